@@ -1,0 +1,2 @@
+"""pyomo_heli: multi-objective parameter identification of nonlinear helicopter flight models."""
+__version__ = "0.1.0"

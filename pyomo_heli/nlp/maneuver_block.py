@@ -1,0 +1,114 @@
+"""A maneuver as a fully discretised block of the NLP (pyomo.dae collocation).
+
+Every sample time of the record is a finite-element boundary, so outputs are
+evaluated exactly at the measurement times (never snapped). Inside each
+element the Radau collocation points carry the same physics as the trim
+blocks and the simulator (:func:`pyomo_heli.physics.model.evaluate`).
+Inputs are the trim inputs of the block's start trim plus the measured
+increments, linearly interpolated at the collocation points, and the initial
+state is the model's own trim state at the start speed (model_spec.md 1.13).
+"""
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Mapping
+
+import numpy as np
+import pyomo.dae as dae
+import pyomo.environ as pyo
+
+from ..physics.model import FLAPPING, INPUTS, STATES, HelicopterModel, evaluate
+from ..physics.ops import get_ops
+from .trim_block import STATE_BOUNDS
+
+
+def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples, increments: Mapping[str, np.ndarray],
+                         start, ncp: int = 3, scheme: str = "LAGRANGE-RADAU",
+                         initial_guess=None) -> None:
+    """Populate ``blk`` with one maneuver.
+
+    t_samples: increasing sample times [s] (element boundaries).
+    increments: channel -> input increment at each sample [rad].
+    start: an object with ``col, lon, u, w, theta, lambda_i`` (floats or
+    Pyomo components, e.g. a trim block) giving the initial state and the
+    base inputs.
+    initial_guess: optional DataFrame (t + state/flap columns) used to
+    initialise the variables, e.g. a simulation.
+    """
+    ops = get_ops("pyomo")
+    t_samples = np.asarray(t_samples, dtype=float)
+    unknown = set(increments) - set(INPUTS)
+    if unknown:
+        raise ValueError(f"unknown input channel(s) {sorted(unknown)}")
+    states = STATES + tuple(s for e in model.extensions for s in e.states)
+    blk.t = dae.ContinuousSet(initialize=list(t_samples))
+    blk.samples = pyo.Set(initialize=list(t_samples), ordered=True)
+    blk.x = pyo.Var(states, blk.t, initialize=0.0)
+    blk.dx = dae.DerivativeVar(blk.x, wrt=blk.t)
+    blk.beta = pyo.Var(FLAPPING, blk.t, initialize=0.0)
+    pyo.TransformationFactory("dae.collocation").apply_to(blk, wrt=blk.t, nfe=len(t_samples) - 1, ncp=ncp,
+                                                          scheme=scheme)
+    times = list(blk.t)
+    t0 = times[0]
+    for (s, t), v in blk.x.items():
+        if s in STATE_BOUNDS:
+            v.setlb(STATE_BOUNDS[s][0]); v.setub(STATE_BOUNDS[s][1])
+    blk.beta["beta_1c", :].setlb(STATE_BOUNDS["beta_1c"][0])
+    blk.beta["beta_1c", :].setub(STATE_BOUNDS["beta_1c"][1])
+    # Radau uses no derivative at t0; fixing it keeps the model free of dangling variables.
+    for s in states:
+        blk.dx[s, t0].fix(0.0)
+
+    inc = {k: np.interp(times, t_samples, np.asarray(increments.get(k, np.zeros_like(t_samples)), dtype=float))
+           for k in INPUTS}
+    blk.du = pyo.Param(INPUTS, blk.t, mutable=True,
+                       initialize={(k, t): float(inc[k][i]) for k in INPUTS for i, t in enumerate(times)})
+
+    ctxs: dict = {}
+
+    def ctx_at(t):
+        if t not in ctxs:
+            x = {s: blk.x[s, t] for s in states}
+            u = {k: getattr(start, k) + blk.du[k, t] for k in INPUTS}
+            beta = [blk.beta[b, t] for b in FLAPPING]
+            ctxs[t] = evaluate(x, u, pmap, ops=ops, beta=beta, extensions=model.extensions)
+        return ctxs[t]
+
+    def ode_rule(_, s, t):
+        if t == t0:
+            return pyo.Constraint.Skip
+        coef, rhs = ctx_at(t).state_eqs[s]
+        return coef * blk.dx[s, t] == rhs
+
+    blk.ode = pyo.Constraint(states, blk.t, rule=ode_rule)
+    blk.flapping = pyo.Constraint(range(3), blk.t, rule=lambda _, i, t: ctx_at(t).flap_residuals[i] == 0)
+    init = {"u": start.u, "w": start.w, "q": 0.0, "theta": start.theta, "lambda_i": start.lambda_i}
+    for e in model.extensions:
+        for s in e.states:
+            init[s] = getattr(start, s)
+    blk.initial = pyo.Constraint(states, rule=lambda _, s: blk.x[s, t0] == init[s])
+    blk.y = pyo.Expression(list(ctx_at(t0).outputs), blk.samples, rule=lambda _, k, t: ctx_at(t).outputs[k])
+    if initial_guess is not None:
+        initialise_from(blk, initial_guess, states)
+
+
+def initialise_from(blk: pyo.Block, df, states) -> None:
+    """Set variable values by interpolating a simulation DataFrame at every point of ``blk.t``."""
+    tt = df["t"].to_numpy()
+    times = list(blk.t)
+    for s in states:
+        if s in df:
+            vals = np.interp(times, tt, df[s].to_numpy())
+            for t, v in zip(times, vals):
+                blk.x[s, t].set_value(float(v), skip_validation=True)
+    for b in FLAPPING:
+        if b in df:
+            vals = np.interp(times, tt, df[b].to_numpy())
+            for t, v in zip(times, vals):
+                blk.beta[b, t].set_value(float(v), skip_validation=True)
+    # derivatives from finite differences of the same interpolant
+    for s in states:
+        if s in df:
+            d = np.gradient(df[s].to_numpy(), tt)
+            for t, v in zip(times[1:], np.interp(times[1:], tt, d)):
+                blk.dx[s, t].set_value(float(v), skip_validation=True)

@@ -1,0 +1,94 @@
+"""The extension seam: optional effects that plug into M0.
+
+An extension is a physical effect with a *strength* parameter whose zero
+value gives M0 exactly. The assembly in :mod:`pyomo_heli.physics.model` calls
+each extension's hooks at fixed points of the calculation, in this order:
+
+1. ``adjust_geometry(ctx)``  may change ``ctx.x_h`` / ``ctx.l_t`` (CG position)
+2. ``adjust_controls(ctx)``  may change ``ctx.col`` / ``ctx.lon`` (rigging)
+3. ``tip_path_plane(ctx)``   may replace ``ctx.beta_1c_tpp`` (flapping lag)
+4. ``adjust_inflow(ctx)``    may change ``ctx.tau_lambda``
+5. ``tail_downwash(ctx)``    returns a downwash at the tail [m/s] (summed)
+6. ``extra_forces(ctx)``     returns (dX, dZ, dM) [N, N, N m] (summed)
+7. ``state_equations(ctx)``  for extra states: name -> (coef, rhs) meaning
+                             coef * d(state)/dt = rhs
+8. ``adjust_outputs(ctx)``   may change entries of ``ctx.outputs`` (sensors)
+
+The same extension object serves the float simulator, Pyomo collocation and
+trim blocks, because hooks only do arithmetic on what ``ctx`` holds, with
+``ctx.ops`` for functions. Parameters an extension needs are declared by
+``parameters()`` and are read from ``ctx.p`` like any model parameter, so a
+strength can be fixed, or free in an identification.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from .parameters import ParameterSpec
+
+
+class Extension:
+    """Base class: every hook is a no-op, so a subclass overrides what it needs."""
+
+    #: short identifier, used in configs and reports
+    name: str = "extension"
+    #: name of the strength parameter (zero gives M0)
+    strength: str = ""
+    #: names of extra differential states this extension adds
+    states: tuple[str, ...] = ()
+
+    def parameters(self) -> list[ParameterSpec]:
+        """Parameter specs this extension adds (the strength first)."""
+        return []
+
+    def describe(self) -> str:
+        return (self.__doc__ or self.name).strip().splitlines()[0]
+
+    # hooks --------------------------------------------------------------
+    def adjust_geometry(self, ctx) -> None:
+        pass
+
+    def adjust_controls(self, ctx) -> None:
+        pass
+
+    def tip_path_plane(self, ctx) -> None:
+        pass
+
+    def adjust_inflow(self, ctx) -> None:
+        pass
+
+    def tail_downwash(self, ctx) -> Any:
+        return 0.0
+
+    def extra_forces(self, ctx) -> tuple[Any, Any, Any]:
+        return 0.0, 0.0, 0.0
+
+    def state_equations(self, ctx) -> dict[str, tuple[Any, Any]]:
+        return {}
+
+    def trim_guess(self, ctx) -> dict[str, float]:
+        """Initial values of the extra states at a trim (from quasi-steady values)."""
+        return {}
+
+    def adjust_outputs(self, ctx) -> None:
+        pass
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r})"
+
+
+class PitchMomentOffset(Extension):
+    """A constant pitching-moment increment dM = M0_offset (a minimal test extension).
+
+    Useful to test the seam and as a generic "unexplained moment" candidate.
+    """
+
+    name = "pitch_moment_offset"
+    strength = "dM_offset"
+
+    def parameters(self):
+        return [ParameterSpec("dM_offset", 0.0, "N m", "constant pitching-moment increment", "choice",
+                              (-5000.0, 5000.0), 1000.0)]
+
+    def extra_forces(self, ctx):
+        return 0.0, 0.0, ctx.p["dM_offset"]

@@ -1,0 +1,1 @@
+"""Float-model trim and time simulation (scipy)."""

@@ -1,0 +1,116 @@
+"""Float trim of the model (scipy root finding), with continuation in speed.
+
+The Pyomo trim block (:mod:`pyomo_heli.nlp.trim_block`) solves the same
+equations as an NLP; this float route serves the simulator and the truth
+model, and is the second, independent route the tests compare against.
+
+Level flight at true airspeed V and flight-path angle gamma_fp:
+unknowns col, lon, theta, lambda_i (+ extension states), with q = 0,
+u = V cos(theta - gamma_fp), w = V sin(theta - gamma_fp), and
+du/dt = dw/dt = dq/dt = dlambda_i/dt = 0 (+ extension states at rest).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy.optimize import root
+
+from ..physics.model import HelicopterModel, rotor
+
+
+class TrimError(RuntimeError):
+    """The trim equations could not be solved."""
+
+
+@dataclass
+class TrimPoint:
+    """A trimmed flight condition (SI, radians)."""
+
+    V: float
+    gamma_fp: float
+    col: float
+    lon: float
+    theta: float
+    lambda_i: float
+    beta_0: float
+    beta_1c: float
+    beta_1s: float
+    u: float
+    w: float
+    extra_states: dict = field(default_factory=dict)
+
+    def state(self) -> dict:
+        return {"u": self.u, "w": self.w, "q": 0.0, "theta": self.theta, "lambda_i": self.lambda_i,
+                **self.extra_states}
+
+    def inputs(self) -> dict:
+        return {"col": self.col, "lon": self.lon}
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def hover_guess(model: HelicopterModel) -> dict:
+    """Closed-form hover trim (model_spec.md section 3), good start for Newton."""
+    p = model.parameters
+    _, sigma, _ = rotor.rotor_constants(p)
+    v_tip = p["Omega"] * p["R"]
+    c_t = p["m"] * p["g"] / (p["rho"] * math.pi * p["R"] ** 2 * v_tip**2)
+    lam = math.sqrt(c_t / 2)
+    theta_tw = p["theta_twist"] * p["R"]
+    col = 6 * c_t / (p["a"] * sigma) + 1.5 * lam - 3 * theta_tw * (0.25 - p["r_ref"] / 3)
+    return {"col": col, "lon": 0.0, "theta": p["gamma_s"], "lambda_i": lam}
+
+
+def _unpack(model, V, gamma_fp, z):
+    col, lon, theta, lam = z[:4]
+    extra = dict(zip(model.state_names[5:], z[4:]))
+    a = theta - gamma_fp
+    x = {"u": V * math.cos(a), "w": V * math.sin(a), "q": 0.0, "theta": theta, "lambda_i": lam, **extra}
+    return x, {"col": col, "lon": lon}
+
+
+def trim_float(model: HelicopterModel, V: float, gamma_fp: float = 0.0, guess: dict | None = None,
+               tol: float = 1e-12) -> TrimPoint:
+    """Solve the trim equations with scipy's hybrid Powell method."""
+    if V < 0:
+        raise ValueError(f"speed must be non-negative, got {V} m/s")
+    g = dict(hover_guess(model)) if guess is None else dict(guess)
+    names = model.state_names
+    z0 = [g["col"], g["lon"], g["theta"], g["lambda_i"]] + [g.get(n, 0.0) for n in names[5:]]
+
+    def residual(z):
+        x, u = _unpack(model, V, gamma_fp, z)
+        r = model.rates(x, u)
+        return np.array([r["u"], r["w"], r["q"] * 10.0, r["lambda_i"] * 0.1] + [r[n] for n in names[5:]])
+
+    sol = root(residual, np.array(z0, dtype=float), method="hybr", tol=tol)
+    if not sol.success or np.max(np.abs(residual(sol.x))) > 1e-8:
+        raise TrimError(f"trim at V = {V:.3f} m/s did not converge: {sol.message}")
+    x, u = _unpack(model, V, gamma_fp, sol.x)
+    ctx = model.evaluate(x, u)
+    b0, b1c, b1s = (float(b) for b in ctx.beta)
+    return TrimPoint(V=V, gamma_fp=gamma_fp, col=float(sol.x[0]), lon=float(sol.x[1]), theta=float(sol.x[2]),
+                     lambda_i=float(sol.x[3]), beta_0=b0, beta_1c=b1c, beta_1s=b1s, u=x["u"], w=x["w"],
+                     extra_states={n: float(v) for n, v in zip(names[5:], sol.x[4:])})
+
+
+def trim_sweep(model: HelicopterModel, speeds, gamma_fp: float = 0.0, step: float = 2.5) -> list[TrimPoint]:
+    """Trim at each speed [m/s], by continuation from hover in steps of ``step`` m/s.
+
+    Continuation matters: Newton from the hover guess can fail at high speed.
+    """
+    speeds = [float(v) for v in speeds]
+    results: dict[float, TrimPoint] = {}
+    guess = None
+    v_cur = 0.0
+    for target in sorted(set(speeds)):
+        path = list(np.arange(v_cur, target, step)[1:]) + [target] if target > v_cur else [target]
+        for v in path:
+            tp = trim_float(model, v, gamma_fp, guess)
+            guess = {"col": tp.col, "lon": tp.lon, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}
+        results[target] = tp
+        v_cur = target
+    return [results[v] for v in speeds]

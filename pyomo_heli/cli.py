@@ -1,0 +1,185 @@
+"""The ``pyomo-heli`` command line.
+
+Every command turns bad input into a one-line error naming the culprit and
+exit status 2, never a traceback. Degrees, knots and feet appear only here
+and in files, labelled; everything inside is SI and radians.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+from .units import DEG, KT
+
+MAX_SPEED_KT = 150.0  # upper end of the speed range the model is meant for
+
+
+class UserError(Exception):
+    """Bad input from the user: printed as one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, no usage dump
+        raise UserError(message)
+
+
+def _parse_params(items, model):
+    values = {}
+    for item in items or []:
+        if "=" not in item:
+            raise UserError(f"--param {item!r} must read NAME=VALUE")
+        name, val = item.split("=", 1)
+        if name not in model.parameters:
+            raise UserError(model.parameters._unknown(name).replace("unknown parameter name", "unknown parameter name in --param"))
+        try:
+            values[name] = float(val)
+        except ValueError:
+            raise UserError(f"--param {name}: value {val!r} is not a number") from None
+    return model.with_parameters(**values) if values else model
+
+
+def _check_speed_kt(v, option):
+    if not math.isfinite(v):
+        raise UserError(f"{option}: speed {v} is not a finite number")
+    if v < 0:
+        raise UserError(f"{option}: speed {v:g} kt is negative")
+    if v > MAX_SPEED_KT:
+        raise UserError(f"{option}: speed {v:g} kt is outside the model's range 0..{MAX_SPEED_KT:g} kt")
+
+
+# ---------------------------------------------------------------- commands
+def cmd_trim(args) -> int:
+    from .nlp.trim_table import trim_table
+    from .physics.model import HelicopterModel
+
+    for v in args.speeds_kt:
+        _check_speed_kt(v, "--speeds-kt")
+    model = _parse_params(args.param, HelicopterModel())
+    table = trim_table(model, [v * KT for v in args.speeds_kt], solver=args.solver)
+    records = []
+    for v_kt, row in zip(args.speeds_kt, table.to_dict("records")):
+        records.append({"speed_kt": v_kt, "col_deg": row["col"] / DEG, "lon_deg": row["lon"] / DEG,
+                        "theta_deg": row["theta"] / DEG, "lambda_i": row["lambda_i"],
+                        "beta_0_deg": row["beta_0"] / DEG, "beta_1c_deg": row["beta_1c"] / DEG})
+    head = f"{'speed kt':>8} {'col deg':>8} {'lon deg':>8} {'theta deg':>9} {'lambda_i':>9} {'beta_0 deg':>10} {'beta_1c deg':>11}"
+    print(head)
+    for r in records:
+        print(f"{r['speed_kt']:8.1f} {r['col_deg']:8.3f} {r['lon_deg']:8.3f} {r['theta_deg']:9.3f} "
+              f"{r['lambda_i']:9.5f} {r['beta_0_deg']:10.3f} {r['beta_1c_deg']:11.3f}")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(records, fh, indent=2)
+            fh.write("\n")
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    import numpy as np
+
+    from .physics.model import HelicopterModel
+    from .simulation.inputs import parse_input
+    from .simulation.integrate import simulate
+    from .simulation.trim import trim_float
+
+    _check_speed_kt(args.speed_kt, "--speed-kt")
+    if not (args.duration > 0 and math.isfinite(args.duration)):
+        raise UserError(f"--duration must be positive, got {args.duration}")
+    if not args.rate > 0:
+        raise UserError(f"--rate must be positive, got {args.rate}")
+    signals = [parse_input(s, t_start=args.t_start) for s in args.input or []]
+    channels = [s.channel for s in signals]
+    if len(set(channels)) != len(channels):
+        raise UserError(f"--input: channel given twice ({', '.join(channels)})")
+    model = _parse_params(args.param, HelicopterModel())
+    trim = trim_float(model, args.speed_kt * KT)
+    t = np.arange(0.0, args.duration + 1e-9, 1.0 / args.rate)
+    df = simulate(model, trim, t, {s.channel: s for s in signals}, max_step=0.05)
+    out = df.assign(t_s=df.t, col_deg=df.col / DEG, lon_deg=df.lon / DEG, q_deg_s=df.q / DEG,
+                    theta_deg=df.theta / DEG, nx_g=df.n_x, nz_g=df.n_z, tas_m_s=df.TAS,
+                    beta0_deg=df.beta_0 / DEG, u_m_s=df.u, w_m_s=df.w, lambda_i=df.lambda_i,
+                    beta1c_deg=df.beta_1c / DEG)
+    cols = ["t_s", "col_deg", "lon_deg", "q_deg_s", "theta_deg", "nx_g", "nz_g", "tas_m_s", "beta0_deg",
+            "u_m_s", "w_m_s", "lambda_i", "beta1c_deg"]
+    if args.out:
+        out[cols].to_csv(args.out, index=False, float_format="%.10g")
+        print(f"wrote {len(out)} samples of {', '.join(channels) or 'no input'} at {args.speed_kt:g} kt to {args.out}")
+    else:
+        print(out[cols].to_string(index=False, float_format=lambda x: f"{x:.4f}"))
+    return 0
+
+
+def cmd_generate_data(args) -> int:
+    from .flighttest.generate import generate_from_file
+
+    out = generate_from_file(args.config, args.out)
+    print(f"wrote synthetic flight test to {out}")
+    return 0
+
+
+def cmd_check_data(args) -> int:
+    from .dataset.cli import check_data
+
+    return check_data(args.directory)
+
+
+# ---------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="pyomo-heli", description="Multi-objective parameter identification of helicopter models")
+    sub = p.add_subparsers(dest="command", parser_class=_Parser, metavar="COMMAND")
+    sub.required = True
+
+    t = sub.add_parser("trim", help="trim table of the model over speed (Pyomo trim block)")
+    t.add_argument("--speeds-kt", type=float, nargs="+", default=[0, 20, 40, 60, 80, 100, 120])
+    t.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter (SI)")
+    t.add_argument("--solver", default="casadi-ipopt", help="casadi-ipopt (default), pounce or ipopt")
+    t.add_argument("--json", metavar="FILE", help="also write the table as JSON records")
+    t.set_defaults(func=cmd_trim)
+
+    s = sub.add_parser("simulate", help="simulate a maneuver from trim (scipy)")
+    s.add_argument("--speed-kt", type=float, required=True)
+    s.add_argument("--input", action="append", metavar="CH:SHAPE:AMP_DEG:STEP_S",
+                   help="input increment, e.g. lon:3211:0.5:0.5 (shapes 3211, doublet, step, pulse)")
+    s.add_argument("--duration", type=float, default=15.0, help="record length [s]")
+    s.add_argument("--rate", type=float, default=50.0, help="output sample rate [Hz]")
+    s.add_argument("--t-start", type=float, default=1.0, help="time the input starts [s]")
+    s.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter (SI)")
+    s.add_argument("--out", metavar="FILE.csv", help="write CSV (units in column names)")
+    s.set_defaults(func=cmd_simulate)
+
+    g = sub.add_parser("generate-data", help="generate a synthetic flight test from a config")
+    g.add_argument("--config", required=True)
+    g.add_argument("--out", required=True)
+    g.set_defaults(func=cmd_generate_data)
+
+    c = sub.add_parser("check-data", help="check a flight-test dataset folder and print a summary")
+    c.add_argument("directory")
+    c.set_defaults(func=cmd_check_data)
+    return p
+
+
+def main(argv=None) -> int:
+    from .flighttest.config import ConfigError
+    from .simulation.inputs import InputSpecError
+    from .simulation.trim import TrimError
+    from .solvers.errors import SolverError
+
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        args = build_parser().parse_args(argv)
+        cmd = args.command
+    except UserError as exc:
+        print(f"pyomo-heli: error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        return args.func(args)
+    except (UserError, InputSpecError, ConfigError, TrimError, SolverError, FileNotFoundError, KeyError,
+            ValueError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        print(f"pyomo-heli {cmd}: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,584 @@
+"""Validate and load a flight-test dataset folder (format ``pyomo_heli-flighttest`` version 1).
+
+One pass over the folder both collects every problem and builds the typed objects; the loader
+raises :class:`DatasetError` when anything is wrong, the validator returns the list.  Only
+``manifest.json`` and the CSV files named in it are opened: ``truth.json`` (evaluation-only
+ground truth) is never opened or required.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import re
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+import pandas as pd
+
+from .schema import (
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    INPUT_CHANNELS,
+    KT,
+    MANEUVER_QUANTITIES,
+    MANIFEST_NAME,
+    MIN_SAMPLES,
+    NAME_PATTERN,
+    PITOT_MIN_KT,
+    ROLES,
+    SPACING_TOL,
+    SPEED_RANGE_KT,
+    TRIM_QUANTITIES,
+    TRIM_WINDOW_S,
+    TRUTH_NAME,
+    DatasetError,
+    FlightTest,
+    Maneuver,
+    Problem,
+    Quantity,
+    column_names,
+)
+
+MANIFEST_KEYS = {"format": True, "format_version": True, "aircraft": True, "description": False,
+                 "atmosphere": True, "mass_kg": True, "trim_file": True, "maneuvers": True}
+ATMOSPHERE_KEYS = ("rho_kg_m3", "g_m_s2")
+MANEUVER_KEYS = {"name": True, "file": True, "role": True, "trim_speed_kt": True, "inputs": True,
+                 "description": False}
+MISSING_TOKENS = {"", "nan", "-nan", "na", "n/a", "nat", "null", "none"}
+MAX_LISTED = 5
+_NAME_RE = re.compile(NAME_PATTERN)
+#: airspeed below this [m/s] is not sensor noise around hover
+_TAS_MIN = -10.0
+
+
+def _rows(idx) -> str:
+    """'row 5' / 'rows 5, 6, 7, ...' from 0-based data-row indices (reported 1-based)."""
+    idx = [int(i) + 1 for i in idx]
+    text = ", ".join(str(i) for i in idx[:MAX_LISTED]) + (", ..." if len(idx) > MAX_LISTED else "")
+    return f"row{'s' if len(idx) > 1 else ''} {text}"
+
+
+def _rows_values(idx, values) -> str:
+    """'row 8 ('1,5')' / 'rows 3 ('a'), 9 ('b'), ...' from 0-based indices and the offending cells."""
+    shown = ", ".join(f"{i + 1} ({values[i]!r})" for i in idx[:MAX_LISTED])
+    return f"row{'s' if len(idx) > 1 else ''} {shown}{', ...' if len(idx) > MAX_LISTED else ''}"
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _type_name(x) -> str:
+    return {dict: "object", list: "array", str: "string", bool: "boolean", type(None): "null",
+            int: "number", float: "number"}.get(type(x), type(x).__name__)
+
+
+class _Reader:
+    def __init__(self, path):
+        self.root = Path(path)
+        self.problems: list[Problem] = []
+
+    def add(self, file: str, field: str | None, message: str) -> None:
+        self.problems.append(Problem(file, field, message))
+
+    # ------------------------------------------------------------ manifest
+    def read_manifest(self):
+        if not self.root.exists():
+            self.add(str(self.root), None, "dataset folder does not exist")
+            return None
+        if not self.root.is_dir():
+            self.add(str(self.root), None, "is not a folder (a dataset is a folder holding manifest.json)")
+            return None
+        mpath = self.root / MANIFEST_NAME
+        if not mpath.is_file():
+            self.add(MANIFEST_NAME, None, f"manifest file not found in {str(self.root)!r}")
+            return None
+        try:
+            text = mpath.read_bytes().decode("utf-8-sig")
+        except (OSError, UnicodeDecodeError) as exc:
+            self.add(MANIFEST_NAME, None, f"cannot read manifest: {exc}")
+            return None
+        duplicates = []
+
+        def hook(pairs):
+            seen = set()
+            for k, _ in pairs:
+                if k in seen:
+                    duplicates.append(k)
+                seen.add(k)
+            return dict(pairs)
+
+        try:
+            man = json.loads(text, object_pairs_hook=hook)
+        except json.JSONDecodeError as exc:
+            self.add(MANIFEST_NAME, None, f"not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}")
+            return None
+        for k in duplicates:
+            self.add(MANIFEST_NAME, k, "key appears more than once in a JSON object")
+        if not isinstance(man, dict):
+            self.add(MANIFEST_NAME, None, f"top level must be a JSON object, got {_type_name(man)}")
+            return None
+        return man
+
+    def check_keys(self, obj: dict, spec: dict, prefix: str) -> None:
+        for key, required in spec.items():
+            if required and key not in obj:
+                self.add(MANIFEST_NAME, prefix + key, "required key is missing")
+        for key in obj:
+            if key not in spec:
+                self.add(MANIFEST_NAME, prefix + key,
+                         f"unknown key; recognised keys: {', '.join(spec)}")
+
+    def positive(self, obj: dict, key: str, field: str, unit: str):
+        if key not in obj:
+            return None
+        v = obj[key]
+        if not _is_number(v) or v <= 0:
+            got = repr(v) if not isinstance(v, (dict, list)) else _type_name(v)
+            self.add(MANIFEST_NAME, field, f"must be a positive number [{unit}], got {got}")
+            return None
+        return float(v)
+
+    def text(self, obj: dict, key: str, field: str, required: bool = True):
+        if key not in obj:
+            return None
+        v = obj[key]
+        if not isinstance(v, str) or (required and not v.strip()):
+            self.add(MANIFEST_NAME, field, f"must be a{' non-empty' if required else ''} string, "
+                                           f"got {_type_name(v)} {v!r}")
+            return None
+        return v
+
+    def rel_path(self, value, field: str, what: str):
+        """Check a file path listed in the manifest; return its posix text if usable."""
+        if not isinstance(value, str) or not value.strip():
+            self.add(MANIFEST_NAME, field, f"must be a non-empty relative path to the {what}, got {value!r}")
+            return None
+        if "\\" in value:
+            self.add(MANIFEST_NAME, field, f"path {value!r} must use '/' as separator")
+            return None
+        pp = PurePosixPath(value)
+        if pp.is_absolute() or re.match(r"^[A-Za-z]:", value):
+            self.add(MANIFEST_NAME, field, f"path {value!r} must be relative to the dataset folder")
+            return None
+        target = (self.root / value).resolve()
+        root = self.root.resolve()
+        if target != root and root not in target.parents:
+            self.add(MANIFEST_NAME, field, f"path {value!r} is outside the dataset folder")
+            return None
+        if target == root / TRUTH_NAME or pp.name == TRUTH_NAME:
+            self.add(MANIFEST_NAME, field, f"{TRUTH_NAME} is evaluation-only ground truth and cannot be "
+                                           "part of the dataset")
+            return None
+        if pp.suffix != ".csv":
+            self.add(MANIFEST_NAME, field, f"path {value!r} must name a .csv file")
+            return None
+        if not target.exists():
+            self.add(MANIFEST_NAME, field, f"the {what} {value!r} does not exist")
+            return None
+        if not target.is_file():
+            self.add(MANIFEST_NAME, field, f"the {what} {value!r} is not a file")
+            return None
+        return pp.as_posix()
+
+    # ------------------------------------------------------------ tables
+    def read_table(self, rel: str, quantities: tuple[Quantity, ...]):
+        """Parse a CSV table into SI arrays.
+
+        Returns ``(columns, source_names, n_rows)`` where ``columns`` maps the SI name to a numpy
+        array (only for columns without problems) and ``source_names`` maps the SI name to the file
+        column name; ``None`` when the table is unusable.
+        """
+        try:
+            text = (self.root / rel).read_bytes().decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            self.add(rel, None, f"not UTF-8 text ({exc.reason} at byte {exc.start})")
+            return None
+        except OSError as exc:
+            self.add(rel, None, f"cannot read file: {exc}")
+            return None
+        try:
+            rows = [r for r in csv.reader(io.StringIO(text, newline="")) if r]
+        except csv.Error as exc:
+            self.add(rel, None, f"not a valid CSV file: {exc}")
+            return None
+        if not rows:
+            self.add(rel, None, "file is empty (no header line)")
+            return None
+        header = [h.strip() for h in rows[0]]
+        data = rows[1:]
+        recognised = column_names(quantities)
+        by_qty: dict[str, tuple[Quantity, str, int]] = {}
+        counts: dict[str, int] = {}
+        for h in header:
+            counts[h] = counts.get(h, 0) + 1
+        reported_dups = set()
+        self._claimed = set()  # quantities whose column already has a naming problem
+        for j, name in enumerate(header):
+            if name == "":
+                self.add(rel, None, f"column {j + 1} of the header has an empty name (a trailing comma?)")
+                continue
+            if counts[name] > 1:
+                self._claimed.update(q.name for q in quantities if name == q.name or name.startswith(q.name + "_"))
+                if name not in reported_dups:
+                    self.add(rel, name, f"column appears {counts[name]} times in the header")
+                    reported_dups.add(name)
+                continue
+            qty, unit = self.match_column(rel, name, quantities, recognised)
+            if qty is None:
+                continue
+            if qty.name in by_qty:
+                other = by_qty[qty.name][1]
+                self.add(rel, name, f"second unit variant of {qty.label} '{qty.name}' (already given by column "
+                                    f"'{other}'): keep exactly one of them")
+                continue
+            by_qty[qty.name] = (qty, name, j)
+        for qty in quantities:
+            if qty.required and qty.name not in by_qty and qty.name not in self._claimed:
+                variants = [f"'{qty.name}_{u}'" for u in qty.units]
+                what = "one of " + ", ".join(variants) if len(variants) > 1 else variants[0]
+                self.add(rel, qty.name, f"missing required column ({qty.label}): add {what}")
+        ragged = [i for i, r in enumerate(data) if len(r) != len(header)]
+        if ragged:
+            lens = sorted({len(data[i]) for i in ragged})
+            self.add(rel, None, f"{_plural(len(ragged), 'data row')} ({_rows(ragged)}) "
+                                f"{'has' if len(ragged) == 1 else 'have'} {'/'.join(map(str, lens))} fields "
+                                f"but the header has {len(header)}")
+        n = len(data)
+        if n == 0:
+            self.add(rel, None, "table has no data rows (header only)")
+            return None
+        columns, names = {}, {}
+        for qty, name, j in by_qty.values():
+            raw = [r[j].strip() if j < len(r) else "" for r in data]
+            names[qty.si] = name
+            if qty.kind == "text":
+                columns[qty.si] = np.array(raw, dtype=object)
+                continue
+            values = self.parse_numbers(rel, name, raw)
+            if values is not None and self.plausible(rel, name, qty, values):
+                columns[qty.si] = values * qty.units[name[len(qty.name) + 1:]]
+        return columns, names, n
+
+    def match_column(self, rel, name, quantities, recognised):
+        for qty in sorted(quantities, key=lambda q: -len(q.name)):
+            if qty.kind == "text":
+                if name == qty.name:
+                    return qty, None
+                continue
+            variants = " or ".join(f"'{qty.name}_{u}'" for u in qty.units)
+            if name == qty.name:
+                self._claimed.add(qty.name)
+                self.add(rel, name, f"column name has no unit suffix: use {variants}")
+                return None, None
+            if name.startswith(qty.name + "_"):
+                unit = name[len(qty.name) + 1:]
+                if unit in qty.units:
+                    return qty, unit
+                self._claimed.add(qty.name)
+                self.add(rel, name, f"unit '{unit}' not recognised for {qty.label} '{qty.name}': "
+                                    f"use {variants}")
+                return None, None
+        hint = [r for r in recognised if r.lower() == name.lower()]
+        extra = f" (did you mean '{hint[0]}'?)" if hint else ""
+        for qty in quantities:
+            if hint and (hint[0] == qty.name or hint[0].startswith(qty.name + "_")):
+                self._claimed.add(qty.name)
+        self.add(rel, name, f"unknown column{extra}; recognised columns: {', '.join(recognised)}")
+        return None, None
+
+    def parse_numbers(self, rel, name, raw):
+        values = np.empty(len(raw))
+        bad, empty, nan = [], [], []
+        for i, s in enumerate(raw):
+            if s.lower() in MISSING_TOKENS:
+                values[i] = np.nan
+                (empty if s == "" else nan).append(i)
+                continue
+            try:
+                values[i] = float(s)
+            except ValueError:
+                values[i] = np.nan
+                bad.append(i)
+                continue
+            if math.isnan(values[i]):
+                nan.append(i)
+        inf = np.flatnonzero(np.isinf(values))
+        ok = True
+        if bad:
+            self.add(rel, name, f"{_plural(len(bad), 'non-numeric value')} ({_rows_values(bad, raw)})")
+            ok = False
+        if nan:
+            self.add(rel, name, f"{_plural(len(nan), 'NaN value')} ({_rows(nan)})")
+            ok = False
+        if empty:
+            self.add(rel, name, f"{_plural(len(empty), 'empty value')} ({_rows(empty)})")
+            ok = False
+        if inf.size:
+            self.add(rel, name, f"{_plural(inf.size, 'infinite value')} ({_rows(inf)})")
+            ok = False
+        return values if ok else None
+
+    def plausible(self, rel, name, qty: Quantity, values) -> bool:
+        unit = name[len(qty.name) + 1:]
+        si = values * qty.units[unit]
+        ok = True
+        if qty.limit is not None:
+            over = np.flatnonzero(np.abs(si) > qty.limit)
+            if over.size:
+                peak = float(np.max(np.abs(values)))
+                msg = (f"{_plural(over.size, 'value')} beyond the plausible limit {qty.limit_text} for "
+                       f"{qty.label} (max |value| {peak:.6g} {unit.replace('_', '/')}, {_rows(over)}): ")
+                if unit in ("rad", "rad_s"):
+                    msg += f"the values look like degrees, wrong unit? (the column would be '{qty.name}_deg" \
+                           f"{'_s' if unit == 'rad_s' else ''}')"
+                elif unit == "g":
+                    msg += "the values look like m/s^2, wrong unit? (the column must be in g)"
+                elif qty.si == "TAS":
+                    msg += "wrong unit? (tas_kt is knots, tas_m_s is m/s)"
+                else:
+                    msg += "wrong unit?"
+                self.add(rel, name, msg)
+                ok = False
+        if qty.si == "TAS":
+            neg = np.flatnonzero(si < _TAS_MIN)
+            if neg.size:
+                self.add(rel, name, f"{_plural(neg.size, 'value')} of airspeed below {_TAS_MIN:g} m/s "
+                                    f"({_rows(neg)}): airspeed cannot be negative beyond sensor noise")
+                ok = False
+        return ok
+
+    def check_time(self, rel, name, t) -> bool:
+        n = t.size
+        if n < MIN_SAMPLES:
+            self.add(rel, None, f"only {_plural(n, 'sample')}; at least {MIN_SAMPLES} are required")
+            return False
+        dt = np.diff(t)
+        dup = np.flatnonzero(dt == 0) + 1
+        dec = np.flatnonzero(dt < 0) + 1
+        if dup.size:
+            self.add(rel, name, f"time is not strictly increasing: {_plural(dup.size, 'duplicated time stamp')} "
+                                f"(same time as the previous row at {_rows(dup)})")
+        if dec.size:
+            self.add(rel, name, f"time is not strictly increasing: it decreases at {_rows(dec)}")
+        if dup.size or dec.size:
+            return False
+        med = float(np.median(dt))
+        irregular = np.flatnonzero(np.abs(dt - med) > SPACING_TOL * med) + 1
+        if irregular.size:
+            self.add(rel, name, f"inconsistent sample rate: spacing varies by more than {SPACING_TOL:.0%} around "
+                                f"the median {med:.6g} s ({1 / med:.6g} Hz); spacing {dt.min():.6g} .. "
+                                f"{dt.max():.6g} s; {_plural(irregular.size, 'irregular interval')} ending at "
+                                f"{_rows(irregular)}")
+            return False
+        return True
+
+    # ------------------------------------------------------------ whole dataset
+    def run(self):
+        man = self.read_manifest()
+        if man is None:
+            return None
+        self.check_keys(man, MANIFEST_KEYS, "")
+        if "format" in man and man["format"] != FORMAT_NAME:
+            self.add(MANIFEST_NAME, "format", f"must be {FORMAT_NAME!r}, got {man['format']!r}")
+        if "format_version" in man:
+            v = man["format_version"]
+            if not (isinstance(v, int) and not isinstance(v, bool)):
+                self.add(MANIFEST_NAME, "format_version", f"must be the integer {FORMAT_VERSION}, got {v!r}")
+            elif v != FORMAT_VERSION:
+                self.add(MANIFEST_NAME, "format_version",
+                         f"unsupported version {v}; this reader supports version {FORMAT_VERSION}")
+        aircraft = self.text(man, "aircraft", "aircraft")
+        description = self.text(man, "description", "description", required=False)
+        rho = g = None
+        if "atmosphere" in man:
+            atm = man["atmosphere"]
+            if isinstance(atm, dict):
+                self.check_keys(atm, dict.fromkeys(ATMOSPHERE_KEYS, True), "atmosphere.")
+                rho = self.positive(atm, "rho_kg_m3", "atmosphere.rho_kg_m3", "kg/m^3")
+                g = self.positive(atm, "g_m_s2", "atmosphere.g_m_s2", "m/s^2")
+            else:
+                self.add(MANIFEST_NAME, "atmosphere", f"must be an object with keys {', '.join(ATMOSPHERE_KEYS)}, "
+                                                      f"got {_type_name(atm)}")
+        mass = self.positive(man, "mass_kg", "mass_kg", "kg")
+
+        entries = self.check_maneuver_entries(man)
+        # None: the maneuver list itself is unusable, so trim 'source' names cannot be checked
+        names = {e["name"] for e in entries if e.get("name")} if entries else None
+
+        maneuvers = {}
+        for e in entries:
+            if e.get("file") is None:
+                continue
+            m = self.load_maneuver(e)
+            if m is not None and e["name"] is not None:
+                maneuvers[e["name"]] = m
+
+        trims = None
+        trim_file = None
+        if "trim_file" in man:
+            trim_file = self.rel_path(man["trim_file"], "trim_file", "trim table")
+            if trim_file is not None:
+                trims = self.load_trims(trim_file, names)
+
+        if self.problems:
+            return None
+        return FlightTest(aircraft=aircraft, mass=mass, rho=rho, g=g, maneuvers=maneuvers, trims=trims,
+                          path=self.root, description=description, trim_file=trim_file)
+
+    def check_maneuver_entries(self, man) -> list[dict]:
+        if "maneuvers" not in man:
+            return []
+        lst = man["maneuvers"]
+        if not isinstance(lst, list):
+            self.add(MANIFEST_NAME, "maneuvers", f"must be a list of maneuver objects, got {_type_name(lst)}")
+            return []
+        if not lst:
+            self.add(MANIFEST_NAME, "maneuvers", "the maneuver list is empty; at least one identification "
+                                                 "maneuver is needed")
+            return []
+        entries, seen_names, seen_files = [], {}, {}
+        for i, item in enumerate(lst):
+            p = f"maneuvers[{i}]."
+            if not isinstance(item, dict):
+                self.add(MANIFEST_NAME, f"maneuvers[{i}]", f"must be an object, got {_type_name(item)}")
+                continue
+            self.check_keys(item, MANEUVER_KEYS, p)
+            e = {"index": i, "name": None, "file": None, "role": None, "trim_kt": None, "inputs": None,
+                 "description": self.text(item, "description", p + "description", required=False)}
+            if "name" in item:
+                name = item["name"]
+                if not isinstance(name, str) or not _NAME_RE.fullmatch(name):
+                    self.add(MANIFEST_NAME, p + "name", f"{name!r} is not a valid name: use only letters, digits, "
+                                                        "'_' and '-' (at least one character)")
+                elif name in seen_names:
+                    self.add(MANIFEST_NAME, p + "name", f"duplicate maneuver name {name!r} (also "
+                                                        f"maneuvers[{seen_names[name]}].name)")
+                else:
+                    seen_names[name] = i
+                    e["name"] = name
+            if "role" in item:
+                role = item["role"]
+                if role not in ROLES:
+                    self.add(MANIFEST_NAME, p + "role", f"{role!r} is not a role: use one of "
+                                                        f"{', '.join(repr(r) for r in ROLES)}")
+                else:
+                    e["role"] = role
+            if "trim_speed_kt" in item:
+                v = item["trim_speed_kt"]
+                lo, hi = SPEED_RANGE_KT
+                if not _is_number(v):
+                    self.add(MANIFEST_NAME, p + "trim_speed_kt", f"must be a number [kt], got {v!r}")
+                elif v < 0:
+                    self.add(MANIFEST_NAME, p + "trim_speed_kt", f"trim speed {v:g} kt is negative")
+                elif v > hi:
+                    self.add(MANIFEST_NAME, p + "trim_speed_kt", f"trim speed {v:g} kt is outside the model "
+                                                                 f"range {lo:g}..{hi:g} kt")
+                else:
+                    e["trim_kt"] = float(v)
+            if "inputs" in item:
+                inp = item["inputs"]
+                if (not isinstance(inp, list) or not inp or any(c not in INPUT_CHANNELS for c in inp)
+                        or len(set(inp)) != len(inp)):
+                    self.add(MANIFEST_NAME, p + "inputs", f"must be a non-empty list of distinct input channels "
+                                                          f"from {list(INPUT_CHANNELS)}, got {inp!r}")
+                else:
+                    e["inputs"] = list(inp)
+            if "file" in item:
+                f = self.rel_path(item["file"], p + "file", "maneuver file")
+                if f is not None:
+                    if f in seen_files:
+                        self.add(MANIFEST_NAME, p + "file", f"same file {f!r} as maneuvers[{seen_files[f]}].file")
+                    else:
+                        seen_files[f] = i
+                        e["file"] = f
+            entries.append(e)
+        roles = [e["role"] for e in entries]
+        if "identification" not in roles:
+            self.add(MANIFEST_NAME, "maneuvers", "no maneuver has role 'identification'; at least one is needed")
+        return entries
+
+    def load_maneuver(self, e):
+        rel = e["file"]
+        n0 = len(self.problems)
+        table = self.read_table(rel, MANEUVER_QUANTITIES)
+        if table is None:
+            return None
+        cols, names, n = table
+        if "t" in cols and not self.check_time(rel, names["t"], cols["t"]):
+            cols.pop("t")
+        if "t" in cols and "TAS" in cols and e["trim_kt"] is not None and e["trim_kt"] >= PITOT_MIN_KT:
+            t, tas = cols["t"], cols["TAS"]
+            start_kt = float(np.mean(tas[t - t[0] <= TRIM_WINDOW_S])) / KT
+            trim_kt = e["trim_kt"]
+            tol = max(5.0, 0.2 * trim_kt)
+            if abs(start_kt - trim_kt) > tol:
+                self.add(MANIFEST_NAME, f"maneuvers[{e['index']}].trim_speed_kt",
+                         f"{trim_kt:g} kt disagrees with the start of column '{names['TAS']}' in {rel}: "
+                         f"{start_kt:.1f} kt (mean over the first {TRIM_WINDOW_S:g} s; tolerance "
+                         f"{tol:.1f} kt)")
+        if len(self.problems) > n0 or None in (e["name"], e["role"], e["trim_kt"], e["inputs"]):
+            return None
+        order = [q.si for q in MANEUVER_QUANTITIES if q.si in cols]
+        data = pd.DataFrame({k: cols[k] for k in order})
+        return Maneuver(name=e["name"], role=e["role"], trim_speed=e["trim_kt"] * KT, inputs=e["inputs"],
+                        data=data, file=rel, description=e["description"])
+
+    def load_trims(self, rel, maneuver_names):
+        n0 = len(self.problems)
+        table = self.read_table(rel, TRIM_QUANTITIES)
+        if table is None:
+            return None
+        cols, names, n = table
+        if "V" in cols:
+            kt = cols["V"] / KT
+            lo, hi = SPEED_RANGE_KT
+            neg = np.flatnonzero(kt < lo)
+            over = np.flatnonzero(kt > hi)
+            if neg.size:
+                self.add(rel, names["V"], f"{_plural(neg.size, 'negative speed')} ({_rows(neg)})")
+            if over.size:
+                self.add(rel, names["V"], f"{_plural(over.size, 'speed')} outside the model range {lo:g}..{hi:g} kt "
+                                          f"(max {kt.max():.6g} kt, {_rows(over)})")
+        if "source" in cols:
+            if maneuver_names is None:
+                bad = [i for i, s in enumerate(cols["source"]) if not s]
+            else:
+                valid = {"level"} | set(maneuver_names)
+                bad = [i for i, s in enumerate(cols["source"]) if s not in valid]
+            if bad:
+                self.add(rel, "source", f"{_plural(len(bad), 'value')} neither 'level' nor a maneuver name "
+                                        f"({_rows_values(bad, cols['source'])})")
+        if len(self.problems) > n0:
+            return None
+        cols.setdefault("gamma_fp", np.zeros(n))
+        order = [q.si for q in TRIM_QUANTITIES if q.si in cols]
+        df = pd.DataFrame({k: cols[k] for k in order})
+        if "source" in df:
+            df["source"] = df["source"].astype(str)
+        return df
+
+
+def validate_flight_test(path) -> list[Problem]:
+    """Every problem with the dataset folder ``path`` (empty list: the dataset is valid)."""
+    r = _Reader(path)
+    r.run()
+    return r.problems
+
+
+def load_flight_test(path) -> FlightTest:
+    """Load a dataset folder into a :class:`FlightTest` (SI units, radians).
+
+    Raises :class:`DatasetError` listing every problem, one per line, if the dataset is invalid.
+    """
+    r = _Reader(path)
+    ft = r.run()
+    if r.problems or ft is None:
+        raise DatasetError(r.problems, path)
+    return ft

@@ -1,0 +1,246 @@
+"""Typed objects of a loaded flight-test dataset and the column vocabulary of the files.
+
+Inside the package everything is SI with angles in radians.  Degrees and knots appear only in
+the files, where every column name carries its unit (``<quantity>_<unit>``); see
+``docs/data_format.md``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+FORMAT_NAME = "pyomo_heli-flighttest"
+FORMAT_VERSION = 1
+MANIFEST_NAME = "manifest.json"
+TRUTH_NAME = "truth.json"  # evaluation-only ground truth; never opened by this package
+ROLES = ("identification", "validation")
+INPUT_CHANNELS = ("col", "lon")
+NAME_PATTERN = r"[A-Za-z0-9_-]+"
+
+KT = 1852.0 / 3600.0  # m/s per knot
+DEG = math.pi / 180.0  # rad per degree
+
+#: model speed range of trim speeds [kt]
+SPEED_RANGE_KT = (0.0, 150.0)
+#: below this trim speed [kt] the pitot is unreliable: no manifest-vs-TAS consistency check
+PITOT_MIN_KT = 15.0
+#: length of the record start [s] averaged for the manifest-vs-TAS consistency check
+TRIM_WINDOW_S = 1.0
+#: allowed relative spread of the sample spacing around its median
+SPACING_TOL = 0.01
+MIN_SAMPLES = 3
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """One physical quantity of a table and the unit variants accepted for it in files."""
+
+    name: str  # file prefix, e.g. "q"
+    si: str  # column name in the loaded (SI) DataFrame, e.g. "q"
+    label: str  # human description
+    units: dict  # unit suffix -> factor to SI
+    required: bool = True
+    limit: float | None = None  # plausible |value| in SI (None: no check)
+    limit_text: str = ""  # the limit in file units for messages, e.g. "90 deg"
+    kind: str = "number"  # "number" or "text"
+
+
+_ANGLE = {"deg": DEG, "rad": 1.0}
+
+MANEUVER_QUANTITIES: tuple[Quantity, ...] = (
+    Quantity("t", "t", "time", {"s": 1.0}),
+    Quantity("col", "col", "collective pitch at 0.7 R", _ANGLE, limit=45 * DEG, limit_text="45 deg"),
+    Quantity("lon", "lon", "longitudinal cyclic theta_1s, positive aft", _ANGLE,
+             limit=45 * DEG, limit_text="45 deg"),
+    Quantity("q", "q", "pitch rate", {"deg_s": DEG, "rad_s": 1.0}, limit=360 * DEG, limit_text="360 deg/s"),
+    Quantity("theta", "theta", "pitch attitude", _ANGLE, limit=90 * DEG, limit_text="90 deg"),
+    Quantity("nx", "n_x", "specific force n_x", {"g": 1.0}, limit=5.0, limit_text="5 g"),
+    Quantity("nz", "n_z", "specific force n_z", {"g": 1.0},
+             limit=5.0, limit_text="5 g"),
+    Quantity("tas", "TAS", "true airspeed", {"m_s": 1.0, "kt": KT}, limit=250 * KT, limit_text="250 kt"),
+    Quantity("beta0", "beta_0", "rotor coning angle", _ANGLE, required=False, limit=30 * DEG,
+             limit_text="30 deg"),
+)
+
+TRIM_QUANTITIES: tuple[Quantity, ...] = (
+    Quantity("speed", "V", "trim airspeed", {"kt": KT, "m_s": 1.0}),
+    Quantity("gamma_fp", "gamma_fp", "flight-path angle (default 0)", _ANGLE, required=False,
+             limit=90 * DEG, limit_text="90 deg"),
+    Quantity("col", "col", "collective pitch at 0.7 R", _ANGLE, limit=45 * DEG, limit_text="45 deg"),
+    Quantity("lon", "lon", "longitudinal cyclic theta_1s, positive aft", _ANGLE,
+             limit=45 * DEG, limit_text="45 deg"),
+    Quantity("theta", "theta", "pitch attitude", _ANGLE, limit=90 * DEG, limit_text="90 deg"),
+    Quantity("beta0", "beta_0", "rotor coning angle", _ANGLE, required=False, limit=30 * DEG,
+             limit_text="30 deg"),
+    Quantity("source", "source", "'level' or the name of the maneuver whose start trim this is", {},
+             required=False, kind="text"),
+)
+
+#: file column names written by :func:`write_flight_test` (fixed order)
+MANEUVER_WRITE_COLUMNS = {"t": "t_s", "col": "col_deg", "lon": "lon_deg", "q": "q_deg_s",
+                          "theta": "theta_deg", "n_x": "nx_g", "n_z": "nz_g", "TAS": "tas_kt",
+                          "beta_0": "beta0_deg"}
+TRIM_WRITE_COLUMNS = {"V": "speed_kt", "gamma_fp": "gamma_fp_deg", "col": "col_deg", "lon": "lon_deg",
+                      "theta": "theta_deg", "beta_0": "beta0_deg", "source": "source"}
+
+
+def column_names(quantities: tuple[Quantity, ...]) -> list[str]:
+    """Every file column name recognised for a table, in canonical order."""
+    out = []
+    for qty in quantities:
+        out.extend([qty.name] if qty.kind == "text" else [f"{qty.name}_{u}" for u in qty.units])
+    return out
+
+
+# ---------------------------------------------------------------- problems
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong with a dataset.
+
+    ``file`` is relative to the dataset folder (posix separators), or the folder itself for
+    folder-level problems; ``field`` is a CSV column name (for ``.csv`` files) or a manifest key
+    path such as ``maneuvers[3].role`` (for ``manifest.json``), or ``None`` when the problem
+    concerns the whole file.
+    """
+
+    file: str
+    field: str | None
+    message: str
+
+    @property
+    def kind(self) -> str:
+        return "column" if self.file.endswith(".csv") else "field"
+
+    def __str__(self) -> str:
+        if self.field is None:
+            return f"{self.file}: {self.message}"
+        return f"{self.file}: {self.kind} '{self.field}': {self.message}"
+
+
+class DatasetError(ValueError):
+    """A dataset could not be loaded or written; ``problems`` lists every problem found."""
+
+    def __init__(self, problems: list[Problem], path: str | Path | None = None):
+        self.problems = list(problems)
+        self.path = path
+        n = len(self.problems)
+        head = f"{n} problem{'s' if n != 1 else ''} in flight-test dataset"
+        head += f" {str(path)!r}:" if path is not None else ":"
+        super().__init__("\n".join([head] + [str(p) for p in self.problems]))
+
+
+# ---------------------------------------------------------------- loaded objects
+@dataclass(eq=False)
+class Maneuver:
+    """One maneuver time history, SI units, angles in radians.
+
+    ``data`` columns: ``t`` [s], ``col``, ``lon`` [rad], ``q`` [rad/s], ``theta`` [rad],
+    ``n_x``, ``n_z`` [g], ``TAS`` [m/s] and optionally ``beta_0`` [rad].
+    ``trim_speed`` is in m/s; ``file`` is the CSV path relative to the dataset folder
+    (empty: the writer uses ``maneuvers/<name>.csv``).
+    """
+
+    name: str
+    role: str
+    trim_speed: float
+    inputs: list[str]
+    data: pd.DataFrame
+    file: str = ""
+    description: str | None = None
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.data["t"].to_numpy(dtype=float)
+
+    @property
+    def n_samples(self) -> int:
+        return len(self.data)
+
+    @property
+    def duration(self) -> float:
+        """Record length t[-1] - t[0] in s."""
+        t = self.t
+        return float(t[-1] - t[0]) if t.size else 0.0
+
+    @property
+    def sample_rate(self) -> float:
+        """Samples per second, 1 / median spacing of ``t`` (nan with fewer than 2 samples)."""
+        t = self.t
+        return float(1.0 / np.median(np.diff(t))) if t.size > 1 else float("nan")
+
+    @property
+    def channels(self) -> list[str]:
+        """SI column names present in ``data`` other than time."""
+        return [c for c in self.data.columns if c != "t"]
+
+    def increments(self, channels=INPUT_CHANNELS) -> dict[str, np.ndarray]:
+        """Input increments on trim: channel -> input minus its first sample (rad)."""
+        out = {}
+        for ch in channels:
+            x = self.data[ch].to_numpy(dtype=float)
+            out[ch] = x - x[0]
+        return out
+
+
+@dataclass(eq=False)
+class FlightTest:
+    """A loaded flight-test dataset (SI units, radians).
+
+    ``trims`` columns: ``V`` [m/s], ``gamma_fp``, ``col``, ``lon``, ``theta`` [rad] and, when the
+    file has them, ``beta_0`` [rad] and ``source`` (``"level"`` or a maneuver name).
+    """
+
+    aircraft: str
+    mass: float
+    rho: float
+    g: float
+    maneuvers: dict[str, Maneuver]
+    trims: pd.DataFrame
+    path: Path | None = None
+    description: str | None = None
+    trim_file: str = "trims.csv"
+
+    def identification(self) -> list[Maneuver]:
+        return [m for m in self.maneuvers.values() if m.role == "identification"]
+
+    def validation(self) -> list[Maneuver]:
+        return [m for m in self.maneuvers.values() if m.role == "validation"]
+
+    def summary(self) -> str:
+        """A readable table of the maneuvers and trim points."""
+        n_id, n_val = len(self.identification()), len(self.validation())
+        where = f" ({self.path})" if self.path is not None else ""
+        lines = [f"Flight test '{self.aircraft}'{where}"]
+        if self.description:
+            lines.append(f"  {self.description}")
+        lines.append(f"  mass {self.mass:g} kg, rho {self.rho:g} kg/m^3, g {self.g:g} m/s^2")
+        lines.append(f"  {len(self.maneuvers)} maneuvers ({n_id} identification, {n_val} validation):")
+        header = ["name", "role", "trim kt", "duration s", "rate Hz", "samples", "inputs", "channels"]
+        rows = []
+        for m in self.maneuvers.values():
+            rows.append([m.name, m.role, f"{m.trim_speed / KT:.1f}", f"{m.duration:.2f}",
+                         f"{m.sample_rate:.1f}", str(m.n_samples), ",".join(m.inputs), " ".join(m.channels)])
+        right = {2, 3, 4, 5}
+        widths = [max(len(r[i]) for r in rows + [header]) for i in range(len(header))]
+
+        def fmt(r):
+            cells = [c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths))]
+            return ("    " + "  ".join(cells)).rstrip()
+
+        lines.append(fmt(header))
+        lines.extend(fmt(r) for r in rows)
+        n = len(self.trims)
+        if n:
+            v = self.trims["V"].to_numpy(dtype=float) / KT
+            text = f"  {n} trim points, speed {v.min():.1f} .. {v.max():.1f} kt"
+            if "source" in self.trims:
+                n_level = int((self.trims["source"] == "level").sum())
+                text += f" ({n_level} level, {n - n_level} maneuver start trims)"
+            lines.append(text)
+        else:
+            lines.append("  0 trim points")
+        return "\n".join(lines)

@@ -1,0 +1,246 @@
+"""Tests of the NLP solver layer (pyomo_heli.solvers): small problems with known answers."""
+
+import math
+
+import pyomo.environ as pyo
+import pytest
+
+from pyomo_heli.solvers import (
+    SOLVER_NAMES,
+    ModelChangedError,
+    SolveResult,
+    SolverUnavailableError,
+    available_solvers,
+    make_solver,
+)
+
+AVAILABLE = available_solvers()
+BACKENDS = [
+    pytest.param(name, marks=pytest.mark.skipif(name not in AVAILABLE, reason=f"{name} not available"))
+    for name in ("casadi-ipopt", "pounce")
+]
+
+
+# ---------------------------------------------------------------- problems
+def disk_problem():
+    """min (x-1)^2+(y-2)^2 s.t. x+y <= 1: x=0, y=1, KKT multiplier 2.
+
+    Pyomo/ASL dual = d(objective)/d(rhs) = -2 for this minimisation.
+    """
+    m = pyo.ConcreteModel()
+    m.x = pyo.Var(initialize=0.0)
+    m.y = pyo.Var(initialize=0.0)
+    m.c = pyo.Constraint(expr=m.x + m.y <= 1)
+    m.o = pyo.Objective(expr=(m.x - 1) ** 2 + (m.y - 2) ** 2)
+    return m
+
+
+def bound_problem(sense=pyo.minimize):
+    """min (x-2)^2+(y+1)^2+z^2 s.t. x<=1, y>=0, x+z>=1.5 (non-degenerate).
+
+    Optimum x=1, y=0, z=0.5; multipliers: constraint 1, upper bound of x 3,
+    lower bound of y 2. ``sense=maximize`` solves the negated objective, so
+    the point is the same and every ASL multiplier flips sign.
+    """
+    s = 1 if sense == pyo.minimize else -1
+    m = pyo.ConcreteModel()
+    m.x = pyo.Var(initialize=0.5, bounds=(None, 1))
+    m.y = pyo.Var(initialize=0.5, bounds=(0, None))
+    m.z = pyo.Var(initialize=0.0)
+    m.w = pyo.Var(initialize=7.0)  # fixed, used: not in the NL, must stay 7
+    m.w.fix()
+    m.c = pyo.Constraint(expr=m.x + m.z >= 1.5)
+    m.o = pyo.Objective(expr=s * ((m.x - 2) ** 2 + (m.y + 1) ** 2 + m.z**2 + 3 + 0 * m.w), sense=sense)
+    return m
+
+
+def rosenbrock_eps(eps, n=4):
+    """Extended Rosenbrock with an epsilon constraint J2 = |x|^2 <= eps (Param in the bound)."""
+    m = pyo.ConcreteModel()
+    m.I = pyo.RangeSet(0, n - 1)
+    m.x = pyo.Var(m.I, initialize=lambda m, i: -1.2 if i % 2 == 0 else 1.0, bounds=(-3, 3))
+    m.eps = pyo.Param(initialize=eps, mutable=True)
+    m.J2 = pyo.Expression(expr=sum(m.x[i] ** 2 for i in m.I))
+    m.eps_con = pyo.Constraint(expr=m.J2 <= m.eps)
+    m.o = pyo.Objective(
+        expr=sum(100 * (m.x[i + 1] - m.x[i] ** 2) ** 2 + (1 - m.x[i]) ** 2 for i in range(n - 1))
+    )
+    return m
+
+
+def xs(m):
+    return [pyo.value(m.x[i]) for i in m.I]
+
+
+# ------------------------------------------------------------------- (a) KKT
+@pytest.mark.parametrize("name", BACKENDS)
+def test_constraint_dual_matches_analytic_kkt(name):
+    m = disk_problem()
+    res = make_solver(m, name).solve(warm_start="none")
+    assert isinstance(res, SolveResult)
+    assert res.success and res.status == "Solve_Succeeded"
+    assert res.iterations > 0
+    assert m.x.value == pytest.approx(0.0, abs=1e-6)
+    assert m.y.value == pytest.approx(1.0, abs=1e-6)
+    assert res.objective == pytest.approx(2.0, abs=1e-6)
+    # analytic KKT multiplier +2 of "x+y<=1"; ASL dual is d(obj)/d(rhs) = -2
+    assert m.dual[m.c] == pytest.approx(-2.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("name", BACKENDS)
+@pytest.mark.parametrize("sense", [pyo.minimize, pyo.maximize], ids=["min", "max"])
+def test_bound_multipliers_and_objective_sense(name, sense):
+    m = bound_problem(sense)
+    res = make_solver(m, name).solve()
+    s = 1 if sense == pyo.minimize else -1
+    assert res.success
+    assert (m.x.value, m.y.value, m.z.value) == pytest.approx((1.0, 0.0, 0.5), abs=1e-6)
+    assert m.w.value == 7.0 and m.w.fixed
+    assert res.objective == pytest.approx(s * 5.25, abs=1e-6)
+    assert res.objective == pytest.approx(pyo.value(m.o), abs=1e-9)
+    assert m.dual[m.c] == pytest.approx(s * 1.0, abs=1e-6)
+    assert m.ipopt_zU_out[m.x] == pytest.approx(s * -3.0, abs=1e-6)  # ASL: zU <= 0 (min)
+    assert m.ipopt_zL_out[m.y] == pytest.approx(s * 2.0, abs=1e-6)  # ASL: zL >= 0 (min)
+
+
+@pytest.mark.skipif("pounce" not in AVAILABLE, reason="pounce not available")
+@pytest.mark.parametrize("sense", [pyo.minimize, pyo.maximize], ids=["min", "max"])
+def test_casadi_and_pounce_agree(sense):
+    got = {}
+    for name in ("casadi-ipopt", "pounce"):
+        m = bound_problem(sense)
+        make_solver(m, name).solve()
+        got[name] = (
+            [m.x.value, m.y.value, m.z.value, m.dual[m.c]]
+            + [m.ipopt_zL_out.get(v, 0.0) for v in (m.x, m.y, m.z)]
+            + [m.ipopt_zU_out.get(v, 0.0) for v in (m.x, m.y, m.z)]
+        )
+    assert got["casadi-ipopt"] == pytest.approx(got["pounce"], abs=1e-6)
+
+
+# ------------------------------------------------------ (c) eps re-solves
+def test_eps_resolve_without_rebuild_matches_fresh_model():
+    m = rosenbrock_eps(2.0)
+    solver = make_solver(m)
+    first = solver.solve(warm_start="none")
+    assert first.success and first.setup_time > 0
+    for eps in (1.5, 1.0):
+        m.eps = eps
+        res = solver.solve(warm_start="primal")
+        assert res.success and res.setup_time == 0.0
+        assert pyo.value(m.J2) == pytest.approx(eps, abs=1e-6)  # constraint active at new eps
+        fresh = rosenbrock_eps(eps)
+        ref = make_solver(fresh).solve(warm_start="none")
+        assert res.objective == pytest.approx(ref.objective, rel=1e-6)
+        assert xs(m) == pytest.approx(xs(fresh), abs=1e-5)
+    # the eps-constraint dual is the Pareto slope dJ1/deps (< 0 here)
+    slope = m.dual[m.eps_con]
+    m.eps = 1.0 - 1e-4
+    before = pyo.value(m.o)
+    solver.solve()
+    assert (pyo.value(m.o) - before) / -1e-4 == pytest.approx(slope, rel=1e-2)
+
+
+@pytest.mark.parametrize("mode", ["primal", "full"])
+def test_warm_resolve_is_cheaper_than_cold(mode):
+    m = rosenbrock_eps(2.0)
+    solver = make_solver(m)
+    assert solver.solve(warm_start="none").success
+    m.eps = 1.8
+    warm = solver.solve(warm_start=mode)
+    cold = make_solver(rosenbrock_eps(1.8)).solve(warm_start="none")
+    assert warm.success and cold.success
+    assert warm.objective == pytest.approx(cold.objective, rel=1e-6)
+    assert warm.iterations < cold.iterations
+
+
+def test_variable_bound_change_is_honoured():
+    m = bound_problem()
+    solver = make_solver(m)
+    solver.solve()
+    m.x.setub(0.8)
+    res = solver.solve()
+    assert res.success and m.x.value == pytest.approx(0.8, abs=1e-6)
+
+
+# ---------------------------------------------------- (d) failures, no raise
+@pytest.mark.parametrize("name", BACKENDS)
+def test_infeasible_returns_failure(name):
+    m = pyo.ConcreteModel()
+    m.x = pyo.Var(initialize=0.5)
+    m.y = pyo.Var(initialize=0.5)
+    m.disk = pyo.Constraint(expr=m.x**2 + m.y**2 <= 1)
+    m.far = pyo.Constraint(expr=m.x + m.y >= 3)
+    m.o = pyo.Objective(expr=(m.x - 1) ** 2 + m.y**2)
+    res = make_solver(m, name).solve(options={"max_iter": 500})
+    assert not res.success
+    assert res.status == "Infeasible_Problem_Detected"
+    assert "infeasib" in res.message.lower()
+
+
+@pytest.mark.parametrize("name", BACKENDS)
+def test_max_iter_returns_failure(name):
+    m = rosenbrock_eps(1e6)
+    res = make_solver(m, name).solve(options={"max_iter": 2})
+    assert not res.success
+    assert res.status == "Maximum_Iterations_Exceeded"
+    assert res.iterations == 2
+    assert math.isfinite(res.objective)
+
+
+# ------------------------------------------------- (e) stale NL is detected
+def test_changed_fixed_value_requires_rebuild():
+    m = bound_problem()
+    m.o.deactivate()
+    m.o2 = pyo.Objective(expr=(m.x - m.w) ** 2 + (m.y + 1) ** 2 + m.z**2)
+    solver = make_solver(m)
+    solver.solve()
+    m.w.fix(0.0)
+    with pytest.raises(ModelChangedError, match=r"fixed variable w .*rebuild\(\)"):
+        solver.solve()
+    solver.rebuild()
+    res = solver.solve()
+    assert res.success and res.setup_time > 0
+    assert (m.x.value, m.z.value) == pytest.approx((0.75, 0.75), abs=1e-6)  # min x^2+z^2 on x+z>=1.5
+
+
+def test_fixing_a_free_variable_requires_rebuild():
+    m = bound_problem()
+    solver = make_solver(m)
+    m.z.fix(0.0)
+    with pytest.raises(ModelChangedError, match="now fixed"):
+        solver.solve()
+
+
+def test_param_in_constraint_body_requires_rebuild():
+    m = rosenbrock_eps(2.0)
+    m.p = pyo.Param(initialize=0.0, mutable=True)
+    m.eps_con.set_value(m.J2 - m.p <= m.eps)
+    solver = make_solver(m)
+    m.p = 0.1
+    with pytest.raises(ModelChangedError, match="Param p"):
+        solver.solve()
+
+
+# ----------------------------------------------------------- (f) factory
+def test_unknown_solver_name_lists_choices():
+    with pytest.raises(ValueError) as info:
+        make_solver(disk_problem(), "cplex")
+    for name in SOLVER_NAMES:
+        assert name in str(info.value)
+
+
+def test_available_solvers_and_unavailable_error():
+    assert "casadi-ipopt" in AVAILABLE
+    assert set(AVAILABLE) <= set(SOLVER_NAMES)
+    for name in set(SOLVER_NAMES) - set(AVAILABLE):
+        with pytest.raises(SolverUnavailableError, match=name):
+            make_solver(disk_problem(), name)
+
+
+def test_bad_warm_start_mode_and_result_str():
+    solver = make_solver(disk_problem())
+    with pytest.raises(ValueError, match="warm_start"):
+        solver.solve(warm_start="hot")
+    text = str(solver.solve())
+    assert "Solve_Succeeded" in text and "casadi-ipopt" in text

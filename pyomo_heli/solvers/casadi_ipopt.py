@@ -123,6 +123,8 @@ class CasadiIpoptSolver:
     """
 
     name = "casadi-ipopt"
+    #: Rows with more free variables than this get their own Jacobian block.
+    dense_row_threshold = 100
 
     def __init__(self, model, options: dict | None = None):
         try:
@@ -168,7 +170,7 @@ class CasadiIpoptSolver:
                 self._row_offset[i] = g_ub[i] - float(con.ub)
             elif con.lb is not None and np.isfinite(g_lb[i]):
                 self._row_offset[i] = g_lb[i] - float(con.lb)
-        self._remember_baked_in_values()
+        self._scan_expressions()
 
         # MX from import_nl -> expanded SX: much faster nlpsol build and solve.
         x_mx = ca.vertcat(*nl.x)
@@ -177,23 +179,55 @@ class CasadiIpoptSolver:
         x = ca.SX.sym("x", len(self.variables))
         f, g = fun(x)
         self._nlp = {"x": x, "f": f, "g": g}
+        self._jac_g = self._jacobian_function(x, g)
         self._solvers = {}
-        self._last = None
         self._pending_setup += time.perf_counter() - t0
 
-    def _remember_baked_in_values(self) -> None:
-        """Record fixed-var and mutable-Param values the NL file holds as numbers."""
+    def _scan_expressions(self) -> None:
+        """Record what the NL file holds as numbers, and which rows are dense.
+
+        Fixed-var and mutable-Param values are baked into the NL; remembering
+        them lets solve() refuse to run on a stale problem. Dense rows (e.g.
+        an epsilon constraint on a sum over all samples) are remembered for
+        the Jacobian construction, see _jacobian_function.
+        """
         self._fixed_at_write = ComponentMap()
         self._params_at_write = ComponentMap()
+        self._dense_rows = []
         exprs = [c.body for c in self.constraints]
         if self.objective is not None:
             exprs.append(self.objective.expr)
-        for expr in exprs:
+        for row, expr in enumerate(exprs):
+            n_free = 0
             for var in identify_variables(expr, include_fixed=True):
                 if var.fixed:
                     self._fixed_at_write[var] = var.value
+                else:
+                    n_free += 1
+            if n_free > self.dense_row_threshold and row < len(self.constraints):
+                self._dense_rows.append(row)
             for par in identify_mutable_parameters(expr):
                 self._params_at_write[par] = pyo.value(par)
+
+    def _jacobian_function(self, x, g):
+        """Constraint Jacobian built row-block-wise, or None for casadi's default.
+
+        casadi colours the whole Jacobian at once; one dense row together with
+        a dense column (a model parameter used at every time step) defeats both
+        forward and reverse colouring and the build becomes quadratic (15 s at
+        4k variables, 64 s at 8k; 0.4 s at 8k this way). The sparse rows are differentiated as
+        one block and each dense row by reverse mode alone, which is linear.
+        """
+        ca = self._ca
+        if not self._dense_rows:
+            return None
+        dense = set(self._dense_rows)
+        sparse = [i for i in range(g.shape[0]) if i not in dense]
+        blocks = [ca.jacobian(g[sparse], x)] + [ca.jacobian(g[i], x) for i in self._dense_rows]
+        back = np.argsort(sparse + self._dense_rows).tolist()  # rows back into NL order
+        jac = ca.vertcat(*blocks)[back, :]
+        p = ca.SX.sym("p", 0)
+        return ca.Function("nlp_jac_g", [x, p], [g, jac], ["x", "p"], ["g", "jac_g_x"])
 
     def _solver_for(self, ipopt_options: dict, verbose: bool):
         ipopt = dict(ipopt_options)
@@ -205,6 +239,8 @@ class CasadiIpoptSolver:
         if key not in self._solvers:
             t0 = time.perf_counter()
             opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
+            if self._jac_g is not None:
+                opts["jac_g"] = self._jac_g
             self._solvers[key] = self._ca.nlpsol("solver", "ipopt", self._nlp, opts)
             self._pending_setup += time.perf_counter() - t0
         return self._solvers[key]

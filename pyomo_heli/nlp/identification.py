@@ -1,0 +1,182 @@
+"""One Pyomo NLP for all the data: maneuvers, trim points, shared parameters.
+
+Layout of the model ``m`` built by :func:`build_identification_nlp`:
+
+- ``m.theta_s[name]``   free parameters (scaled), shared by every block
+- ``m.trim[i]``         one trim block per distinct trim speed; a trim data
+                        point and a maneuver start at the same speed share it
+- ``m.man[name]``       one collocation block per maneuver, started from the
+                        trim block at its speed, inputs = model trim + measured increments
+- ``m.J_time``, ``m.J_trim``  the objectives (expressions), see :mod:`.objectives`
+- ``m.eps_trim``        mutable Param: epsilon bound of ``m.eps_con: J_trim <= eps_trim``
+- ``m.objective``       the active objective (swapped by :func:`set_objective`)
+
+Everything the physics sees is in SI units; objectives are scaled only in
+``m.objective`` (optimizer level, paper Fig. 4).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyomo.environ as pyo
+
+from ..physics.model import FLAPPING, HelicopterModel
+from ..simulation.integrate import sampled, simulate
+from ..simulation.trim import trim_sweep
+from .maneuver_block import build_maneuver_block, initialise_from
+from .objectives import add_time_objective, add_trim_objective
+from .parameters import FreeParameter, add_parameters
+from .trim_block import build_trim_block
+
+TIME_OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
+TRIM_OUTPUTS = ("col", "lon", "theta")
+
+
+@dataclass
+class NLPOptions:
+    """How the data become an NLP."""
+
+    time_outputs: tuple = ("q", "theta", "n_x", "n_z", "TAS")
+    trim_outputs: tuple = TRIM_OUTPUTS
+    covariance: str = "diagonal"
+    ncp: int = 2
+    scheme: str = "LAGRANGE-RADAU"
+
+    def __post_init__(self):
+        bad = [o for o in self.time_outputs if o not in TIME_OUTPUTS]
+        if bad:
+            raise ValueError(f"unknown time output(s) {bad}; choose from {', '.join(TIME_OUTPUTS)}")
+        bad = [o for o in self.trim_outputs if o not in TRIM_OUTPUTS]
+        if bad:
+            raise ValueError(f"unknown trim output(s) {bad}; choose from {', '.join(TRIM_OUTPUTS)}")
+        if not self.time_outputs and not self.trim_outputs:
+            raise ValueError("no outputs selected")
+
+
+@dataclass
+class IdentificationData:
+    """The data one NLP is built from (SI units), already selected and resampled.
+
+    maneuvers: list of dataset Maneuver objects (data, trim_speed, name).
+    trims: DataFrame with V, col, lon, theta (one row per trim point).
+    """
+
+    maneuvers: list
+    trims: object
+    speed_tol: float = 1e-6
+    speeds: list = field(default_factory=list)
+
+    def __post_init__(self):
+        speeds = sorted({round(float(v), 6) for v in self.trims["V"]} | {round(m.trim_speed, 6)
+                                                                          for m in self.maneuvers})
+        self.speeds = speeds
+
+    def speed_index(self, V: float) -> int:
+        return self.speeds.index(round(float(V), 6))
+
+
+def _model_at(model: HelicopterModel, free: list[FreeParameter]) -> HelicopterModel:
+    return model.with_parameters(**{f.name: f.initial for f in free}) if free else model
+
+
+def build_identification_nlp(data: IdentificationData, model: HelicopterModel, free: list[FreeParameter],
+                             options: NLPOptions | None = None) -> pyo.ConcreteModel:
+    """Build the full-discretisation NLP, initialised from a simulation at the initial parameters."""
+    opts = options or NLPOptions()
+    m = pyo.ConcreteModel(name="identification")
+    pmap = add_parameters(m, model.parameters, free)
+    m.extensions = [e.name for e in model.extensions]
+
+    # --- trim blocks, initialised from float trims at the initial guess
+    sim_model = _model_at(model, free)
+    float_trims = trim_sweep(sim_model, data.speeds)
+    m.trim_speeds = pyo.Set(initialize=range(len(data.speeds)), ordered=True)
+    m.trim = pyo.Block(m.trim_speeds)
+    for i, (V, tp) in enumerate(zip(data.speeds, float_trims)):
+        guess = {**tp.to_dict(), **tp.extra_states}
+        build_trim_block(m.trim[i], model, pmap, V, guess=guess)
+
+    # --- trim objective
+    trim_res = []
+    for _, row in data.trims.iterrows():
+        blk = m.trim[data.speed_index(row["V"])]
+        trim_res.append([row[k] - getattr(blk, k) for k in opts.trim_outputs])
+    if trim_res and opts.trim_outputs:
+        add_trim_objective(m, trim_res)
+    else:
+        m.J_trim = pyo.Expression(expr=0.0)
+
+    # --- maneuvers
+    names = [mv.name for mv in data.maneuvers]
+    m.maneuver_names = pyo.Set(initialize=names, ordered=True)
+    m.man = pyo.Block(m.maneuver_names)
+    residuals = {o: [] for o in opts.time_outputs}
+    init_res = {o: [] for o in opts.time_outputs}
+    for mv in data.maneuvers:
+        i = data.speed_index(mv.trim_speed)
+        blk = m.man[mv.name]
+        t = mv.data["t"].to_numpy()
+        inc = mv.increments()
+        build_maneuver_block(blk, model, pmap, t, inc, m.trim[i], ncp=opts.ncp, scheme=opts.scheme)
+        tp = float_trims[i]
+        sim = simulate(sim_model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, max_step=0.05)
+        initialise_from(blk, sim, sim_model.state_names)
+        for o in opts.time_outputs:
+            meas = mv.data[o].to_numpy()
+            residuals[o].extend(float(y) - blk.y[o, tt] for y, tt in zip(meas, blk.samples))
+            init_res[o].extend(meas - sim[o].to_numpy())
+    if data.maneuvers and opts.time_outputs:
+        add_time_objective(m, residuals, list(opts.time_outputs), opts.covariance,
+                           {o: np.array(v) for o, v in init_res.items()})
+    else:
+        m.J_time = pyo.Expression(expr=0.0)
+
+    # --- epsilon constraint and the active objective
+    m.eps_trim = pyo.Param(initialize=1e20, mutable=True)
+    m.eps_con = pyo.Constraint(expr=m.J_trim <= m.eps_trim)
+    m.objective = pyo.Objective(expr=m.J_time)
+    m.options = opts
+    return m
+
+
+def set_objective(m: pyo.ConcreteModel, expr) -> None:
+    """Replace the active objective (the solver adapter must then be rebuilt)."""
+    m.del_component("objective")
+    m.objective = pyo.Objective(expr=expr)
+
+
+def prepare_data(ft, maneuvers="identification", resample_hz: float | None = None,
+                 max_duration: float | None = None) -> IdentificationData:
+    """Select maneuvers of a loaded FlightTest, keep every k-th sample and crop the record.
+
+    Keeping every k-th sample (k = rate / resample_hz, an integer) leaves the
+    measurement times on the element boundaries: nothing is snapped.
+    """
+    import dataclasses
+
+    if maneuvers in ("identification", "validation"):
+        chosen = [mv for mv in ft.maneuvers.values() if mv.role == maneuvers]
+    else:
+        missing = [n for n in maneuvers if n not in ft.maneuvers]
+        if missing:
+            raise KeyError(f"maneuver(s) {missing} not in the dataset; it has {', '.join(ft.maneuvers)}")
+        chosen = [ft.maneuvers[n] for n in maneuvers]
+    out = []
+    for mv in chosen:
+        df = mv.data
+        if resample_hz:
+            k = mv.sample_rate / resample_hz
+            if abs(k - round(k)) > 1e-6 or round(k) < 1:
+                raise ValueError(f"resample_hz {resample_hz} must divide the sample rate {mv.sample_rate:g} Hz "
+                                 f"of maneuver {mv.name}")
+            df = df.iloc[:: int(round(k))]
+        if max_duration is not None:
+            df = df[df["t"] <= df["t"].iloc[0] + max_duration + 1e-9]
+        out.append(dataclasses.replace(mv, data=df.reset_index(drop=True)))
+    return IdentificationData(maneuvers=out, trims=ft.trims)
+
+
+def maneuver_outputs(m: pyo.ConcreteModel, name: str, outputs) -> dict[str, np.ndarray]:
+    blk = m.man[name]
+    return {o: np.array([pyo.value(blk.y[o, t]) for t in blk.samples]) for o in outputs}

@@ -87,7 +87,13 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
         for s in e.states:
             init[s] = getattr(start, s)
     blk.initial = pyo.Constraint(states, rule=lambda _, s: blk.x[s, t0] == init[s])
-    blk.y = pyo.Expression(list(ctx_at(t0).outputs), blk.samples, rule=lambda _, k, t: ctx_at(t).outputs[k])
+    # Outputs at the samples are variables defined by equalities, not expressions:
+    # the likelihood sums squares over thousands of samples, and with output
+    # variables that sum is a plain quadratic (diagonal Hessian) instead of a
+    # row that inlines the whole force model at every sample.
+    out_names = list(ctx_at(t0).outputs)
+    blk.y = pyo.Var(out_names, blk.samples, initialize=0.0)
+    blk.output_eq = pyo.Constraint(out_names, blk.samples, rule=lambda _, k, t: blk.y[k, t] == ctx_at(t).outputs[k])
     if initial_guess is not None:
         initialise_from(blk, initial_guess, states)
 
@@ -101,6 +107,10 @@ def initialise_from(blk: pyo.Block, df, states) -> None:
             vals = np.interp(times, tt, df[s].to_numpy())
             for t, v in zip(times, vals):
                 blk.x[s, t].set_value(float(v), skip_validation=True)
+    for k in sorted({k for k, _ in blk.y.keys()}):
+        if k in df:
+            for t in blk.samples:
+                blk.y[k, t].set_value(float(np.interp(t, tt, df[k].to_numpy())), skip_validation=True)
     for b in FLAPPING:
         if b in df:
             vals = np.interp(times, tt, df[b].to_numpy())

@@ -124,6 +124,42 @@ def cmd_check_data(args) -> int:
     return check_data(args.directory)
 
 
+def cmd_identify(args) -> int:
+    from .config import load_identification_config
+    from .identify import run_identification
+
+    cfg = load_identification_config(args.config)
+    print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
+          f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
+    result = run_identification(cfg, args.out)
+    if not args.no_report:
+        from .report.identification import write_report
+
+        write_report(args.out, cfg)
+    print(result)
+    print(f"results in {args.out}")
+    return 0
+
+
+def cmd_demo(args) -> int:
+    from pathlib import Path
+
+    config = Path(__file__).resolve().parent.parent / "studies" / "case1.toml"
+    if not config.is_file():
+        raise UserError(f"demo config {config} not found (the demo runs from a source checkout)")
+    args.config, args.no_report = str(config), False
+    return cmd_identify(args)
+
+
+def cmd_inspect(args) -> int:
+    from .config import load_identification_config
+    from .nlp.inspect import inspect_problem
+
+    cfg = load_identification_config(args.config)
+    print(inspect_problem(cfg, diagnostics=not args.no_diagnostics))
+    return 0
+
+
 # ---------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="pyomo-heli", description="Multi-objective parameter identification of helicopter models")
@@ -153,6 +189,21 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--out", required=True)
     g.set_defaults(func=cmd_generate_data)
 
+    i = sub.add_parser("identify", help="multi-objective identification from a config (Pareto front)")
+    i.add_argument("config")
+    i.add_argument("--out", required=True, help="results folder")
+    i.add_argument("--no-report", action="store_true", help="skip figures and report")
+    i.set_defaults(func=cmd_identify)
+
+    d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")
+    d.add_argument("--out", default="demo_out")
+    d.set_defaults(func=cmd_demo)
+
+    n = sub.add_parser("inspect", help="print the NLP of a config without solving")
+    n.add_argument("config")
+    n.add_argument("--no-diagnostics", action="store_true", help="skip the IDAES structural diagnostics")
+    n.set_defaults(func=cmd_inspect)
+
     c = sub.add_parser("check-data", help="check a flight-test dataset folder and print a summary")
     c.add_argument("directory")
     c.set_defaults(func=cmd_check_data)
@@ -160,6 +211,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    from .config import ConfigError as IdentificationConfigError
+    from .dataset import DatasetError
     from .flighttest.config import ConfigError
     from .simulation.inputs import InputSpecError
     from .simulation.trim import TrimError
@@ -174,8 +227,8 @@ def main(argv=None) -> int:
         return 2
     try:
         return args.func(args)
-    except (UserError, InputSpecError, ConfigError, TrimError, SolverError, FileNotFoundError, KeyError,
-            ValueError) as exc:
+    except (UserError, InputSpecError, ConfigError, IdentificationConfigError, DatasetError, TrimError, SolverError,
+            FileNotFoundError, KeyError, ValueError, RuntimeError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
         print(f"pyomo-heli {cmd}: error: {msg}", file=sys.stderr)
         return 2

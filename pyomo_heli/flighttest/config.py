@@ -85,6 +85,11 @@ def load_config(path: str | Path) -> GeneratorConfig:
         if name not in TRUTH_EFFECTS:
             raise ConfigError(f"{w} [truth.effects]: unknown effect '{name}'; choose from "
                               f"{', '.join(sorted(TRUTH_EFFECTS))}")
+        known = [s.name for s in TRUTH_EFFECTS[name]().parameters()]
+        for k in eff:
+            if k not in known:
+                raise ConfigError(f"{w} [truth.effects.{name}]: unknown parameter name '{k}'; "
+                                  f"use {', '.join(known)}")
         effects[name] = {k: float(v) for k, v in eff.items()}
 
     sen = _get(raw, "sensors", w, dict, {})

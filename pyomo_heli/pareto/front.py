@@ -51,6 +51,9 @@ class FrontPoint:
     wall_time: float
     setup_time: float = 0.0
     warm_start: str = "primal"
+    cold_iterations: int | None = None  # filled by the cold check only
+    cold_status: str | None = None
+    cold_J_time: float | None = None
 
     def row(self) -> dict:
         d = asdict(self)
@@ -67,6 +70,7 @@ class ParetoSettings:
     lexicographic_tol: float = 1e-6  # relative slack on J_trim(B) for B's second stage
     solver: str = "casadi-ipopt"
     solver_options: dict = field(default_factory=dict)
+    cold_check: bool = False  # also solve every interior point cold, to measure what warm starts save
 
     def __post_init__(self):
         if self.points < 2:
@@ -123,6 +127,7 @@ class ParetoSolver:
         m.selected_objective = pyo.Objective(expr=w["w_time"] * m.J_time + w["w_trim"] * m.J_trim
                                              + w["w_utopia"] * utopia)
         self._pin(w_time=1.0 / self.s_time)
+        self._snap_initial = _Snapshot(m)
         self.solver = make_solver(m, self.settings.solver, self.settings.solver_options)
         self.points: list[FrontPoint] = []
 
@@ -191,6 +196,8 @@ class ParetoSolver:
         # objectives of multi-objective solves are scaled by their utopia value
         for k in range(1, s.points - 1):
             p = self._solve("time", k, "eps", float(eps[k]), s.warm_start, scale=max(abs(a.J_time), 1.0))
+            if s.cold_check:
+                self._cold_check(p, last_good, scale=max(abs(a.J_time), 1.0))
             if p.success:
                 last_good = self.snapshots[k] = _Snapshot(self.m)
             else:
@@ -200,6 +207,14 @@ class ParetoSolver:
         self.points.append(b)
         self.on_point(b)
         return self.points
+
+    def _cold_check(self, p: FrontPoint, back, scale: float) -> None:
+        """Solve the same epsilon point from the initial guess; keep the warm solution in the model."""
+        warm = _Snapshot(self.m)
+        self._snap_initial.restore()
+        cold = self._solve("time", p.index, "eps", p.epsilon, "none", scale=scale)
+        p.cold_iterations, p.cold_status, p.cold_J_time = cold.iterations, cold.status, cold.J_time
+        warm.restore()
 
     # ------------------------------------------------------------- choosing
     def utopia_nadir(self):

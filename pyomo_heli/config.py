@@ -1,0 +1,184 @@
+"""The identification config (a TOML file) and its validation.
+
+Every error names the file and the field at fault. Parameter values are
+given in the unit named by ``unit`` (the parameter's SI unit or its display
+unit, e.g. deg/m for theta_twist) and converted to SI here.
+Example: studies/case1.toml.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .nlp.identification import TIME_OUTPUTS, TRIM_OUTPUTS, NLPOptions
+from .nlp.parameters import FreeParameter
+from .pareto.front import ParetoSettings
+from .physics.model import HelicopterModel
+from .solvers import SOLVER_NAMES
+
+
+class ConfigError(ValueError):
+    """A bad identification config; the message names the file and field."""
+
+
+@dataclass
+class IdentificationConfig:
+    path: Path
+    dataset: Path
+    maneuvers: object  # "identification" or a list of names
+    validation: object  # "validation" or a list of names
+    resample_hz: float | None
+    max_duration: float | None
+    model: HelicopterModel
+    free: list
+    nlp: NLPOptions
+    pareto: ParetoSettings
+    raw: dict = field(default_factory=dict)
+
+
+def _need(d, key, where, types, default=...):
+    if key not in d:
+        if default is ...:
+            raise ConfigError(f"{where}: missing field '{key}'")
+        return default
+    v = d[key]
+    if (isinstance(v, bool) and types is not bool) or not isinstance(v, types):
+        names = "/".join(t.__name__ for t in (types if isinstance(types, tuple) else (types,)))
+        raise ConfigError(f"{where}: field '{key}' must be {names}, got {v!r}")
+    return v
+
+
+def _unit_factor(spec, unit: str, where: str) -> float:
+    if unit in (spec.unit, "SI", ""):
+        return 1.0
+    if spec.display is not None and unit == spec.display[0]:
+        return 1.0 / spec.display[1]
+    allowed = [spec.unit] + ([spec.display[0]] if spec.display else [])
+    raise ConfigError(f"{where}: unit '{unit}' not recognised for {spec.name}; use {' or '.join(allowed)}")
+
+
+def load_identification_config(path: str | Path, overrides: dict | None = None) -> IdentificationConfig:
+    """Read and check an identification config. ``overrides`` replace top-level tables (tests, CLI)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: config file not found")
+    try:
+        raw = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    for k, v in (overrides or {}).items():
+        raw[k] = {**raw.get(k, {}), **v} if isinstance(v, dict) else v
+    f = str(path)
+    known = {"data", "model", "parameters", "objectives", "discretization", "pareto", "solver", "study"}
+    unknown = set(raw) - known
+    if unknown:
+        raise ConfigError(f"{f}: unknown table(s) {sorted(unknown)}; expected {sorted(known)}")
+
+    data = _need(raw, "data", f, dict)
+    ds = Path(_need(data, "dataset", f"{f} [data]", str))
+    if not ds.is_absolute():
+        ds = (path.parent / ds).resolve()
+    if not ds.is_dir():
+        raise ConfigError(f"{f} [data]: field 'dataset': folder {ds} not found")
+    mans = data.get("maneuvers", "identification")
+    if not (mans == "identification" or (isinstance(mans, list) and all(isinstance(x, str) for x in mans))):
+        raise ConfigError(f"{f} [data]: field 'maneuvers' must be \"identification\" or a list of names")
+    val = data.get("validation", "validation")
+    resample = data.get("resample_hz")
+    if resample is not None and not (isinstance(resample, (int, float)) and resample > 0):
+        raise ConfigError(f"{f} [data]: field 'resample_hz' must be a positive number")
+    max_dur = data.get("max_duration_s")
+    if max_dur is not None and not (isinstance(max_dur, (int, float)) and max_dur > 0):
+        raise ConfigError(f"{f} [data]: field 'max_duration_s' must be a positive number")
+
+    mdl = raw.get("model", {})
+    extensions = []
+    ext_names = _need(mdl, "extensions", f"{f} [model]", list, [])
+    if ext_names:
+        from .diagnosis.candidates import make_candidate
+
+        for n in ext_names:
+            try:
+                extensions.append(make_candidate(n))
+            except KeyError as exc:
+                raise ConfigError(f"{f} [model]: field 'extensions': {exc.args[0]}") from None
+    model = HelicopterModel(extensions=extensions)
+    fixed = _need(mdl, "parameters", f"{f} [model]", dict, {})
+    for k in fixed:
+        if k not in model.parameters:
+            raise ConfigError(f"{f} [model.parameters]: unknown parameter name '{k}'")
+    if fixed:
+        model = model.with_parameters(**{k: float(v) for k, v in fixed.items()})
+
+    params = _need(raw, "parameters", f, dict)
+    if not params:
+        raise ConfigError(f"{f} [parameters]: no free parameter given")
+    free = []
+    for name, spec_raw in params.items():
+        where = f"{f} [parameters.{name}]"
+        if name not in model.parameters:
+            msg = model.parameters._unknown(name)
+            raise ConfigError(f"{where}: {msg}")
+        if not isinstance(spec_raw, dict):
+            raise ConfigError(f"{where}: must be a table with initial, lower, upper, scale, unit")
+        spec = model.parameters.spec(name)
+        fac = _unit_factor(spec, _need(spec_raw, "unit", where, str, spec.unit), where)
+        def num(key, default):
+            v = _need(spec_raw, key, where, (int, float), default)
+            return None if v is None else float(v) * fac
+        lo_d, hi_d = spec.bounds or (None, None)
+        initial = num("initial", None)
+        lower = num("lower", None) if "lower" in spec_raw else lo_d
+        upper = num("upper", None) if "upper" in spec_raw else hi_d
+        scale = num("scale", None) if "scale" in spec_raw else spec.scale
+        if initial is None:
+            initial = spec.value
+        if lower is None or upper is None:
+            raise ConfigError(f"{where}: give 'lower' and 'upper' (no default range for {name})")
+        try:
+            free.append(FreeParameter(name, initial, lower, upper, abs(scale) if scale else max(abs(initial), 1.0)))
+        except ValueError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+
+    obj = raw.get("objectives", {})
+    t_out = tuple(_need(obj, "time_outputs", f"{f} [objectives]", list, ["q", "theta", "n_x", "n_z", "TAS"]))
+    r_out = tuple(_need(obj, "trim_outputs", f"{f} [objectives]", list, ["col", "lon", "theta"]))
+    for o in t_out:
+        if o not in TIME_OUTPUTS:
+            raise ConfigError(f"{f} [objectives]: unknown output '{o}' in time_outputs; choose from "
+                              f"{', '.join(TIME_OUTPUTS)}")
+    for o in r_out:
+        if o not in TRIM_OUTPUTS:
+            raise ConfigError(f"{f} [objectives]: unknown output '{o}' in trim_outputs; choose from "
+                              f"{', '.join(TRIM_OUTPUTS)}")
+    cov = _need(obj, "covariance", f"{f} [objectives]", str, "diagonal")
+    if cov not in ("diagonal", "full"):
+        raise ConfigError(f"{f} [objectives]: field 'covariance' must be diagonal or full")
+    disc = raw.get("discretization", {})
+    ncp = _need(disc, "ncp", f"{f} [discretization]", int, 2)
+    if not 1 <= ncp <= 5:
+        raise ConfigError(f"{f} [discretization]: field 'ncp' must be 1..5")
+    nlp = NLPOptions(time_outputs=t_out, trim_outputs=r_out, covariance=cov, ncp=ncp)
+
+    par = raw.get("pareto", {})
+    sol = raw.get("solver", {})
+    solver = _need(sol, "name", f"{f} [solver]", str, "casadi-ipopt")
+    if solver not in SOLVER_NAMES:
+        raise ConfigError(f"{f} [solver]: field 'name': unknown solver '{solver}'; choose from {', '.join(SOLVER_NAMES)}")
+    points = _need(par, "points", f"{f} [pareto]", int, 11)
+    if points < 2:
+        raise ConfigError(f"{f} [pareto]: field 'points': the epsilon grid needs at least 2 points (the anchors), "
+                          f"got {points}")
+    try:
+        pareto = ParetoSettings(points=points, spacing=_need(par, "spacing", f"{f} [pareto]", str, "geometric"),
+                                warm_start=_need(par, "warm_start", f"{f} [pareto]", str, "primal"),
+                                cold_check=bool(_need(par, "cold_check", f"{f} [pareto]", bool, False)),
+                                solver=solver, solver_options=dict(_need(sol, "options", f"{f} [solver]", dict, {})))
+    except ValueError as exc:
+        raise ConfigError(f"{f} [pareto]: {exc}") from None
+    return IdentificationConfig(path=path, dataset=ds, maneuvers=mans, validation=val,
+                                resample_hz=float(resample) if resample else None,
+                                max_duration=float(max_dur) if max_dur else None, model=model, free=free,
+                                nlp=nlp, pareto=pareto, raw=raw)

@@ -1,0 +1,465 @@
+"""The report of an identification run: figures, tables and error metrics.
+
+:func:`write_report` reads a results folder (``front.csv``, ``chosen.json``,
+``time_domain.json``, see :class:`~pyomo_heli.pareto.result.IdentificationResult`)
+and writes next to them:
+
+- ``pareto_front.png``  the front, anchors A and B, utopia U, chosen C, direct Eq. 11 point (paper Fig. 3)
+- ``trim_vs_speed.png`` trim col, lon, theta vs speed: data and both models (paper Fig. 5)
+- ``validation.png``    validation maneuvers: data and both models (paper Fig. 6)
+- ``parameters.md``, ``parameters.csv``  the parameter table (paper Tables 2-3)
+- ``metrics.json``      the RMS errors (SI) and every simulation problem, machine-readable
+- ``report.md``         all of the above, linked, with the front table
+
+Model predictions are computed here, independently of the NLP, with the
+float model (:mod:`pyomo_heli.simulation`): trims by continuation from
+hover, maneuvers from the model's own trim at the maneuver's trim speed
+with inputs = model trim + measured increments, as the identification does.
+A trim or simulation that fails is recorded and reported, never raised.
+``truth.json`` of the dataset is read only here, for the truth column.
+"""
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..dataset import load_flight_test
+from ..dataset.schema import MANEUVER_QUANTITIES
+from ..nlp.identification import prepare_data
+from ..pareto.result import IdentificationResult, write_json
+from ..physics.model import HelicopterModel
+from ..simulation.integrate import sampled, simulate
+from ..simulation.trim import TrimPoint, trim_sweep
+from ..units import KT
+from . import plots
+
+#: outputs compared on the validation maneuvers (all recorded time outputs)
+VALIDATION_OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
+TRIM_CHANNELS = ("col", "lon", "theta")
+#: speeds of the model trim curves [m/s]: 0 .. 120 kt every 2.5 kt
+CURVE_SPEEDS = tuple(np.arange(0.0, 120.0 + 1e-9, 2.5) * KT)
+TIME_DOMAIN = "time-domain (A)"
+MULTI_OBJECTIVE = "multi-objective (C)"
+
+
+# ---------------------------------------------------------------- model predictions
+@dataclass
+class Prediction:
+    """What one parameter set predicts for the data, computed with the float model (SI units).
+
+    ``trims``: speed (rounded key, see :func:`speed_key`) -> TrimPoint or None
+    (failed). ``maneuvers``: name -> simulated DataFrame or None (failed or
+    diverged). ``partial``: name -> the record of a diverged simulation up to
+    where it left the plausible range. ``problems``: one readable line per
+    failed trim or simulation.
+    """
+
+    label: str
+    parameters: dict
+    trims: dict = field(default_factory=dict)
+    maneuvers: dict = field(default_factory=dict)
+    partial: dict = field(default_factory=dict)
+    problems: list = field(default_factory=list)
+
+    def shown_runs(self) -> dict:
+        """name -> record to plot: the full simulation, the diverged part, or None."""
+        return {n: (sim if sim is not None else self.partial.get(n)) for n, sim in self.maneuvers.items()}
+
+    def trim_table(self, speeds) -> pd.DataFrame:
+        """V and the trim channels at ``speeds`` [m/s], NaN where the model could not be trimmed."""
+        rows = []
+        for v in speeds:
+            tp = self.trims.get(speed_key(v))
+            rows.append({"V": float(v), **{c: (getattr(tp, c) if tp is not None else np.nan) for c in TRIM_CHANNELS}})
+        return pd.DataFrame(rows, columns=["V", *TRIM_CHANNELS])
+
+
+def speed_key(v: float) -> float:
+    return round(float(v), 6)
+
+
+def model_trims(model: HelicopterModel, speeds) -> tuple[dict, list]:
+    """Trim ``model`` at ``speeds`` [m/s] by continuation from hover.
+
+    Returns (speed key -> TrimPoint or None, problems). One sweep through
+    every speed first; if it breaks, each speed is tried on its own so that
+    one bad speed costs only itself.
+    """
+    speeds = sorted({speed_key(v) for v in speeds})
+    try:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            tps = trim_sweep(model, speeds)
+        return dict(zip(speeds, tps)), []
+    except Exception:  # noqa: BLE001 - any failure of the physics is reported, not raised
+        pass
+    out, failed = {}, []
+    for v in speeds:
+        try:
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                out[v] = trim_sweep(model, [v])[0]
+        except Exception as exc:  # noqa: BLE001
+            out[v] = None
+            failed.append((v, str(exc).splitlines()[0] if str(exc) else type(exc).__name__))
+    problems = []
+    if failed:
+        kts = ", ".join(f"{v / KT:.1f}" for v, _ in failed)
+        problems.append(f"trim failed at {len(failed)} speed(s) [kt]: {kts} (first: {failed[0][1]})")
+    return out, problems
+
+
+#: |value| beyond which a simulated output counts as diverged (the dataset's plausibility limits, SI)
+DIVERGENCE_LIMITS = {q.si: q.limit for q in MANEUVER_QUANTITIES if q.si in VALIDATION_OUTPUTS and q.limit}
+#: the record is integrated in pieces of this length [s], so that a diverging model is stopped early
+CHUNK_S = 1.0
+
+
+class Diverged(RuntimeError):
+    """The simulated response left the plausible range; ``partial`` holds the record up to there."""
+
+    def __init__(self, message: str, partial: pd.DataFrame):
+        super().__init__(message)
+        self.partial = partial
+
+
+def simulate_maneuver(model: HelicopterModel, maneuver, trim: TrimPoint) -> pd.DataFrame:
+    """Replay a measured maneuver: start at ``trim``, inputs = trim inputs + measured increments.
+
+    The record is integrated in pieces of about ``CHUNK_S`` (each piece starts
+    from the state at the end of the previous one), so that a diverging model
+    is stopped as soon as an output leaves ``DIVERGENCE_LIMITS``: then
+    :class:`Diverged` is raised with the record up to there. Raises
+    RuntimeError if the integration itself fails.
+    """
+    t = maneuver.data["t"].to_numpy(dtype=float)
+    inc = {k: sampled(t, v) for k, v in maneuver.increments().items()}
+    names = model.state_names
+    per = max(int(round(CHUNK_S * (len(t) - 1) / max(t[-1] - t[0], 1e-12))), 1) if len(t) > 1 else 1
+    pieces, x0, i0 = [], None, 0
+    while True:
+        i1 = min(i0 + per, len(t) - 1)
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sim = simulate(model, trim, t[i0:i1 + 1], inc, x0=x0, max_step=0.05)
+        if len(sim) != i1 + 1 - i0:
+            raise RuntimeError(f"simulation stopped after {i0 + len(sim)} of {len(t)} samples")
+        pieces.append(sim if not pieces else sim.iloc[1:])
+        vals = sim[[c for c in VALIDATION_OUTPUTS if c in sim]]
+        bad = ~np.isfinite(vals.to_numpy(dtype=float))
+        for c, lim in DIVERGENCE_LIMITS.items():
+            if c in vals:
+                bad[:, list(vals.columns).index(c)] |= np.abs(vals[c].to_numpy(dtype=float)) > lim
+        if bad.any():
+            k = int(np.argmax(bad.any(axis=1)))
+            col = vals.columns[int(np.argmax(bad[k]))]
+            partial = pd.concat(pieces, ignore_index=True)
+            partial = partial[partial["t"] <= sim["t"].iloc[k]].reset_index(drop=True)
+            raise Diverged(f"diverged: {col} left its plausible range at t = {sim['t'].iloc[k]:.2f} s", partial)
+        if i1 >= len(t) - 1:
+            break
+        x0 = {n: float(sim[n].iloc[-1]) for n in names}
+        i0 = i1
+    return pd.concat(pieces, ignore_index=True)
+
+
+def predict(label: str, model: HelicopterModel, parameters: dict, trim_speeds, maneuvers) -> Prediction:
+    """Trims at ``trim_speeds`` [m/s] and simulations of ``maneuvers`` for ``model`` at ``parameters`` (SI)."""
+    mdl = model.with_parameters(**parameters) if parameters else model
+    speeds = set(speed_key(v) for v in trim_speeds) | {speed_key(mv.trim_speed) for mv in maneuvers}
+    trims, problems = model_trims(mdl, speeds)
+    pred = Prediction(label=label, parameters=dict(parameters), trims=trims, problems=list(problems))
+    for mv in maneuvers:
+        tp = trims.get(speed_key(mv.trim_speed))
+        if tp is None:
+            pred.maneuvers[mv.name] = None
+            pred.problems.append(f"maneuver {mv.name}: no model trim at {mv.trim_speed / KT:.1f} kt, not simulated")
+            continue
+        try:
+            pred.maneuvers[mv.name] = simulate_maneuver(mdl, mv, tp)
+        except Diverged as exc:
+            pred.maneuvers[mv.name] = None
+            pred.partial[mv.name] = exc.partial
+            pred.problems.append(f"maneuver {mv.name}: simulation {exc} (shown up to there, no RMS)")
+        except Exception as exc:  # noqa: BLE001 - an unstable model must not stop the report
+            pred.maneuvers[mv.name] = None
+            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            pred.problems.append(f"maneuver {mv.name}: simulation failed ({msg})")
+    return pred
+
+
+def _rms(x) -> float:
+    x = np.asarray(x, dtype=float)
+    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+
+
+def validation_rms(pred: Prediction, maneuvers, outputs=VALIDATION_OUTPUTS) -> dict:
+    """RMS of data minus model per maneuver and output (SI), plus ``"all"`` pooling every maneuver.
+
+    A failed simulation gives None for that maneuver (and is left out of ``"all"``).
+    """
+    out, pooled = {}, {o: [] for o in outputs}
+    for mv in maneuvers:
+        sim = pred.maneuvers.get(mv.name)
+        if sim is None:
+            out[mv.name] = None
+            continue
+        row = {}
+        for o in outputs:
+            if o in mv.data and o in sim:
+                e = mv.data[o].to_numpy(dtype=float) - sim[o].to_numpy(dtype=float)
+                row[o] = _rms(e)
+                pooled[o].append(e)
+            else:
+                row[o] = None
+        out[mv.name] = row
+    out["all"] = {o: (_rms(np.concatenate(v)) if v else None) for o, v in pooled.items()}
+    return out
+
+
+def trim_rms(pred: Prediction, trims: pd.DataFrame, channels=TRIM_CHANNELS) -> dict:
+    """RMS of data minus model trim per channel (SI) over all trim points, the level ones and the
+    maneuver start ones; points the model could not trim are counted in ``n_failed`` and left out."""
+    model = pred.trim_table(trims["V"])
+    level = (trims["source"].astype(str) == "level").to_numpy() if "source" in trims else np.ones(len(trims), bool)
+    ok = np.isfinite(model[list(channels)].to_numpy(dtype=float)).all(axis=1)
+    out = {"n_points": int(len(trims)), "n_failed": int((~ok).sum())}
+    for group, mask in (("all", np.ones(len(trims), bool)), ("level", level), ("maneuver_start", ~level)):
+        m = mask & ok
+        out[group] = {c: (_rms(trims[c].to_numpy(dtype=float)[m] - model[c].to_numpy(dtype=float)[m])
+                          if m.any() else None) for c in channels}
+    return out
+
+
+# ---------------------------------------------------------------- tables
+def _display(model: HelicopterModel, name: str) -> tuple[str, float]:
+    spec = model.parameters.spec(name)
+    return (spec.display[0], spec.display[1]) if spec.display else (spec.unit, 1.0)
+
+
+def read_truth(dataset: Path) -> dict | None:
+    """Truth parameters (SI) of a synthetic dataset, or None if it has no ``truth.json``."""
+    f = Path(dataset) / "truth.json"
+    if not f.is_file():
+        return None
+    with open(f) as fh:
+        return json.load(fh)["parameters"]
+
+
+def parameter_table(result: IdentificationResult, cfg, truth: dict | None = None) -> pd.DataFrame:
+    """Parameters in display units: initial, time-domain, multi-objective, Eq. 11 direct (+ truth and errors)."""
+    initial = {f.name: f.initial for f in cfg.free}
+    rows = []
+    for name in result.parameters:
+        unit, fac = _display(cfg.model, name)
+        row = {"parameter": name, "unit": unit,
+               "initial": initial.get(name, cfg.model.parameters[name]) * fac,
+               "time-domain": result.time_domain["parameters"][name] * fac,
+               "multi-objective": result.chosen["parameters"][name] * fac,
+               "Eq. 11 direct": (result.direct["parameters"][name] * fac if result.direct else np.nan)}
+        if truth is not None:
+            tv = truth.get(name)
+            row["truth"] = tv * fac if tv is not None else np.nan
+            for col in ("time-domain", "multi-objective", "Eq. 11 direct"):
+                ok = tv is not None and tv != 0 and math.isfinite(row[col])
+                row[f"{col} error %"] = 100.0 * (row[col] - row["truth"]) / abs(row["truth"]) if ok else np.nan
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _fmt(x, digits=6) -> str:
+    if x is None:
+        return "n/a"
+    if isinstance(x, (bool, np.bool_)):
+        return "yes" if x else "no"
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    if isinstance(x, (float, np.floating)):
+        if math.isnan(x):
+            return "n/a"
+        if math.isinf(x):
+            return "inf" if x > 0 else "-inf"
+        return f"{x:.{digits}g}"
+    return str(x)
+
+
+def markdown_table(df: pd.DataFrame, digits: int = 6, formats: dict | None = None) -> str:
+    formats = formats or {}
+    head = "| " + " | ".join(str(c) for c in df.columns) + " |"
+    sep = "|" + "|".join("---" for _ in df.columns) + "|"
+    lines = [head, sep]
+    for _, r in df.iterrows():
+        cells = []
+        for c in df.columns:
+            v = r[c]
+            cells.append(formats[c](v) if c in formats else _fmt(v, digits))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def front_table(result: IdentificationResult, model: HelicopterModel) -> pd.DataFrame:
+    """front.csv with parameters in display units."""
+    f = result.front
+    cols = {c: f[c] for c in ("index", "kind", "epsilon", "J_time", "J_trim") if c in f}
+    for name in result.parameters:
+        unit, fac = _display(model, name)
+        cols[f"{name} [{unit}]"] = f[name] * fac
+    for c in ("success", "status", "iterations", "wall_time", "utopia_distance"):
+        if c in f:
+            cols["wall time [s]" if c == "wall_time" else c] = f[c]
+    return pd.DataFrame(cols)
+
+
+def utopia_distance_of(result: IdentificationResult, point: dict) -> float | None:
+    """Eq. 11: distance of a point to the utopia point, objectives normalised by nadir - utopia."""
+    try:
+        terms = [(point[k] - result.utopia[i]) / (result.nadir[i] - result.utopia[i])
+                 for i, k in enumerate(("J_time", "J_trim")) if result.nadir[i] != result.utopia[i]]
+        d = math.sqrt(sum(x * x for x in terms))
+    except (KeyError, TypeError, ZeroDivisionError):
+        return None
+    return d if math.isfinite(d) else None
+
+
+def mean_interior_iterations(front: pd.DataFrame) -> float | None:
+    eps = front[front["kind"] == "eps"]
+    return float(eps["iterations"].mean()) if len(eps) else None
+
+
+def _shown_rms(name: str, v) -> str:
+    return "n/a" if v is None or not math.isfinite(v) else f"{float(plots.shown(name, v)):.4g}"
+
+
+# ---------------------------------------------------------------- orchestration
+def _save(fig, path: Path) -> None:
+    fig.savefig(path, dpi=120)
+
+
+def write_report(out_dir, cfg, results_dir=None) -> Path:
+    """Write figures, tables, metrics and ``report.md`` of the identification in ``results_dir``
+    (default: ``out_dir``) into ``out_dir``; return the path of ``report.md``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    result = IdentificationResult.load(results_dir if results_dir is not None else out)
+    ft = load_flight_test(cfg.dataset)
+    truth = read_truth(cfg.dataset)
+    val_mans = list(prepare_data(ft, cfg.validation).maneuvers)  # full records at the recorded rate
+    trims = ft.trims.reset_index(drop=True)
+
+    speeds = list(CURVE_SPEEDS) + list(trims["V"])
+    models = {TIME_DOMAIN: result.time_domain["parameters"], MULTI_OBJECTIVE: result.chosen["parameters"]}
+    preds = {lab: predict(lab, cfg.model, p, speeds, val_mans) for lab, p in models.items()}
+
+    # --- figures
+    fig = plots.plot_pareto_front(result.front, result.utopia, result.nadir, result.chosen, result.direct)
+    _save(fig, out / "pareto_front.png")
+    curves = {lab: pr.trim_table(CURVE_SPEEDS) for lab, pr in preds.items()}
+    fig = plots.plot_trim_vs_speed(trims, curves)
+    _save(fig, out / "trim_vs_speed.png")
+    fig = plots.plot_validation({mv.name: mv.data for mv in val_mans},
+                                {lab: pr.shown_runs() for lab, pr in preds.items()}, VALIDATION_OUTPUTS,
+                                inputs={mv.name: mv.inputs for mv in val_mans},
+                                titles={mv.name: f"{mv.name} ({mv.trim_speed / KT:.0f} kt)" for mv in val_mans},
+                                notes={mv.name: [f"{lab}: diverged" for lab, pr in preds.items() if mv.name in pr.partial]
+                                       for mv in val_mans})
+    _save(fig, out / "validation.png")
+
+    # --- tables and metrics
+    ptab = parameter_table(result, cfg, truth)
+    ptab.to_csv(out / "parameters.csv", index=False, float_format="%.10g")
+    err_fmt = {c: (lambda v: _fmt(v, 3)) for c in ptab.columns if c.endswith("error %")}
+    ptab_md = markdown_table(ptab, formats=err_fmt)
+    (out / "parameters.md").write_text(
+        "# Identified parameters\n\nDisplay units; initial = the config's initial guess"
+        + ("; truth from the dataset's truth.json, errors relative to it." if truth is not None else ".")
+        + "\n\n" + ptab_md + "\n")
+    vrms = {lab: validation_rms(pr, val_mans) for lab, pr in preds.items()}
+    trms = {lab: trim_rms(pr, trims) for lab, pr in preds.items()}
+    problems = {lab: pr.problems for lab, pr in preds.items()}
+    mean_it = mean_interior_iterations(result.front)
+    write_json(out / "metrics.json", {
+        "units": "SI (rad, rad/s, m/s, g)", "validation_maneuvers": [mv.name for mv in val_mans],
+        "validation_rms": vrms, "trim_rms": trms, "problems": problems, "models": models,
+        "mean_iterations_interior_front": mean_it})
+
+    # --- report.md
+    info = result.info
+    L = ["# Identification report", ""]
+    L += [f"- config: `{info.get('config', cfg.path)}`", f"- dataset: `{cfg.dataset}`",
+          f"- free parameters: {', '.join(result.parameters)}",
+          f"- identification maneuvers: {', '.join(info.get('maneuvers', [])) or str(cfg.maneuvers)}",
+          f"- model extensions: {', '.join(info.get('extensions', [])) or 'none (M0)'}",
+          f"- solver: {info.get('solver', 'n/a')}; total time {_fmt(info.get('total_time'), 4)} s "
+          f"(NLP build {_fmt(info.get('build_time'), 3)} s, solver setup {_fmt(info.get('solver_setup_time'), 3)} s)",
+          "- models compared below: **time-domain (A)** = the J_time anchor (classic output error), "
+          "**multi-objective (C)** = the front point closest to the utopia point (Eq. 11)", ""]
+    all_problems = [f"{lab}: {p}" for lab, ps in problems.items() for p in ps]
+    if all_problems:
+        L += ["> **Simulation problems** (the affected curves are missing or cut short in the figures, "
+              "and left out of the RMS tables):", ">"] + [f"> - {p}" for p in all_problems] + [""]
+
+    L += ["## Pareto front", "", "![Pareto front](pareto_front.png)", "",
+          f"Utopia U (J_time, J_trim) = ({_fmt(result.utopia[0], 10)}, {_fmt(result.utopia[1], 6)}); "
+          f"nadir = ({_fmt(result.nadir[0], 10)}, {_fmt(result.nadir[1], 6)}).  ",
+          f"Chosen point C: front point {result.chosen.get('index')} "
+          f"(J_time = {_fmt(result.chosen['J_time'], 10)}, J_trim = {_fmt(result.chosen['J_trim'], 6)}).  "]
+    if result.direct:
+        d = result.direct
+        L.append(f"Eq. 11 solved directly: J_time = {_fmt(d['J_time'], 10)}, J_trim = {_fmt(d['J_trim'], 6)} "
+                 f"({d.get('status')}, {d.get('iterations')} iterations, {_fmt(d.get('wall_time'), 3)} s).  ")
+        dc, dd = utopia_distance_of(result, result.chosen), utopia_distance_of(result, d)
+        L.append(f"Normalised distance to U (Eq. 11): C {_fmt(dc, 4)}, direct solve {_fmt(dd, 4)}"
+                 + (" (the direct solve lies closer to U than every sampled front point: the front is sampled "
+                       "coarsely near C, or its solves stopped short of the optimum)."
+                    if dd is not None and dc is not None and dd < dc - 1e-3 else ".") + "  ")
+    n_eps = int((result.front["kind"] == "eps").sum())
+    L.append(f"Mean iterations per interior front point: {_fmt(mean_it, 4)} "
+             f"(over {n_eps} epsilon-constraint solve{'s' if n_eps != 1 else ''}, failed ones included).")
+    L += ["", "Front (parameters in display units):", "",
+          markdown_table(front_table(result, cfg.model),
+                         formats={"wall time [s]": lambda v: _fmt(v, 3), "J_time": lambda v: _fmt(v, 12)}), ""]
+
+    L += ["## Parameters", "", "Table: [parameters.md](parameters.md) (also `parameters.csv`).", "", ptab_md, ""]
+
+    L += ["## Trim predictions", "", "![Trim vs speed](trim_vs_speed.png)", "",
+          f"RMS of data minus model over the {len(trims)} trim points "
+          f"({int(trims['source'].eq('level').sum()) if 'source' in trims else len(trims)} level-flight, the rest "
+          f"maneuver start trims) [deg]:", ""]
+    rows = []
+    for lab, r in trms.items():
+        for group in ("all", "level", "maneuver_start"):
+            if group != "all" and "source" not in trims:
+                continue
+            rows.append({"model": lab, "points": group.replace("_", " "),
+                         **{f"{c} [deg]": _shown_rms(c, r[group][c]) for c in TRIM_CHANNELS},
+                         "not trimmed": r["n_failed"]})
+    L += [markdown_table(pd.DataFrame(rows)), ""]
+
+    L += ["## Validation maneuvers", ""]
+    if not val_mans:
+        L += ["The dataset has no validation maneuvers.", ""]
+    else:
+        L += ["![Validation maneuvers](validation.png)", "",
+              "Each model is trimmed at the maneuver's speed and driven by its own trim inputs plus the measured "
+              "input increments (as in the identification). RMS of data minus model:", ""]
+        rows = []
+        for lab, r in vrms.items():
+            for name in [mv.name for mv in val_mans] + ["all"]:
+                v = r[name]
+                rows.append({"model": lab, "maneuver": name if name != "all" else "**all pooled**",
+                             **{f"{o} [{plots.UNITS[o][0]}]": ("failed" if v is None else _shown_rms(o, v[o]))
+                                for o in VALIDATION_OUTPUTS}})
+        L += [markdown_table(pd.DataFrame(rows)), ""]
+
+    L += ["## Simulation problems", ""]
+    L += [f"- {p}" for p in all_problems] if all_problems else ["None: every trim and simulation succeeded."]
+    L += ["", "Machine-readable numbers (SI): `metrics.json`.", ""]
+    path = out / "report.md"
+    path.write_text("\n".join(L))
+    return path

@@ -1,0 +1,163 @@
+"""The identification engine on small-horizon instances (issue: identification engine).
+
+Each fixture runs a whole front once (anchors, epsilon points, Eq. 11 choice)
+and the tests check it against independent references: the true parameters of
+the noise-free data, a single-shooting fit, and Eq. 11 recomputed from
+front.csv.
+"""
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pyomo_heli.config import ConfigError, load_identification_config
+from pyomo_heli.dataset import load_flight_test
+from pyomo_heli.identify import run_identification
+from pyomo_heli.nlp.identification import prepare_data
+from pyomo_heli.nlp.single_shooting import fit_single_shooting
+from pyomo_heli.pareto.result import IdentificationResult
+from pyomo_heli.physics.parameters import bo105
+
+HERE = Path(__file__).parent
+CONFIGS = HERE / "configs"
+TRUTH = bo105()
+
+
+def _run(name, tmp_path_factory):
+    cfg = load_identification_config(CONFIGS / name)
+    out = tmp_path_factory.mktemp(name.replace(".toml", ""))
+    run_identification(cfg, out, progress=lambda *_: None)
+    return cfg, out, IdentificationResult.load(out)
+
+
+@pytest.fixture(scope="module")
+def clean_case1(tmp_path_factory):
+    return _run("small_case1.toml", tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def clean_case2(tmp_path_factory):
+    return _run("small_case2.toml", tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def noisy_case1(tmp_path_factory):
+    return _run("small_case1_noisy.toml", tmp_path_factory)
+
+
+@pytest.mark.parametrize("fixture", ["clean_case1", "clean_case2"])
+def test_exactness_on_noise_free_data(fixture, request):
+    """From initial guesses 30 % off, the chosen multi-objective estimate recovers the truth to 1e-4."""
+    cfg, _, res = request.getfixturevalue(fixture)
+    for f in cfg.free:
+        assert abs(f.initial / TRUTH[f.name] - 1) > 0.25  # really started 30 % off
+        est = res.chosen["parameters"][f.name]
+        assert est == pytest.approx(TRUTH[f.name], rel=1e-4), f.name
+
+
+def test_front_sanity(noisy_case1):
+    cfg, out, res = noisy_case1
+    front = pd.read_csv(out / "front.csv").sort_values("index")
+    assert front["success"].all()
+    assert list(front["kind"]) == ["A"] + ["eps"] * (len(front) - 2) + ["B"]
+    jt, jr = front["J_time"].to_numpy(), front["J_trim"].to_numpy()
+    # epsilon tightens from A to B: J_time non-decreasing, J_trim non-increasing
+    assert np.all(np.diff(jt) >= -1e-6 * np.abs(jt[:-1]))
+    assert np.all(np.diff(jr) <= 1e-9)
+    # the anchors are the ends: A has the least J_time, B the least J_trim
+    assert jt[0] == pytest.approx(jt.min()) and jr[-1] == pytest.approx(jr.min())
+    assert jr[0] > 1.5 * jr[-1]  # the objectives really conflict on data with an undeclared effect
+    # Eq. 11 recomputed independently from front.csv
+    u = (jt.min(), jr.min())
+    n = (jt[np.argmin(jr)], jr[np.argmin(jt)])
+    d = np.hypot((jt - u[0]) / (n[0] - u[0]), (jr - u[1]) / (n[1] - u[1]))
+    assert int(front["index"].iloc[int(np.argmin(d))]) == res.chosen["index"]
+    # the direct Eq. 11 NLP lands within one front spacing of the post-hoc choice
+    pts = np.column_stack([(jt - u[0]) / (n[0] - u[0]), (jr - u[1]) / (n[1] - u[1])])
+    spacing = np.max(np.linalg.norm(np.diff(pts, axis=0), axis=1))
+    direct = np.array([(res.direct["J_time"] - u[0]) / (n[0] - u[0]), (res.direct["J_trim"] - u[1]) / (n[1] - u[1])])
+    k = int(np.argmin(d))
+    assert np.linalg.norm(direct - pts[k]) <= spacing
+    assert np.linalg.norm(direct) <= d[k] + 1e-6  # and it is at least as close to utopia
+
+
+def test_warm_starts_save_iterations(noisy_case1):
+    _, out, res = noisy_case1
+    warm, cold = res.info["mean_iterations_front"], res.info["mean_iterations_front_cold"]
+    assert warm is not None and cold is not None
+    assert warm < cold
+
+
+def test_results_round_trip(noisy_case1):
+    _, out, res = noisy_case1
+    again = IdentificationResult.load(out)
+    assert again.chosen == res.chosen
+    text = str(again)
+    assert "time domain (A)" in text and "theta_twist" in text
+    td = json.loads((out / "time_domain.json").read_text())
+    assert td["kind"] == "A"
+
+
+def test_point_a_equals_single_shooting(tmp_path):
+    """Two routes to the classic estimate: full-discretisation NLP (point A) and scipy single shooting."""
+    from pyomo_heli.nlp.identification import build_identification_nlp
+    from pyomo_heli.pareto.front import ParetoSettings, ParetoSolver
+
+    cfg = load_identification_config(CONFIGS / "small_case1_noisy.toml")
+    ft = load_flight_test(cfg.dataset)
+    data = prepare_data(ft, ["lon3211_80kt_a", "coldoublet_hover"], max_duration=4.0)
+    from pyomo_heli.nlp.parameters import FreeParameter
+
+    free = [FreeParameter.from_spec(cfg.model.parameters, "CL_alpha_HT", initial=4.35),
+            FreeParameter.from_spec(cfg.model.parameters, "Iyy", initial=6400.0)]
+    m = build_identification_nlp(data, cfg.model, free, cfg.nlp)
+    a, _ = ParetoSolver(m, ParetoSettings(points=2)).anchors()
+    assert a.success
+    ss = fit_single_shooting(cfg.model, data.maneuvers, free, list(cfg.nlp.time_outputs))
+    for f in free:
+        assert a.parameters[f.name] == pytest.approx(ss.parameters[f.name], rel=1e-3), f.name
+    assert a.J_time == pytest.approx(ss.J_time, rel=1e-5)
+
+
+BAD = [
+    ("[parameters.Iyx]\ninitial = 1.0\nlower = 0.0\nupper = 2.0\n", "unknown parameter name 'Iyx'"),
+    ("[parameters.Iyy]\ninitial = 9000.0\nlower = 2000.0\nupper = 8000.0\n", "outside its bounds"),
+    ("[objectives]\ntime_outputs = [\"q\", \"r\"]\n", "unknown output 'r'"),
+    ("[pareto]\npoints = 0\n", "'points'"),
+    ("[parameters.theta_twist]\nunit = \"furlong\"\n", "unit 'furlong' not recognised"),
+    ("[solver]\nname = \"snopt\"\n", "unknown solver 'snopt'"),
+]
+
+
+@pytest.mark.parametrize("extra, message", BAD)
+def test_bad_configs_name_the_field(tmp_path, extra, message):
+    base = (CONFIGS / "small_case1.toml").read_text().replace("../../data", str(HERE.parent / "data"))
+    lines, out, skip = base.splitlines(), [], False
+    # drop a table of the base that the extra text re-declares
+    first = extra.splitlines()[0]
+    for line in lines:
+        if line.startswith("["):
+            skip = line == first
+        if not skip:
+            out.append(line)
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text("\n".join(out) + "\n" + extra)
+    with pytest.raises(ConfigError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        load_identification_config(cfg)
+    proc = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "identify", str(cfg), "--out", str(tmp_path / "o")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert "bad.toml" in proc.stderr
+
+
+def test_missing_dataset_is_named(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text((CONFIGS / "small_case1.toml").read_text().replace("../../data/bo105_clean", "nowhere"))
+    with pytest.raises(ConfigError, match="dataset.*not found"):
+        load_identification_config(cfg)

@@ -1,0 +1,155 @@
+"""Tests of the equation-level NLP inspection (pyomo_heli.nlp.inspect, ``pyomo-heli inspect``).
+
+The IDAES structural diagnostics take most of the time (~45 s on the full
+small config). So the CLI runs on the full small config in a background
+process, started first, while the in-process checks run on the same config
+cut to 1 s of record (the degrees of freedom do not depend on the horizon).
+"""
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pyomo_heli.config import load_identification_config
+
+ROOT = Path(__file__).resolve().parent.parent
+SMALL = ROOT / "tests" / "configs" / "small_case1.toml"
+CLI_TIMEOUT = 300  # hang guard only; the run takes ~60 s, more on a loaded machine
+
+
+def _dof_line(text):
+    mt = re.search(r"degrees of freedom: free variables - active equalities = (\d+) - (\d+) = (-?\d+); "
+                   r"idaes degrees_of_freedom\(m\) = (-?\d+) \((\w+)\)", text)
+    assert mt, "no degrees-of-freedom line in the report"
+    free, eq, dof, dof_idaes, verdict = mt.groups()
+    return int(free), int(eq), int(dof), int(dof_idaes), verdict
+
+
+@pytest.fixture(scope="module")
+def cli_run():
+    """``python -m pyomo_heli.cli inspect small_case1.toml`` (diagnostics on), started in the background."""
+    proc = subprocess.Popen([sys.executable, "-m", "pyomo_heli.cli", "inspect", str(SMALL)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    state = {}
+
+    def result():
+        if not state:
+            try:
+                out, err = proc.communicate(timeout=CLI_TIMEOUT)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.communicate()
+                pytest.fail(f"pyomo-heli inspect did not finish in {CLI_TIMEOUT} s")
+            state.update(rc=proc.returncode, out=out, err=err)
+        return state
+
+    yield result
+    if proc.poll() is None:
+        proc.kill()
+        proc.communicate()
+
+
+@pytest.fixture(scope="module")
+def short_cfg():
+    return load_identification_config(SMALL, overrides={"data": {"max_duration_s": 1.0}})
+
+
+@pytest.fixture(scope="module")
+def report(cli_run, short_cfg):  # cli_run first: the CLI works while this builds
+    from pyomo_heli.nlp.inspect import inspect_problem
+
+    return inspect_problem(short_cfg, diagnostics=True)
+
+
+def test_dof_matches_idaes_and_free_parameters(report, short_cfg):
+    from idaes.core.util.model_statistics import degrees_of_freedom
+
+    from pyomo_heli.identify import build_problem
+
+    free, eq, dof, dof_idaes_reported, verdict = _dof_line(report)
+    m, _, _ = build_problem(short_cfg)
+    assert dof == free - eq
+    assert dof == dof_idaes_reported == degrees_of_freedom(m)
+    assert verdict == "agree"
+    # Cholesky factors are fixed by as many equalities, eps_con is an inequality:
+    # the only decision freedom is the free parameters.
+    assert dof == len(short_cfg.free) == len(m.theta_s)
+    assert "decision freedom = the 2 free parameters theta_s" in report
+
+
+def test_report_sections(report, short_cfg):
+    # header: data and free parameters with SI and display units
+    assert "dataset:" in report and "lon3211_80kt_a" in report
+    assert "theta_twist" in report and "deg/m" in report and "rad/m" in report
+    # per-block table: parameters, trim blocks with speed, maneuvers, objective part
+    assert re.search(r"^params \(theta_s\)\s+2\s+2\s+0\s+0\s+0\s+2$", report, re.M)
+    assert re.search(r"^trim\[10\]\s+80\.0 kt\s+8\s+8\s+0\s+8\s+0\s+0$", report, re.M)
+    assert re.search(r"^man\[coldoublet_hover\]\s+\d+\s+\d+\s+5\s+\d+\s+0\s+0$", report, re.M)
+    assert re.search(r"^objective \(L, cholesky, eps_con\)\s+5\s+5\s+0\s+5\s+1\s+0$", report, re.M)
+    # IDAES structural diagnostics with the parameters fixed: square, no warnings
+    diag = report.split("3. IDAES structural diagnostics")[1].split("4a.")[0]
+    assert "Model Statistics" in diag and "0 WARNINGS" in diag, diag
+    assert "structural diagnostics failed" not in diag
+    assert "PyNumero" in diag
+
+
+def test_report_equations(report):
+    point = report.split("4a. equations at one time point")[1].split("4b.")[0]
+    assert "man[lon3211_80kt_a], t = 0.02 s" in point
+    for s in ("u", "w", "q", "theta", "lambda_i"):
+        assert f"  ode[{s},0.02]:" in point  # compact form
+        assert f"  man[lon3211_80kt_a].ode[{s},0.02]:" in point  # full form
+        assert f"man[lon3211_80kt_a].dx_disc_eq[{s},0.02]" in point
+    assert "theta_dot  ==  q" in point  # compact ode[theta]
+    assert "man[lon3211_80kt_a].dx[theta,0.02]  ==  man[lon3211_80kt_a].x[q,0.02]" in point  # to_string()
+    assert "flapping[2,0.02]" in point and "output_eq[n_z,0.02]" in point
+    assert "col_trim                 = trim[10].col" in point  # legend
+    trim = report.split("4b. equations of one trim block")[1].split("4c.")[0]
+    assert "trim[10], V = 80.0 kt" in trim
+    assert "V  ==  V_target" in trim and "trim[10].V  ==  trim[10].V_target" in trim
+    for c in ("equilibrium[u]", "equilibrium[w]", "equilibrium[q]", "equilibrium[lambda_i]",
+              "flapping[0]", "flapping[1]", "flapping[2]"):
+        assert f"  {c}:" in trim and f"  trim[10].{c}:" in trim
+    # every line wrapped at 120 characters, expressions included
+    assert max(len(line) for line in report.splitlines()) <= 120
+    params = report.split("4d. physical parameters")[1]
+    assert "theta_twist    = 0.0174533 * theta_s[theta_twist]" in params
+    assert "CL_alpha_HT    = 5 * theta_s[CL_alpha_HT]" in params
+
+
+def test_toolbox_error_is_reported_not_raised(monkeypatch):
+    from idaes.core.util.diagnostics_tools.diagnostics_toolbox import DiagnosticsToolbox
+
+    from pyomo_heli.nlp.inspect import inspect_problem
+
+    def boom(self, stream=None):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(DiagnosticsToolbox, "report_structural_issues", boom)
+    cfg = load_identification_config(SMALL, overrides={"data": {"max_duration_s": 0.1}})
+    text = inspect_problem(cfg, diagnostics=True)
+    assert "structural diagnostics failed: RuntimeError: boom" in text
+    assert "4a. equations at one time point" in text  # the rest of the report is still there
+
+
+def test_cli_inspect_small_config(cli_run):
+    r = cli_run()
+    assert r["rc"] == 0, r["err"][-2000:]
+    out = r["out"]
+    free, eq, dof, dof_idaes, verdict = _dof_line(out)
+    assert dof == dof_idaes == 2 and verdict == "agree"
+    assert "0 WARNINGS" in out
+    assert "  man[lon3211_80kt_a].ode[q,0.02]:" in out and "  trim[10].equilibrium[q]:" in out
+
+
+def test_cli_inspect_bad_config_path(tmp_path):
+    missing = tmp_path / "nope.toml"
+    r = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "inspect", str(missing)], cwd=ROOT,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2
+    err = r.stderr.strip()
+    assert "\n" not in err and "Traceback" not in err
+    assert err.startswith("pyomo-heli inspect: error:") and "nope.toml" in err and "not found" in err
+    assert r.stdout == ""

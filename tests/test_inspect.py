@@ -29,8 +29,13 @@ def _dof_line(text):
 
 @pytest.fixture(scope="module")
 def cli_run():
-    """``python -m pyomo_heli.cli inspect small_case1.toml`` (diagnostics on), started in the background."""
-    proc = subprocess.Popen([sys.executable, "-m", "pyomo_heli.cli", "inspect", str(SMALL)], cwd=ROOT,
+    """``python -m pyomo_heli.cli inspect small_case1.toml --no-diagnostics``, started in the background.
+
+    The IDAES structural check is exercised in process on a shortened record
+    (it takes ~45 s on the full small config).
+    """
+    proc = subprocess.Popen([sys.executable, "-m", "pyomo_heli.cli", "inspect", str(SMALL), "--no-diagnostics"],
+                            cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     state = {}
 
@@ -140,7 +145,6 @@ def test_cli_inspect_small_config(cli_run):
     out = r["out"]
     free, eq, dof, dof_idaes, verdict = _dof_line(out)
     assert dof == dof_idaes == 2 and verdict == "agree"
-    assert "0 WARNINGS" in out
     assert "  man[lon3211_80kt_a].ode[q,0.02]:" in out and "  trim[10].equilibrium[q]:" in out
 
 

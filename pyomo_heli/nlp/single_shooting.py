@@ -41,8 +41,7 @@ def simulate_outputs(model: HelicopterModel, maneuvers, outputs) -> dict[str, np
         t = mv.data["t"].to_numpy()
         inc = mv.increments()
         tp = trim_float(model, mv.trim_speed)
-        df = simulate(model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, max_step=0.05,
-                      rtol=1e-10, atol=1e-12)
+        df = simulate(model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=4)
         for o in outputs:
             out[o].append(df[o].to_numpy())
     return {o: np.concatenate(v) for o, v in out.items()}
@@ -73,7 +72,7 @@ def fit_single_shooting(model: HelicopterModel, maneuvers, free: list[FreeParame
     for k in range(1, max_outer + 1):
         w = {o: 1.0 / np.sqrt(R[o]) for o in outputs}
         sol = least_squares(lambda zz: np.concatenate([residuals_of(zz)[o] * w[o] for o in outputs]), z,
-                            bounds=(lo, hi), x_scale=1.0, xtol=1e-14, ftol=1e-14, gtol=1e-14, diff_step=1e-7)
+                            bounds=(lo, hi), x_scale=1.0, xtol=1e-12, ftol=1e-12, gtol=1e-12, diff_step=1e-6)
         z_new = sol.x
         e = residuals_of(z_new)
         R_new = {o: float(np.mean(e[o] ** 2) + R_FLOOR[o] ** 2) for o in outputs}

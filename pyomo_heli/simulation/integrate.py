@@ -25,13 +25,38 @@ def sampled(times, values) -> Increment:
     return lambda t: np.interp(t, times, values)
 
 
+def rk4(rhs, t_eval, y0, substeps: int = 4) -> np.ndarray:
+    """Fixed-step classic Runge-Kutta, ``substeps`` steps per interval of ``t_eval``."""
+    ys = np.empty((len(y0), len(t_eval)))
+    y = np.array(y0, dtype=float)
+    ys[:, 0] = y
+    for i in range(1, len(t_eval)):
+        t, h = t_eval[i - 1], (t_eval[i] - t_eval[i - 1]) / substeps
+        for _ in range(substeps):
+            k1 = rhs(t, y)
+            k2 = rhs(t + h / 2, y + h / 2 * k1)
+            k3 = rhs(t + h / 2, y + h / 2 * k2)
+            k4 = rhs(t + h, y + h * k3)
+            y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            t += h
+        if not np.all(np.isfinite(y)):
+            raise RuntimeError(f"simulation diverged at t = {t:.3f} s")
+        ys[:, i] = y
+    return ys
+
+
 def simulate(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mapping[str, Increment] | None = None,
              x0: Mapping | None = None, base_inputs: Mapping | None = None, rtol: float = 1e-10,
-             atol: float = 1e-10, max_step: float | None = None, method: str = "DOP853") -> pd.DataFrame:
+             atol: float = 1e-10, max_step: float | None = None, method: str = "DOP853",
+             substeps: int = 4) -> pd.DataFrame:
     """Integrate the model and return states, inputs, flapping and outputs at ``t_eval``.
 
     The initial state is the trim state (or ``x0``); the inputs are the trim
-    inputs (or ``base_inputs``) plus ``increments``. Columns: t, every state,
+    inputs (or ``base_inputs``) plus ``increments``. ``method="rk4"`` takes
+    ``substeps`` classic Runge-Kutta steps between consecutive ``t_eval``
+    points: with sampled (piecewise-linear) inputs the input is smooth inside
+    every step, where an adaptive method would crawl through every kink of a
+    noisy input record. Columns: t, every state,
     col, lon, beta_0, beta_1c, beta_1s and every output (n_x, n_z, TAS, ...).
     """
     increments = dict(increments or {})
@@ -52,14 +77,18 @@ def simulate(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mappin
     def rhs(t, y):
         return model.rhs_vector(y, inputs_at(t))
 
-    kw = {} if max_step is None else {"max_step": max_step}
-    sol = solve_ivp(rhs, (float(t_eval[0]), float(t_eval[-1])), y0, t_eval=t_eval, method=method,
-                    rtol=rtol, atol=atol, **kw)
-    if not sol.success:
-        raise RuntimeError(f"simulation failed: {sol.message}")
+    if method == "rk4":
+        ys = rk4(rhs, t_eval, y0, substeps)
+    else:
+        kw = {} if max_step is None else {"max_step": max_step}
+        sol = solve_ivp(rhs, (float(t_eval[0]), float(t_eval[-1])), y0, t_eval=t_eval, method=method,
+                        rtol=rtol, atol=atol, **kw)
+        if not sol.success:
+            raise RuntimeError(f"simulation failed: {sol.message}")
+        ys = sol.y
     rows = []
-    for i, t in enumerate(sol.t):
-        x = dict(zip(names, sol.y[:, i]))
+    for i, t in enumerate(t_eval):
+        x = dict(zip(names, ys[:, i]))
         u = inputs_at(t)
         ctx = model.evaluate(x, u)
         row = {"t": t, **x, **u, **dict(zip(FLAPPING, (float(b) for b in ctx.beta)))}

@@ -120,7 +120,7 @@ def build_identification_nlp(data: IdentificationData, model: HelicopterModel, f
         inc = mv.increments()
         build_maneuver_block(blk, model, pmap, t, inc, m.trim[i], ncp=opts.ncp, scheme=opts.scheme)
         tp = float_trims[i]
-        sim = simulate(sim_model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, max_step=0.05)
+        sim = simulate(sim_model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=2)
         initialise_from(blk, sim, sim_model.state_names)
         for o in opts.time_outputs:
             meas = mv.data[o].to_numpy()

@@ -147,7 +147,7 @@ def simulate_maneuver(model: HelicopterModel, maneuver, trim: TrimPoint) -> pd.D
         i1 = min(i0 + per, len(t) - 1)
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            sim = simulate(model, trim, t[i0:i1 + 1], inc, x0=x0, max_step=0.05)
+            sim = simulate(model, trim, t[i0:i1 + 1], inc, x0=x0, method="rk4", substeps=4)
         if len(sim) != i1 + 1 - i0:
             raise RuntimeError(f"simulation stopped after {i0 + len(sim)} of {len(t)} samples")
         pieces.append(sim if not pieces else sim.iloc[1:])

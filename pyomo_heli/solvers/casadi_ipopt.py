@@ -123,8 +123,16 @@ class CasadiIpoptSolver:
     """
 
     name = "casadi-ipopt"
-    #: Rows with more free variables than this get their own Jacobian block.
-    dense_row_threshold = 100
+    #: A Jacobian row or column, or a Hessian column, is *dense* when it has
+    #: more nonzeros than this and than ``dense_factor`` times the 99th
+    #: percentile of its kind; dense ones get their own derivative blocks
+    #: (see :meth:`_jacobian_function`, :meth:`_hessian_function`). A huge
+    #: value gives casadi's own Jacobian and Hessian.
+    dense_row_threshold = 20
+    dense_factor = 3.0
+    #: False: let casadi derive the Lagrangian Hessian (slow with dense
+    #: columns; kept for comparison).
+    custom_hessian = True
 
     def __init__(self, model, options: dict | None = None):
         try:
@@ -156,7 +164,7 @@ class CasadiIpoptSolver:
             nl.import_nl(path)
             self.variables = list(info.variables)
             self.constraints = list(info.constraints)
-            self._scan_expressions(path)
+            self._scan_expressions()
         self.objective = info.objectives[0] if info.objectives else None
         # casadi's import_nl already negates a maximisation objective (it
         # always minimises); sense_sign converts back to the user's objective.
@@ -179,18 +187,28 @@ class CasadiIpoptSolver:
         x = ca.SX.sym("x", len(self.variables))
         f, g = fun(x)
         self._nlp = {"x": x, "f": f, "g": g}
+        # Jacobian structure (cheap: bitwise propagation, no derivatives).
+        jsp = ca.Function("nlp_g", [x], [g]).jac_sparsity(0, 0)
+        self._dense_rows = self._dense(np.bincount(np.array(jsp.row(), dtype=int), minlength=g.shape[0]))
+        self._dense_cols = self._dense(np.diff(np.array(jsp.colind(), dtype=int)))
         self._jac_g = self._jacobian_function(x, g)
+        self._hess_lag = False  # not built yet; built at the first exact-Hessian solve
         self._solvers = {}
         self._pending_setup += time.perf_counter() - t0
 
-    def _scan_expressions(self, nl_path: str) -> None:
-        """Record what the NL file holds as numbers, and which rows are dense.
+    def _dense(self, counts: np.ndarray) -> list[int]:
+        """Indices whose nonzero count is an outlier (see ``dense_row_threshold``)."""
+        if len(counts) == 0:
+            return []
+        threshold = max(self.dense_row_threshold, self.dense_factor * np.percentile(counts, 99))
+        return np.flatnonzero(counts > threshold).tolist()
+
+    def _scan_expressions(self) -> None:
+        """Record what the NL file holds as numbers.
 
         Fixed-var and mutable-Param values are baked into the NL; remembering
         them lets solve() refuse to run on a stale problem. Params that appear
-        in constraint bounds are the ones a re-solve refreshes. Dense rows
-        (e.g. an epsilon constraint on a sum over all samples) are read from
-        the NL file's Jacobian segments, for _jacobian_function. Nothing here
+        in constraint bounds are the ones a re-solve refreshes. Nothing here
         walks the constraint bodies: at 100k rows that walk cost more than
         writing the NL file.
         """
@@ -205,33 +223,88 @@ class CasadiIpoptSolver:
             for bound in (con.lower, con.upper):
                 if bound is not None and not isinstance(bound, (int, float)) and not bound.is_constant():
                     self._bound_params.update(identify_mutable_parameters(bound))
-        self._dense_rows = []
-        with open(nl_path) as fh:
-            for line in fh:
-                if line[0] == "J":
-                    row, count = line[1:].split()
-                    if int(count) > self.dense_row_threshold:
-                        self._dense_rows.append(int(row))
 
     def _jacobian_function(self, x, g):
-        """Constraint Jacobian built row-block-wise, or None for casadi's default.
+        """Constraint Jacobian built block-wise, or None for casadi's default.
 
-        casadi colours the whole Jacobian at once; one dense row together with
-        a dense column (a model parameter used at every time step) defeats both
+        casadi colours the whole Jacobian at once, and every colour costs a
+        sweep over the whole expression graph. One dense row together with a
+        dense column (a model parameter used at every time step) defeats both
         forward and reverse colouring and the build becomes quadratic (15 s at
-        4k variables, 64 s at 8k; 0.4 s at 8k this way). The sparse rows are differentiated as
-        one block and each dense row by reverse mode alone, which is linear.
+        4k variables, 64 s at 8k). Here the sparse rows x sparse columns block
+        is one casadi Jacobian (8 forward colours on the identification NLPs,
+        instead of 39 with the epsilon row or 47 with the dense columns), the
+        dense columns are one forward block over the sparse rows, and the dense
+        rows one reverse block over their own small subgraph: linear in size.
         """
         ca = self._ca
-        if not self._dense_rows:
+        n, m = x.shape[0], g.shape[0]
+        if not self._dense_rows and not self._dense_cols:
             return None
-        dense = set(self._dense_rows)
-        sparse = [i for i in range(g.shape[0]) if i not in dense]
-        blocks = [ca.jacobian(g[sparse], x)] + [ca.jacobian(g[i], x) for i in self._dense_rows]
-        back = np.argsort(sparse + self._dense_rows).tolist()  # rows back into NL order
-        jac = ca.vertcat(*blocks)[back, :]
+        dense_rows, dense_cols = self._dense_rows, self._dense_cols
+        rows = np.setdiff1d(np.arange(m), dense_rows).tolist()
+        cols = np.setdiff1d(np.arange(n), dense_cols).tolist()
+        g_sparse = g[rows]
+        blocks = [ca.jacobian(g_sparse, x[cols])]
+        if dense_cols:
+            blocks.append(ca.jacobian(g_sparse, x[dense_cols]))
+        jac = ca.horzcat(*blocks)[:, np.argsort(cols + dense_cols).tolist()]  # columns back into NL order
+        if dense_rows:
+            jac = ca.vertcat(jac, ca.jacobian(g[dense_rows], x))[np.argsort(rows + dense_rows).tolist(), :]
         p = ca.SX.sym("p", 0)
         return ca.Function("nlp_jac_g", [x, p], [g, jac], ["x", "p"], ["g", "jac_g_x"])
+
+    def _hessian_function(self):
+        """Lagrangian Hessian built block-wise, or None for casadi's default.
+
+        casadi's Hessian is one symmetric (star) colouring of the whole
+        Hessian and one forward sweep over the gradient graph per colour. On
+        the identification NLPs, 8 dense columns (free parameters, trim
+        controls used at every collocation point) and ~40 trim-block variables
+        that couple in a dense ~50x50 block force 53 colours, although the
+        rest needs 7: 45 s at 25k variables. Split of the columns:
+
+        * ``S``: the rest - one symmetric casadi Jacobian of grad[S] w.r.t. x[S];
+        * ``D2``: dense in the Hessian but in few Jacobian rows - rows of the
+          Hessian by reverse mode, over the small subgraph of grad[D2];
+        * ``D1``: dense in the Hessian and in the Jacobian - rows of the
+          Hessian by reverse mode (few colours, large subgraph).
+
+        The blocks together cover the Hessian exactly once up to symmetry;
+        the values equal casadi's up to rounding.
+        """
+        ca = self._ca
+        x, f, g = self._nlp["x"], self._nlp["f"], self._nlp["g"]
+        n, m = x.shape[0], g.shape[0]
+        lam_f = ca.SX.sym("lam_f")
+        lam_g = ca.SX.sym("lam_g", m)
+        grad = ca.gradient(lam_f * f + ca.dot(lam_g, g), x)
+        hsp = ca.Function("nlp_grad_l", [x, lam_f, lam_g], [grad]).jac_sparsity(0, 0)
+        degree = np.diff(np.array(hsp.colind(), dtype=int))
+        dense = self._dense(degree)
+        if not dense:
+            return None
+        d1 = sorted(set(dense) & set(self._dense_cols))
+        d2 = sorted(set(dense) - set(d1))
+        s = np.setdiff1d(np.arange(n), dense).tolist()
+        ns, n2 = len(s), len(d2)
+        perm = s + d2 + d1
+        h_ss = ca.jacobian(grad[s], x[s], {"symmetric": True})
+        h_2 = ca.jacobian(grad[d2], x[s + d2]) if d2 else ca.SX(0, ns)  # rows D2, columns S + D2
+        h_1 = ca.jacobian(grad[d1], x[perm]).T if d1 else ca.SX(n, 0)  # columns D1, rows S + D2 + D1
+        h_2s, h_22 = h_2[:, :ns], h_2[:, ns:]
+        h_1s, h_12, h_11 = h_1[:ns, :], h_1[ns:ns + n2, :], h_1[ns + n2:, :]
+        hp = ca.vertcat(
+            ca.horzcat(h_ss, h_2s.T, h_1s),
+            ca.horzcat(h_2s, h_22, h_12),
+            ca.horzcat(h_1s.T, h_12.T, h_11),
+        )
+        back = np.argsort(perm).tolist()
+        hess = ca.triu(hp[back, back])
+        p = ca.SX.sym("p", 0)
+        return ca.Function(
+            "nlp_hess_l", [x, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]
+        )
 
     def _solver_for(self, ipopt_options: dict, verbose: bool):
         ipopt = dict(ipopt_options)
@@ -247,9 +320,17 @@ class CasadiIpoptSolver:
         key = tuple(sorted((k, repr(v)) for k, v in ipopt.items()))
         if key not in self._solvers:
             t0 = time.perf_counter()
-            opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
+            # no_nlp_grad: the Lagrangian-gradient function casadi builds by
+            # default only serves lam_p (there is no p) and calc_lam_x (off);
+            # it cost 3.5 s at 25k variables.
+            opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False, "no_nlp_grad": True}
             if self._jac_g is not None:
                 opts["jac_g"] = self._jac_g
+            if self.custom_hessian and str(ipopt.get("hessian_approximation", "exact")) == "exact":
+                if self._hess_lag is False:
+                    self._hess_lag = self._hessian_function()
+                if self._hess_lag is not None:
+                    opts["hess_lag"] = self._hess_lag
             self._solvers[key] = self._ca.nlpsol("solver", "ipopt", self._nlp, opts)
             self._pending_setup += time.perf_counter() - t0
         return self._solvers[key]

@@ -8,9 +8,10 @@ Example: studies/case1.toml.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from .tomlfile import read_toml
 
 from .nlp.identification import TIME_OUTPUTS, TRIM_OUTPUTS, NLPOptions
 from .nlp.parameters import FreeParameter
@@ -62,12 +63,7 @@ def _unit_factor(spec, unit: str, where: str) -> float:
 def load_identification_config(path: str | Path, overrides: dict | None = None) -> IdentificationConfig:
     """Read and check an identification config. ``overrides`` replace top-level tables (tests, CLI)."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: config file not found")
-    try:
-        raw = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    raw = read_toml(path, ConfigError)
     for k, v in (overrides or {}).items():
         raw[k] = {**raw.get(k, {}), **v} if isinstance(v, dict) else v
     f = str(path)

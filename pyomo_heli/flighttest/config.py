@@ -6,9 +6,10 @@ See data/bo105_synthetic.toml for a commented example. Units in key names
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from ..tomlfile import read_toml
 
 from ..physics.parameters import bo105
 from ..units import DEG, KT
@@ -65,12 +66,7 @@ def _get(d: dict, key: str, where: str, typ=None, default=...):
 
 def load_config(path: str | Path) -> GeneratorConfig:
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: config file not found")
-    try:
-        raw = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    raw = read_toml(path, ConfigError)
     w = str(path)
     ds = _get(raw, "dataset", w, dict)
     truth = _get(raw, "truth", w, dict, {})

@@ -1,0 +1,16 @@
+"""Reading a TOML config with an error that names the file (shared by all configs)."""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+
+def read_toml(path: str | Path, error: type[Exception]) -> dict:
+    """Parse ``path``; a missing file or bad TOML raises ``error`` naming the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{path}: config file not found")
+    try:
+        return tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: not valid TOML ({exc})") from None

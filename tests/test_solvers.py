@@ -303,3 +303,62 @@ def test_bad_warm_start_mode_and_result_str():
         solver.solve(warm_start="hot")
     text = str(solver.solve())
     assert "Solve_Succeeded" in text and "casadi-ipopt" in text
+
+
+def chain_with_dense_blocks(n=2500, k=24):
+    """chain_with_dense_row plus a small dense Hessian block.
+
+    Dense Jacobian column and Hessian row/column: p (in every step). Dense
+    Jacobian rows: the epsilon row and ``block``; ``block`` couples the k
+    variables y in a dense k x k Hessian block while each y sits in one row
+    (the trim-block pattern of the identification NLPs).
+    """
+    m = pyo.ConcreteModel()
+    m.I = pyo.RangeSet(0, n - 1)
+    m.K = pyo.RangeSet(0, k - 1)
+    m.p = pyo.Var(initialize=1.0, bounds=(0.1, 5))
+    m.x = pyo.Var(m.I, initialize=0.1)
+    m.y = pyo.Var(m.K, initialize=0.0, bounds=(-2, 2))
+    m.eps = pyo.Param(initialize=0.5 * n, mutable=True)
+    m.step = pyo.Constraint(
+        range(n - 1), rule=lambda m, i: m.x[i + 1] == m.x[i] + 0.01 * (1 - m.p * pyo.sin(m.x[i]))
+    )
+    m.eps_con = pyo.Constraint(expr=sum(m.x[i] ** 2 for i in m.I) <= m.eps)
+    m.block = pyo.Constraint(expr=pyo.exp(sum(0.1 * (j + 1) * m.y[j] for j in m.K)) <= 2.0 + m.p)
+    m.o = pyo.Objective(
+        expr=sum((m.x[i] - 1.0) ** 2 for i in m.I) + (m.p - 2) ** 2 + sum(m.y[j] ** 2 - m.y[j] for j in m.K)
+    )
+    return m
+
+
+def test_blockwise_hessian_equals_casadi_hessian(monkeypatch):
+    import numpy as np
+
+    from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver, resolve_options
+
+    def build(custom):
+        monkeypatch.setattr(CasadiIpoptSolver, "custom_hessian", custom)
+        m = chain_with_dense_blocks()
+        solver = make_solver(m)
+        opts, verbose, _ = resolve_options(solver.options, None, "primal")
+        hess = solver._solver_for(opts, verbose).get_function("nlp_hess_l")
+        return m, solver, hess
+
+    m1, custom, h1 = build(True)
+    assert custom._hessian_split == {"S": 2500, "D2": 24, "D1": 1}  # every block is exercised
+    m2, default, h2 = build(False)
+    assert h1.sparsity_out(0) == h2.sparsity_out(0)
+    rng = np.random.default_rng(1)
+    x = rng.uniform(-1, 1, h1.size1_in(0))
+    lam_g = rng.standard_normal(h1.size1_in(3))
+    a = np.array(h1(x, [], 0.7, lam_g).nonzeros())
+    b = np.array(h2(x, [], 0.7, lam_g).nonzeros())
+    assert a == pytest.approx(b, rel=1e-12, abs=1e-12)
+
+    r1, r2 = custom.solve(), default.solve()
+    assert r1.success and r2.success
+    assert r1.iterations == r2.iterations
+    assert r1.objective == pytest.approx(r2.objective, rel=1e-12)
+    got1 = [m1.p.value, m1.dual[m1.block], m1.dual[m1.eps_con]] + xs(m1) + [m1.y[j].value for j in m1.K]
+    got2 = [m2.p.value, m2.dual[m2.block], m2.dual[m2.eps_con]] + xs(m2) + [m2.y[j].value for j in m2.K]
+    assert got1 == pytest.approx(got2, abs=1e-9)

@@ -193,6 +193,7 @@ class CasadiIpoptSolver:
         self._dense_cols = self._dense(np.diff(np.array(jsp.colind(), dtype=int)))
         self._jac_g = self._jacobian_function(x, g)
         self._hess_lag = False  # not built yet; built at the first exact-Hessian solve
+        self._hessian_split = None  # block sizes {"S", "D2", "D1"} once a custom Hessian is built
         self._solvers = {}
         self._pending_setup += time.perf_counter() - t0
 
@@ -288,6 +289,7 @@ class CasadiIpoptSolver:
         d2 = sorted(set(dense) - set(d1))
         s = np.setdiff1d(np.arange(n), dense).tolist()
         ns, n2 = len(s), len(d2)
+        self._hessian_split = {"S": ns, "D2": n2, "D1": len(d1)}
         perm = s + d2 + d1
         h_ss = ca.jacobian(grad[s], x[s], {"symmetric": True})
         h_2 = ca.jacobian(grad[d2], x[s + d2]) if d2 else ca.SX(0, ns)  # rows D2, columns S + D2

@@ -128,7 +128,8 @@ def cmd_identify(args) -> int:
     from .config import load_identification_config
     from .identify import run_identification
 
-    cfg = load_identification_config(args.config)
+    overrides = {"pareto": {"cold_check": True}} if args.cold_check else None
+    cfg = load_identification_config(args.config, overrides)
     print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
           f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
     result = run_identification(cfg, args.out)
@@ -193,6 +194,8 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("config")
     i.add_argument("--out", required=True, help="results folder")
     i.add_argument("--no-report", action="store_true", help="skip figures and report")
+    i.add_argument("--cold-check", action="store_true",
+                   help="also solve every interior front point cold ([pareto] cold_check), to measure warm starts")
     i.set_defaults(func=cmd_identify)
 
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")

@@ -58,8 +58,8 @@ def _tiny_dataset(path: Path, truth: bool) -> Path:
     return path
 
 
-def _point(index, kind, J_time, J_trim, twist, cl, eps=None, success=True, iterations=20):
-    return {"index": index, "kind": kind, "epsilon": eps, "J_time": J_time, "J_trim": J_trim, "success": success,
+def _point(index, kind, J_time, J_trim, twist, cl, eps=None, success=True, iterations=20, cold=None):
+    return {"cold_iterations": cold, "cold_wall_time": None if cold is None else 3.0,"index": index, "kind": kind, "epsilon": eps, "J_time": J_time, "J_trim": J_trim, "success": success,
             "status": "Solve_Succeeded" if success else "Infeasible_Problem_Detected", "iterations": iterations,
             "wall_time": 1.5, "setup_time": 0.0, "warm_start": "primal",
             "parameters": {"theta_twist": twist, "CL_alpha_HT": cl}}
@@ -70,9 +70,9 @@ def _fake_result(out: Path) -> IdentificationResult:
     t = _truth()
     tw, cl = t["theta_twist"], t["CL_alpha_HT"]
     pts = [_point(0, "A", -500.0, 4.0e-3, tw, cl, eps=math.inf, iterations=60),
-           _point(1, "eps", -498.0, 1.0e-3, tw * 1.03, cl * 0.97, eps=2e-3, iterations=12),
-           _point(2, "eps", -496.0, 5.0e-4, tw * 1.06, cl * 0.95, eps=1e-3, success=False, iterations=30),
-           _point(3, "eps", -493.0, 3.0e-4, tw * 1.08, cl * 0.93, eps=5e-4, iterations=9),
+           _point(1, "eps", -498.0, 1.0e-3, tw * 1.03, cl * 0.97, eps=2e-3, iterations=12, cold=30),
+           _point(2, "eps", -496.0, 5.0e-4, tw * 1.06, cl * 0.95, eps=1e-3, success=False, iterations=30, cold=40),
+           _point(3, "eps", -493.0, 3.0e-4, tw * 1.08, cl * 0.93, eps=5e-4, iterations=9, cold=29),
            _point(4, "B", -480.0, 2.0e-4, tw * 1.12, cl * 0.90, eps=2.5e-4, iterations=15)]
     rows = []
     for p in pts:
@@ -138,6 +138,7 @@ def test_report_files_exist_and_pngs_are_valid(report_with_truth):
     for name in ("pareto_front.png", "trim_vs_speed.png", "validation.png", "parameters.md"):
         assert f"({name})" in text
     assert "Mean iterations per interior front point: 17" in text  # (12 + 30 + 9) / 3
+    assert "mean iterations warm 17, cold 33 (ratio warm/cold 0.515" in text  # (30 + 40 + 29) / 3
     assert "None: every trim and simulation succeeded." in text
     assert VAL in text
 

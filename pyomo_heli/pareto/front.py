@@ -54,6 +54,7 @@ class FrontPoint:
     cold_iterations: int | None = None  # filled by the cold check only
     cold_status: str | None = None
     cold_J_time: float | None = None
+    cold_wall_time: float | None = None
 
     def row(self) -> dict:
         d = asdict(self)
@@ -214,6 +215,7 @@ class ParetoSolver:
         self._snap_initial.restore()
         cold = self._solve("time", p.index, "eps", p.epsilon, "none", scale=scale)
         p.cold_iterations, p.cold_status, p.cold_J_time = cold.iterations, cold.status, cold.J_time
+        p.cold_wall_time = cold.wall_time
         warm.restore()
 
     # ------------------------------------------------------------- choosing

@@ -332,6 +332,21 @@ def mean_interior_iterations(front: pd.DataFrame) -> float | None:
     return float(eps["iterations"].mean()) if len(eps) else None
 
 
+def mean_cold_iterations(front: pd.DataFrame) -> float | None:
+    """Mean iterations of the cold re-solves of the interior points ([pareto] cold_check), None without them."""
+    if "cold_iterations" not in front:
+        return None
+    v = pd.to_numeric(front.loc[front["kind"] == "eps", "cold_iterations"], errors="coerce").dropna()
+    return float(v.mean()) if len(v) else None
+
+
+def _mean_col(front: pd.DataFrame, col: str) -> float | None:
+    if col not in front:
+        return None
+    v = pd.to_numeric(front.loc[front["kind"] == "eps", col], errors="coerce").dropna()
+    return float(v.mean()) if len(v) else None
+
+
 def _shown_rms(name: str, v) -> str:
     return "n/a" if v is None or not math.isfinite(v) else f"{float(plots.shown(name, v)):.4g}"
 
@@ -421,6 +436,13 @@ def write_report(out_dir, cfg, results_dir=None) -> Path:
     n_eps = int((result.front["kind"] == "eps").sum())
     L.append(f"Mean iterations per interior front point: {_fmt(mean_it, 4)} "
              f"(over {n_eps} epsilon-constraint solve{'s' if n_eps != 1 else ''}, failed ones included).")
+    cold_it = mean_cold_iterations(result.front)
+    if cold_it is not None:
+        L[-1] += "  "
+        L.append(f"Warm starts vs cold starts on the same interior points: mean iterations warm {_fmt(mean_it, 4)}, "
+                 f"cold {_fmt(cold_it, 4)} (ratio warm/cold {_fmt(mean_it / cold_it, 3)}; "
+                 f"mean wall time warm {_fmt(_mean_col(result.front, 'wall_time'), 3)} s, "
+                 f"cold {_fmt(_mean_col(result.front, 'cold_wall_time'), 3)} s).")
     L += ["", "Front (parameters in display units):", "",
           markdown_table(front_table(result, cfg.model),
                          formats={"wall time [s]": lambda v: _fmt(v, 3), "J_time": lambda v: _fmt(v, 12)}), ""]

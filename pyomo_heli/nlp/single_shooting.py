@@ -18,8 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..physics.model import HelicopterModel
-from ..simulation.integrate import sampled, simulate
-from ..simulation.trim import trim_float
+from ..simulation.sensitivity import maneuver_outputs
 from .objectives import R_FLOOR, j_time_value
 from .parameters import FreeParameter
 
@@ -36,15 +35,7 @@ class ShootingResult:
 
 def simulate_outputs(model: HelicopterModel, maneuvers, outputs) -> dict[str, np.ndarray]:
     """Model outputs at the samples of every maneuver, concatenated per output."""
-    out = {o: [] for o in outputs}
-    for mv in maneuvers:
-        t = mv.data["t"].to_numpy()
-        inc = mv.increments()
-        tp = trim_float(model, mv.trim_speed)
-        df = simulate(model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=4)
-        for o in outputs:
-            out[o].append(df[o].to_numpy())
-    return {o: np.concatenate(v) for o, v in out.items()}
+    return maneuver_outputs(model, maneuvers, outputs, substeps=4)
 
 
 def fit_single_shooting(model: HelicopterModel, maneuvers, free: list[FreeParameter], outputs,

@@ -1,0 +1,61 @@
+"""Output sensitivities (pyomo_heli.simulation.sensitivity) against analytic results."""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pyomo_heli.dataset import load_flight_test
+from pyomo_heli.physics.model import HelicopterModel
+from pyomo_heli.simulation.sensitivity import sensitivities
+
+CLEAN = Path(__file__).resolve().parents[1] / "data" / "bo105_clean"
+
+
+def test_hover_collective_sensitivity_to_twist_is_blade_element_theory():
+    """Hover at fixed thrust: C_T ~ col/3 + theta_tw (1/4 - r_ref/3), so dcol/dtwist = -3 R (1/4 - r_ref/3)."""
+    m = HelicopterModel()
+    p = m.parameters
+    s = sensitivities(m, ["theta_twist", "Iyy"], trim_speeds=[0.0], trim_out=["col", "theta"])
+    expected = -3 * p["R"] * (0.25 - p["r_ref"] / 3)
+    assert s.trim["col"][0, 0] == pytest.approx(expected, rel=1e-2)
+    # a trim is an equilibrium: the pitch inertia cannot move it
+    assert abs(s.trim["col"][0, 1]) < 1e-12 and abs(s.trim["theta"][0, 1]) < 1e-12
+
+
+def test_pitch_rate_sensitivity_to_inertia_right_after_the_input():
+    """Just after the input starts, q(t) ~ M t / Iyy, so dq/dIyy ~ -q / Iyy; trim does not depend on Iyy."""
+    ft = load_flight_test(CLEAN)
+    mv = ft.maneuvers["lon3211_80kt_a"]
+    lon = mv.data["lon"].to_numpy()
+    t_in = mv.data["t"].to_numpy()[np.argmax(np.abs(lon - lon[0]) > 1e-6)]  # first sample with an input
+    mv = dataclasses.replace(mv, data=mv.data[mv.data["t"] <= t_in + 0.3].reset_index(drop=True))
+    m = HelicopterModel()
+    s = sensitivities(m, ["Iyy"], maneuvers=[mv], time_outputs=["q", "theta"])
+    q = s.y_time["q"]
+    t = mv.data["t"].to_numpy()
+    first = int(np.argmax((t > t_in) & (np.abs(q) > 1e-5)))  # the first sample that responds
+    ratio = s.time["q"][first, 0] / (-q[first] / m.parameters["Iyy"])
+    assert ratio == pytest.approx(1.0, abs=0.07)  # -> 1 as t -> t_in; pitch damping acts at O(t)
+    # theta' = q, so d(theta)/dIyy is the time integral of dq/dIyy (trapezoid rule at 50 Hz)
+    from scipy.integrate import cumulative_trapezoid
+
+    integral = cumulative_trapezoid(s.time["q"][:, 0], t, initial=0.0)
+    scale = np.max(np.abs(s.time["theta"][:, 0]))
+    assert scale > 0 and np.max(np.abs(integral - s.time["theta"][:, 0])) < 0.02 * scale
+    assert np.max(np.abs(s.time["q"][t < t_in, 0])) < 1e-12  # nothing moves before the input
+
+
+def test_one_sided_difference_at_a_lower_bound_matches_a_secant():
+    """A parameter at its lower bound gets a one-sided derivative, consistent with a finite secant."""
+    m = HelicopterModel().with_parameters(theta_twist=0.0)  # twist's upper bound is 0; lower -10 deg/m
+    lo = m.parameters.spec("K_beta").bounds[0]
+    m0 = HelicopterModel().with_parameters(K_beta=lo)
+    s = sensitivities(m0, ["K_beta"], trim_speeds=[40.0], trim_out=["lon"])
+    h = 50.0
+    secant = (sensitivities(m0.with_parameters(K_beta=lo + h), [], trim_speeds=[40.0], trim_out=["lon"]).y_trim["lon"]
+              - s.y_trim["lon"]) / h
+    assert s.trim["lon"][0, 0] == pytest.approx(secant[0], rel=1e-2)
+    assert m is not None

@@ -161,6 +161,27 @@ def cmd_inspect(args) -> int:
     return 0
 
 
+def cmd_linearize(args) -> int:
+    import numpy as np
+
+    from .physics.model import HelicopterModel
+    from .simulation.linearize import linearize_float
+
+    for v in args.speeds_kt:
+        _check_speed_kt(v, "--speeds-kt")
+    model = _parse_params(args.param, HelicopterModel())
+    np.set_printoptions(precision=5, linewidth=140, suppress=False)
+    for v in args.speeds_kt:
+        lin = linearize_float(model, v * KT)
+        print(f"{v:g} kt: finite-difference linearisation of the float model at its trim "
+              f"(states {', '.join(lin.states)}; inputs col, lon [rad])")
+        print("A =\n" + str(lin.A))
+        print("B =\n" + str(lin.B))
+        print("poles [1/s]: " + ", ".join(f"{z.real:.4f}{z.imag:+.4f}j" if abs(z.imag) > 0 else f"{z.real:.4f}"
+                                          for z in lin.poles()))
+    return 0
+
+
 # ---------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="pyomo-heli", description="Multi-objective parameter identification of helicopter models")
@@ -206,6 +227,11 @@ def build_parser() -> argparse.ArgumentParser:
     n.add_argument("config")
     n.add_argument("--no-diagnostics", action="store_true", help="skip the IDAES structural diagnostics")
     n.set_defaults(func=cmd_inspect)
+
+    lz = sub.add_parser("linearize", help="A, B and poles of the float model at trim (central differences)")
+    lz.add_argument("--speeds-kt", type=float, nargs="+", default=[0, 80])
+    lz.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter (SI)")
+    lz.set_defaults(func=cmd_linearize)
 
     c = sub.add_parser("check-data", help="check a flight-test dataset folder and print a summary")
     c.add_argument("directory")

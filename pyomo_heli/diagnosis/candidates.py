@@ -1,0 +1,244 @@
+"""The library of candidate model extensions the closed loop may add to M0.
+
+Each candidate is an :class:`~pyomo_heli.physics.extensions.Extension`: a
+parametric physical effect with one *strength* parameter whose zero value
+gives M0 exactly, plugged in through the model's extension seam. The forms
+are this project's own modelling choices (docs/model.md, section
+"Candidate extensions"); they are deliberately written without reference to
+the truth simulator's effects (:mod:`pyomo_heli.flighttest.truth_effects`),
+because a user's aircraft will not follow our truth simulator.
+
+Every strength has bounds and a scale (used when the loop frees it) and,
+for state-adding or stiff candidates, ``score_step``: the absolute
+finite-difference step used by the score test (see
+:mod:`pyomo_heli.diagnosis.attribution`).
+
+Registry: :data:`CANDIDATES` (name -> class); :func:`make_candidate` builds one.
+"""
+from __future__ import annotations
+
+from ..physics.extensions import Extension
+from ..physics.parameters import DEG, ParameterSpec
+
+
+class Candidate(Extension):
+    """An extension offered to the diagnosis: one strength, a physical reason, a score-test step."""
+
+    #: absolute step of the score-test finite difference (None: the default relative step)
+    score_step: float | None = None
+    #: True when only one sign of the strength is physical (lower bound 0): one-sided score test
+    one_sided: bool = False
+    #: what the effect does to the data, shown in reports
+    signature: str = ""
+
+
+class RotorWakeOnTail(Candidate):
+    """Rotor wake on the horizontal tail: downwash w_dw = k_wt g(xi) 2 lambda_i Omega R at the tail.
+
+    The wake is a cylinder of radius R leaving the disc along the skew angle
+    chi, tan(chi) = mu_d / lambda_d (disc-frame flow). At the stabiliser's
+    depth z_ht below the hub its centre line is z_ht tan(chi) aft of the hub;
+    the tail, l_t + x_h aft of the hub, is xi = (l_t + x_h - z_ht tan chi)/R
+    wake radii from it. Immersion is a smooth top hat g = 1/(1 + xi^6)
+    (inside |xi| < 1). The fully developed wake carries twice the
+    disc-induced velocity, hence 2 lambda_i Omega R; k_wt scales it.
+    """
+
+    name = "rotor_wake_on_tail"
+    strength = "k_wt"
+    one_sided = True
+    signature = "low-speed bump (10-50 kt) in trim lon/theta; q/theta in low-speed maneuvers"
+
+    def parameters(self):
+        return [
+            ParameterSpec("k_wt", 0.0, "-", "candidate: wake downwash at the tail / twice the induced velocity",
+                          "choice", (0.0, 5.0), 1.0),
+            ParameterSpec("z_ht", 1.7, "m", "candidate: stabiliser depth below the hub (drawing value)", "choice"),
+        ]
+
+    def tail_downwash(self, ctx):
+        p = ctx.p
+        tan_chi = ctx.disc.mu_d / ctx.disc.lambda_d
+        xi = (ctx.l_t + ctx.x_h - p["z_ht"] * tan_chi) / p["R"]
+        g = 1.0 / (1.0 + xi**6)
+        return p["k_wt"] * g * 2.0 * ctx.x["lambda_i"] * ctx.flow.v_tip
+
+
+class FlappingLag(Candidate):
+    """Flapping lag: first-order tip-path-plane response tau_b db/dt = beta_1c,qs - b.
+
+    The rotor force direction, the hub moment and the disc-frame inflow use
+    the lagged longitudinal tilt b instead of the quasi-steady beta_1c.
+    Physical value about 16/(gamma Omega) = 0.07 s for the Bo-105.
+    """
+
+    name = "flapping_lag"
+    strength = "tau_b"
+    states = ("b1c_lag",)
+    one_sided = True
+    # RK4 needs tau well above the sample step; the difference is a secant over 0..0.04 s
+    score_step = 0.02
+    signature = "no trim residual; q residual at cyclic input edges (2-15 rad/s)"
+
+    def parameters(self):
+        return [ParameterSpec("tau_b", 0.0, "s", "candidate: tip-path-plane lag time constant", "choice",
+                              (0.0, 0.3), 0.05)]
+
+    def tip_path_plane(self, ctx):
+        ctx.beta_1c_tpp = ctx.x["b1c_lag"]
+
+    def state_equations(self, ctx):
+        return {"b1c_lag": (ctx.p["tau_b"], ctx.beta[1] - ctx.x["b1c_lag"])}
+
+
+class InflowTimeConstant(Candidate):
+    """Inflow time constant: tau_lambda -> tau_lambda exp(k_ti) (log scale keeps it positive).
+
+    k_ti = ln(0.019/0.1) = -1.66 would be Pitt-Peters' 8/(3 pi Omega) against M0's 0.1 s.
+    """
+
+    name = "inflow_time_constant"
+    strength = "k_ti"
+    signature = "no trim residual; n_z/beta_0 transients after collective steps"
+
+    def parameters(self):
+        return [ParameterSpec("k_ti", 0.0, "-", "candidate: log of the inflow time-constant factor", "choice",
+                              (-3.0, 1.5), 1.0)]
+
+    def adjust_inflow(self, ctx):
+        ctx.tau_lambda = ctx.tau_lambda * ctx.ops.exp(ctx.p["k_ti"])
+
+
+class CGOffset(Candidate):
+    """CG offset: the CG dx_fwd forward of its nominal station (hub aft: x_h - dx, tail arm l_t + dx)."""
+
+    name = "cg_offset"
+    strength = "dx_fwd"
+    signature = "constant lon and theta trim offsets of opposite sign, growing little with speed"
+
+    def parameters(self):
+        return [ParameterSpec("dx_fwd", 0.0, "m", "candidate: CG forward shift", "choice", (-0.5, 0.5), 0.1)]
+
+    def adjust_geometry(self, ctx):
+        ctx.x_h = ctx.x_h - ctx.p["dx_fwd"]
+        ctx.l_t = ctx.l_t + ctx.p["dx_fwd"]
+
+
+class LonRiggingBias(Candidate):
+    """Cyclic rigging bias: the rotor sees theta_1s = lon_measured + b_lon."""
+
+    name = "lon_rigging"
+    strength = "b_lon"
+    signature = "constant lon trim offset, no attitude change"
+
+    def parameters(self):
+        return [ParameterSpec("b_lon", 0.0, "rad", "candidate: longitudinal cyclic rigging bias", "choice",
+                              (-3 * DEG, 3 * DEG), 0.5 * DEG, display=("deg", 1 / DEG))]
+
+    def adjust_controls(self, ctx):
+        ctx.lon = ctx.lon + ctx.p["b_lon"]
+
+
+class ColRiggingBias(Candidate):
+    """Collective rigging bias: the rotor sees col_measured + b_col (at r_ref)."""
+
+    name = "col_rigging"
+    strength = "b_col"
+    signature = "constant collective trim offset"
+
+    def parameters(self):
+        return [ParameterSpec("b_col", 0.0, "rad", "candidate: collective rigging bias", "choice",
+                              (-3 * DEG, 3 * DEG), 0.5 * DEG, display=("deg", 1 / DEG))]
+
+    def adjust_controls(self, ctx):
+        ctx.col = ctx.col + ctx.p["b_col"]
+
+
+class AccelerometerPositionX(Candidate):
+    """Accelerometer dx_acc forward of the CG: specific force at r = (dx, 0, 0) of a body pitching at q.
+
+    a_meas = a_cg + dq/dt x r + q x (q x r) gives n_z += dq/dt dx/g and n_x -= q^2 dx/g.
+    """
+
+    name = "accel_position_x"
+    strength = "dx_acc"
+    signature = "n_z residual proportional to pitch acceleration; nothing in trim"
+
+    def parameters(self):
+        return [ParameterSpec("dx_acc", 0.0, "m", "candidate: accelerometer forward of the CG", "choice",
+                              (-3.0, 3.0), 1.0)]
+
+    def adjust_outputs(self, ctx):
+        dx, g = ctx.p["dx_acc"], ctx.p["g"]
+        q, dq = ctx.x["q"], ctx.rates["q"]
+        ctx.outputs["n_z"] = ctx.outputs["n_z"] + dq * dx / g
+        ctx.outputs["n_x"] = ctx.outputs["n_x"] - q**2 * dx / g
+
+
+class AccelerometerPositionZ(Candidate):
+    """Accelerometer dz_acc below the CG: n_x += dq/dt dz/g, n_z += q^2 dz/g (same kinematics)."""
+
+    name = "accel_position_z"
+    strength = "dz_acc"
+    signature = "n_x residual proportional to pitch acceleration; nothing in trim"
+
+    def parameters(self):
+        return [ParameterSpec("dz_acc", 0.0, "m", "candidate: accelerometer below the CG", "choice",
+                              (-3.0, 3.0), 1.0)]
+
+    def adjust_outputs(self, ctx):
+        dz, g = ctx.p["dz_acc"], ctx.p["g"]
+        q, dq = ctx.x["q"], ctx.rates["q"]
+        ctx.outputs["n_x"] = ctx.outputs["n_x"] + dq * dz / g
+        ctx.outputs["n_z"] = ctx.outputs["n_z"] + q**2 * dz / g
+
+
+class GyroBias(Candidate):
+    """Pitch-rate gyro bias: q_meas = q + b_q."""
+
+    name = "gyro_bias"
+    strength = "b_q"
+    signature = "constant q residual in every maneuver"
+
+    def parameters(self):
+        return [ParameterSpec("b_q", 0.0, "rad/s", "candidate: pitch-rate gyro bias", "choice",
+                              (-2 * DEG, 2 * DEG), 0.1 * DEG, display=("deg/s", 1 / DEG))]
+
+    def adjust_outputs(self, ctx):
+        ctx.outputs["q"] = ctx.outputs["q"] + ctx.p["b_q"]
+
+
+class NormalAccelBias(Candidate):
+    """Normal accelerometer bias: n_z,meas = n_z + b_nz."""
+
+    name = "nz_bias"
+    strength = "b_nz"
+    signature = "constant n_z residual in every maneuver"
+
+    def parameters(self):
+        return [ParameterSpec("b_nz", 0.0, "-", "candidate: normal load-factor sensor bias [g]", "choice",
+                              (-0.2, 0.2), 0.01)]
+
+    def adjust_outputs(self, ctx):
+        ctx.outputs["n_z"] = ctx.outputs["n_z"] + ctx.p["b_nz"]
+
+
+CANDIDATES: dict[str, type[Candidate]] = {c.name: c for c in (
+    RotorWakeOnTail, FlappingLag, InflowTimeConstant, CGOffset, LonRiggingBias, ColRiggingBias,
+    AccelerometerPositionX, AccelerometerPositionZ, GyroBias, NormalAccelBias)}
+
+
+def candidate_names() -> list[str]:
+    return list(CANDIDATES)
+
+
+def make_candidate(name: str) -> Candidate:
+    """The candidate called ``name``; KeyError naming the known ones (and close matches) otherwise."""
+    try:
+        return CANDIDATES[name]()
+    except KeyError:
+        import difflib
+
+        close = difflib.get_close_matches(name, list(CANDIDATES), n=2)
+        hint = f" (did you mean {' or '.join(close)}?)" if close else ""
+        raise KeyError(f"unknown candidate extension {name!r}{hint}; choose from {', '.join(CANDIDATES)}") from None

@@ -27,7 +27,7 @@ CASE1 = ROOT / "docs" / "results" / "case1"
 @pytest.fixture(scope="module")
 def clean_residuals():
     cfg = load_identification_config(ROOT / "tests" / "configs" / "small_case1.toml")
-    return cfg, compute_residuals(cfg, {}, label="M0 nominal")
+    return cfg, compute_residuals(cfg, {}, label="M0 nominal", input_offsets=False)
 
 
 def test_m0_on_its_own_clean_data_has_zero_residuals(clean_residuals):
@@ -67,7 +67,7 @@ def test_case1_residuals_reproduce_the_committed_report():
     res = IdentificationResult.load(CASE1)
     cfg = load_identification_config(find_config(CASE1, res))
     metrics = json.loads((CASE1 / "metrics.json").read_text())
-    r = compute_residuals(cfg, res.chosen["parameters"], roles=("validation",))
+    r = compute_residuals(cfg, res.chosen["parameters"], roles=("validation",), input_offsets=False)
     rms = r.rms_dict()
     ref_trim = metrics["trim_rms"]["multi-objective (C)"]
     for group, key in (("all", "identification"), ("level", "level"), ("maneuver_start", "maneuver_start")):

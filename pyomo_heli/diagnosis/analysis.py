@@ -118,9 +118,11 @@ def _shape_sentence(t: ShapeTest) -> str:
     unit, fac = DISPLAY.get(t.channel, ("SI", 1.0))
     pmin = min(t.p_values.values())
     if not t.structured:
-        return (f"trim {t.channel}: noise only (smallest p = {pmin:.2g} >= {t.alpha / len(t.p_values):.2g}); "
-                f"RMS {t.rms * fac:.3g} {unit}")
-    parts = [f"trim {t.channel}: {t.description} (p = {pmin:.2g})"]
+        return (f"trim {t.channel}: noise only (smallest p = {pmin:.2g} >= {t.alpha / len(t.p_values):.2g}"
+                + (f", a shift of {', '.join(t.nuisance)} allowed" if t.nuisance else "") + f"); RMS {t.rms * fac:.3g} {unit}"
+                + (f", {t.rms_after * fac:.3g} {unit} after the parameter shift" if t.nuisance else ""))
+    parts = [f"trim {t.channel}: {t.description} (p = {pmin:.2g}"
+             + (f", beyond a shift of {', '.join(t.nuisance)})" if t.nuisance else ")")]
     f = t.fit
     if "amplitude" in f:
         parts.append(f"bump centre {f['centre'] / KT:.0f} kt, width {f['width'] / KT:.0f} kt, amplitude "
@@ -172,16 +174,31 @@ def _findings(d: Diagnosis, shapes: dict, white: pd.DataFrame, coh: pd.DataFrame
 
 
 # ---------------------------------------------------------------- the diagnosis
-def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = 5.0, n_mc: int = 4000, seed: int = 0
-             ) -> Diagnosis:
-    """Run every residual test on ``res`` (see the module docstring)."""
+def trim_nuisance(res: Residuals, channel: str) -> tuple[np.ndarray | None, list]:
+    """The trim sensitivities of the identified parameters for ``channel`` (columns ``dres_<c>_d<p>``)."""
+    names = [p for p in res.parameters if f"dres_{channel}_d{p}" in res.trim]
+    if not names:
+        return None, []
+    return res.trim[[f"dres_{channel}_d{p}" for p in names]].to_numpy(dtype=float), names
+
+
+def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = 5.0, n_mc: int = 4000, seed: int = 0,
+             absorb_parameters: bool = True) -> Diagnosis:
+    """Run every residual test on ``res`` (see the module docstring).
+
+    ``absorb_parameters``: the trim shape test allows a shift of the identified
+    parameters (their trim sensitivities, when ``res`` has them) in every model.
+    """
     settings = {"alpha": alpha, "test_rate_hz": test_rate_hz, "n_mc": n_mc, "seed": seed,
-                "dynamics_band_hz": list(DYN_BAND), "high_band_hz": list(HIGH_BAND)}
+                "dynamics_band_hz": list(DYN_BAND), "high_band_hz": list(HIGH_BAND),
+                "absorb_parameters": absorb_parameters}
     problems = list(res.problems)
     shapes = {}
     for c in res.trim_channels:
+        S, names = trim_nuisance(res, c) if absorb_parameters else (None, [])
         try:
-            shapes[c] = trim_shape_test(res.trim["V"], res.trim[f"res_{c}"], c, alpha=alpha, n_mc=n_mc, seed=seed)
+            shapes[c] = trim_shape_test(res.trim["V"], res.trim[f"res_{c}"], c, alpha=alpha, n_mc=n_mc, seed=seed,
+                                        nuisance=S, nuisance_names=names)
         except ValueError as exc:
             problems.append(str(exc))
     time = res.time

@@ -77,7 +77,8 @@ class Residuals:
       model's applied inputs) as regressors.
     ``trim``: one row per trim point, columns ``V [m/s], gamma_fp [rad], source``
       and for every channel ``c``: ``res_<c>``, ``data_<c>``, ``model_<c>``, plus
-      ``model_u, model_w, model_lambda_i, model_mu, model_chi`` of the model trim.
+      ``model_u, model_w, model_lambda_i, model_mu, model_chi`` of the model trim, and
+      ``dres_<c>_d<p>`` (d model_c / d parameter p) for every parameter given.
     ``info["inputs"]``: maneuver -> the input channels it excites (from the dataset).
     ``fitted_outputs`` / ``fitted_trim``: what the identification's objectives used.
     """
@@ -246,7 +247,8 @@ def _trims(model: HelicopterModel, trims: pd.DataFrame, extra_speeds, problems: 
 
 
 def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = "model",
-                      roles=ROLES, outputs=TIME_OUTPUTS, input_offsets: bool = True) -> Residuals:
+                      roles=ROLES, outputs=TIME_OUTPUTS, input_offsets: bool = True,
+                      trim_sensitivities: bool = True) -> Residuals:
     """Residuals (model - data) of every maneuver of ``roles`` and every trim point at ``parameters`` (SI).
 
     ``parameters`` override the config model's values (free parameters of an
@@ -256,6 +258,10 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
     replay starts from the first recorded input sample, so that sample's noise
     acts as a constant input error over the whole record (a nuisance the
     diagnosis removes before testing whiteness). Costs two more replays.
+    ``trim_sensitivities``: also the trim sensitivities of the parameters given
+    (columns ``dres_<c>_d<parameter>`` of ``trim``, central differences of the
+    model trims, SI per SI unit), so that a diagnosis can ask what the
+    identified parameters could still absorb. Costs two trim sweeps per parameter.
     """
     model = cfg.model.with_parameters(**parameters) if parameters else cfg.model
     ft = load_flight_test(cfg.dataset)
@@ -330,6 +336,8 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
             row.update({f"model_{x}": math.nan for x in FLOW_EXTRAS})
         rows.append(row)
     trim = pd.DataFrame(rows)
+    if trim_sensitivities and parameters and len(trim):
+        _add_trim_sensitivities(model, list(parameters), trim, problems)
     return Residuals(label=label, parameters={k: float(v) for k, v in (parameters or {}).items()}, time=time,
                      trim=trim, outputs=list(outputs), trim_channels=list(TRIM_CHANNELS),
                      fitted_outputs=list(cfg.nlp.time_outputs), fitted_trim=list(cfg.nlp.trim_outputs),
@@ -337,6 +345,25 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
                      info={"config": str(cfg.path), "dataset": str(cfg.dataset),
                            "extensions": [e.name for e in cfg.model.extensions],
                            "inputs": {mv.name: list(mv.inputs) for _, mv in mans}})
+
+
+def _add_trim_sensitivities(model: HelicopterModel, names: list, trim: pd.DataFrame, problems: list) -> None:
+    from ..simulation.sensitivity import sensitivities
+
+    if "gamma_fp" in trim and np.any(np.abs(trim["gamma_fp"].to_numpy(dtype=float)) > 1e-9):
+        problems.append("trim sensitivities skipped: the data have climbing/descending trims")
+        return
+    try:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sens = sensitivities(model, names, trim_speeds=trim["V"].to_numpy(dtype=float),
+                                 trim_out=list(TRIM_CHANNELS))
+    except Exception as exc:  # noqa: BLE001 - the residuals stay usable without them
+        problems.append(f"trim sensitivities failed ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})")
+        return
+    for c in TRIM_CHANNELS:
+        for j, n in enumerate(names):
+            trim[f"dres_{c}_d{n}"] = sens.trim[c][:, j]
 
 
 # ---------------------------------------------------------------- from a results folder

@@ -26,8 +26,16 @@ e_k at speeds V_k:
    The bump is a generic localised shape, not the form of any particular
    physical effect.
 
+   Optionally every model, the noise-only one included, also carries
+   nuisance columns: the trim sensitivities of the identified parameters. The
+   test then asks for structure beyond what those parameters can absorb (the
+   Pareto choice trades trim fit against time fit, which leaves a residual
+   along those directions without any missing physics); "noise" then means
+   "noise plus a parameter shift".
+
 2. Is there any structure? For each shape, the F statistic against noise only,
-   F = ((RSS_0 - RSS_s) / k_s) / (RSS_s / (n - k_s)), k_s = linear coefficients.
+   F = ((RSS_0 - RSS_s) / k_s) / (RSS_s / (n - k_s - p)), k_s = linear shape
+   coefficients, p = nuisance columns.
    F does not depend on the noise level, so its distribution under "white
    Gaussian noise" depends only on the speeds: it is obtained by a seeded Monte
    Carlo (``n_mc`` draws), which also accounts for the grid search of the bump
@@ -82,6 +90,9 @@ class ShapeTest:
     runs: dict = field(default_factory=dict)  # runs test: runs, expected, z, p
     alpha: float = 0.01
     n_mc: int = 0
+    nuisance: list = field(default_factory=list)  # names of the nuisance columns (identified parameters)
+    V: list = field(default_factory=list)  # speeds of the points tested [m/s]
+    adjusted: list = field(default_factory=list)  # residual minus the nuisance part of the chosen fit (SI)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -91,25 +102,33 @@ def bump_basis(V, centre, width):
     return np.exp(-0.5 * ((np.asarray(V, dtype=float) - centre) / width) ** 2)
 
 
-def _designs(V: np.ndarray) -> dict:
-    """shape -> list of (design matrix, bump (centre, width) or None)."""
+def _designs(V: np.ndarray, S: np.ndarray) -> dict:
+    """shape -> list of (design matrix [shape columns, then nuisance S], bump (centre, width) or None)."""
     one = np.ones_like(V)
     x2 = (V / V_REF) ** 2
-    out = {"constant": [(one[:, None], None)], "V^2": [(np.column_stack([one, x2]), None)], "bump": [],
-           "V^2+bump": []}
+    out = {"constant": [(np.column_stack([one, S]), None)], "V^2": [(np.column_stack([one, x2, S]), None)],
+           "bump": [], "V^2+bump": []}
     for c in BUMP_CENTRES_KT:
         for w in BUMP_WIDTHS_KT:
             g = bump_basis(V, c * KT, w * KT)
             if np.ptp(g) < 1e-3:  # no speed in the data sees this bump
                 continue
-            out["bump"].append((np.column_stack([one, g]), (c * KT, w * KT)))
-            out["V^2+bump"].append((np.column_stack([one, x2, g]), (c * KT, w * KT)))
+            out["bump"].append((np.column_stack([one, g, S]), (c * KT, w * KT)))
+            out["V^2+bump"].append((np.column_stack([one, x2, g, S]), (c * KT, w * KT)))
     return out
+
+
+def _basis(X: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the column space of X (rank-revealing: collinear columns count once)."""
+    if X.shape[1] == 0:
+        return X
+    U, sv, _ = np.linalg.svd(X / np.maximum(np.linalg.norm(X, axis=0), 1e-300), full_matrices=False)
+    return U[:, sv > 1e-9 * sv[0]]
 
 
 def _rss_batch(X: np.ndarray, E: np.ndarray) -> np.ndarray:
     """Residual sum of squares of the LS fit of every column of E on X."""
-    Q, _ = np.linalg.qr(X)
+    Q = _basis(X)
     proj = Q.T @ E
     return np.sum(E**2, axis=0) - np.sum(proj**2, axis=0)
 
@@ -118,10 +137,6 @@ def _best(designs, E):
     """Minimum RSS over a list of designs, per column of E, and the index of the best design."""
     rss = np.vstack([_rss_batch(X, E) for X, _ in designs])
     return rss.min(axis=0), rss.argmin(axis=0)
-
-
-def _F(rss0, rss, k, n):
-    return ((rss0 - rss) / k) / np.maximum(rss / (n - k), 1e-300)
 
 
 def runs_test(e) -> dict:
@@ -139,54 +154,73 @@ def runs_test(e) -> dict:
     return {"runs": runs, "expected": mu, "z": z, "p": float(2 * stats.norm.sf(abs(z)))}
 
 
-def trim_shape_test(V, e, channel: str = "", alpha: float = 0.01, n_mc: int = 4000, seed: int = 0) -> ShapeTest:
-    """Classify the shape of residual ``e`` against speed ``V`` [m/s] (see the module docstring)."""
+def trim_shape_test(V, e, channel: str = "", alpha: float = 0.01, n_mc: int = 4000, seed: int = 0,
+                    nuisance=None, nuisance_names=()) -> ShapeTest:
+    """Classify the shape of residual ``e`` against speed ``V`` [m/s] (see the module docstring).
+
+    ``nuisance`` (n x p): columns every model may use for free, in the null
+    model too: the trim sensitivities of the identified parameters, so that the
+    test asks for structure *beyond what those parameters can absorb*
+    (re-weighting of the trade-off between time and trim data moves the trims
+    along these directions, without any missing physics).
+    """
     V = np.asarray(V, dtype=float)
     e = np.asarray(e, dtype=float)
-    ok = np.isfinite(V) & np.isfinite(e)
-    V, e = V[ok], e[ok]
+    S = np.zeros((len(V), 0)) if nuisance is None else np.asarray(nuisance, dtype=float).reshape(len(V), -1)
+    ok = np.isfinite(V) & np.isfinite(e) & np.all(np.isfinite(S), axis=1)
+    V, e, S = V[ok], e[ok], S[ok]
     n = len(e)
-    if n < 8:
-        raise ValueError(f"trim shape test of {channel or 'a channel'}: {n} points, need at least 8")
-    designs = _designs(V)
+    p_n = _basis(S).shape[1]
+    if n < 8 + p_n:
+        raise ValueError(f"trim shape test of {channel or 'a channel'}: {n} points, need at least {8 + p_n}")
+    designs = _designs(V, S)
     k_lin = {"constant": 1, "V^2": 2, "bump": 2, "V^2+bump": 3}
-    rss0 = float(np.sum(e**2))
+
+    def F_of(rss0, rss, k):
+        return ((rss0 - rss) / k) / np.maximum(rss / (n - k - p_n), 1e-300)
+
+    rss0 = float(_rss_batch(S, e[:, None])[0]) if p_n else float(np.sum(e**2))
     rss, idx, F = {"noise": rss0}, {}, {}
     for s, ds in designs.items():
         r, i = _best(ds, e[:, None])
         rss[s], idx[s] = float(r[0]), int(i[0])
-        F[s] = float(_F(rss0, rss[s], k_lin[s], n))
-    # null distribution of F (scale-free): white Gaussian residuals at the same speeds
+        F[s] = float(F_of(rss0, rss[s], k_lin[s]))
+    # null distribution of F: white Gaussian residuals (+ any nuisance combination, to which F is
+    # invariant, as it is to the noise level) at the same speeds
     rng = np.random.default_rng(seed)
     E = rng.standard_normal((n, n_mc))
-    rss0_mc = np.sum(E**2, axis=0)
+    rss0_mc = _rss_batch(S, E) if p_n else np.sum(E**2, axis=0)
     p = {}
     for s, ds in designs.items():
         r_mc, _ = _best(ds, E)
-        F_mc = _F(rss0_mc, r_mc, k_lin[s], n)
-        p[s] = float((1 + np.sum(F_mc >= F[s])) / (1 + n_mc))
+        p[s] = float((1 + np.sum(F_of(rss0_mc, r_mc, k_lin[s]) >= F[s])) / (1 + n_mc))
     bic = {s: n * math.log(max(rss[s], 1e-300) / n) + N_PARAMS[s] * math.log(n) for s in SHAPES}
     structured = min(p.values()) < alpha / len(p)
     shape = min(designs, key=lambda s: bic[s]) if structured else "noise"
 
     def coefficients(s):
+        """Shape coefficients and the nuisance combination of the fit of shape ``s``."""
         if s == "noise":
-            return {}
-        X, bw = designs[s][idx[s]]
-        c, *_ = np.linalg.lstsq(X, e, rcond=None)
-        names = {"constant": ["offset"], "V^2": ["offset", "V2_at_120kt"], "bump": ["offset", "amplitude"],
-                 "V^2+bump": ["offset", "V2_at_120kt", "amplitude"]}[s]
-        d = dict(zip(names, (float(x) for x in c)))
+            X, bw, k = S, None, 0
+        else:
+            (X, bw), k = designs[s][idx[s]], k_lin[s]
+        c = np.linalg.lstsq(X, e, rcond=None)[0] if X.shape[1] else np.zeros(0)
+        names = {"noise": [], "constant": ["offset"], "V^2": ["offset", "V2_at_120kt"],
+                 "bump": ["offset", "amplitude"], "V^2+bump": ["offset", "V2_at_120kt", "amplitude"]}[s]
+        d = dict(zip(names, (float(x) for x in c[:k])))
         if bw is not None:
             d.update({"centre": float(bw[0]), "width": float(bw[1])})
-        return d
+        return d, (S @ c[k:] if p_n else np.zeros(n))
 
-    rms = math.sqrt(rss0 / n)
+    fit, absorbed = coefficients(shape)
+    adjusted = e - absorbed
+    rms = math.sqrt(float(np.sum(e**2)) / n)
     return ShapeTest(channel=channel, n=n, shape=shape, description=DESCRIPTION[shape], structured=bool(structured),
                      p_values=p, F=F, bic=bic, rss=rss, rms=rms, rms_after=math.sqrt(rss[shape] / n),
-                     explained=1.0 - rss[shape] / rss0 if rss0 > 0 else 0.0, fit=coefficients(shape),
-                     bump=coefficients("bump"), runs=runs_test(e[np.argsort(V, kind="stable")]), alpha=alpha,
-                     n_mc=n_mc)
+                     explained=1.0 - rss[shape] / rss0 if rss0 > 0 else 0.0, fit=fit,
+                     bump=coefficients("bump")[0], runs=runs_test(adjusted[np.argsort(V, kind="stable")]),
+                     alpha=alpha, n_mc=n_mc, nuisance=list(nuisance_names)[: S.shape[1]],
+                     V=V.tolist(), adjusted=adjusted.tolist())
 
 
 def shape_curve(test: ShapeTest, V) -> np.ndarray:

@@ -171,7 +171,8 @@ def cmd_diagnose(args) -> int:
     out = Path(args.out or args.results_dir)
     print(f"diagnosing {label} of {args.results_dir} (config {cfg.path})")
     r = compute_residuals(cfg, point["parameters"], label)
-    r.save(out / f"residuals_{args.point}")
+    if not args.no_residuals:
+        r.save(out / f"residuals_{args.point}")
     d = diagnose(r, alpha=args.alpha, test_rate_hz=args.test_rate_hz, seed=args.seed)
     d.save(out / "diagnosis.json")
     cmd = "pyomo-heli diagnose " + " ".join(sys.argv[1:][1:]) if sys.argv[1:2] == ["diagnose"] else None
@@ -245,6 +246,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--alpha", type=float, default=0.01, help="significance level of the tests (default 0.01)")
     g.add_argument("--test-rate-hz", type=float, default=5.0, help="sample rate of the whiteness test (default 5)")
     g.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo p-values (default 0)")
+    g.add_argument("--no-residuals", action="store_true",
+                   help="do not save the residuals folder (residuals_<point>/, about 1 MB per 10 maneuvers)")
     g.set_defaults(func=cmd_diagnose)
 
     c = sub.add_parser("check-data", help="check a flight-test dataset folder and print a summary")

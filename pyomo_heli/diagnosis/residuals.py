@@ -156,10 +156,13 @@ class Residuals:
 
     # ------------------------------------------------------------ disk
     def save(self, folder: str | Path) -> Path:
-        """Write ``time.csv``, ``trim.csv`` and ``meta.json`` into ``folder``."""
+        """Write ``time.csv.gz`` (gzip-compressed CSV), ``trim.csv`` and ``meta.json`` into ``folder``."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        self.time.to_csv(folder / "time.csv", index=False, float_format="%.12g")
+        if (folder / "time.csv").exists():
+            (folder / "time.csv").unlink()
+        self.time.to_csv(folder / "time.csv.gz", index=False, float_format="%.10g",
+                         compression={"method": "gzip", "mtime": 0})
         self.trim.to_csv(folder / "trim.csv", index=False, float_format="%.12g")
         write_json(folder / "meta.json", {"label": self.label, "parameters": self.parameters, "outputs": self.outputs,
                                           "trim_channels": self.trim_channels, "fitted_outputs": self.fitted_outputs,
@@ -170,11 +173,12 @@ class Residuals:
     @classmethod
     def load(cls, folder: str | Path) -> "Residuals":
         folder = Path(folder)
-        for name in ("time.csv", "trim.csv", "meta.json"):
-            if not (folder / name).is_file():
-                raise FileNotFoundError(f"{folder}: no {name}; is this a residuals folder?")
+        time_file = folder / "time.csv.gz" if (folder / "time.csv.gz").is_file() else folder / "time.csv"
+        for f in (time_file, folder / "trim.csv", folder / "meta.json"):
+            if not f.is_file():
+                raise FileNotFoundError(f"{folder}: no {f.name}; is this a residuals folder?")
         meta = json.loads((folder / "meta.json").read_text())
-        time = pd.read_csv(folder / "time.csv", dtype={"maneuver": str, "role": str})
+        time = pd.read_csv(time_file, dtype={"maneuver": str, "role": str})
         trim = pd.read_csv(folder / "trim.csv", dtype={"source": str})
         return cls(label=meta["label"], parameters=meta["parameters"], time=time, trim=trim, outputs=meta["outputs"],
                    trim_channels=meta["trim_channels"], fitted_outputs=meta["fitted_outputs"],
@@ -342,9 +346,18 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
                      trim=trim, outputs=list(outputs), trim_channels=list(TRIM_CHANNELS),
                      fitted_outputs=list(cfg.nlp.time_outputs), fitted_trim=list(cfg.nlp.trim_outputs),
                      problems=problems,
-                     info={"config": str(cfg.path), "dataset": str(cfg.dataset),
+                     info={"config": _shown_path(cfg.path), "dataset": _shown_path(cfg.dataset),
                            "extensions": [e.name for e in cfg.model.extensions],
                            "inputs": {mv.name: list(mv.inputs) for _, mv in mans}})
+
+
+def _shown_path(p) -> str:
+    """A path relative to the current folder when it lies inside it (machine-independent records)."""
+    p = Path(p)
+    try:
+        return str(p.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(p)
 
 
 def _add_trim_sensitivities(model: HelicopterModel, names: list, trim: pd.DataFrame, problems: list) -> None:

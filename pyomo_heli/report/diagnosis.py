@@ -185,7 +185,7 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
     figs = {"diagnosis_trim.png": plot_trim_residuals(res, diag), "diagnosis_spectra.png": plot_residual_spectra(diag),
             "diagnosis_coherence.png": plot_coherence(diag), "diagnosis_time.png": plot_time_residuals(res, diag)}
     for name, fig in figs.items():
-        fig.savefig(out / name, dpi=110)
+        fig.savefig(out / name, dpi=90)
     s = diag.settings
     L = ["# Residual diagnosis", ""]
     if command:
@@ -260,7 +260,8 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
               markdown_table(show, digits=3), ""]
     if diag.problems:
         L += ["## Problems", ""] + [f"- {p}" for p in diag.problems] + [""]
-    L += ["Machine-readable: `diagnosis.json`; residuals: the `residuals_*` folder (time.csv, trim.csv).", ""]
+    L += ["Machine-readable: `diagnosis.json`; residuals (unless `--no-residuals`): the `residuals_*` folder "
+          "(time.csv.gz, trim.csv, meta.json; `Residuals.load`).", ""]
     path = out / "diagnosis.md"
     path.write_text("\n".join(L))
     return path

@@ -237,10 +237,6 @@ def diagnose_many(residuals: dict, **kw) -> dict:
     return {k: diagnose(r, **kw) for k, r in residuals.items()}
 
 
-def _finite(x) -> bool:
-    return x is not None and isinstance(x, (int, float)) and math.isfinite(x)
-
-
 def summary_rows(d: Diagnosis) -> list[dict]:
     """Per trim channel and time output: RMS (display units) and the test verdicts, for report tables."""
     rows = []

@@ -93,3 +93,17 @@ def test_diagnose_bad_input_is_one_line_exit_2(tmp_path, capsys):
     res.save(tmp_path / "r")
     assert main(["diagnose", str(tmp_path / "r")]) == 2
     assert "info.config" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_committed_case1_diagnosis_regenerates(tmp_path):
+    """docs/results/case1_diagnosis is what its command produces (about 40 s: slow study)."""
+    assert main(["diagnose", str(CASE1), "--out", str(tmp_path), "--no-residuals"]) == 0
+    new = Diagnosis.load(tmp_path / "diagnosis.json")
+    old = Diagnosis.load(ROOT / "docs" / "results" / "case1_diagnosis" / "diagnosis.json")
+    assert new.verdict == old.verdict
+    for c, t in old.trim_shapes.items():
+        assert new.trim_shapes[c]["p_values"] == t["p_values"]
+        for k, v in t["fit"].items():
+            assert new.trim_shapes[c]["fit"][k] == pytest.approx(v, rel=1e-6, abs=1e-12)
+    assert [w["p"] for w in new.whiteness] == pytest.approx([w["p"] for w in old.whiteness], rel=1e-4, abs=1e-30)

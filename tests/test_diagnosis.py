@@ -107,3 +107,49 @@ def test_committed_case1_diagnosis_regenerates(tmp_path):
         for k, v in t["fit"].items():
             assert new.trim_shapes[c]["fit"][k] == pytest.approx(v, rel=1e-6, abs=1e-12)
     assert [w["p"] for w in new.whiteness] == pytest.approx([w["p"] for w in old.whiteness], rel=1e-4, abs=1e-30)
+
+
+GEN_TRIMS_ONLY = """[dataset]
+name = "{name}"
+aircraft = "Bo-105 (synthetic: M0 + {name})"
+seed = 7
+[truth]
+parameters = {{}}
+[truth.effects.{name}]
+{param} = {value}
+[sensors]
+noise = true
+[trims]
+speeds_kt = [10, 15, 20, 25, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120]
+[[maneuvers]]
+name = "lon_step_80kt"
+role = "identification"
+speed_kt = 80
+channel = "lon"
+shape = "doublet"
+amplitude_deg = 0.2
+step_s = 0.5
+duration_s = 2
+"""
+
+
+@pytest.mark.parametrize("name, param, value, lon, theta", [
+    ("cg_offset", "dx_cg", 0.10, "constant", "constant"),  # 10 cm: moves lon and the attitude
+    ("lon_rigging", "delta_lon", 0.3 * 3.141592653589793 / 180, "constant", "noise"),  # 0.3 deg: lon only
+])
+def test_trim_shapes_tell_a_cg_offset_from_a_rigging_bias(tmp_path, name, param, value, lon, theta):
+    """Generated trims with one undeclared offset-type effect: constant lon residual in both, a constant
+    theta residual only for the CG offset (model_spec.md section 4, E4). M0 at the nominal values of the
+    Case 1 parameters, whose shift the test allows."""
+    from pyomo_heli.flighttest.generate import generate_from_file
+
+    gen = tmp_path / "gen.toml"
+    gen.write_text(GEN_TRIMS_ONLY.format(name=name, param=param, value=value))
+    generate_from_file(gen, tmp_path / "data")
+    cfg = load_identification_config(ROOT / "tests" / "configs" / "m0_noise_small.toml",
+                                     {"data": {"dataset": str(tmp_path / "data")}})
+    nominal = {p.name: cfg.model.parameters[p.name] for p in cfg.free}
+    r = compute_residuals(cfg, nominal, name, roles=(), input_offsets=False)
+    d = diagnose(r, n_mc=2000)
+    assert d.verdict["trim_shape"] == {"col": "noise", "lon": lon, "theta": theta}
+    assert "V^2" in d.shape("lon").absorbed  # twist and tail lift slope make a V^2-like lon trend themselves

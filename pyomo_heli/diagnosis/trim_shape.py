@@ -22,7 +22,9 @@ e_k at speeds V_k:
    =============  ================================  =====================
 
    g(V) = exp(-(V - V_c)^2 / (2 w^2)) is a Gaussian bump; its centre V_c
-   (0..70 kt) and width w (5..20 kt) are chosen from a grid by least squares.
+   (0..50 kt: low speed) and width w (5..20 kt) are chosen from a grid by least squares;
+   a grid bump must cover at least 3 distinct speeds (g >= 0.5), so that a
+   single outlying point is not called a bump.
    The bump is a generic localised shape, not the form of any particular
    physical effect.
 
@@ -31,7 +33,10 @@ e_k at speeds V_k:
    test then asks for structure beyond what those parameters can absorb (the
    Pareto choice trades trim fit against time fit, which leaves a residual
    along those directions without any missing physics); "noise" then means
-   "noise plus a parameter shift".
+   "noise plus a parameter shift". A shape whose basis lies almost inside
+   the span of those sensitivities (less than 10 % of its norm outside, e.g.
+   V^2 in lon, which twist and tail lift slope produce) cannot be told apart
+   from a parameter shift and is not tested (``absorbed``).
 
 2. Is there any structure? For each shape, the F statistic against noise only,
    F = ((RSS_0 - RSS_s) / k_s) / (RSS_s / (n - k_s - p)), k_s = linear shape
@@ -40,9 +45,9 @@ e_k at speeds V_k:
    Gaussian noise" depends only on the speeds: it is obtained by a seeded Monte
    Carlo (``n_mc`` draws), which also accounts for the grid search of the bump
    (the maximum of F over the grid). Structure is declared when the smallest
-   p-value is below ``alpha / 4`` (Bonferroni over the four shapes).
+   p-value is below ``alpha / m`` (Bonferroni over the m <= 4 shapes tested).
 
-3. Which structure? Among the four shapes, the smallest BIC,
+3. Which structure? Among the shapes tested, the smallest BIC,
    n ln(RSS/n) + k ln(n) with k the parameters counted above.
 
 A Wald-Wolfowitz runs test on the signs of the residuals ordered by speed is
@@ -60,9 +65,13 @@ from ..units import KT
 
 SHAPES = ("noise", "constant", "V^2", "bump", "V^2+bump")
 #: bump grid: centres and widths [kt]
-BUMP_CENTRES_KT = tuple(float(c) for c in np.arange(0.0, 70.0 + 1e-9, 5.0))
+BUMP_CENTRES_KT = tuple(float(c) for c in np.arange(0.0, 50.0 + 1e-9, 5.0))
 BUMP_WIDTHS_KT = (5.0, 10.0, 15.0, 20.0)
 V_REF = 120 * KT
+#: distinct speeds a bump must cover (basis >= 0.5) to count as a localised shape
+MIN_BUMP_SPEEDS = 3
+#: a shape column whose part outside the nuisance span is below this fraction of its norm is absorbed
+ABSORBED = 0.1
 #: parameters counted by the information criterion (bump: + centre and width)
 N_PARAMS = {"noise": 0, "constant": 1, "V^2": 2, "bump": 4, "V^2+bump": 5}
 DESCRIPTION = {"noise": "noise only", "constant": "constant offset", "V^2": "smooth trend ~V^2",
@@ -93,6 +102,7 @@ class ShapeTest:
     nuisance: list = field(default_factory=list)  # names of the nuisance columns (identified parameters)
     V: list = field(default_factory=list)  # speeds of the points tested [m/s]
     adjusted: list = field(default_factory=list)  # residual minus the nuisance part of the chosen fit (SI)
+    absorbed: list = field(default_factory=list)  # shapes not tested: a basis column lies in the nuisance span
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -102,8 +112,27 @@ def bump_basis(V, centre, width):
     return np.exp(-0.5 * ((np.asarray(V, dtype=float) - centre) / width) ** 2)
 
 
-def _designs(V: np.ndarray, S: np.ndarray) -> dict:
-    """shape -> list of (design matrix [shape columns, then nuisance S], bump (centre, width) or None)."""
+def _basis(X: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the column space of X (rank-revealing: collinear columns count once)."""
+    if X.shape[1] == 0:
+        return X
+    U, sv, _ = np.linalg.svd(X / np.maximum(np.linalg.norm(X, axis=0), 1e-300), full_matrices=False)
+    return U[:, sv > 1e-9 * sv[0]]
+
+
+def _absorbed(col: np.ndarray, S: np.ndarray) -> bool:
+    """True if ``col`` lies (almost) in the span of the nuisance columns: such a shape cannot be told
+    apart from a shift of the identified parameters."""
+    if S.shape[1] == 0:
+        return False
+    Q = _basis(S)
+    res = col - Q @ (Q.T @ col)
+    return bool(np.linalg.norm(res) < ABSORBED * np.linalg.norm(col))
+
+
+def _designs(V: np.ndarray, S: np.ndarray) -> tuple[dict, list]:
+    """shape -> list of (design matrix [shape columns, then nuisance S], bump (centre, width) or None),
+    and the shapes left out because a basis column is absorbed by the nuisance."""
     one = np.ones_like(V)
     x2 = (V / V_REF) ** 2
     out = {"constant": [(np.column_stack([one, S]), None)], "V^2": [(np.column_stack([one, x2, S]), None)],
@@ -111,19 +140,21 @@ def _designs(V: np.ndarray, S: np.ndarray) -> dict:
     for c in BUMP_CENTRES_KT:
         for w in BUMP_WIDTHS_KT:
             g = bump_basis(V, c * KT, w * KT)
-            if np.ptp(g) < 1e-3:  # no speed in the data sees this bump
+            # a bump must be seen by at least MIN_BUMP_SPEEDS distinct speeds: a bump through one
+            # speed is an outlier fit, not a localised shape
+            if len({round(float(v), 3) for v in V[g >= 0.5]}) < MIN_BUMP_SPEEDS or np.ptp(g) < 1e-3:
+                continue
+            if _absorbed(g - g.mean(), S):
                 continue
             out["bump"].append((np.column_stack([one, g, S]), (c * KT, w * KT)))
             out["V^2+bump"].append((np.column_stack([one, x2, g, S]), (c * KT, w * KT)))
-    return out
-
-
-def _basis(X: np.ndarray) -> np.ndarray:
-    """Orthonormal basis of the column space of X (rank-revealing: collinear columns count once)."""
-    if X.shape[1] == 0:
-        return X
-    U, sv, _ = np.linalg.svd(X / np.maximum(np.linalg.norm(X, axis=0), 1e-300), full_matrices=False)
-    return U[:, sv > 1e-9 * sv[0]]
+    dropped = []
+    if _absorbed(one, S):
+        dropped += ["constant"]
+    if _absorbed(x2, S) or _absorbed(x2 - x2.mean(), S):
+        dropped += ["V^2", "V^2+bump"]
+    dropped += [k for k in ("bump", "V^2+bump") if not out[k] and k not in dropped]
+    return {k: v for k, v in out.items() if k not in dropped and v}, dropped
 
 
 def _rss_batch(X: np.ndarray, E: np.ndarray) -> np.ndarray:
@@ -173,7 +204,9 @@ def trim_shape_test(V, e, channel: str = "", alpha: float = 0.01, n_mc: int = 40
     p_n = _basis(S).shape[1]
     if n < 8 + p_n:
         raise ValueError(f"trim shape test of {channel or 'a channel'}: {n} points, need at least {8 + p_n}")
-    designs = _designs(V, S)
+    designs, dropped = _designs(V, S)
+    if not designs:
+        raise ValueError(f"trim shape test of {channel or 'a channel'}: every shape is absorbed by the nuisance")
     k_lin = {"constant": 1, "V^2": 2, "bump": 2, "V^2+bump": 3}
 
     def F_of(rss0, rss, k):
@@ -194,7 +227,7 @@ def trim_shape_test(V, e, channel: str = "", alpha: float = 0.01, n_mc: int = 40
     for s, ds in designs.items():
         r_mc, _ = _best(ds, E)
         p[s] = float((1 + np.sum(F_of(rss0_mc, r_mc, k_lin[s]) >= F[s])) / (1 + n_mc))
-    bic = {s: n * math.log(max(rss[s], 1e-300) / n) + N_PARAMS[s] * math.log(n) for s in SHAPES}
+    bic = {s: n * math.log(max(rss[s], 1e-300) / n) + N_PARAMS[s] * math.log(n) for s in rss}
     structured = min(p.values()) < alpha / len(p)
     shape = min(designs, key=lambda s: bic[s]) if structured else "noise"
 
@@ -213,14 +246,15 @@ def trim_shape_test(V, e, channel: str = "", alpha: float = 0.01, n_mc: int = 40
         return d, (S @ c[k:] if p_n else np.zeros(n))
 
     fit, absorbed = coefficients(shape)
+    bump_fit = coefficients("bump")[0] if "bump" in designs else {}
     adjusted = e - absorbed
     rms = math.sqrt(float(np.sum(e**2)) / n)
     return ShapeTest(channel=channel, n=n, shape=shape, description=DESCRIPTION[shape], structured=bool(structured),
                      p_values=p, F=F, bic=bic, rss=rss, rms=rms, rms_after=math.sqrt(rss[shape] / n),
                      explained=1.0 - rss[shape] / rss0 if rss0 > 0 else 0.0, fit=fit,
-                     bump=coefficients("bump")[0], runs=runs_test(adjusted[np.argsort(V, kind="stable")]),
+                     bump=bump_fit, runs=runs_test(adjusted[np.argsort(V, kind="stable")]),
                      alpha=alpha, n_mc=n_mc, nuisance=list(nuisance_names)[: S.shape[1]],
-                     V=V.tolist(), adjusted=adjusted.tolist())
+                     V=V.tolist(), adjusted=adjusted.tolist(), absorbed=dropped)
 
 
 def shape_curve(test: ShapeTest, V) -> np.ndarray:

@@ -215,7 +215,8 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
                       "runs z": t["runs"].get("z")})
     if trows:
         L += ["Shapes fitted by least squares; p-values of F against noise only (Monte Carlo); shape chosen by BIC "
-              "when any p < alpha/4.", "", markdown_table(pd.DataFrame(trows), digits=3), ""]
+              "when any p < alpha / shapes tested; n/a: shape not tested (absorbed by the parameter shift, "
+              "see docs/diagnosis.md).", "", markdown_table(pd.DataFrame(trows), digits=3), ""]
 
     w = pd.DataFrame(diag.whiteness)
     L += ["## Time-series residuals", ""]

@@ -61,7 +61,8 @@ def plot_trim_residuals(res: Residuals, diag: Diagnosis) -> Figure:
             if t.shape != "noise":
                 ax.plot(vgrid / KT, shape_curve(t, vgrid) * fac, "-", color="tab:red", linewidth=1.6,
                         label=f"fitted shape: {t.shape}")
-            title = f"{c}: {t.description} (smallest p = {min(t.p_values.values()):.2g})"
+            title = (f"{c}: {t.description}" + (" beyond a parameter shift" if t.nuisance else "")
+                     + f" (smallest p = {min(t.p_values.values()):.2g})")
         ax.set_title(title, fontsize=10)
         ax.set_ylabel(f"{c} residual [{unit}]")
         ax.grid(True, alpha=0.3)

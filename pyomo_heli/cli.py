@@ -124,34 +124,6 @@ def cmd_check_data(args) -> int:
     return check_data(args.directory)
 
 
-def cmd_identify(args) -> int:
-    from .config import load_identification_config
-    from .identify import run_identification
-
-    overrides = {"pareto": {"cold_check": True}} if args.cold_check else None
-    cfg = load_identification_config(args.config, overrides)
-    print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
-          f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
-    result = run_identification(cfg, args.out)
-    if not args.no_report:
-        from .report.identification import write_report
-
-        write_report(args.out, cfg)
-    print(result)
-    print(f"results in {args.out}")
-    return 0
-
-
-def cmd_demo(args) -> int:
-    from pathlib import Path
-
-    config = Path(__file__).resolve().parent.parent / "studies" / "case1.toml"
-    if not config.is_file():
-        raise UserError(f"demo config {config} not found (the demo runs from a source checkout)")
-    args.config, args.no_report = str(config), False
-    return cmd_identify(args)
-
-
 def cmd_diagnose(args) -> int:
     from pathlib import Path
 
@@ -180,6 +152,34 @@ def cmd_diagnose(args) -> int:
     print(d)
     print(f"wrote {out / 'diagnosis.json'}, {out / 'diagnosis.md'} and figures")
     return 0
+
+
+def cmd_identify(args) -> int:
+    from .config import load_identification_config
+    from .identify import run_identification
+
+    overrides = {"pareto": {"cold_check": True}} if args.cold_check else None
+    cfg = load_identification_config(args.config, overrides)
+    print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
+          f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
+    result = run_identification(cfg, args.out)
+    if not args.no_report:
+        from .report.identification import write_report
+
+        write_report(args.out, cfg)
+    print(result)
+    print(f"results in {args.out}")
+    return 0
+
+
+def cmd_demo(args) -> int:
+    from pathlib import Path
+
+    config = Path(__file__).resolve().parent.parent / "studies" / "case1.toml"
+    if not config.is_file():
+        raise UserError(f"demo config {config} not found (the demo runs from a source checkout)")
+    args.config, args.no_report = str(config), False
+    return cmd_identify(args)
 
 
 def cmd_inspect(args) -> int:
@@ -237,6 +237,10 @@ def build_parser() -> argparse.ArgumentParser:
     n.add_argument("--no-diagnostics", action="store_true", help="skip the IDAES structural diagnostics")
     n.set_defaults(func=cmd_inspect)
 
+    c = sub.add_parser("check-data", help="check a flight-test dataset folder and print a summary")
+    c.add_argument("directory")
+    c.set_defaults(func=cmd_check_data)
+
     g = sub.add_parser("diagnose", help="residual analysis of an identification result (diagnosis.json, diagnosis.md)")
     g.add_argument("results_dir", help="results folder of pyomo-heli identify")
     g.add_argument("--config", help="identification config (default: the one named in chosen.json)")
@@ -249,10 +253,6 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-residuals", action="store_true",
                    help="do not save the residuals folder (residuals_<point>/, about 1 MB per 10 maneuvers)")
     g.set_defaults(func=cmd_diagnose)
-
-    c = sub.add_parser("check-data", help="check a flight-test dataset folder and print a summary")
-    c.add_argument("directory")
-    c.set_defaults(func=cmd_check_data)
     return p
 
 

@@ -116,3 +116,15 @@ def test_whiteness_table_bonferroni_and_spectra_band_ratio():
     assert sp["band_ratio"]["q"] == pytest.approx(1.0, abs=0.6)
     sp = spectra(time[time["maneuver"] == "slow"], ["q"], "identification")
     assert sp["band_ratio"]["q"] > 10
+
+
+def test_trim_nuisance_leaves_out_parameters_that_do_not_act_on_trims():
+    from pyomo_heli.diagnosis.analysis import trim_nuisance
+    from pyomo_heli.diagnosis.residuals import Residuals
+
+    trim = pd.DataFrame({"V": V, "res_lon": 0 * V, "dres_lon_dtheta_twist": (V / V_REF) ** 2 * 0.1,
+                         "dres_lon_dtau_b": 1e-12 + 0 * V})  # a time constant: finite-difference noise only
+    r = Residuals(label="x", parameters={"theta_twist": -0.028, "tau_b": 0.05}, time=pd.DataFrame(), trim=trim)
+    S, names = trim_nuisance(r, "lon")
+    assert names == ["theta_twist"] and S.shape == (len(V), 1)
+    assert trim_nuisance(r, "theta") == (None, [])

@@ -174,9 +174,22 @@ def _findings(d: Diagnosis, shapes: dict, white: pd.DataFrame, coh: pd.DataFrame
 
 
 # ---------------------------------------------------------------- the diagnosis
+#: a parameter whose trim sensitivity times its magnitude stays below this [rad] does not act on trims
+#: (e.g. a time constant): its column is finite-difference noise and is left out of the nuisance
+TRIM_EFFECT_FLOOR = 1e-7
+
+
 def trim_nuisance(res: Residuals, channel: str) -> tuple[np.ndarray | None, list]:
-    """The trim sensitivities of the identified parameters for ``channel`` (columns ``dres_<c>_d<p>``)."""
-    names = [p for p in res.parameters if f"dres_{channel}_d{p}" in res.trim]
+    """The trim sensitivities of the identified parameters for ``channel`` (columns ``dres_<c>_d<p>``),
+    without parameters that do not act on trims."""
+    names = []
+    for p in res.parameters:
+        col = f"dres_{channel}_d{p}"
+        if col not in res.trim:
+            continue
+        ref = abs(res.parameters[p]) or 1.0
+        if np.nanmax(np.abs(res.trim[col].to_numpy(dtype=float))) * ref >= TRIM_EFFECT_FLOOR:
+            names.append(p)
     if not names:
         return None, []
     return res.trim[[f"dres_{channel}_d{p}" for p in names]].to_numpy(dtype=float), names

@@ -46,12 +46,17 @@ TIME_OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
 TRIM_CHANNELS = ("col", "lon", "theta")
 #: model quantities kept next to the residuals (regressors for the diagnosis), when the model has them
 MODEL_EXTRAS = ("u", "w", "q", "theta", "lambda_i", "beta_1c", "col", "lon")
+#: rotor-flow regressors added from the model's states: mu_d (in-plane advance ratio of the disc) and
+#: chi (wake skew angle, atan2(mu_d, lambda_d): 0 in hover, -> 90 deg at speed)
+FLOW_EXTRAS = ("mu", "chi")
 #: display unit and SI -> display factor, for printing only
 DISPLAY = {"q": ("deg/s", 1 / DEG), "theta": ("deg", 1 / DEG), "n_x": ("g", 1.0), "n_z": ("g", 1.0),
            "TAS": ("m/s", 1.0), "beta_0": ("deg", 1 / DEG), "col": ("deg", 1 / DEG), "lon": ("deg", 1 / DEG)}
 #: |model output| beyond which a replay counts as diverged (SI)
 DIVERGED = {"q": 3.0, "theta": 1.5, "n_x": 3.0, "n_z": 5.0, "TAS": 150.0, "beta_0": 0.5}
 ROLES = ("identification", "validation")
+#: constant input offset of the input-offset sensitivities [rad] (small: the response is linear in it)
+OFFSET_STEP = 1e-3 * DEG
 
 
 def _rms(x) -> float:
@@ -72,7 +77,9 @@ class Residuals:
       model's applied inputs) as regressors.
     ``trim``: one row per trim point, columns ``V [m/s], gamma_fp [rad], source``
       and for every channel ``c``: ``res_<c>``, ``data_<c>``, ``model_<c>``, plus
-      ``model_u, model_w, model_lambda_i`` of the model trim.
+      ``model_u, model_w, model_lambda_i, model_mu, model_chi`` of the model trim, and
+      ``dres_<c>_d<p>`` (d model_c / d parameter p) for every parameter given.
+    ``info["inputs"]``: maneuver -> the input channels it excites (from the dataset).
     ``fitted_outputs`` / ``fitted_trim``: what the identification's objectives used.
     """
 
@@ -149,10 +156,13 @@ class Residuals:
 
     # ------------------------------------------------------------ disk
     def save(self, folder: str | Path) -> Path:
-        """Write ``time.csv``, ``trim.csv`` and ``meta.json`` into ``folder``."""
+        """Write ``time.csv.gz`` (gzip-compressed CSV), ``trim.csv`` and ``meta.json`` into ``folder``."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        self.time.to_csv(folder / "time.csv", index=False, float_format="%.12g")
+        if (folder / "time.csv").exists():
+            (folder / "time.csv").unlink()
+        self.time.to_csv(folder / "time.csv.gz", index=False, float_format="%.10g",
+                         compression={"method": "gzip", "mtime": 0})
         self.trim.to_csv(folder / "trim.csv", index=False, float_format="%.12g")
         write_json(folder / "meta.json", {"label": self.label, "parameters": self.parameters, "outputs": self.outputs,
                                           "trim_channels": self.trim_channels, "fitted_outputs": self.fitted_outputs,
@@ -163,11 +173,12 @@ class Residuals:
     @classmethod
     def load(cls, folder: str | Path) -> "Residuals":
         folder = Path(folder)
-        for name in ("time.csv", "trim.csv", "meta.json"):
-            if not (folder / name).is_file():
-                raise FileNotFoundError(f"{folder}: no {name}; is this a residuals folder?")
+        time_file = folder / "time.csv.gz" if (folder / "time.csv.gz").is_file() else folder / "time.csv"
+        for f in (time_file, folder / "trim.csv", folder / "meta.json"):
+            if not f.is_file():
+                raise FileNotFoundError(f"{folder}: no {f.name}; is this a residuals folder?")
         meta = json.loads((folder / "meta.json").read_text())
-        time = pd.read_csv(folder / "time.csv", dtype={"maneuver": str, "role": str})
+        time = pd.read_csv(time_file, dtype={"maneuver": str, "role": str})
         trim = pd.read_csv(folder / "trim.csv", dtype={"source": str})
         return cls(label=meta["label"], parameters=meta["parameters"], time=time, trim=trim, outputs=meta["outputs"],
                    trim_channels=meta["trim_channels"], fitted_outputs=meta["fitted_outputs"],
@@ -175,10 +186,35 @@ class Residuals:
 
 
 # ---------------------------------------------------------------- computing
-def _replay(model: HelicopterModel, mv, trim) -> pd.DataFrame:
-    """Simulate one maneuver as the identification does (RK4, 4 sub-steps per sample)."""
+def flow_regressors(model: HelicopterModel, states: dict, inputs: dict) -> dict:
+    """Disc advance ratio ``mu`` and wake skew angle ``chi`` [rad] at arrays of states and inputs.
+
+    States missing from ``states`` (extension states) are taken at zero; the
+    model is evaluated vectorised, or sample by sample if an extension needs floats.
+    """
+    n = len(np.atleast_1d(states["u"]))
+    x = {k: np.asarray(states.get(k, np.zeros(n)), dtype=float) for k in model.state_names}
+    u = {k: np.asarray(inputs[k], dtype=float) for k in ("col", "lon")}
+    try:
+        with np.errstate(all="ignore"):
+            d = model.evaluate(x, u).disc
+        mu_d, lam_d = np.broadcast_to(d.mu_d, (n,)), np.broadcast_to(d.lambda_d, (n,))
+    except Exception:  # noqa: BLE001 - an extension written for scalars
+        mu_d, lam_d = np.empty(n), np.empty(n)
+        for i in range(n):
+            d = model.evaluate({k: float(v[i]) for k, v in x.items()}, {k: float(v[i]) for k, v in u.items()}).disc
+            mu_d[i], lam_d[i] = float(d.mu_d), float(d.lambda_d)
+    return {"mu": np.array(mu_d, dtype=float), "chi": np.arctan2(mu_d, lam_d)}
+
+
+def _replay(model: HelicopterModel, mv, trim, offsets: dict | None = None) -> pd.DataFrame:
+    """Simulate one maneuver as the identification does (RK4, 4 sub-steps per sample).
+
+    ``offsets``: constant input offsets [rad] added to the increments (for input-offset sensitivities).
+    """
     t = mv.data["t"].to_numpy(dtype=float)
-    inc = {k: sampled(t, v) for k, v in mv.increments().items()}
+    offsets = offsets or {}
+    inc = {k: sampled(t, v + offsets.get(k, 0.0)) for k, v in mv.increments().items()}
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sim = simulate(model, trim, t, inc, method="rk4", substeps=4)
@@ -215,11 +251,21 @@ def _trims(model: HelicopterModel, trims: pd.DataFrame, extra_speeds, problems: 
 
 
 def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = "model",
-                      roles=ROLES, outputs=TIME_OUTPUTS) -> Residuals:
+                      roles=ROLES, outputs=TIME_OUTPUTS, input_offsets: bool = True,
+                      trim_sensitivities: bool = True) -> Residuals:
     """Residuals (model - data) of every maneuver of ``roles`` and every trim point at ``parameters`` (SI).
 
     ``parameters`` override the config model's values (free parameters of an
     identification, extension strengths, ...); the rest stays as configured.
+    ``input_offsets``: also compute, per maneuver, the output response to a
+    constant offset of each input (columns ``dres_<o>_d<input>``, per rad): the
+    replay starts from the first recorded input sample, so that sample's noise
+    acts as a constant input error over the whole record (a nuisance the
+    diagnosis removes before testing whiteness). Costs two more replays.
+    ``trim_sensitivities``: also the trim sensitivities of the parameters given
+    (columns ``dres_<c>_d<parameter>`` of ``trim``, central differences of the
+    model trims, SI per SI unit), so that a diagnosis can ask what the
+    identified parameters could still absorb. Costs two trim sweeps per parameter.
     """
     model = cfg.model.with_parameters(**parameters) if parameters else cfg.model
     ft = load_flight_test(cfg.dataset)
@@ -260,6 +306,19 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
         for x in MODEL_EXTRAS:
             if x in sim and f"model_{x}" not in df:
                 df[f"model_{x}"] = sim[x].to_numpy(dtype=float)
+        fl = flow_regressors(model, {k: sim[k].to_numpy() for k in model.state_names if k in sim},
+                             {k: sim[k].to_numpy() for k in ("col", "lon")})
+        for x in FLOW_EXTRAS:
+            df[f"model_{x}"] = fl[x]
+        if input_offsets:
+            for c in ("col", "lon"):
+                try:
+                    sim_c = _replay(model, mv, tp, {c: OFFSET_STEP})
+                except Exception:  # noqa: BLE001 - keep the residuals, drop the sensitivity
+                    problems.append(f"maneuver {mv.name}: input-offset replay ({c}) failed")
+                    continue
+                for o in outputs:
+                    df[f"dres_{o}_d{c}"] = (sim_c[o].to_numpy(dtype=float) - sim[o].to_numpy(dtype=float)) / OFFSET_STEP
         frames.append(df)
     time = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(
         columns=["maneuver", "role", "trim_speed", "t"])
@@ -274,14 +333,50 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
             row.update({f"res_{c}": mod - float(r[c]), f"data_{c}": float(r[c]), f"model_{c}": mod})
         for x in ("u", "w", "lambda_i"):
             row[f"model_{x}"] = float(getattr(tp, x)) if tp is not None else math.nan
+        if tp is not None:
+            fl = flow_regressors(model, {**tp.state(), **tp.extra_states}, tp.inputs())
+            row.update({f"model_{x}": float(np.ravel(fl[x])[0]) for x in FLOW_EXTRAS})
+        else:
+            row.update({f"model_{x}": math.nan for x in FLOW_EXTRAS})
         rows.append(row)
     trim = pd.DataFrame(rows)
+    if trim_sensitivities and parameters and len(trim):
+        _add_trim_sensitivities(model, list(parameters), trim, problems)
     return Residuals(label=label, parameters={k: float(v) for k, v in (parameters or {}).items()}, time=time,
                      trim=trim, outputs=list(outputs), trim_channels=list(TRIM_CHANNELS),
                      fitted_outputs=list(cfg.nlp.time_outputs), fitted_trim=list(cfg.nlp.trim_outputs),
                      problems=problems,
-                     info={"config": str(cfg.path), "dataset": str(cfg.dataset),
-                           "extensions": [e.name for e in cfg.model.extensions]})
+                     info={"config": _shown_path(cfg.path), "dataset": _shown_path(cfg.dataset),
+                           "extensions": [e.name for e in cfg.model.extensions],
+                           "inputs": {mv.name: list(mv.inputs) for _, mv in mans}})
+
+
+def _shown_path(p) -> str:
+    """A path relative to the current folder when it lies inside it (machine-independent records)."""
+    p = Path(p)
+    try:
+        return str(p.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(p)
+
+
+def _add_trim_sensitivities(model: HelicopterModel, names: list, trim: pd.DataFrame, problems: list) -> None:
+    from ..simulation.sensitivity import sensitivities
+
+    if "gamma_fp" in trim and np.any(np.abs(trim["gamma_fp"].to_numpy(dtype=float)) > 1e-9):
+        problems.append("trim sensitivities skipped: the data have climbing/descending trims")
+        return
+    try:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sens = sensitivities(model, names, trim_speeds=trim["V"].to_numpy(dtype=float),
+                                 trim_out=list(TRIM_CHANNELS))
+    except Exception as exc:  # noqa: BLE001 - the residuals stay usable without them
+        problems.append(f"trim sensitivities failed ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})")
+        return
+    for c in TRIM_CHANNELS:
+        for j, n in enumerate(names):
+            trim[f"dres_{c}_d{n}"] = sens.trim[c][:, j]
 
 
 # ---------------------------------------------------------------- from a results folder

@@ -170,6 +170,36 @@ def cmd_demo(args) -> int:
     return cmd_identify(args)
 
 
+def cmd_diagnose(args) -> int:
+    from pathlib import Path
+
+    from .diagnosis.analysis import diagnose
+    from .diagnosis.residuals import load_result_config, compute_residuals
+    from .pareto.result import IdentificationResult
+    from .report.diagnosis import write_diagnosis_report
+
+    if not 0 < args.alpha < 1:
+        raise UserError(f"--alpha must lie in (0, 1), got {args.alpha}")
+    if not args.test_rate_hz > 0:
+        raise UserError(f"--test-rate-hz must be positive, got {args.test_rate_hz}")
+    res = IdentificationResult.load(args.results_dir)
+    cfg = load_result_config(args.results_dir, args.config)
+    point = res.chosen if args.point == "chosen" else res.time_domain
+    label = "multi-objective (C)" if args.point == "chosen" else "time-domain (A)"
+    out = Path(args.out or args.results_dir)
+    print(f"diagnosing {label} of {args.results_dir} (config {cfg.path})")
+    r = compute_residuals(cfg, point["parameters"], label)
+    if not args.no_residuals:
+        r.save(out / f"residuals_{args.point}")
+    d = diagnose(r, alpha=args.alpha, test_rate_hz=args.test_rate_hz, seed=args.seed)
+    d.save(out / "diagnosis.json")
+    cmd = "pyomo-heli diagnose " + " ".join(sys.argv[1:][1:]) if sys.argv[1:2] == ["diagnose"] else None
+    write_diagnosis_report(out, r, d, results_dir=args.results_dir, command=cmd)
+    print(d)
+    print(f"wrote {out / 'diagnosis.json'}, {out / 'diagnosis.md'} and figures")
+    return 0
+
+
 def cmd_inspect(args) -> int:
     from .config import load_identification_config
     from .nlp.inspect import inspect_problem
@@ -231,6 +261,19 @@ def build_parser() -> argparse.ArgumentParser:
     n.add_argument("config")
     n.add_argument("--no-diagnostics", action="store_true", help="skip the IDAES structural diagnostics")
     n.set_defaults(func=cmd_inspect)
+
+    g = sub.add_parser("diagnose", help="residual analysis of an identification result (diagnosis.json, diagnosis.md)")
+    g.add_argument("results_dir", help="results folder of pyomo-heli identify")
+    g.add_argument("--config", help="identification config (default: the one named in chosen.json)")
+    g.add_argument("--out", help="folder for diagnosis.json, diagnosis.md and figures (default: RESULTS_DIR)")
+    g.add_argument("--point", choices=("chosen", "time_domain"), default="chosen",
+                   help="diagnose the chosen point C (default) or the time-domain point A")
+    g.add_argument("--alpha", type=float, default=0.01, help="significance level of the tests (default 0.01)")
+    g.add_argument("--test-rate-hz", type=float, default=5.0, help="sample rate of the whiteness test (default 5)")
+    g.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo p-values (default 0)")
+    g.add_argument("--no-residuals", action="store_true",
+                   help="do not save the residuals folder (residuals_<point>/, about 1 MB per 10 maneuvers)")
+    g.set_defaults(func=cmd_diagnose)
 
     c = sub.add_parser("check-data", help="check a flight-test dataset folder and print a summary")
     c.add_argument("directory")

@@ -1,0 +1,261 @@
+"""The residual diagnosis of an identified model: one call, one plain result.
+
+:func:`diagnose` takes the :class:`~pyomo_heli.diagnosis.residuals.Residuals`
+of a parameter set and runs every test:
+
+- trim residual shape per channel against airspeed (:mod:`.trim_shape`);
+- per maneuver, the nuisance part of the time residuals (output biases and the
+  response to constant input offsets) removed, then whiteness (Ljung-Box at the
+  test rate), spectra (Welch), coherence with the excited inputs and the
+  correlation with physical regressors (:mod:`.timeseries`).
+
+The result, :class:`Diagnosis`, is plain data: it saves to and loads from
+JSON, prints as readable tables and carries short findings in words. Figures
+are functions of it (``pyomo_heli.report.diagnosis``).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..pareto.result import write_json
+from ..units import DEG, KT
+from .residuals import DISPLAY, Residuals
+from .timeseries import (DYN_BAND, HIGH_BAND, clean_time_residuals, coherence_table, correlation_table, spectra,
+                         whiteness_table)
+from .trim_shape import ShapeTest, trim_shape_test
+
+#: band ratio above which a residual spectrum counts as dominated by the dynamics band
+BAND_RATIO_FLAG = 3.0
+#: |r| above which a correlation with a regressor is listed in the findings
+CORRELATION_FLAG = 0.3
+
+
+def _records(df: pd.DataFrame) -> list[dict]:
+    return json.loads(df.to_json(orient="records")) if len(df) else []
+
+
+@dataclass
+class Diagnosis:
+    """Every residual test of one parameter set (SI inside; findings in display units)."""
+
+    label: str
+    parameters: dict
+    settings: dict
+    rms: list = field(default_factory=list)  # records of Residuals.rms()
+    trim_shapes: dict = field(default_factory=dict)  # channel -> ShapeTest as dict
+    nuisance: list = field(default_factory=list)  # per maneuver: bias_<o>, offset_<input>
+    whiteness: list = field(default_factory=list)  # per maneuver and output
+    spectra: dict = field(default_factory=dict)  # role -> {"f", "fs", "psd": {o: [...]}, "band_ratio": {o: r}}
+    coherence: list = field(default_factory=list)  # per maneuver, output and input
+    coherence_curves: dict = field(default_factory=dict)  # maneuver -> {"f": [...], "<in>:<out>": [...]}
+    correlations: list = field(default_factory=list)
+    verdict: dict = field(default_factory=dict)
+    findings: list = field(default_factory=list)
+    problems: list = field(default_factory=list)
+    info: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------ tables
+    def table(self, name: str) -> pd.DataFrame:
+        """One of rms, nuisance, whiteness, coherence, correlations, trim_shapes as a DataFrame."""
+        if name == "trim_shapes":
+            rows = []
+            for c, t in self.trim_shapes.items():
+                p = t["p_values"]
+                rows.append({"channel": c, "shape": t["shape"], "min p": min(p.values()), "n": t["n"],
+                             **{f"p {s}": p[s] for s in p}, "rms": t["rms"], "rms after": t["rms_after"],
+                             "runs z": t["runs"].get("z")})
+            return pd.DataFrame(rows)
+        return pd.DataFrame(getattr(self, name))
+
+    def shape(self, channel: str) -> ShapeTest:
+        return ShapeTest(**self.trim_shapes[channel])
+
+    # ------------------------------------------------------------ disk
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_json(path, asdict(self))
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Diagnosis":
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such diagnosis file")
+        return cls(**json.loads(path.read_text()))
+
+    def __str__(self) -> str:
+        L = [f"Residual diagnosis of '{self.label}' (residual = model - data)", ""]
+        L += ["Findings:"] + [f"  - {f}" for f in self.findings] + [""]
+        ts = self.table("trim_shapes")
+        if len(ts):
+            ts = ts.assign(**{"rms [deg]": ts["rms"] / DEG, "rms after [deg]": ts["rms after"] / DEG})
+            L += ["Trim residual shape vs airspeed (Monte Carlo p-values of F against noise only):",
+                  ts[["channel", "shape", "p constant", "p V^2", "p bump", "p V^2+bump", "rms [deg]",
+                      "rms after [deg]", "runs z"]].to_string(index=False, float_format=lambda x: f"{x:.3g}"), ""]
+        w = self.table("whiteness")
+        if len(w):
+            piv = w.pivot_table(index=["role", "maneuver"], columns="output", values="p", sort=False)
+            L += [f"Whiteness: Ljung-Box p-values at {self.settings['test_rate_hz']:g} Hz after removing the nuisance "
+                  f"(white if p > alpha / tests):", piv.to_string(float_format=lambda x: f"{x:.2g}"), ""]
+        for role, sp in self.spectra.items():
+            br = ", ".join(f"{o} {v:.3g}" for o, v in sp.get("band_ratio", {}).items())
+            L.append(f"Spectral band ratio ({role}; PSD {DYN_BAND[0]:g}-{DYN_BAND[1]:g} Hz / "
+                     f"{HIGH_BAND[0]:g}-{HIGH_BAND[1]:g} Hz, ~1 for white noise): {br}")
+        if self.problems:
+            L += ["", "Problems:"] + [f"  - {p}" for p in self.problems]
+        return "\n".join(L)
+
+
+# ---------------------------------------------------------------- findings in words
+def _shape_sentence(t: ShapeTest) -> str:
+    unit, fac = DISPLAY.get(t.channel, ("SI", 1.0))
+    pmin = min(t.p_values.values())
+    if not t.structured:
+        return (f"trim {t.channel}: noise only (smallest p = {pmin:.2g} >= {t.alpha / len(t.p_values):.2g}"
+                + (f", a shift of {', '.join(t.nuisance)} allowed" if t.nuisance else "") + f"); RMS {t.rms * fac:.3g} {unit}"
+                + (f", {t.rms_after * fac:.3g} {unit} after the parameter shift" if t.nuisance else ""))
+    parts = [f"trim {t.channel}: {t.description} (p = {pmin:.2g}"
+             + (f", beyond a shift of {', '.join(t.nuisance)})" if t.nuisance else ")")]
+    f = t.fit
+    if "amplitude" in f:
+        parts.append(f"bump centre {f['centre'] / KT:.0f} kt, width {f['width'] / KT:.0f} kt, amplitude "
+                     f"{f['amplitude'] * fac:+.3g} {unit}")
+    if "V2_at_120kt" in f:
+        parts.append(f"V^2 term {f['V2_at_120kt'] * fac:+.3g} {unit} at 120 kt")
+    if "offset" in f:
+        parts.append(f"offset {f['offset'] * fac:+.3g} {unit}")
+    parts.append(f"RMS {t.rms * fac:.3g} -> {t.rms_after * fac:.3g} {unit} after the shape")
+    return "; ".join(parts)
+
+
+def _findings(d: Diagnosis, shapes: dict, white: pd.DataFrame, coh: pd.DataFrame, corr: pd.DataFrame) -> list[str]:
+    out = [_shape_sentence(t) for t in shapes.values()]
+    for role in ("identification", "validation"):
+        w = white[white["role"] == role] if len(white) else white
+        if not len(w):
+            continue
+        bad = w[~w["white"].astype(bool)]
+        if bad.empty:
+            out.append(f"{role} maneuvers: residuals white in all {len(w)} tests (Ljung-Box at "
+                       f"{d.settings['test_rate_hz']:g} Hz, family-wise alpha {d.settings['alpha']:g})")
+        else:
+            items = ", ".join(f"{r.output} in {r.maneuver} (p = {r.p:.1e})" for r in bad.itertuples())
+            out.append(f"{role} maneuvers: residuals NOT white in {len(bad)} of {len(w)} tests: {items}")
+    for role, sp in d.spectra.items():
+        hot = {o: v for o, v in sp.get("band_ratio", {}).items() if v > BAND_RATIO_FLAG}
+        if hot:
+            out.append(f"{role} residual spectra concentrated in {DYN_BAND[0]:g}-{DYN_BAND[1]:g} Hz (band ratio > "
+                       f"{BAND_RATIO_FLAG:g}): " + ", ".join(f"{o} {v:.3g}" for o, v in hot.items()))
+    if len(coh):
+        sig = coh[coh["significant"].astype(bool)]
+        if len(sig):
+            out.append("coherence of residual with input above the zero-coherence threshold: "
+                       + ", ".join(f"{r.output} with {r.input} in {r.maneuver} ({r.peak:.2f} at {r.f_peak:.2g} Hz)"
+                                   for r in sig.itertuples()))
+    if len(corr):
+        for (kind, role), gr in corr.groupby(["kind", "role"], sort=False):
+            bound = d.settings["alpha"] / max(int(gr["p"].notna().sum()), 1)
+            for ch, g in gr.groupby("channel", sort=False):
+                g = g.dropna(subset=["r"])
+                if g.empty:
+                    continue
+                top = g.loc[g["r"].abs().idxmax()]
+                if abs(top["r"]) >= CORRELATION_FLAG and top["p"] < bound:
+                    out.append(f"{kind} residual {ch} ({role}) correlates most with {top['regressor']}: "
+                               f"r = {top['r']:+.2f} (nominal p = {top['p']:.1e})")
+    return out
+
+
+# ---------------------------------------------------------------- the diagnosis
+def trim_nuisance(res: Residuals, channel: str) -> tuple[np.ndarray | None, list]:
+    """The trim sensitivities of the identified parameters for ``channel`` (columns ``dres_<c>_d<p>``)."""
+    names = [p for p in res.parameters if f"dres_{channel}_d{p}" in res.trim]
+    if not names:
+        return None, []
+    return res.trim[[f"dres_{channel}_d{p}" for p in names]].to_numpy(dtype=float), names
+
+
+def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = 5.0, n_mc: int = 4000, seed: int = 0,
+             absorb_parameters: bool = True) -> Diagnosis:
+    """Run every residual test on ``res`` (see the module docstring).
+
+    ``absorb_parameters``: the trim shape test allows a shift of the identified
+    parameters (their trim sensitivities, when ``res`` has them) in every model.
+    """
+    settings = {"alpha": alpha, "test_rate_hz": test_rate_hz, "n_mc": n_mc, "seed": seed,
+                "dynamics_band_hz": list(DYN_BAND), "high_band_hz": list(HIGH_BAND),
+                "absorb_parameters": absorb_parameters}
+    problems = list(res.problems)
+    shapes = {}
+    for c in res.trim_channels:
+        S, names = trim_nuisance(res, c) if absorb_parameters else (None, [])
+        try:
+            shapes[c] = trim_shape_test(res.trim["V"], res.trim[f"res_{c}"], c, alpha=alpha, n_mc=n_mc, seed=seed,
+                                        nuisance=S, nuisance_names=names)
+        except ValueError as exc:
+            problems.append(str(exc))
+    time = res.time
+    if len(time):
+        clean, nuisance = clean_time_residuals(time, res.outputs)
+        white = whiteness_table(clean, res.outputs, test_rate_hz, alpha)
+        spec = {role: spectra(clean, res.outputs, role) for role in dict.fromkeys(clean["role"])}
+        coh, curves = coherence_table(clean, res.outputs, res.info.get("inputs"), alpha)
+        corr = correlation_table(clean, res.trim, res.outputs, res.trim_channels, test_rate_hz)
+    else:
+        nuisance = white = coh = pd.DataFrame()
+        corr = correlation_table(time, res.trim, res.outputs, res.trim_channels, test_rate_hz) if len(res.trim) \
+            else pd.DataFrame()
+        spec, curves = {}, {}
+    d = Diagnosis(label=res.label, parameters=dict(res.parameters), settings=settings, rms=_records(res.rms()),
+                  trim_shapes={c: t.to_dict() for c, t in shapes.items()}, nuisance=_records(nuisance),
+                  whiteness=_records(white), spectra={r: s for r, s in spec.items() if s}, coherence=_records(coh),
+                  coherence_curves=curves, correlations=_records(corr), problems=problems, info=dict(res.info))
+    verdict = {"trim_shape": {c: t.shape for c, t in shapes.items()}}
+    for role in ("identification", "validation"):
+        w = white[white["role"] == role] if len(white) else white
+        if len(w):
+            verdict[f"white_{role}"] = bool(w["white"].astype(bool).all())
+    verdict["noise_only"] = bool(all(t.shape == "noise" for t in shapes.values())
+                                 and verdict.get("white_identification", True))
+    d.verdict = verdict
+    d.findings = _findings(d, shapes, white, coh, corr)
+    d.findings.insert(0, "verdict: " + ("the residuals look like noise only (no trim shape, identification residuals "
+                                        "white)" if verdict["noise_only"] else
+                                        "structure left in the residuals: something is missing from the model"))
+    return d
+
+
+def diagnose_many(residuals: dict, **kw) -> dict:
+    """{key: Diagnosis} for a dict of Residuals (e.g. the chosen and the time-domain point)."""
+    return {k: diagnose(r, **kw) for k, r in residuals.items()}
+
+
+def summary_rows(d: Diagnosis) -> list[dict]:
+    """Per trim channel and time output: RMS (display units) and the test verdicts, for report tables."""
+    rows = []
+    rms = pd.DataFrame(d.rms)
+    for c, t in d.trim_shapes.items():
+        unit, fac = DISPLAY[c]
+        rows.append({"data": "trim", "channel": c, "unit": unit, "RMS": t["rms"] * fac, "verdict": t["description"],
+                     "p": min(t["p_values"].values())})
+    w = pd.DataFrame(d.whiteness)
+    for role in ("identification", "validation"):
+        for o in dict.fromkeys(w["output"]) if len(w) else []:
+            g = w[(w["role"] == role) & (w["output"] == o)]
+            if g.empty:
+                continue
+            unit, fac = DISPLAY[o]
+            r = rms[(rms["kind"] == "time") & (rms["role"] == role) & (rms["channel"] == o)]["rms"]
+            rows.append({"data": f"time ({role})", "channel": o, "unit": unit,
+                         "RMS": float(r.iloc[0]) * fac if len(r) else np.nan,
+                         "verdict": "white" if g["white"].astype(bool).all() else
+                         f"not white in {int((~g['white'].astype(bool)).sum())}/{len(g)} maneuvers",
+                         "p": float(g["p"].min())})
+    return rows

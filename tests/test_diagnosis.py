@@ -1,0 +1,109 @@
+"""The residual diagnosis on identification results with a known truth.
+
+Independent reference: the data generator's truth.
+
+- docs/results/case1 (committed) was identified with M0 on data/bo105_synthetic, whose truth is
+  M0 + the rotor wake on the tail (E1): a trim signature over 10-50 kt of lon lower and theta
+  higher than M0 (model_spec.md section 4, E1), i.e. a model-minus-data residual that is a
+  positive lon bump and a negative theta bump at low speed, absent in hover and above ~55 kt,
+  and a time-series signature at 20 kt (q, theta). The diagnosis must name a low-speed bump.
+- tests/results/m0_noise_small (committed, made by the command in tests/configs/m0_noise_small.toml)
+  was identified on tests/data/m0_noise_small, generated from M0 itself with sensor noise only
+  (tests/configs/gen_m0_noise_small.toml): nothing is missing, so the diagnosis must say noise only
+  and the identification residuals must pass the whiteness test.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from pyomo_heli.cli import main
+from pyomo_heli.config import load_identification_config
+from pyomo_heli.diagnosis.analysis import Diagnosis, diagnose
+from pyomo_heli.diagnosis.residuals import Residuals, compute_residuals, find_config
+from pyomo_heli.pareto.result import IdentificationResult
+from pyomo_heli.units import KT
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE1 = ROOT / "docs" / "results" / "case1"
+M0_NOISE = ROOT / "tests" / "results" / "m0_noise_small"
+
+
+@pytest.fixture(scope="module")
+def case1():
+    res = IdentificationResult.load(CASE1)
+    return res, load_identification_config(find_config(CASE1, res))
+
+
+def test_wake_on_tail_trim_residual_is_named_a_low_speed_bump(case1):
+    res, cfg = case1
+    r = compute_residuals(cfg, res.chosen["parameters"], "C", roles=(), input_offsets=False)
+    d = diagnose(r, n_mc=2000)
+    assert not d.verdict["noise_only"]
+    lon, theta = d.shape("lon"), d.shape("theta")
+    # lon: a bump beyond what twist and CL_alpha_HT can absorb, centred where E1 acts (10-50 kt),
+    # model above data (the truth's lon is lower than M0 there)
+    assert lon.structured and "bump" in lon.shape and lon.nuisance == ["CL_alpha_HT", "theta_twist"]
+    assert 10 <= lon.fit["centre"] / KT <= 50 and lon.fit["amplitude"] > 0
+    # theta: structured and containing a bump; the residual beyond the parameter shift is negative
+    # (model below data) over 15-50 kt, where the truth's theta is higher than M0
+    assert theta.structured and "bump" in theta.shape
+    low = [a for v, a in zip(theta.V, theta.adjusted) if 15 * KT <= v <= 50 * KT]
+    assert sum(low) / len(low) < -0.3 * 3.14159 / 180
+    assert d.shape("lon").runs["z"] < -2.5  # few sign runs along speed: neighbouring speeds agree
+
+
+def test_wake_on_tail_time_signature_at_20kt_is_not_white(case1):
+    res, cfg = case1
+    cfg20 = load_identification_config(cfg.path, {"data": {"maneuvers": ["londoublet_20kt_a"]}})
+    r = compute_residuals(cfg20, res.chosen["parameters"], "C", roles=("identification",), trim_sensitivities=False)
+    d = diagnose(r, n_mc=200)
+    w = d.table("whiteness").set_index("output")
+    assert not w.loc["q", "white"] and not w.loc["theta", "white"]
+    assert d.verdict["white_identification"] is False
+
+
+def test_m0_noise_only_result_is_diagnosed_noise_only_via_the_cli(tmp_path, capsys):
+    assert main(["diagnose", str(M0_NOISE), "--out", str(tmp_path)]) == 0
+    for f in ("diagnosis.json", "diagnosis.md", "diagnosis_trim.png", "diagnosis_spectra.png",
+              "diagnosis_coherence.png", "diagnosis_time.png"):
+        assert (tmp_path / f).is_file(), f
+    d = Diagnosis.load(tmp_path / "diagnosis.json")
+    assert d.verdict["noise_only"] is True
+    assert d.verdict["trim_shape"] == {"col": "noise", "lon": "noise", "theta": "noise"}
+    assert d.verdict["white_identification"] is True
+    # the saved residuals reload and give the same RMS as the diagnosis recorded
+    r = Residuals.load(tmp_path / "residuals_chosen")
+    assert r.rms()["rms"].tolist() == pytest.approx([row["rms"] for row in d.rms], rel=1e-6)  # time.csv.gz keeps 10 digits
+    md = (tmp_path / "diagnosis.md").read_text()
+    assert "noise only" in md and "![trim residuals](diagnosis_trim.png)" in md
+    assert "residuals look like noise only" in capsys.readouterr().out
+
+
+def test_diagnose_bad_input_is_one_line_exit_2(tmp_path, capsys):
+    assert main(["diagnose", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "front.csv" in err and len(err.strip().splitlines()) == 1
+    assert main(["diagnose", str(M0_NOISE), "--alpha", "2"]) == 2
+    assert "--alpha" in capsys.readouterr().err
+    res = IdentificationResult.load(M0_NOISE)
+    res.info = {**res.info, "config": "nowhere.toml"}
+    res.save(tmp_path / "r")
+    assert main(["diagnose", str(tmp_path / "r")]) == 2
+    assert "info.config" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_committed_case1_diagnosis_regenerates(tmp_path):
+    """docs/results/case1_diagnosis is what its command produces (about 40 s: slow study)."""
+    assert main(["diagnose", str(CASE1), "--out", str(tmp_path), "--no-residuals"]) == 0
+    new = Diagnosis.load(tmp_path / "diagnosis.json")
+    old = Diagnosis.load(ROOT / "docs" / "results" / "case1_diagnosis" / "diagnosis.json")
+    assert new.verdict == old.verdict
+    for c, t in old.trim_shapes.items():
+        assert new.trim_shapes[c]["p_values"] == t["p_values"]
+        for k, v in t["fit"].items():
+            assert new.trim_shapes[c]["fit"][k] == pytest.approx(v, rel=1e-6, abs=1e-12)
+    assert [w["p"] for w in new.whiteness] == pytest.approx([w["p"] for w in old.whiteness], rel=1e-4, abs=1e-30)

@@ -8,7 +8,10 @@
    identification and the validation maneuvers and per trim channel
    (float-model replay of :mod:`pyomo_heli.report.identification`);
 3. the attribution (:func:`pyomo_heli.diagnosis.attribution.attribute`);
-4. if a candidate is accepted and the iteration limit is not reached: add it
+4. if nothing is accepted: the residual analysis says whether what is left is
+   noise only or an "unexplained residual", with its signature (trim shapes,
+   whiteness, coherence: :mod:`pyomo_heli.diagnosis.analysis`);
+5. if a candidate is accepted and the iteration limit is not reached: add it
    to the model with its strength free (initial value: the score test's
    one-step estimate, clipped to the bounds; the other free parameters start
    from this iteration's chosen values) and go on.
@@ -104,6 +107,25 @@ def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: f
     return dataclasses.replace(cfg, model=model, free=free)
 
 
+def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=print) -> dict:
+    """When nothing is accepted: is the residual noise only, or an unexplained residual with a signature?
+
+    Uses the residual analysis of :mod:`pyomo_heli.diagnosis.analysis` (trim shapes, whiteness,
+    coherence) on the chosen parameters. A failure is reported, not raised (the loop's results stand).
+    """
+    try:
+        from .diagnosis.analysis import diagnose
+        from .diagnosis.residuals import compute_residuals
+
+        d = diagnose(compute_residuals(cfg, chosen, label="chosen"))
+    except Exception as exc:  # noqa: BLE001 - the verdict is an addition to finished results
+        progress(f"residual diagnosis failed: {exc}")
+        return {"status": f"failed: {exc}"}
+    status = "noise only" if d.verdict.get("noise_only") else "unexplained residual"
+    progress(f"residual diagnosis: {status}")
+    return {"status": status, "verdict": d.verdict, "findings": d.findings}
+
+
 def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = None, progress=print) -> dict:
     """Run the loop; returns the content of ``loop.json`` (also written after every iteration)."""
     settings = settings or loop_settings(cfg)
@@ -140,6 +162,8 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
             "J_time": result.chosen["J_time"], "J_trim": result.chosen["J_trim"],
             **errs, "attribution": att.to_dict() if att is not None else None,
             "wall_time": time.perf_counter() - t0})
+        if att is not None and att.decision != "accepted":
+            doc["iterations"][-1]["residual_diagnosis"] = residual_verdict(cfg, chosen, progress)
         if att is None:
             doc["stopped"] = "every candidate of the library is in the model"
         elif att.decision != "accepted":

@@ -145,6 +145,10 @@ def write_loop_report(out, cfg) -> Path:
         if a.get("confounded_pairs"):
             L += ["Confounded pairs among the significant candidates (projected correlation): "
                   + "; ".join(f"{p[0]} / {p[1]} ({p[2]:+.2f})" for p in a["confounded_pairs"]), ""]
+        rd = it.get("residual_diagnosis")
+        if rd:
+            L += [f"Residual analysis of what is left (pyomo_heli.diagnosis): **{rd['status']}**", ""]
+            L += [f"- {f}" for f in rd.get("findings", [])] + [""]
         if a.get("signature"):
             rows = [{"block": k, **v} for k, v in a["signature"].items()]
             L += ["Residual signature (SI):", "", markdown_table(pd.DataFrame(rows), digits=4), ""]

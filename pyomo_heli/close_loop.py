@@ -20,7 +20,8 @@
 finished is lost. Settings come from the config's ``[loop]`` table:
 ``max_iterations`` (identifications after the first, default 3),
 ``candidates`` (names, default the whole library), ``alpha``, ``ratio``,
-``confound_corr`` (see :mod:`pyomo_heli.diagnosis.attribution`).
+``confound_corr``, ``robust`` (see :mod:`pyomo_heli.diagnosis.attribution`). A finished
+iteration found in ``out/iter_i`` (same config, model and free parameters) is reused, not redone.
 """
 from __future__ import annotations
 
@@ -51,6 +52,7 @@ class LoopSettings:
     alpha: float = attr.ALPHA
     ratio: float = attr.RATIO
     confound_corr: float = attr.CONFOUND_CORR
+    robust: bool = True
 
 
 def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
@@ -84,6 +86,10 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo < v <= hi:
                 raise ConfigError(f"{where}: field '{key}' must be a number in ({lo:g}, {hi:g}], got {v!r}")
             setattr(s, key, float(v))
+    if "robust" in raw:
+        if not isinstance(raw["robust"], bool):
+            raise ConfigError(f"{where}: field 'robust' must be true or false, got {raw['robust']!r}")
+        s.robust = raw["robust"]
     return s
 
 
@@ -105,6 +111,26 @@ def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: f
     free = [dataclasses.replace(f, initial=min(max(chosen[f.name], f.lower), f.upper)) for f in cfg.free]
     free.append(FreeParameter(cand.strength, init, lo, hi, spec.scale or 1.0))
     return dataclasses.replace(cfg, model=model, free=free)
+
+
+def _finished(cfg: IdentificationConfig, folder: Path):
+    """A finished identification of the same model, free parameters and config in ``folder``, or None.
+
+    Lets a loop that was stopped resume without redoing finished fronts (nothing finished is lost).
+    """
+    from .pareto.result import IdentificationResult
+
+    if not (folder / "chosen.json").is_file():
+        return None
+    try:
+        res = IdentificationResult.load(folder)
+    except (FileNotFoundError, ValueError, KeyError):
+        return None
+    same = (res.parameters == [f.name for f in cfg.free]
+            and res.info.get("extensions") == [e.name for e in cfg.model.extensions]
+            and Path(res.info.get("config", "")).resolve() == Path(cfg.path).resolve()
+            and len(res.front) == cfg.pareto.points)
+    return res if same else None
 
 
 def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=print) -> dict:
@@ -143,7 +169,11 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
         names = [e.name for e in cfg.model.extensions]
         progress(f"iteration {i}: model M0{''.join(' + ' + n for n in names)}; free "
                  f"{', '.join(f.name for f in cfg.free)}")
-        result = run_identification(cfg, out / f"iter_{i}", progress=lambda s: progress("  " + s))
+        result = _finished(cfg, out / f"iter_{i}")
+        if result is not None:
+            progress(f"  iteration {i}: reusing the finished identification in {out / f'iter_{i}'}")
+        else:
+            result = run_identification(cfg, out / f"iter_{i}", progress=lambda s: progress("  " + s))
         chosen = result.chosen["parameters"]
         errs = errors_of(cfg.model, chosen, id_data.maneuvers, val_mans, trims, f"iteration {i}")
         model = cfg.model.with_parameters(**chosen)
@@ -153,7 +183,7 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
         if left:
             att = attr.attribute(model, [f.name for f in cfg.free], id_data, cfg.nlp.time_outputs,
                                  cfg.nlp.trim_outputs, candidates=left, alpha=settings.alpha, ratio=settings.ratio,
-                                 confound_corr=settings.confound_corr)
+                                 confound_corr=settings.confound_corr, robust=settings.robust)
             progress(str(att))
         doc["iterations"].append({
             "iteration": i, "extensions": names, "results_dir": f"iter_{i}",

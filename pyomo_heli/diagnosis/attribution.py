@@ -48,13 +48,16 @@ import pandas as pd
 from scipy import stats
 
 from ..physics.model import HelicopterModel
+from ..simulation.integrate import sampled, simulate
 from ..simulation.sensitivity import sensitivities
+from ..simulation.trim import trim_float
 from .candidates import CANDIDATES, make_candidate
 
 ALPHA = 0.01
 RATIO = 2.0
 CONFOUND_CORR = 0.7
 ABSORBED = 0.10
+SEGMENT_S = 1.0
 
 
 @dataclass
@@ -147,13 +150,61 @@ def _signature(e, w, groups) -> dict:
     return sig
 
 
+def input_offset_columns(model: HelicopterModel, data, time_outputs, n_trim_rows: int, substeps: int = 2,
+                         delta: float = 1e-4) -> np.ndarray:
+    """Output response to a constant offset of each input, one column per maneuver and input (stacked rows).
+
+    The model replays a maneuver with inputs = trim + (measured - first measured sample), so the
+    noise of the first sample acts as a constant input error over the whole record: a nuisance
+    direction the score test must not mistake for an effect. One-sided differences, ``delta`` rad.
+    """
+    cols = []
+    n_per = [len(mv.data) for mv in data.maneuvers]
+    starts = np.cumsum([0] + n_per)
+    for i, mv in enumerate(data.maneuvers):
+        t = mv.data["t"].to_numpy()
+        tp = trim_float(model, mv.trim_speed)
+        inc = mv.increments()
+        base = simulate(model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=substeps)
+        for k in ("col", "lon"):
+            shifted = {c: sampled(t, v + (delta if c == k else 0.0)) for c, v in inc.items()}
+            if k not in shifted:
+                shifted[k] = sampled(t, np.full(t.size, delta))
+            sim = simulate(model, tp, t, shifted, method="rk4", substeps=substeps)
+            col = []
+            for o in time_outputs:
+                block = np.zeros(starts[-1])
+                block[starts[i]:starts[i + 1]] = (sim[o].to_numpy() - base[o].to_numpy()) / delta
+                col.append(block)
+            col.append(np.zeros(n_trim_rows))
+            cols.append(np.concatenate(col))
+    return np.array(cols).T if cols else np.zeros((starts[-1] * len(time_outputs) + n_trim_rows, 0))
+
+
+def segment_ids(data, time_outputs, n_trims: int, trim_outputs, segment_s: float) -> np.ndarray:
+    """Segment of every stacked row for the batch-means variance: per maneuver, ``segment_s`` long
+    stretches (all outputs of a stretch together); every trim point (all its channels) on its own."""
+    ids, nxt = [], 0
+    for mv in data.maneuvers:
+        t = mv.data["t"].to_numpy()
+        k = np.floor((t - t[0]) / segment_s).astype(int)
+        ids.append(nxt + k)
+        nxt += int(k.max()) + 1 if k.size else 0
+    time_ids = np.concatenate(ids) if ids else np.zeros(0, int)
+    trim_ids = nxt + np.arange(n_trims)
+    return np.concatenate([time_ids] * len(time_outputs) + [trim_ids] * len(trim_outputs))
+
+
 def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outputs, candidates=None,
               alpha: float = ALPHA, ratio: float = RATIO, confound_corr: float = CONFOUND_CORR,
-              substeps: int = 2) -> Attribution:
+              substeps: int = 2, robust: bool = True, segment_s: float = SEGMENT_S) -> Attribution:
     """Score every candidate (default: the whole library minus those already in ``model``).
 
     ``model`` carries the identified values; ``identified`` are the free
     parameter names; ``data`` an :class:`~pyomo_heli.nlp.identification.IdentificationData`.
+    ``robust``: also project off the input-offset nuisance of every maneuver and estimate the
+    score's variance by batch means over ``segment_s`` stretches (coloured residuals); False gives
+    the plain white-noise score test of model_spec.md 4.8.
     """
     have = {e.name for e in model.extensions}
     names = [n for n in (candidates or list(CANDIDATES)) if n not in have]
@@ -176,8 +227,15 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
             cols[c.strength] = _stack(s, time_outputs, trim_outputs, 0)
     e, w, groups = residual_vector(base, data, time_outputs, trim_outputs)
     sw = np.sqrt(w)
-    A, ew = S * sw[:, None], e * sw
     n_trim = sum(sl.stop - sl.start for lbl, sl in groups if lbl.startswith("trim"))
+    if robust:
+        nuis = input_offset_columns(full, data, time_outputs, n_trim, substeps)
+        S_proj = np.hstack([S, nuis])
+        seg = segment_ids(data, time_outputs, len(speeds), trim_outputs, segment_s)
+    else:
+        S_proj = S
+    A, ew = S_proj * sw[:, None], e * sw
+    n_id = S.shape[1]
     trim_rows = slice(len(e) - n_trim, len(e))
 
     proj, rows = {}, []
@@ -187,14 +245,20 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
         bt = b - A @ coef
         F, F_raw = float(bt @ bt), float(b @ b)
         g = float(bt @ ew)
-        lm = g * g / F if F > 0 else 0.0
         kappa = g / F if F > 0 else 0.0
+        if robust and F > 0:
+            # batch means: sum the score contributions per segment; residual with the candidate's fit removed
+            u = bt * (ew - kappa * bt)
+            var = float(np.sum(np.bincount(seg, weights=u) ** 2))
+            lm = g * g / var if var > 0 else 0.0
+        else:
+            lm = g * g / F if F > 0 else 0.0
         if c.one_sided and kappa < 0:
             p = 1.0
         else:
             p = float(stats.chi2.sf(lm, 1)) * (0.5 if c.one_sided else 1.0)
         corr_id = [abs(float(b @ A[:, k]) / np.sqrt(max(F_raw * float(A[:, k] @ A[:, k]), 1e-300)))
-                   for k in range(A.shape[1])]
+                   for k in range(n_id)]
         k_like = int(np.argmax(corr_id)) if corr_id else None
         proj[c.name] = bt
         rows.append({"name": c.name, "strength": c.strength, "LM": lm, "p_value": p, "kappa_hat": kappa,

@@ -4,7 +4,7 @@
 
 1. the whole identification (Pareto front, utopia choice) with the current
    model (:func:`pyomo_heli.identify.run_identification`) into ``out/iter_i``;
-2. the errors of the chosen model: RMS of data minus model per output on the
+2. the errors of the model at the diagnosed point (``[loop] point``): RMS of data minus model per output on the
    identification and the validation maneuvers and per trim channel
    (float-model replay of :mod:`pyomo_heli.report.identification`);
 3. the attribution (:func:`pyomo_heli.diagnosis.attribution.attribute`);
@@ -20,7 +20,8 @@
 finished is lost. Settings come from the config's ``[loop]`` table:
 ``max_iterations`` (identifications after the first, default 3),
 ``candidates`` (names, default the whole library), ``alpha``, ``ratio``,
-``confound_corr``, ``robust`` (see :mod:`pyomo_heli.diagnosis.attribution`). A finished
+``confound_corr``, ``robust``, ``point`` (``direct``: the Eq. 11 solution solved
+directly, default; ``chosen``: the closest sampled front point) (see :mod:`pyomo_heli.diagnosis.attribution`). A finished
 iteration found in ``out/iter_i`` (same config, model and free parameters) is reused, not redone.
 """
 from __future__ import annotations
@@ -53,6 +54,7 @@ class LoopSettings:
     ratio: float = attr.RATIO
     confound_corr: float = attr.CONFOUND_CORR
     robust: bool = True
+    point: str = "direct"
 
 
 def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
@@ -86,6 +88,10 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo < v <= hi:
                 raise ConfigError(f"{where}: field '{key}' must be a number in ({lo:g}, {hi:g}], got {v!r}")
             setattr(s, key, float(v))
+    if "point" in raw:
+        if raw["point"] not in ("direct", "chosen"):
+            raise ConfigError(f"{where}: field 'point' must be \"direct\" or \"chosen\", got {raw['point']!r}")
+        s.point = raw["point"]
     if "robust" in raw:
         if not isinstance(raw["robust"], bool):
             raise ConfigError(f"{where}: field 'robust' must be true or false, got {raw['robust']!r}")
@@ -111,6 +117,20 @@ def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: f
     free = [dataclasses.replace(f, initial=min(max(chosen[f.name], f.lower), f.upper)) for f in cfg.free]
     free.append(FreeParameter(cand.strength, init, lo, hi, spec.scale or 1.0))
     return dataclasses.replace(cfg, model=model, free=free)
+
+
+def _diagnosed_point(result, which: str) -> tuple[dict, str]:
+    """The point of the front the loop diagnoses and reports.
+
+    ``direct``: the Eq. 11 solution solved directly (the utopia-closest point of the continuous
+    front), so that a coarse front (few points, as the loop's time budget needs) does not decide
+    the compromise; the closest sampled point if that solve failed. ``chosen``: the closest sampled
+    front point (the identification report's C).
+    """
+    d = result.direct
+    if which == "direct" and d and d.get("success"):
+        return d, "Eq. 11 direct"
+    return result.chosen, "closest front point" + (" (direct solve failed)" if which == "direct" else "")
 
 
 def _finished(cfg: IdentificationConfig, folder: Path):
@@ -174,7 +194,8 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
             progress(f"  iteration {i}: reusing the finished identification in {out / f'iter_{i}'}")
         else:
             result = run_identification(cfg, out / f"iter_{i}", progress=lambda s: progress("  " + s))
-        chosen = result.chosen["parameters"]
+        point, which = _diagnosed_point(result, settings.point)
+        chosen = point["parameters"]
         errs = errors_of(cfg.model, chosen, id_data.maneuvers, val_mans, trims, f"iteration {i}")
         model = cfg.model.with_parameters(**chosen)
         pool = settings.candidates or list(CANDIDATES)
@@ -189,7 +210,7 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
             "iteration": i, "extensions": names, "results_dir": f"iter_{i}",
             "free": [f.name for f in cfg.free], "parameters": chosen,
             "units": {n: cfg.model.parameters.spec(n).unit for n in chosen},
-            "J_time": result.chosen["J_time"], "J_trim": result.chosen["J_trim"],
+            "point": which, "J_time": point["J_time"], "J_trim": point["J_trim"],
             **errs, "attribution": att.to_dict() if att is not None else None,
             "wall_time": time.perf_counter() - t0})
         if att is not None and att.decision != "accepted":

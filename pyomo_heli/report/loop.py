@@ -115,7 +115,7 @@ def write_loop_report(out, cfg) -> Path:
     L = ["# Closed-loop report", "", f"- config: `{doc['config']}`", f"- dataset: `{doc['dataset']}`",
          f"- settings: {doc['settings']}", f"- stopped: {doc['stopped']}", ""]
     L += ["## Error before and after", "",
-          "RMS of data minus model (float-model replay of the chosen front point of each iteration); "
+          "RMS of data minus model (float-model replay of each iteration's diagnosed point, `[loop] point`); "
           "trim over all trim points, `id` = identification maneuvers, `val` = validation maneuvers.", "",
           markdown_table(before_after_table(doc), digits=4), ""]
     ch = change_table(doc)
@@ -131,7 +131,7 @@ def write_loop_report(out, cfg) -> Path:
     L += ["## Iterations", ""]
     for it in its:
         L += [f"### {label(it)}", "", f"Results: `{it['results_dir']}/` (front, report). "
-              f"Chosen parameters (SI): " + ", ".join(f"{k} = {_fmt(v, 6)}" for k, v in it["parameters"].items())
+              f"Parameters at the diagnosed point ({it.get('point', 'closest front point')}, SI): " + ", ".join(f"{k} = {_fmt(v, 6)}" for k, v in it["parameters"].items())
               + f"; J_time = {_fmt(it['J_time'], 8)}, J_trim = {_fmt(it['J_trim'], 5)}.", ""]
         a = it.get("attribution")
         if a is None:

@@ -181,6 +181,8 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
     ("max_iterations = -1", "[loop]: field 'max_iterations' must be an integer >= 0"),
     ("ratio = 0.5", "[loop]: field 'ratio' must be a number"),
     ("colour = 1", "[loop]: unknown field(s) ['colour']"),
+    ('point = "best"', "[loop]: field 'point' must be \"direct\" or \"chosen\""),
+    ('robust = "yes"', "[loop]: field 'robust' must be true or false"),
 ])
 def test_bad_loop_table_is_one_line_exit_2(tmp_path, capsys, loop, message):
     (tmp_path / "data").mkdir()

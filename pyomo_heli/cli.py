@@ -124,6 +124,24 @@ def cmd_check_data(args) -> int:
     return check_data(args.directory)
 
 
+def cmd_close_loop(args) -> int:
+    from .close_loop import close_loop, loop_settings
+    from .config import load_identification_config
+    from .report.loop import write_loop_report
+
+    cfg = load_identification_config(args.config)
+    settings = loop_settings(cfg)
+    if args.max_iterations is not None:
+        if args.max_iterations < 0:
+            raise UserError("option --max-iterations must be >= 0")
+        settings.max_iterations = args.max_iterations
+    doc = close_loop(cfg, args.out, settings)
+    path = write_loop_report(args.out, cfg)
+    print(f"{len(doc['iterations'])} identification(s); stopped: {doc['stopped']}")
+    print(f"loop.json and {path} written")
+    return 0
+
+
 def cmd_diagnose(args) -> int:
     from pathlib import Path
 
@@ -248,6 +266,13 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--cold-check", action="store_true",
                    help="also solve every interior front point cold ([pareto] cold_check), to measure warm starts")
     i.set_defaults(func=cmd_identify)
+
+    cl = sub.add_parser("close-loop", help="identify, attribute the residual to a candidate effect, add it, "
+                                           "re-identify, repeat ([loop] table of the config)")
+    cl.add_argument("config")
+    cl.add_argument("--out", required=True, help="results folder (loop.json, loop_report.md, iter_*/)")
+    cl.add_argument("--max-iterations", type=int, help="override [loop] max_iterations")
+    cl.set_defaults(func=cmd_close_loop)
 
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")
     d.add_argument("--out", default="demo_out")

@@ -67,7 +67,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     for k, v in (overrides or {}).items():
         raw[k] = {**raw.get(k, {}), **v} if isinstance(v, dict) else v
     f = str(path)
-    known = {"data", "model", "parameters", "objectives", "discretization", "pareto", "solver", "study"}
+    known = {"data", "model", "parameters", "objectives", "discretization", "pareto", "solver", "study", "loop"}
     unknown = set(raw) - known
     if unknown:
         raise ConfigError(f"{f}: unknown table(s) {sorted(unknown)}; expected {sorted(known)}")

@@ -13,7 +13,7 @@ from pyomo_heli.units import DEG, KT
 
 def test_registry_lists_every_required_effect():
     required = {"rotor_wake_on_tail", "flapping_lag", "inflow_time_constant", "cg_offset", "lon_rigging",
-                "col_rigging", "accel_position_x", "gyro_bias", "nz_bias"}
+                "col_rigging", "accel_position_x", "nz_bias", "nx_bias"}
     assert required <= set(CANDIDATES)
     for name in CANDIDATES:
         c = make_candidate(name)

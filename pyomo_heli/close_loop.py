@@ -1,0 +1,238 @@
+"""Close the loop: identify, attribute the residual, add the accepted effect, re-identify, repeat.
+
+``close_loop(cfg, out)`` runs, for iteration i = 0, 1, ...:
+
+1. the whole identification (Pareto front, utopia choice) with the current
+   model (:func:`pyomo_heli.identify.run_identification`) into ``out/iter_i``;
+2. the errors of the model at the diagnosed point (``[loop] point``): RMS of data minus model per output on the
+   identification and the validation maneuvers and per trim channel
+   (float-model replay of :mod:`pyomo_heli.report.identification`);
+3. the attribution (:func:`pyomo_heli.diagnosis.attribution.attribute`);
+4. if nothing is accepted: the residual analysis says whether what is left is
+   noise only or an "unexplained residual", with its signature (trim shapes,
+   whiteness, coherence: :mod:`pyomo_heli.diagnosis.analysis`);
+5. if a candidate is accepted and the iteration limit is not reached: add it
+   to the model with its strength free (initial value: the score test's
+   one-step estimate, clipped to the bounds; the other free parameters start
+   from this iteration's chosen values) and go on.
+
+``out/loop.json`` is rewritten as each iteration finishes, so nothing
+finished is lost. Settings come from the config's ``[loop]`` table:
+``max_iterations`` (identifications after the first, default 3),
+``candidates`` (names, default the whole library), ``alpha``, ``ratio``,
+``confound_corr``, ``robust``, ``point`` (``direct``: the Eq. 11 solution solved
+directly, default; ``chosen``: the closest sampled front point) (see :mod:`pyomo_heli.diagnosis.attribution`). A finished
+iteration found in ``out/iter_i`` (same config, model and free parameters) is reused, not redone.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from .config import ConfigError, IdentificationConfig
+from .dataset import load_flight_test
+from .diagnosis import attribution as attr
+from .diagnosis.candidates import CANDIDATES, make_candidate
+from .identify import run_identification
+from .nlp.identification import prepare_data
+from .nlp.parameters import FreeParameter
+from .pareto.result import write_json
+from .physics.model import HelicopterModel
+from .report.identification import CURVE_SPEEDS, predict, trim_rms, validation_rms
+
+LOOP_FILE = "loop.json"
+
+
+@dataclass
+class LoopSettings:
+    max_iterations: int = 3
+    candidates: list | None = None
+    alpha: float = attr.ALPHA
+    ratio: float = attr.RATIO
+    confound_corr: float = attr.CONFOUND_CORR
+    robust: bool = True
+    point: str = "direct"
+
+
+def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
+    """The ``[loop]`` table of an identification config, checked; errors name the field."""
+    raw = cfg.raw.get("loop", {})
+    where = f"{cfg.path} [loop]"
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{where}: must be a table")
+    known = {f.name for f in dataclasses.fields(LoopSettings)}
+    bad = set(raw) - known
+    if bad:
+        raise ConfigError(f"{where}: unknown field(s) {sorted(bad)}; expected {sorted(known)}")
+    s = LoopSettings()
+    if "max_iterations" in raw:
+        v = raw["max_iterations"]
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            raise ConfigError(f"{where}: field 'max_iterations' must be an integer >= 0, got {v!r}")
+        s.max_iterations = v
+    if "candidates" in raw:
+        v = raw["candidates"]
+        if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
+            raise ConfigError(f"{where}: field 'candidates' must be a non-empty list of names")
+        for n in v:
+            if n not in CANDIDATES:
+                raise ConfigError(f"{where}: field 'candidates': unknown candidate {n!r}; choose from "
+                                  f"{', '.join(CANDIDATES)}")
+        s.candidates = list(v)
+    for key, lo, hi in (("alpha", 0.0, 1.0), ("ratio", 1.0, float("inf")), ("confound_corr", 0.0, 1.0)):
+        if key in raw:
+            v = raw[key]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo < v <= hi:
+                raise ConfigError(f"{where}: field '{key}' must be a number in ({lo:g}, {hi:g}], got {v!r}")
+            setattr(s, key, float(v))
+    if "point" in raw:
+        if raw["point"] not in ("direct", "chosen"):
+            raise ConfigError(f"{where}: field 'point' must be \"direct\" or \"chosen\", got {raw['point']!r}")
+        s.point = raw["point"]
+    if "robust" in raw:
+        if not isinstance(raw["robust"], bool):
+            raise ConfigError(f"{where}: field 'robust' must be true or false, got {raw['robust']!r}")
+        s.robust = raw["robust"]
+    return s
+
+
+def errors_of(model: HelicopterModel, params: dict, id_mans, val_mans, trims, label: str) -> dict:
+    """RMS of data minus model (SI) per output on identification and validation maneuvers and per trim channel."""
+    speeds = list(trims["V"]) + list(CURVE_SPEEDS)
+    pred = predict(label, model, params, speeds, list(id_mans) + list(val_mans))
+    return {"identification_rms": validation_rms(pred, id_mans)["all"],
+            "validation_rms": validation_rms(pred, val_mans)["all"] if val_mans else {},
+            "trim_rms": trim_rms(pred, trims)["all"], "problems": pred.problems}
+
+
+def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: float) -> IdentificationConfig:
+    cand = make_candidate(name)
+    model = HelicopterModel(parameters=cfg.model.parameters, extensions=tuple(cfg.model.extensions) + (cand,))
+    spec = model.parameters.spec(cand.strength)
+    lo, hi = spec.bounds
+    init = min(max(kappa, lo + 0.05 * (hi - lo) if cand.one_sided else lo), hi)
+    free = [dataclasses.replace(f, initial=min(max(chosen[f.name], f.lower), f.upper)) for f in cfg.free]
+    free.append(FreeParameter(cand.strength, init, lo, hi, spec.scale or 1.0))
+    return dataclasses.replace(cfg, model=model, free=free)
+
+
+def _diagnosed_point(result, which: str) -> tuple[dict, str]:
+    """The point of the front the loop diagnoses and reports.
+
+    ``direct``: the Eq. 11 solution solved directly (the utopia-closest point of the continuous
+    front), so that a coarse front (few points, as the loop's time budget needs) does not decide
+    the compromise; the closest sampled point if that solve failed. ``chosen``: the closest sampled
+    front point (the identification report's C).
+    """
+    d = result.direct
+    if which == "direct" and d and d.get("success"):
+        return d, "Eq. 11 direct"
+    return result.chosen, "closest front point" + (" (direct solve failed)" if which == "direct" else "")
+
+
+def _finished(cfg: IdentificationConfig, folder: Path):
+    """A finished identification of the same model, free parameters and config in ``folder``, or None.
+
+    Lets a loop that was stopped resume without redoing finished fronts (nothing finished is lost).
+    """
+    from .pareto.result import IdentificationResult
+
+    if not (folder / "chosen.json").is_file():
+        return None
+    try:
+        res = IdentificationResult.load(folder)
+    except (FileNotFoundError, ValueError, KeyError):
+        return None
+    same = (res.parameters == [f.name for f in cfg.free]
+            and res.info.get("extensions") == [e.name for e in cfg.model.extensions]
+            and Path(res.info.get("config", "")).resolve() == Path(cfg.path).resolve()
+            and len(res.front) == cfg.pareto.points)
+    return res if same else None
+
+
+def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=print) -> dict:
+    """When nothing is accepted: is the residual noise only, or an unexplained residual with a signature?
+
+    Uses the residual analysis of :mod:`pyomo_heli.diagnosis.analysis` (trim shapes, whiteness,
+    coherence) on the chosen parameters. A failure is reported, not raised (the loop's results stand).
+    """
+    try:
+        from .diagnosis.analysis import diagnose
+        from .diagnosis.residuals import compute_residuals
+
+        d = diagnose(compute_residuals(cfg, chosen, label="chosen"))
+    except Exception as exc:  # noqa: BLE001 - the verdict is an addition to finished results
+        progress(f"residual diagnosis failed: {exc}")
+        return {"status": f"failed: {exc}"}
+    status = "noise only" if d.verdict.get("noise_only") else "unexplained residual"
+    progress(f"residual diagnosis: {status}")
+    return {"status": status, "verdict": d.verdict, "findings": d.findings}
+
+
+def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = None, progress=print) -> dict:
+    """Run the loop; returns the content of ``loop.json`` (also written after every iteration)."""
+    settings = settings or loop_settings(cfg)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ft = load_flight_test(cfg.dataset)
+    id_data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    val_mans = list(prepare_data(ft, cfg.validation).maneuvers) if cfg.validation else []
+    trims = ft.trims.reset_index(drop=True)
+    doc = {"config": str(cfg.path), "dataset": str(cfg.dataset), "settings": dataclasses.asdict(settings),
+           "units": "SI (rad, rad/s, m/s, g)", "iterations": [], "stopped": None}
+    i = 0
+    while True:
+        t0 = time.perf_counter()
+        names = [e.name for e in cfg.model.extensions]
+        progress(f"iteration {i}: model M0{''.join(' + ' + n for n in names)}; free "
+                 f"{', '.join(f.name for f in cfg.free)}")
+        result = _finished(cfg, out / f"iter_{i}")
+        if result is not None:
+            progress(f"  iteration {i}: reusing the finished identification in {out / f'iter_{i}'}")
+        else:
+            result = run_identification(cfg, out / f"iter_{i}", progress=lambda s: progress("  " + s))
+        point, which = _diagnosed_point(result, settings.point)
+        chosen = point["parameters"]
+        errs = errors_of(cfg.model, chosen, id_data.maneuvers, val_mans, trims, f"iteration {i}")
+        model = cfg.model.with_parameters(**chosen)
+        pool = settings.candidates or list(CANDIDATES)
+        left = [n for n in pool if n not in names]
+        att = None
+        if left:
+            att = attr.attribute(model, [f.name for f in cfg.free], id_data, cfg.nlp.time_outputs,
+                                 cfg.nlp.trim_outputs, candidates=left, alpha=settings.alpha, ratio=settings.ratio,
+                                 confound_corr=settings.confound_corr, robust=settings.robust)
+            progress(str(att))
+        doc["iterations"].append({
+            "iteration": i, "extensions": names, "results_dir": f"iter_{i}",
+            "free": [f.name for f in cfg.free], "parameters": chosen,
+            "units": {n: cfg.model.parameters.spec(n).unit for n in chosen},
+            "point": which, "J_time": point["J_time"], "J_trim": point["J_trim"],
+            **errs, "attribution": att.to_dict() if att is not None else None,
+            "wall_time": time.perf_counter() - t0})
+        if att is not None and att.decision != "accepted":
+            doc["iterations"][-1]["residual_diagnosis"] = residual_verdict(cfg, chosen, progress)
+        if att is None:
+            doc["stopped"] = "every candidate of the library is in the model"
+        elif att.decision != "accepted":
+            doc["stopped"] = f"nothing accepted ({att.decision}): {att.message}"
+        elif i >= settings.max_iterations:
+            doc["stopped"] = (f"iteration limit {settings.max_iterations} reached; {att.accepted} would be added next")
+        write_json(out / LOOP_FILE, doc)
+        if doc["stopped"]:
+            progress(f"stopped: {doc['stopped']}")
+            return doc
+        row = att.accepted_row()
+        progress(f"adding {att.accepted} with {row['strength']} free (score-test estimate {row['kappa_hat']:.4g})")
+        cfg = _with_candidate(cfg, chosen, att.accepted, float(row["kappa_hat"]))
+        i += 1
+
+
+def load_loop(out) -> dict:
+    f = Path(out) / LOOP_FILE
+    if not f.is_file():
+        raise FileNotFoundError(f"{out}: no {LOOP_FILE}; is this a close-loop results folder?")
+    return json.loads(f.read_text())

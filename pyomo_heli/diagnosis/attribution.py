@@ -1,0 +1,311 @@
+"""Attribution: which candidate extension explains the residual of an identified model?
+
+The method is a score (Lagrange-multiplier) test of each candidate's strength
+kappa_j at zero, with the candidate's sensitivities projected off those of the
+already-identified parameters (model_spec.md section 4.8):
+
+    residuals e = data - model at the estimate: every configured time output
+        of every maneuver and every trim channel of every trim point (SI);
+    weights W = diag(1/R_o) per time output and diag(1/s_c^2) per trim
+        channel, both *as estimated* (mean square residual per output /
+        channel, the diagonal ML estimate of the output-error likelihood);
+    S = d(outputs)/d(identified parameters), s_j = d(outputs)/d(kappa_j)
+        (central differences of the float model, simulation.sensitivity);
+    s~_j = s_j - S (S^T W S)^-1 S^T W s_j   (what the identified parameters
+        cannot absorb), g_j = s~_j^T W e, F_j = s~_j^T W s~_j,
+    LM_j = g_j^2 / F_j ~ chi-square(1) if the effect is absent,
+    kappa_j,hat = g_j / F_j (one Gauss-Newton step from zero).
+
+For a strength that is physical with one sign only (a time constant or a
+downwash factor, lower bound 0) the test is one-sided: a score of the wrong
+sign gives p = 1, otherwise p = chi2.sf(LM)/2.
+
+Decision rule (documented in docs/model.md):
+- significant: p < alpha / n_candidates (Bonferroni over the library,
+  alpha = 0.01 by default: with 10 candidates LM > 10.8);
+- accepted: the top candidate is significant and its LM is at least
+  ``ratio`` (default 2) times the runner-up's;
+- confounded: top and runner-up within that ratio and their projected
+  sensitivity directions correlate (|rho| >= ``confound_corr``, 0.7): the
+  data cannot separate them, both are reported, none is picked;
+- ambiguous: within the ratio but not correlated: reported, none picked;
+- none: nothing significant; the residual's signature is reported.
+A candidate whose sensitivity is mostly absorbed by an identified parameter
+(projected energy F_j below 10 % of the raw one) is flagged with the
+parameter it looks like (e.g. flapping lag vs Iyy).
+
+The residuals used here are those of the same float simulation the
+sensitivities linearise (``Sensitivities.y_time`` / ``y_trim``), so that the
+test is consistent; the residual *analysis* (shapes, spectra) belongs to
+:mod:`pyomo_heli.diagnosis.residuals`.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from ..physics.model import HelicopterModel
+from ..simulation.integrate import sampled, simulate
+from ..simulation.sensitivity import sensitivities
+from ..simulation.trim import trim_float
+from .candidates import CANDIDATES, make_candidate
+
+ALPHA = 0.01
+RATIO = 2.0
+CONFOUND_CORR = 0.7
+ABSORBED = 0.10
+SEGMENT_S = 1.0
+
+
+@dataclass
+class Attribution:
+    """The outcome of one attribution: a score table and a decision.
+
+    ``scores``: one row per candidate (name, strength, LM, p_value,
+    significant, kappa_hat, kept = F_proj/F_raw, like = the identified
+    parameter its raw sensitivity correlates with most, like_corr,
+    trim_share = part of F_proj coming from the trims), sorted by LM.
+    ``decision``: accepted | confounded | ambiguous | none.
+    """
+
+    scores: pd.DataFrame
+    decision: str
+    accepted: str | None
+    threshold: float
+    alpha: float
+    ratio: float
+    confound_corr: float
+    confounded_pairs: list = field(default_factory=list)
+    message: str = ""
+    signature: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["scores"] = self.scores.to_dict(orient="records")
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Attribution":
+        d = dict(d)
+        d["scores"] = pd.DataFrame(d["scores"])
+        return cls(**d)
+
+    def accepted_row(self) -> dict | None:
+        if self.accepted is None:
+            return None
+        return self.scores.set_index("name").loc[self.accepted].to_dict()
+
+    def __str__(self) -> str:
+        cols = ["name", "LM", "p_value", "significant", "kappa_hat", "kept", "like", "like_corr", "trim_share"]
+        lines = [f"score test: significant when p < {self.alpha:g}/{len(self.scores)} (LM > {self.threshold:.3g}); "
+                 f"accept when LM >= {self.ratio:g} x runner-up",
+                 self.scores[cols].to_string(index=False, float_format=lambda x: f"{x:.4g}"),
+                 f"decision: {self.decision}: {self.message}"]
+        return "\n".join(lines)
+
+
+def _stack(sens, time_outputs, trim_outputs, col: int | None = None):
+    parts = [sens.time[o] for o in time_outputs] + [sens.trim[c] for c in trim_outputs]
+    M = np.vstack(parts) if parts else np.zeros((0, len(sens.names)))
+    return M if col is None else M[:, col]
+
+
+def residual_vector(sens, data, time_outputs, trim_outputs) -> tuple[np.ndarray, np.ndarray, list]:
+    """Data minus the nominal simulation of ``sens``, stacked like the sensitivities.
+
+    Returns (e, w, groups): residuals, weights (1 / mean square per output or
+    trim channel, the ML estimate), and the (label, slice) of each block.
+    """
+    e, w, groups, k = [], [], [], 0
+    for o in time_outputs:
+        meas = np.concatenate([mv.data[o].to_numpy(dtype=float) for mv in data.maneuvers])
+        r = meas - sens.y_time[o]
+        e.append(r)
+        w.append(np.full(r.size, 1.0 / max(np.mean(r**2), 1e-30)))
+        groups.append((f"time:{o}", slice(k, k + r.size)))
+        k += r.size
+    for c in trim_outputs:
+        r = data.trims[c].to_numpy(dtype=float) - sens.y_trim[c]
+        e.append(r)
+        w.append(np.full(r.size, 1.0 / max(np.mean(r**2), 1e-30)))
+        groups.append((f"trim:{c}", slice(k, k + r.size)))
+        k += r.size
+    return np.concatenate(e), np.concatenate(w), groups
+
+
+def _signature(e, w, groups) -> dict:
+    """RMS per block and lag-1 autocorrelation (whiteness) of each time block."""
+    sig = {}
+    for label, sl in groups:
+        r = e[sl]
+        d = {"rms": float(np.sqrt(np.mean(r**2)))}
+        if label.startswith("time") and r.size > 2:
+            rc = r - r.mean()
+            d["lag1_autocorrelation"] = float(np.dot(rc[1:], rc[:-1]) / max(np.dot(rc, rc), 1e-300))
+        d["mean"] = float(r.mean())
+        sig[label] = d
+    return sig
+
+
+def input_offset_columns(model: HelicopterModel, data, time_outputs, n_trim_rows: int, substeps: int = 2,
+                         delta: float = 1e-4) -> np.ndarray:
+    """Output response to a constant offset of each input, one column per maneuver and input (stacked rows).
+
+    The model replays a maneuver with inputs = trim + (measured - first measured sample), so the
+    noise of the first sample acts as a constant input error over the whole record: a nuisance
+    direction the score test must not mistake for an effect. One-sided differences, ``delta`` rad.
+    """
+    cols = []
+    n_per = [len(mv.data) for mv in data.maneuvers]
+    starts = np.cumsum([0] + n_per)
+    for i, mv in enumerate(data.maneuvers):
+        t = mv.data["t"].to_numpy()
+        tp = trim_float(model, mv.trim_speed)
+        inc = mv.increments()
+        base = simulate(model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=substeps)
+        for k in ("col", "lon"):
+            shifted = {c: sampled(t, v + (delta if c == k else 0.0)) for c, v in inc.items()}
+            if k not in shifted:
+                shifted[k] = sampled(t, np.full(t.size, delta))
+            sim = simulate(model, tp, t, shifted, method="rk4", substeps=substeps)
+            col = []
+            for o in time_outputs:
+                block = np.zeros(starts[-1])
+                block[starts[i]:starts[i + 1]] = (sim[o].to_numpy() - base[o].to_numpy()) / delta
+                col.append(block)
+            col.append(np.zeros(n_trim_rows))
+            cols.append(np.concatenate(col))
+    return np.array(cols).T if cols else np.zeros((starts[-1] * len(time_outputs) + n_trim_rows, 0))
+
+
+def segment_ids(data, time_outputs, n_trims: int, trim_outputs, segment_s: float) -> np.ndarray:
+    """Segment of every stacked row for the batch-means variance: per maneuver, ``segment_s`` long
+    stretches (all outputs of a stretch together); every trim point (all its channels) on its own."""
+    ids, nxt = [], 0
+    for mv in data.maneuvers:
+        t = mv.data["t"].to_numpy()
+        k = np.floor((t - t[0]) / segment_s).astype(int)
+        ids.append(nxt + k)
+        nxt += int(k.max()) + 1 if k.size else 0
+    time_ids = np.concatenate(ids) if ids else np.zeros(0, int)
+    trim_ids = nxt + np.arange(n_trims)
+    return np.concatenate([time_ids] * len(time_outputs) + [trim_ids] * len(trim_outputs))
+
+
+def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outputs, candidates=None,
+              alpha: float = ALPHA, ratio: float = RATIO, confound_corr: float = CONFOUND_CORR,
+              substeps: int = 2, robust: bool = True, segment_s: float = SEGMENT_S) -> Attribution:
+    """Score every candidate (default: the whole library minus those already in ``model``).
+
+    ``model`` carries the identified values; ``identified`` are the free
+    parameter names; ``data`` an :class:`~pyomo_heli.nlp.identification.IdentificationData`.
+    ``robust``: also project off the input-offset nuisance of every maneuver and estimate the
+    score's variance by batch means over ``segment_s`` stretches (coloured residuals); False gives
+    the plain white-noise score test of model_spec.md 4.8.
+    """
+    have = {e.name for e in model.extensions}
+    names = [n for n in (candidates or list(CANDIDATES)) if n not in have]
+    if not names:
+        raise ValueError("no candidate left to score: every candidate is already in the model")
+    cands = [make_candidate(n) for n in names]
+    full = HelicopterModel(parameters=model.parameters, extensions=tuple(model.extensions) + tuple(cands))
+    time_outputs, trim_outputs = list(time_outputs), list(trim_outputs)
+    speeds = list(data.trims["V"]) if trim_outputs else []
+    common = dict(maneuvers=data.maneuvers, time_outputs=time_outputs, trim_speeds=speeds, trim_out=trim_outputs,
+                  substeps=substeps)
+    default = [c for c in cands if c.score_step is None]
+    base = sensitivities(full, list(identified) + [c.strength for c in default], **common)
+    S = _stack(base, time_outputs, trim_outputs)[:, : len(identified)]
+    cols = {c.strength: _stack(base, time_outputs, trim_outputs, len(identified) + i) for i, c in enumerate(default)}
+    for c in cands:
+        if c.score_step is not None:
+            scale = full.parameters.spec(c.strength).scale or 1.0
+            s = sensitivities(full, [c.strength], rel_step=c.score_step / scale, **common)
+            cols[c.strength] = _stack(s, time_outputs, trim_outputs, 0)
+    e, w, groups = residual_vector(base, data, time_outputs, trim_outputs)
+    sw = np.sqrt(w)
+    n_trim = sum(sl.stop - sl.start for lbl, sl in groups if lbl.startswith("trim"))
+    if robust:
+        nuis = input_offset_columns(full, data, time_outputs, n_trim, substeps)
+        S_proj = np.hstack([S, nuis])
+        seg = segment_ids(data, time_outputs, len(speeds), trim_outputs, segment_s)
+    else:
+        S_proj = S
+    A, ew = S_proj * sw[:, None], e * sw
+    n_id = S.shape[1]
+    trim_rows = slice(len(e) - n_trim, len(e))
+
+    proj, rows = {}, []
+    for c in cands:
+        b = cols[c.strength] * sw
+        coef, *_ = np.linalg.lstsq(A, b, rcond=None) if A.shape[1] else (np.zeros(0),)
+        bt = b - A @ coef
+        F, F_raw = float(bt @ bt), float(b @ b)
+        g = float(bt @ ew)
+        kappa = g / F if F > 0 else 0.0
+        if robust and F > 0:
+            # batch means: sum the score contributions per segment; residual with the candidate's fit removed
+            u = bt * (ew - kappa * bt)
+            var = float(np.sum(np.bincount(seg, weights=u) ** 2))
+            lm = g * g / var if var > 0 else 0.0
+        else:
+            lm = g * g / F if F > 0 else 0.0
+        if c.one_sided and kappa < 0:
+            p = 1.0
+        else:
+            p = float(stats.chi2.sf(lm, 1)) * (0.5 if c.one_sided else 1.0)
+        corr_id = [abs(float(b @ A[:, k]) / np.sqrt(max(F_raw * float(A[:, k] @ A[:, k]), 1e-300)))
+                   for k in range(n_id)]
+        k_like = int(np.argmax(corr_id)) if corr_id else None
+        proj[c.name] = bt
+        rows.append({"name": c.name, "strength": c.strength, "LM": lm, "p_value": p, "kappa_hat": kappa,
+                     "kept": F / F_raw if F_raw > 0 else 0.0,
+                     "like": list(identified)[k_like] if k_like is not None else "",
+                     "like_corr": corr_id[k_like] if k_like is not None else 0.0,
+                     "trim_share": float(bt[trim_rows] @ bt[trim_rows]) / F if F > 0 else 0.0})
+    n = len(cands)
+    threshold = float(stats.chi2.isf(alpha / n, 1))
+    level = alpha / n
+    scores = pd.DataFrame(rows)
+    scores["significant"] = scores["p_value"] < level
+    # rank by evidence; a wrong-sign one-sided score has no evidence
+    scores["evidence"] = np.where(scores["p_value"] < 1.0, scores["LM"], 0.0)
+    scores = scores.sort_values("evidence", ascending=False).reset_index(drop=True)
+
+    def corr(a, b):
+        x, y = proj[a], proj[b]
+        return float(x @ y / np.sqrt(max((x @ x) * (y @ y), 1e-300)))
+
+    sig_names = list(scores.loc[scores.significant, "name"])
+    pairs = [(a, b, corr(a, b)) for i, a in enumerate(sig_names) for b in sig_names[i + 1:]
+             if abs(corr(a, b)) >= confound_corr]
+    top = scores.iloc[0]
+    second = scores.iloc[1] if len(scores) > 1 else None
+    accepted, signature = None, {}
+    if not top.significant:
+        decision = "none"
+        signature = _signature(e, w, groups)
+        message = (f"no candidate significant (largest LM {top.evidence:.3g} for {top['name']} < {threshold:.3g}); "
+                   "any remaining residual is unexplained by the library, signature attached")
+    elif second is None or second.evidence * ratio <= top.evidence:
+        decision, accepted = "accepted", str(top["name"])
+        runner = f"; runner-up {second['name']} LM {second.evidence:.3g}" if second is not None else ""
+        message = (f"{top['name']} LM {top.evidence:.3g} (p = {top.p_value:.2g}){runner}; "
+                   f"estimated {top.strength} = {top.kappa_hat:.4g}")
+        if top.kept < ABSORBED:
+            message += (f"; note: {100 * (1 - top.kept):.0f} % of its signal is absorbed by the identified "
+                        f"parameters (most like {top.like}, |rho| = {top.like_corr:.2f})")
+    else:
+        rho = corr(top["name"], second["name"])
+        decision = "confounded" if abs(rho) >= confound_corr else "ambiguous"
+        message = (f"{top['name']} (LM {top.evidence:.3g}) and {second['name']} (LM {second.evidence:.3g}) are within "
+                   f"a factor {ratio:g}; projected sensitivities correlate rho = {rho:.2f}: "
+                   + ("the data cannot separate them, none is picked" if decision == "confounded"
+                      else "two different signatures both significant, none is picked"))
+        signature = _signature(e, w, groups)
+    return Attribution(scores=scores.drop(columns="evidence"), decision=decision, accepted=accepted,
+                       threshold=threshold, alpha=alpha, ratio=ratio, confound_corr=confound_corr,
+                       confounded_pairs=[list(p) for p in pairs], message=message, signature=signature)

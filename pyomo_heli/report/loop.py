@@ -1,0 +1,159 @@
+"""The report of a closed loop: the error before and after each added effect.
+
+:func:`write_loop_report` reads ``loop.json`` (see :mod:`pyomo_heli.close_loop`)
+and writes next to it:
+
+- ``loop_trim_vs_speed.png``  trim col, lon, theta vs speed: data and the model of every iteration
+- ``loop_validation.png``     validation time histories: data and the model of every iteration
+- ``loop_report.md``          before/after table (J_time, J_trim, RMS per trim channel and per output on
+                              identification and validation data), parameters of every iteration, the
+                              attribution tables and decisions; parameter errors against ``truth.json``
+                              only when the dataset has one (nothing else reads it).
+
+The models are replayed with the float simulator (as the identification report does).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from ..dataset import load_flight_test
+from ..diagnosis.candidates import make_candidate
+from ..nlp.identification import prepare_data
+from ..physics.model import HelicopterModel
+from ..units import KT
+from . import plots
+from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
+                             read_truth)
+
+
+def iteration_model(base: HelicopterModel, it: dict) -> HelicopterModel:
+    """The model of one loop iteration: the config's base model plus that iteration's extensions."""
+    exts = [make_candidate(n) for n in it["extensions"]]
+    return HelicopterModel(parameters=base.parameters, extensions=tuple(base.extensions) + tuple(exts))
+
+
+def label(it: dict) -> str:
+    return f"iter {it['iteration']}: M0" + "".join(f" + {n}" for n in it["extensions"])
+
+
+def before_after_table(doc: dict) -> pd.DataFrame:
+    """One row per iteration: J_time, J_trim, RMS trim per channel [deg] and RMS per output [display units]."""
+    rows = []
+    for it in doc["iterations"]:
+        r = {"iteration": it["iteration"], "model": "M0" + "".join(f" + {n}" for n in it["extensions"]),
+             "J_time": it["J_time"], "J_trim": it["J_trim"]}
+        for c in TRIM_CHANNELS:
+            v = it["trim_rms"].get(c)
+            r[f"trim {c} [deg]"] = None if v is None else float(plots.shown(c, v))
+        for group, key in (("id", "identification_rms"), ("val", "validation_rms")):
+            for o in VALIDATION_OUTPUTS:
+                v = (it.get(key) or {}).get(o)
+                if v is not None:
+                    r[f"{group} {o} [{plots.UNITS[o][0]}]"] = float(plots.shown(o, v))
+        rows.append(r)
+    return pd.DataFrame(rows)
+
+
+def change_table(doc: dict) -> pd.DataFrame:
+    """Relative change of every RMS error from the first to the last iteration [%] (negative = better)."""
+    tab = before_after_table(doc)
+    if len(tab) < 2:
+        return pd.DataFrame()
+    first, last = tab.iloc[0], tab.iloc[-1]
+    rows = []
+    for c in tab.columns[4:]:
+        if pd.notna(first[c]) and pd.notna(last[c]) and first[c]:
+            rows.append({"error": c, "first": first[c], "last": last[c], "change %": 100 * (last[c] / first[c] - 1)})
+    return pd.DataFrame(rows)
+
+
+def truth_errors(doc: dict, base: HelicopterModel, truth: dict) -> pd.DataFrame:
+    """Identified parameters of every iteration vs truth (display units) and their errors [%]."""
+    rows = []
+    names = []
+    for it in doc["iterations"]:
+        names += [n for n in it["parameters"] if n not in names]
+    for n in names:
+        if n not in truth:
+            continue
+        spec = base.parameters.spec(n) if n in base.parameters else None
+        unit, fac = (spec.display if spec is not None and spec.display else (spec.unit if spec else "", 1.0))
+        r = {"parameter": n, "unit": unit, "truth": truth[n] * fac}
+        for it in doc["iterations"]:
+            v = it["parameters"].get(n)
+            r[f"iter {it['iteration']}"] = None if v is None else v * fac
+            r[f"iter {it['iteration']} error %"] = (None if v is None or not truth[n]
+                                                   else 100 * (v - truth[n]) / abs(truth[n]))
+        rows.append(r)
+    return pd.DataFrame(rows)
+
+
+def write_loop_report(out, cfg) -> Path:
+    """Figures and ``loop_report.md`` of the loop in ``out`` (``cfg``: the loop's identification config)."""
+    from ..close_loop import load_loop
+
+    out = Path(out)
+    doc = load_loop(out)
+    ft = load_flight_test(cfg.dataset)
+    trims = ft.trims.reset_index(drop=True)
+    val_mans = list(prepare_data(ft, cfg.validation).maneuvers) if cfg.validation else []
+    its = doc["iterations"]
+    preds = {label(it): predict(label(it), iteration_model(cfg.model, it), it["parameters"],
+                                list(CURVE_SPEEDS) + list(trims["V"]), val_mans) for it in its}
+    fig = plots.plot_trim_vs_speed(trims, {lab: p.trim_table(CURVE_SPEEDS) for lab, p in preds.items()},
+                                   title="Trim vs speed, before and after")
+    _save(fig, out / "loop_trim_vs_speed.png")
+    if val_mans:
+        fig = plots.plot_validation({mv.name: mv.data for mv in val_mans},
+                                    {lab: p.shown_runs() for lab, p in preds.items()}, VALIDATION_OUTPUTS,
+                                    inputs={mv.name: mv.inputs for mv in val_mans},
+                                    titles={mv.name: f"{mv.name} ({mv.trim_speed / KT:.0f} kt)" for mv in val_mans})
+        _save(fig, out / "loop_validation.png")
+
+    L = ["# Closed-loop report", "", f"- config: `{doc['config']}`", f"- dataset: `{doc['dataset']}`",
+         f"- settings: {doc['settings']}", f"- stopped: {doc['stopped']}", ""]
+    L += ["## Error before and after", "",
+          "RMS of data minus model (float-model replay of each iteration's diagnosed point, `[loop] point`); "
+          "trim over all trim points, `id` = identification maneuvers, `val` = validation maneuvers.", "",
+          markdown_table(before_after_table(doc), digits=4), ""]
+    ch = change_table(doc)
+    if len(ch):
+        L += [f"Change from iteration 0 to iteration {its[-1]['iteration']}:", "", markdown_table(ch, digits=4), ""]
+    L += ["![Trim vs speed before and after](loop_trim_vs_speed.png)", ""]
+    if val_mans:
+        L += ["![Validation before and after](loop_validation.png)", ""]
+    truth = read_truth(cfg.dataset)
+    if truth is not None:
+        L += ["## Parameters vs truth", "", "From the dataset's `truth.json` (read only by this report).", "",
+              markdown_table(truth_errors(doc, cfg.model, truth), digits=5), ""]
+    L += ["## Iterations", ""]
+    for it in its:
+        L += [f"### {label(it)}", "", f"Results: `{it['results_dir']}/` (front, report). "
+              f"Parameters at the diagnosed point ({it.get('point', 'closest front point')}, SI): " + ", ".join(f"{k} = {_fmt(v, 6)}" for k, v in it["parameters"].items())
+              + f"; J_time = {_fmt(it['J_time'], 8)}, J_trim = {_fmt(it['J_trim'], 5)}.", ""]
+        a = it.get("attribution")
+        if a is None:
+            L += ["No candidate left to score.", ""]
+            continue
+        sc = pd.DataFrame(a["scores"])[["name", "strength", "LM", "p_value", "significant", "kappa_hat", "kept",
+                                         "like", "like_corr", "trim_share"]]
+        L += [f"Score test (significant when p < {a['alpha']:g}/{len(sc)}, i.e. LM > {a['threshold']:.3g}; accepted "
+              f"when LM >= {a['ratio']:g} x runner-up; confounded when projected |rho| >= {a['confound_corr']:g}):", "",
+              markdown_table(sc, digits=4), "", f"**Decision: {a['decision']}** - {a['message']}", ""]
+        if a.get("confounded_pairs"):
+            L += ["Confounded pairs among the significant candidates (projected correlation): "
+                  + "; ".join(f"{p[0]} / {p[1]} ({p[2]:+.2f})" for p in a["confounded_pairs"]), ""]
+        rd = it.get("residual_diagnosis")
+        if rd:
+            L += [f"Residual analysis of what is left (pyomo_heli.diagnosis): **{rd['status']}**", ""]
+            L += [f"- {f}" for f in rd.get("findings", [])] + [""]
+        if a.get("signature"):
+            rows = [{"block": k, **v} for k, v in a["signature"].items()]
+            L += ["Residual signature (SI):", "", markdown_table(pd.DataFrame(rows), digits=4), ""]
+    problems = [f"{lab}: {p}" for lab, pr in preds.items() for p in pr.problems]
+    L += ["## Simulation problems", ""] + ([f"- {p}" for p in problems] if problems else ["None."]) + [""]
+    path = out / "loop_report.md"
+    path.write_text("\n".join(L))
+    return path

@@ -1,0 +1,194 @@
+"""The closed loop on small generated flight tests (flighttest generator into tmp_path).
+
+Each dataset has one undeclared truth effect (or none); the identification
+uses M0 and the candidates of pyomo_heli.diagnosis.candidates, which are
+written independently of the truth effects. Small instances: two short
+maneuvers, a dense trim sweep (the trims carry most of the information),
+three front points.
+"""
+import json
+import textwrap
+
+import pytest
+
+from pyomo_heli.cli import main
+from pyomo_heli.close_loop import close_loop, loop_settings
+from pyomo_heli.config import load_identification_config
+from pyomo_heli.dataset import load_flight_test
+from pyomo_heli.diagnosis.attribution import attribute
+from pyomo_heli.flighttest.generate import generate_from_file
+from pyomo_heli.identify import run_identification
+from pyomo_heli.nlp.identification import prepare_data
+from pyomo_heli.report.loop import write_loop_report
+
+MANEUVERS = """
+[[maneuvers]]
+name = "lon_20kt"
+role = "identification"
+speed_kt = 20
+channel = "lon"
+shape = "doublet"
+amplitude_deg = 0.5
+step_s = 1.0
+duration_s = 5
+t_start_s = 1.0
+
+[[maneuvers]]
+name = "lon3211_80kt"
+role = "identification"
+speed_kt = 80
+channel = "lon"
+shape = "3211"
+amplitude_deg = 0.5
+step_s = 0.5
+duration_s = 5
+t_start_s = 1.0
+
+[[maneuvers]]
+name = "lon_80kt_val"
+role = "validation"
+speed_kt = 80
+channel = "lon"
+shape = "doublet"
+amplitude_deg = 0.5
+step_s = 1.0
+duration_s = 5
+t_start_s = 1.0
+"""
+
+FREE = {
+    "theta_twist": 'unit = "deg/m"\ninitial = -2.1228\nlower = -10.0\nupper = 0.0\nscale = 1.0',
+    "CL_alpha_HT": "initial = 4.3516\nlower = 0.1\nupper = 10.0\nscale = 5.0",
+    "Iyy": "initial = 6464.9\nlower = 2000.0\nupper = 8000.0\nscale = 5000.0",
+}
+
+
+def make_case(root, effect: str = "", seed: int = 11, free=("theta_twist", "CL_alpha_HT", "Iyy"), points: int = 3,
+              loop: str = ""):
+    """Generate a small dataset with ``effect`` (a [truth.effects.*] table) and write its identification config."""
+    root.mkdir(parents=True, exist_ok=True)
+    gen = (f'[dataset]\nname = "small"\naircraft = "Bo-105 (small test)"\nseed = {seed}\n\n[truth]\nparameters = {{}}\n'
+           f"{textwrap.dedent(effect)}\n[sensors]\nnoise = true\n\n[trims]\n"
+           "speeds_kt = [10, 15, 20, 25, 30, 40, 50, 60, 80, 100, 120]\n" + MANEUVERS)
+    (root / "gen.toml").write_text(gen)
+    generate_from_file(root / "gen.toml", root / "data")
+    params = "".join(f"\n[parameters.{n}]\n{FREE[n]}\n" for n in free)
+    ident = (f'[data]\ndataset = "data"\nresample_hz = 25\n{params}\n[pareto]\npoints = {points}\n\n'
+             f'[solver]\nname = "casadi-ipopt"\n{loop}')
+    (root / "ident.toml").write_text(ident)
+    return load_identification_config(root / "ident.toml")
+
+
+def identify_and_attribute(cfg, out):
+    res = run_identification(cfg, out, progress=lambda s: None)
+    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    model = cfg.model.with_parameters(**res.chosen["parameters"])
+    return attribute(model, [f.name for f in cfg.free], data, cfg.nlp.time_outputs, cfg.nlp.trim_outputs)
+
+
+def test_m0_with_noise_accepts_nothing(tmp_path):
+    cfg = make_case(tmp_path, seed=21, free=("theta_twist", "CL_alpha_HT"), points=2)
+    att = identify_and_attribute(cfg, tmp_path / "out")
+    print(att)
+    assert att.decision == "none" and att.accepted is None
+    assert att.signature  # the residual's signature is reported instead
+
+
+def test_rigging_only_leads_to_rigging(tmp_path):
+    cfg = make_case(tmp_path, "[truth.effects.lon_rigging]\ndelta_lon = 0.005236\n", seed=22,
+                    free=("theta_twist", "CL_alpha_HT"), points=2)
+    att = identify_and_attribute(cfg, tmp_path / "out")
+    print(att)
+    assert att.decision == "accepted" and att.accepted == "lon_rigging"
+    assert not att.scores.set_index("name").loc["cg_offset", "significant"]
+    # truth: measured lon = theta_1s + 0.3 deg; candidate: theta_1s = lon + b_lon, so b_lon ~ -0.3 deg
+    assert att.accepted_row()["kappa_hat"] == pytest.approx(-0.005236, rel=0.3)
+
+
+def test_cg_offset_only_leads_to_cg_not_to_rigging(tmp_path):
+    """A CG offset moves lon and the attitude; a rigging bias moves lon only. On this small instance the
+    CG signal in the time series (the trim attitude shifts the gravity part of n_x) is matched equally
+    well by an n_x sensor bias: the loop must then name CG in an honest confounded report, never pick
+    rigging, and its one-step CG estimate must be right."""
+    cfg = make_case(tmp_path, "[truth.effects.cg_offset]\ndx_cg = 0.05\n", seed=23,
+                    free=("theta_twist", "CL_alpha_HT"), points=2)
+    att = identify_and_attribute(cfg, tmp_path / "out")
+    print(att)
+    scores = att.scores.set_index("name")
+    assert scores.loc["cg_offset", "significant"]
+    assert scores.loc["cg_offset", "LM"] > scores.loc["lon_rigging", "LM"]
+    if att.decision == "accepted":
+        assert att.accepted == "cg_offset"
+    else:
+        assert att.decision == "confounded" and att.accepted is None
+        assert any("cg_offset" in p[:2] for p in att.confounded_pairs)
+    # truth moves the hub 5 cm forward of the CG (an aft CG): candidate dx_fwd ~ -0.05 m
+    assert scores.loc["cg_offset", "kappa_hat"] == pytest.approx(-0.05, rel=0.3)
+
+
+def test_flapping_lag_is_found_or_reported_confounded_with_iyy(tmp_path):
+    cfg = make_case(tmp_path, "[truth.effects.flapping_lag]\ntau_f = 0.071\n", seed=24, points=2)
+    att = identify_and_attribute(cfg, tmp_path / "out")
+    print(att)
+    row = att.scores.set_index("name").loc["flapping_lag"]
+    if att.decision == "accepted":
+        assert att.accepted == "flapping_lag"
+        assert row["kappa_hat"] == pytest.approx(0.071, rel=0.3)
+    else:
+        # honest report: not picked, and the table says its signal looks like Iyy
+        assert att.accepted is None and row["like"] == "Iyy"
+
+
+def _rss(d: dict) -> float:
+    return sum(v**2 for v in d.values()) ** 0.5
+
+
+def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
+    """The acceptance of the loop on a small instance of the synthetic flight test (truth: M0 + wake on tail)."""
+    cfg = make_case(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
+                    loop="\n[loop]\nmax_iterations = 1\n")
+    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
+    doc = json.loads((tmp_path / "loop" / "loop.json").read_text())
+    it0, it1 = doc["iterations"][0], doc["iterations"][-1]
+    print(json.dumps({k: (it0[k], it1[k]) for k in ("trim_rms", "validation_rms", "parameters")}, indent=1))
+    assert it0["attribution"]["decision"] == "accepted"
+    assert it0["attribution"]["accepted"] == "rotor_wake_on_tail"
+    assert it1["extensions"] == ["rotor_wake_on_tail"] and it1["parameters"]["k_wt"] > 0
+    # after the wake, nothing else is significant (no false positive on the second round)
+    assert it1["attribution"]["decision"] == "none"
+    # the new model dominates the old one at the diagnosed (Eq. 11) point: both objectives fall
+    assert it1["J_time"] < it0["J_time"] and it1["J_trim"] < it0["J_trim"]
+    # the wake's trim channels improve
+    for c in ("lon", "theta"):
+        assert it1["trim_rms"][c] < it0["trim_rms"][c], c
+    # at the trim anchor B the model with the wake recovers twist, tail lift slope and Iyy (truth known)
+    truth = json.loads((cfg.dataset / "truth.json").read_text())["parameters"]
+    import pandas as pd
+    b0, b1 = (pd.read_csv(tmp_path / "loop" / f"iter_{i}" / "front.csv").set_index("kind").loc["B"] for i in (0, 1))
+    for n in ("theta_twist", "CL_alpha_HT", "Iyy"):
+        assert abs(b1[n] - truth[n]) < abs(b0[n] - truth[n]), n
+        assert b1[n] == pytest.approx(truth[n], rel=0.05), n
+    # Not asserted on this small instance (reported in docs/close_loop.md): the 50 % fall of the pooled trim
+    # RMS, validation RMS not rising and the truth errors at the Eq. 11 point; the full-size study checks them.
+    report = (tmp_path / "loop" / "loop_report.md").read_text()
+    assert "## Error before and after" in report and "## Parameters vs truth" in report
+    assert (tmp_path / "loop" / "loop_trim_vs_speed.png").is_file()
+    assert (tmp_path / "loop" / "loop_validation.png").is_file()
+
+
+@pytest.mark.parametrize("loop, message", [
+    ('candidates = ["wake"]', "[loop]: field 'candidates': unknown candidate 'wake'"),
+    ("max_iterations = -1", "[loop]: field 'max_iterations' must be an integer >= 0"),
+    ("ratio = 0.5", "[loop]: field 'ratio' must be a number"),
+    ("colour = 1", "[loop]: unknown field(s) ['colour']"),
+    ('point = "best"', "[loop]: field 'point' must be \"direct\" or \"chosen\""),
+    ('robust = "yes"', "[loop]: field 'robust' must be true or false"),
+])
+def test_bad_loop_table_is_one_line_exit_2(tmp_path, capsys, loop, message):
+    (tmp_path / "data").mkdir()
+    cfgf = tmp_path / "c.toml"
+    cfgf.write_text(f'[data]\ndataset = "data"\n\n[parameters.Iyy]\ninitial = 5000.0\n\n[loop]\n{loop}\n')
+    assert main(["close-loop", str(cfgf), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()

@@ -140,3 +140,33 @@ def test_j_linear_alone_on_clean_data(clean_responses):
         assert abs(est[n] / P[n] - 1) < 0.10, (n, est[n], P[n])
     data, G = zip(*model_responses(m))
     assert abs(pyo.value(m.J_linear) - j_linear_value(data, G)) < 1e-9 * max(1.0, pyo.value(m.J_linear))
+
+
+# ------------------------------------------------------------------ config switch
+from pyomo_heli.config import ConfigError, load_identification_config  # noqa: E402
+
+CASE1 = DATA.parent.parent / "studies" / "case1.toml"
+
+
+def test_objectives_switch_default_is_bi_objective():
+    cfg = load_identification_config(CASE1)
+    assert cfg.objectives == ("time", "trim") and cfg.linear is None
+    tri = load_identification_config(DATA.parent.parent / "studies" / "case1_tri.toml")
+    assert tri.objectives == ("time", "trim", "linear")
+    assert tri.linear.pairs == (("q", "lon"), ("n_z", "col")) and tri.linear.points == 3
+    assert tri.linear.speeds == pytest.approx((0.0, 80 * KT))
+
+
+@pytest.mark.parametrize("overrides, needle", [
+    ({"objectives": {"use": ["time", "linear"]}}, "field 'use'"),
+    ({"objectives": {"use": ["time", "trim", "lin"]}}, "unknown objective(s) ['lin']"),
+    ({"linear": {"points": 3}}, "[linear]: given but"),
+    ({"objectives": {"use": ["time", "trim", "linear"]}, "linear": {"pairs": [["q", "ped"]]}}, "unknown input 'ped'"),
+    ({"objectives": {"use": ["time", "trim", "linear"]}, "linear": {"coherence_min": 1.5}}, "coherence_min"),
+    ({"objectives": {"use": ["time", "trim", "linear"]}, "linear": {"window": 5}}, "unknown field(s) ['window']"),
+])
+def test_objectives_switch_errors_name_the_field(overrides, needle):
+    with pytest.raises(ConfigError) as exc:
+        load_identification_config(CASE1, overrides)
+    msg = str(exc.value)
+    assert "case1.toml" in msg and needle in msg and "\n" not in msg

@@ -170,3 +170,40 @@ def test_objectives_switch_errors_name_the_field(overrides, needle):
         load_identification_config(CASE1, overrides)
     msg = str(exc.value)
     assert "case1.toml" in msg and needle in msg and "\n" not in msg
+
+
+# ------------------------------------------------------------------ report
+def test_linear_report_from_a_results_folder(tmp_path, clean_responses):
+    """write_linear_report on a hand-made results folder whose estimates are all the truth of
+    bo105_clean: every Bode model equals the truth model, so every band error equals the data-vs-model
+    error of the estimator (< 1 dB, < 5 deg), and the figures and tables are written."""
+    import json
+
+    import pandas as pd
+
+    from pyomo_heli.dataset.frequency_response import save_responses
+    from pyomo_heli.pareto.result import IdentificationResult
+    from pyomo_heli.report.linear import write_linear_report
+
+    _, responses = clean_responses
+    cfg = load_identification_config(DATA.parent.parent / "studies" / "case1_tri.toml",
+                                     {"data": {"dataset": str(DATA)}})
+    truth = json.loads((DATA / "truth.json").read_text())["parameters"]
+    params = {f.name: truth[f.name] for f in cfg.free}
+    point = {"index": 0, "kind": "A", "J_time": -1.0, "J_trim": 0.1, "J_linear": 2.0, "parameters": params}
+    front = pd.DataFrame([{**{k: v for k, v in point.items() if k != "parameters"}, **params, "success": True,
+                           "status": "ok", "iterations": 1, "wall_time": 0.0, "i_trim": 0, "i_linear": 0}])
+    res = IdentificationResult(front=front, parameters=list(params), units={}, utopia=(-1, 0.1, 2.0),
+                               nadir=(0, 1, 3), chosen=point, direct=point, time_domain=point,
+                               info={"objectives": ["time", "trim", "linear"], "grid": [1, 1], "total_time": 0.0,
+                                     "failed_points": 0, "bi_objective": {"chosen": point}})
+    res.save(tmp_path)
+    save_responses(responses, tmp_path / "frequency_responses.csv")
+    report = write_linear_report(tmp_path, cfg)
+    assert report.is_file() and (tmp_path / "bode.png").is_file() and (tmp_path / "front_projections.png").is_file()
+    errs = pd.read_csv(tmp_path / "band_errors.csv")
+    assert set(errs["model"]) == {"time-domain (A)", "bi-objective", "tri-objective", "truth"}
+    assert len(errs) == 4 * len(responses)
+    assert errs["max gain error [dB]"].max() < 1.0 and errs["max phase error [deg]"].max() < 5.0
+    for _, g in errs.groupby("response"):
+        assert g["max gain error [dB]"].nunique() == 1  # same parameters -> same model curve

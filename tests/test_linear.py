@@ -207,3 +207,14 @@ def test_linear_report_from_a_results_folder(tmp_path, clean_responses):
     assert errs["max gain error [dB]"].max() < 1.0 and errs["max phase error [deg]"].max() < 5.0
     for _, g in errs.groupby("response"):
         assert g["max gain error [dB]"].nunique() == 1  # same parameters -> same model curve
+
+
+def test_linearize_command_prints_the_documented_poles(capsys):
+    from pyomo_heli.cli import main
+
+    assert main(["linearize", "--speeds-kt", "0", "80"]) == 0
+    out = capsys.readouterr().out
+    assert "poles [1/s]: -3.7736, -3.7470, -0.2580, 0.0220-0.4056j, 0.0220+0.4056j" in out
+    assert "poles [1/s]: -5.8486, -3.6994, -0.7155, 0.0099-0.2918j, 0.0099+0.2918j" in out
+    assert main(["linearize", "--speeds-kt", "200"]) == 2
+    assert "--speeds-kt" in capsys.readouterr().err

@@ -7,7 +7,6 @@ each estimate, a route independent of the NLP.
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -140,8 +139,6 @@ def write_linear_report(out_dir, cfg) -> Path:
     fig.savefig(out / "front_projections.png", dpi=110)
     fig = plot_bode(responses, curves, omega)
     fig.savefig(out / "bode.png", dpi=110)
-    band_curves = {label: model_curves(cfg.model, p, [r.band() for r in responses], np.array([]))
-                   for label, p in sets.items()}
     band_curves = {label: [model_curves(cfg.model, p, [r], r.band().omega)[0] for r in responses]
                    for label, p in sets.items()}
     errs = band_errors(responses, band_curves)

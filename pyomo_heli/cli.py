@@ -181,7 +181,11 @@ def cmd_identify(args) -> int:
     print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
           f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
     result = run_identification(cfg, args.out)
-    if not args.no_report:
+    if not args.no_report and "linear" in cfg.objectives:
+        from .report.linear import write_linear_report
+
+        print(f"report: {write_linear_report(args.out, cfg)}")
+    elif not args.no_report:
         from .report.identification import write_report
 
         write_report(args.out, cfg)
@@ -206,6 +210,15 @@ def cmd_inspect(args) -> int:
 
     cfg = load_identification_config(args.config)
     print(inspect_problem(cfg, diagnostics=not args.no_diagnostics))
+    return 0
+
+
+def cmd_report_linear(args) -> int:
+    from .config import load_identification_config
+    from .report.linear import write_linear_report
+
+    cfg = load_identification_config(args.config)
+    print(f"report: {write_linear_report(args.out, cfg)}")
     return 0
 
 
@@ -282,6 +295,11 @@ def build_parser() -> argparse.ArgumentParser:
     n.add_argument("config")
     n.add_argument("--no-diagnostics", action="store_true", help="skip the IDAES structural diagnostics")
     n.set_defaults(func=cmd_inspect)
+
+    rl = sub.add_parser("report-linear", help="figures and report of a tri-objective results folder")
+    rl.add_argument("config")
+    rl.add_argument("--out", required=True, help="results folder written by identify")
+    rl.set_defaults(func=cmd_report_linear)
 
     lz = sub.add_parser("linearize", help="A, B and poles of the float model at trim (central differences)")
     lz.add_argument("--speeds-kt", type=float, nargs="+", default=[0, 80])

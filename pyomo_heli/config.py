@@ -37,6 +37,8 @@ class IdentificationConfig:
     nlp: NLPOptions
     pareto: ParetoSettings
     raw: dict = field(default_factory=dict)
+    objectives: tuple = ("time", "trim")  # [objectives] use
+    linear: object = None  # LinearSettings when "linear" is used
 
 
 def _need(d, key, where, types, default=...):
@@ -67,7 +69,8 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     for k, v in (overrides or {}).items():
         raw[k] = {**raw.get(k, {}), **v} if isinstance(v, dict) else v
     f = str(path)
-    known = {"data", "model", "parameters", "objectives", "discretization", "pareto", "solver", "study", "loop"}
+    known = {"data", "model", "parameters", "objectives", "discretization", "pareto", "solver", "study", "loop",
+             "linear"}
     unknown = set(raw) - known
     if unknown:
         raise ConfigError(f"{f}: unknown table(s) {sorted(unknown)}; expected {sorted(known)}")
@@ -174,7 +177,38 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
                                 solver=solver, solver_options=dict(_need(sol, "options", f"{f} [solver]", dict, {})))
     except ValueError as exc:
         raise ConfigError(f"{f} [pareto]: {exc}") from None
+    use, linear = _objectives_use(raw, f)
     return IdentificationConfig(path=path, dataset=ds, maneuvers=mans, validation=val,
                                 resample_hz=float(resample) if resample else None,
                                 max_duration=float(max_dur) if max_dur else None, model=model, free=free,
-                                nlp=nlp, pareto=pareto, raw=raw)
+                                nlp=nlp, pareto=pareto, raw=raw, objectives=use, linear=linear)
+
+
+#: the objective sets an identification can use ([objectives] use)
+OBJECTIVE_SETS = (("time", "trim"), ("time", "trim", "linear"))
+
+
+def _objectives_use(raw: dict, f: str):
+    """[objectives] use and the [linear] table (local linear models, J_linear)."""
+    from .linear_settings import LinearSettings
+
+    obj = raw.get("objectives", {})
+    use = _need(obj, "use", f"{f} [objectives]", list, ["time", "trim"])
+    bad = [u for u in use if u not in ("time", "trim", "linear")]
+    if bad:
+        raise ConfigError(f"{f} [objectives]: field 'use': unknown objective(s) {bad}; choose from time, trim, linear")
+    order = tuple(k for k in ("time", "trim", "linear") if k in use)
+    if order not in OBJECTIVE_SETS:
+        raise ConfigError(f"{f} [objectives]: field 'use': {list(use)} is not supported; use "
+                          + " or ".join(str(list(s)) for s in OBJECTIVE_SETS))
+    lin_raw = raw.get("linear", {})
+    if "linear" not in order:
+        if lin_raw:
+            raise ConfigError(f"{f} [linear]: given but [objectives] use does not include \"linear\"")
+        return order, None
+    if not isinstance(lin_raw, dict):
+        raise ConfigError(f"{f} [linear]: must be a table")
+    try:
+        return order, LinearSettings.from_table(lin_raw)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{f} [linear]: {exc}") from None

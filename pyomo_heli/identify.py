@@ -40,6 +40,10 @@ def build_problem(cfg: IdentificationConfig):
 
 def run_identification(cfg: IdentificationConfig, out: str | Path, progress=print) -> IdentificationResult:
     """Solve anchors, front and choice; write each front point to ``out/front.csv`` as it finishes."""
+    if "linear" in getattr(cfg, "objectives", ()):
+        from .identify_linear import run_tri_identification
+
+        return run_tri_identification(cfg, out, progress)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

@@ -65,3 +65,156 @@ def test_poles_match_docs(nlp_linearizations, speed_kt):
     _, mats = nlp_linearizations
     poles = _sorted(np.linalg.eigvals(mats[speed_kt]["A"]))
     np.testing.assert_allclose(poles, _sorted(DOC_POLES[speed_kt]), atol=6e-5)
+
+
+# ------------------------------------------------------------------ data side and J_linear
+from pyomo_heli.dataset import load_flight_test  # noqa: E402
+from pyomo_heli.dataset.frequency_response import FrequencyResponse, frequency_responses  # noqa: E402
+from pyomo_heli.nlp.identification import IdentificationData, NLPOptions, build_identification_nlp, set_objective  # noqa: E402,E501
+from pyomo_heli.nlp.linear_model import model_responses  # noqa: E402
+from pyomo_heli.nlp.objectives import j_linear_value  # noqa: E402
+from pyomo_heli.nlp.parameters import free_parameter_values  # noqa: E402
+
+DATA = __import__("pathlib").Path(__file__).resolve().parent.parent / "data" / "bo105_clean"
+
+
+@pytest.fixture(scope="module")
+def clean_responses():
+    ft = load_flight_test(DATA)
+    return ft, frequency_responses(ft.identification(), speeds=[0.0, 80 * KT])
+
+
+def test_data_frequency_responses_match_model_in_coherent_band(clean_responses):
+    """bo105_clean (M0 itself): H1 estimates within 1 dB and 5 deg of the model's own G(jw) in the band."""
+    _, responses = clean_responses
+    model = HelicopterModel()
+    seen = set()
+    for r in responses:
+        b = r.band()
+        assert len(b.omega) >= 5, r.label  # the band is not empty: something is tested
+        G = linearize_float(model, r.speed).frequency_response(r.output, r.input, b.omega)
+        gain = 20 * np.log10(np.abs(b.T) / np.abs(G))
+        phase = np.degrees(np.angle(b.T / G))
+        assert np.abs(gain).max() < 1.0, (r.label, gain)
+        assert np.abs(phase).max() < 5.0, (r.label, phase)
+        seen.add((round(r.speed / KT), r.output, r.input))
+    assert {(0, "q", "lon"), (80, "q", "lon"), (0, "n_z", "col"), (80, "n_z", "col")} <= seen
+
+
+def _j_linear_alone(responses, names, rel_start=1.3):
+    model = HelicopterModel()
+    P = model.parameters
+    free = [FreeParameter.from_spec(P, n, initial=P[n] * rel_start) for n in names]
+    ft = load_flight_test(DATA)
+    data = IdentificationData(maneuvers=[], trims=ft.trims.iloc[0:0])
+    m = build_identification_nlp(data, model, free, NLPOptions(), responses=responses)
+    set_objective(m, m.J_linear)
+    res = make_solver(m, "casadi-ipopt", {"tol": 1e-10}).solve()
+    assert res.success, res.status
+    return m, free_parameter_values(m), P
+
+
+def test_j_linear_alone_is_exact_on_model_frequency_responses(clean_responses):
+    """Responses from the float model's finite-difference linearisation (the truth) at the data's bins
+    and coherences: J_linear alone, started 30 % off, recovers CL_alpha_HT and Iyy, and J_linear -> 0."""
+    _, responses = clean_responses
+    model = HelicopterModel()
+    synthetic = []
+    for r in responses:
+        b = r.band()
+        G = linearize_float(model, r.speed).frequency_response(r.output, r.input, b.omega)
+        synthetic.append(FrequencyResponse(b.speed, b.output, b.input, b.omega, G, b.coherence, b.input_power,
+                                           b.coherent))
+    m, est, P = _j_linear_alone(synthetic, ["CL_alpha_HT", "Iyy"])
+    for n in ("CL_alpha_HT", "Iyy"):
+        assert abs(est[n] / P[n] - 1) < 1e-4, (n, est[n], P[n])
+    assert pyo.value(m.J_linear) < 1e-6
+
+
+def test_j_linear_alone_on_clean_data(clean_responses):
+    """Data-side H1 estimates (0.1-0.9 dB, 1-4 deg off the model): CL_alpha_HT and Iyy within 10 %
+    (measured -2.8 % and -6.0 %), and the NLP's J_linear equals the numpy Eq. 9 of the same responses."""
+    _, responses = clean_responses
+    m, est, P = _j_linear_alone([r.band() for r in responses], ["CL_alpha_HT", "Iyy"])
+    for n in ("CL_alpha_HT", "Iyy"):
+        assert abs(est[n] / P[n] - 1) < 0.10, (n, est[n], P[n])
+    data, G = zip(*model_responses(m))
+    assert abs(pyo.value(m.J_linear) - j_linear_value(data, G)) < 1e-9 * max(1.0, pyo.value(m.J_linear))
+
+
+# ------------------------------------------------------------------ config switch
+from pyomo_heli.config import ConfigError, load_identification_config  # noqa: E402
+
+CASE1 = DATA.parent.parent / "studies" / "case1.toml"
+
+
+def test_objectives_switch_default_is_bi_objective():
+    cfg = load_identification_config(CASE1)
+    assert cfg.objectives == ("time", "trim") and cfg.linear is None
+    tri = load_identification_config(DATA.parent.parent / "studies" / "case1_tri.toml")
+    assert tri.objectives == ("time", "trim", "linear")
+    assert tri.linear.pairs == (("q", "lon"), ("n_z", "col")) and tri.linear.points == 3
+    assert tri.linear.speeds == pytest.approx((0.0, 80 * KT))
+
+
+@pytest.mark.parametrize("overrides, needle", [
+    ({"objectives": {"use": ["time", "linear"]}}, "field 'use'"),
+    ({"objectives": {"use": ["time", "trim", "lin"]}}, "unknown objective(s) ['lin']"),
+    ({"linear": {"points": 3}}, "[linear]: given but"),
+    ({"objectives": {"use": ["time", "trim", "linear"]}, "linear": {"pairs": [["q", "ped"]]}}, "unknown input 'ped'"),
+    ({"objectives": {"use": ["time", "trim", "linear"]}, "linear": {"coherence_min": 1.5}}, "coherence_min"),
+    ({"objectives": {"use": ["time", "trim", "linear"]}, "linear": {"window": 5}}, "unknown field(s) ['window']"),
+])
+def test_objectives_switch_errors_name_the_field(overrides, needle):
+    with pytest.raises(ConfigError) as exc:
+        load_identification_config(CASE1, overrides)
+    msg = str(exc.value)
+    assert "case1.toml" in msg and needle in msg and "\n" not in msg
+
+
+# ------------------------------------------------------------------ report
+def test_linear_report_from_a_results_folder(tmp_path, clean_responses):
+    """write_linear_report on a hand-made results folder whose estimates are all the truth of
+    bo105_clean: every Bode model equals the truth model, so every band error equals the data-vs-model
+    error of the estimator (< 1 dB, < 5 deg), and the figures and tables are written."""
+    import json
+
+    import pandas as pd
+
+    from pyomo_heli.dataset.frequency_response import save_responses
+    from pyomo_heli.pareto.result import IdentificationResult
+    from pyomo_heli.report.linear import write_linear_report
+
+    _, responses = clean_responses
+    cfg = load_identification_config(DATA.parent.parent / "studies" / "case1_tri.toml",
+                                     {"data": {"dataset": str(DATA)}})
+    truth = json.loads((DATA / "truth.json").read_text())["parameters"]
+    params = {f.name: truth[f.name] for f in cfg.free}
+    point = {"index": 0, "kind": "A", "J_time": -1.0, "J_trim": 0.1, "J_linear": 2.0, "parameters": params}
+    front = pd.DataFrame([{**{k: v for k, v in point.items() if k != "parameters"}, **params, "success": True,
+                           "status": "ok", "iterations": 1, "wall_time": 0.0, "i_trim": 0, "i_linear": 0}])
+    res = IdentificationResult(front=front, parameters=list(params), units={}, utopia=(-1, 0.1, 2.0),
+                               nadir=(0, 1, 3), chosen=point, direct=point, time_domain=point,
+                               info={"objectives": ["time", "trim", "linear"], "grid": [1, 1], "total_time": 0.0,
+                                     "failed_points": 0, "bi_objective": {"chosen": point}})
+    res.save(tmp_path)
+    save_responses(responses, tmp_path / "frequency_responses.csv")
+    report = write_linear_report(tmp_path, cfg)
+    assert report.is_file() and (tmp_path / "bode.png").is_file() and (tmp_path / "front_projections.png").is_file()
+    errs = pd.read_csv(tmp_path / "band_errors.csv")
+    assert set(errs["model"]) == {"time-domain (A)", "bi-objective", "tri-objective", "truth"}
+    assert len(errs) == 4 * len(responses)
+    assert errs["max gain error [dB]"].max() < 1.0 and errs["max phase error [deg]"].max() < 5.0
+    for _, g in errs.groupby("response"):
+        assert g["max gain error [dB]"].nunique() == 1  # same parameters -> same model curve
+
+
+def test_linearize_command_prints_the_documented_poles(capsys):
+    from pyomo_heli.cli import main
+
+    assert main(["linearize", "--speeds-kt", "0", "80"]) == 0
+    out = capsys.readouterr().out
+    assert "poles [1/s]: -3.7736, -3.7470, -0.2580, 0.0220-0.4056j, 0.0220+0.4056j" in out
+    assert "poles [1/s]: -5.8486, -3.6994, -0.7155, 0.0099-0.2918j, 0.0099+0.2918j" in out
+    assert main(["linearize", "--speeds-kt", "200"]) == 2
+    assert "--speeds-kt" in capsys.readouterr().err

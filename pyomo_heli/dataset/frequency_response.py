@@ -17,7 +17,7 @@ measured errors against the model's own linearisation).
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -127,12 +127,13 @@ def estimate(maneuvers, output: str, input: str, settings: SpectralSettings | No
 
 
 def single_input_maneuvers(maneuvers, input: str) -> dict[float, list]:
-    """Maneuvers that move only ``input``, grouped by trim speed [m/s]."""
+    """Maneuvers whose excited inputs (manifest ``inputs``) are ``input`` alone, grouped by trim speed [m/s].
+
+    The manifest is used rather than the records because recorded inputs carry sensor noise.
+    """
     out: dict[float, list] = {}
     for mv in maneuvers:
-        inc = mv.increments()
-        moved = [k for k, v in inc.items() if np.max(np.abs(v)) > 0]
-        if moved == [input]:
+        if list(mv.inputs) == [input]:
             out.setdefault(round(float(mv.trim_speed), 6), []).append(mv)
     return out
 

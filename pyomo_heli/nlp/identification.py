@@ -81,8 +81,12 @@ def _model_at(model: HelicopterModel, free: list[FreeParameter]) -> HelicopterMo
 
 
 def build_identification_nlp(data: IdentificationData, model: HelicopterModel, free: list[FreeParameter],
-                             options: NLPOptions | None = None) -> pyo.ConcreteModel:
-    """Build the full-discretisation NLP, initialised from a simulation at the initial parameters."""
+                             options: NLPOptions | None = None, responses=None) -> pyo.ConcreteModel:
+    """Build the full-discretisation NLP, initialised from a simulation at the initial parameters.
+
+    responses: data frequency responses (coherent band only); if given, the model's
+    linearisations and ``m.J_linear`` (paper Eq. 9) are added, see :mod:`.linear_model`.
+    """
     opts = options or NLPOptions()
     m = pyo.ConcreteModel(name="identification")
     pmap = add_parameters(m, model.parameters, free)
@@ -131,6 +135,12 @@ def build_identification_nlp(data: IdentificationData, model: HelicopterModel, f
                            {o: np.array(v) for o, v in init_res.items()})
     else:
         m.J_time = pyo.Expression(expr=0.0)
+
+    # --- local linear models (third objective), only when asked for
+    if responses:
+        from .linear_model import add_linear_information
+
+        add_linear_information(m, model, pmap, responses, data.speeds, [m.trim[i] for i in m.trim_speeds])
 
     # --- epsilon constraint and the active objective
     m.eps_trim = pyo.Param(initialize=1e20, mutable=True)

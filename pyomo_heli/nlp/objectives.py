@@ -108,3 +108,57 @@ def add_trim_objective(m: pyo.Block, residuals: list) -> None:
     n = len(residuals)
     m.n_trims = pyo.Param(initialize=n)
     m.J_trim = pyo.Expression(expr=sum(sum((r / DEG) ** 2 for r in point) for point in residuals) / n)
+
+
+# ---------------------------------------------------------------- J_linear (paper Eq. 9)
+#: gain weight [1/dB^2] and phase weight [1/deg^2] of Eq. 9, Tischler & Remple's values, which
+#: make 1 dB of gain error count like 7.57 deg of phase error
+W_GAIN, W_PHASE = 1.0, 0.01745
+DB_PER_NEPER2 = 10.0 / math.log(10.0)  # 10 log10(|G|^2) = DB_PER_NEPER2 * ln(|G|^2)
+
+
+def coherence_weight(coherence) -> np.ndarray:
+    """W_gamma = [1.58 (1 - exp(-gamma^2))]^2 (Tischler & Remple), gamma^2 = the coherence."""
+    return (1.58 * (1.0 - np.exp(-np.asarray(coherence, float)))) ** 2
+
+
+def linear_terms(G_re, G_im, T: complex, coherence: float, ops=None):
+    """Weighted squared gain [dB] and phase [deg] errors of one frequency (Eq. 9 summand).
+
+    The phase error is the angle of G / T, written as 2 atan(Im / (|z| + Re)) with
+    z = G conj(T)/|T|: smooth everywhere except at exactly 180 deg, no atan2 branch cut.
+    ``ops`` supplies log, sqrt, atan (Pyomo or numpy).
+    """
+    ops = ops or pyo
+    c, s = math.cos(np.angle(T)), math.sin(np.angle(T))
+    re = G_re * c + G_im * s
+    im = G_im * c - G_re * s
+    gain_err = DB_PER_NEPER2 * ops.log(G_re**2 + G_im**2) - 20 * math.log10(abs(T))
+    phase_err = 2 * ops.atan(im / (ops.sqrt(re**2 + im**2) + re)) * (180.0 / math.pi)
+    return float(coherence_weight(coherence)) * (W_GAIN * gain_err**2 + W_PHASE * phase_err**2)
+
+
+def add_linear_objective(m: pyo.Block, terms: list[list]) -> None:
+    """``m.J_linear``: Eq. 9 per frequency response, averaged over the responses.
+
+    terms: one list per frequency response of the Eq. 9 summands (``linear_terms``);
+    J_r = 20/n_omega sum_k summand_k, J_linear = mean_r J_r.
+    """
+    n = len(terms)
+    m.n_linear_responses = pyo.Param(initialize=n)
+    m.J_linear = pyo.Expression(expr=sum(20.0 / len(t) * sum(t) for t in terms) / n)
+
+
+def j_linear_value(responses, model_T) -> float:
+    """J_linear of data responses against complex model responses (numpy; an independent check).
+
+    responses: FrequencyResponse objects restricted to the bins used (``.band()``);
+    model_T: one complex array per response at the same bins.
+    """
+    total = 0.0
+    for r, G in zip(responses, model_T):
+        G = np.asarray(G)
+        gain = 20 * np.log10(np.abs(G)) - 20 * np.log10(np.abs(r.T))
+        phase = np.degrees(np.angle(G / r.T))
+        total += 20.0 / len(r.omega) * np.sum(coherence_weight(r.coherence) * (W_GAIN * gain**2 + W_PHASE * phase**2))
+    return total / len(responses)

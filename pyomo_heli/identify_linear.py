@@ -1,0 +1,107 @@
+"""Tri-objective identification run: data -> frequency responses -> NLP with J_linear -> 2-D front.
+
+Called by :func:`pyomo_heli.identify.run_identification` when a config's
+``[objectives] use`` includes "linear". Files written into ``out`` (each front
+point as soon as it is solved):
+
+- ``frequency_responses.csv``: the data frequency responses on the full
+  frequency grid, with coherence, input power and the coherent-band flag;
+- ``front.csv``: anchors A, B, C and the grid points (J_time, J_trim, J_linear,
+  both bounds, grid position, parameters, solver status);
+- ``chosen.json``, ``time_domain.json`` as for the bi-objective run; ``chosen``
+  is the tri-objective Eq. 11 choice and ``info.bi_objective`` the two-objective
+  choice on the grid row whose J_linear bound is inactive.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import pandas as pd
+
+from .dataset import load_flight_test
+from .dataset.frequency_response import frequency_responses, save_responses
+from .nlp.identification import build_identification_nlp, prepare_data
+from .pareto.result import IdentificationResult
+from .pareto.tri_front import TriParetoSolver, utopia_distance_n
+
+
+def _point_dict(p) -> dict:
+    d = asdict(p)
+    for k in ("epsilon", "epsilon_linear"):
+        d[k] = None if not math.isfinite(d[k]) else d[k]
+    return d
+
+
+def data_responses(cfg, ft):
+    """Frequency responses of the config's identification maneuvers (full record rate)."""
+    if cfg.maneuvers == "identification":
+        mans = ft.identification()
+    else:
+        mans = [ft.maneuvers[n] for n in cfg.maneuvers]
+    return frequency_responses(mans, cfg.linear.pairs, cfg.linear.speeds, cfg.linear.spectral)
+
+
+def run_tri_identification(cfg, out, progress=print) -> IdentificationResult:
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    ft = load_flight_test(cfg.dataset)
+    data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    responses = data_responses(cfg, ft)
+    if not responses:
+        raise ValueError(f"{cfg.path} [linear]: no maneuver at speeds_kt moves exactly one input of the pairs")
+    save_responses(responses, out / "frequency_responses.csv")
+    band = [r.band() for r in responses]
+    for r in band:
+        progress(f"  frequency response {r.label}: {len(r.omega)} coherent bins"
+                 + (f", {r.omega.min():.2f}..{r.omega.max():.2f} rad/s" if len(r.omega) else ""))
+    m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp, responses=[r for r in band if len(r.omega)])
+    t_build = time.perf_counter() - t0
+    progress(f"built NLP: {len(data.maneuvers)} maneuvers, {len(data.trims)} trim points, "
+             f"{sum(len(r.omega) for r in band)} frequency points in {t_build:.1f} s")
+    rows = []
+    front_csv = out / "front.csv"
+    if front_csv.exists():
+        front_csv.unlink()
+
+    def on_point(p):
+        rows.append(p.row())
+        pd.DataFrame(rows).to_csv(front_csv, index=False, float_format="%.12g")
+        params = " ".join(f"{k}={v:.6g}" for k, v in p.parameters.items())
+        progress(f"  point {p.index:>2} {p.kind:<3} ({p.i_trim},{p.i_linear}) J_time={p.J_time:.6g} "
+                 f"J_trim={p.J_trim:.6g} J_linear={p.J_linear:.6g} {params} "
+                 f"[{p.status}, {p.iterations} it, {p.wall_time:.1f} s]")
+
+    t1 = time.perf_counter()
+    ps = TriParetoSolver(m, cfg.pareto, cfg.linear.points, on_point=on_point)
+    setup = time.perf_counter() - t1
+    ps.front()
+    chosen, _, utopia, nadir = ps.choose()
+    bi, _, bi_utopia, bi_nadir = ps.choose(("time", "trim"), row_linear=0)
+    direct = ps.direct_choice(chosen)
+    on_point(direct)
+    progress(f"  chosen (3 objectives): point {chosen.index} {chosen.kind}; bi-objective choice: point {bi.index}; "
+             f"direct Eq. 11 solve: {direct.status}")
+    front = pd.DataFrame(rows).sort_values("index").reset_index(drop=True)
+    ok = front["success"].astype(bool) & front["kind"].isin(["A", "B", "C", "eps"])
+    front["utopia_distance"] = float("nan")
+    front.loc[ok, "utopia_distance"] = utopia_distance_n(front.loc[ok, ["J_time", "J_trim", "J_linear"]].to_numpy(),
+                                                         utopia, nadir)
+    front.to_csv(front_csv, index=False, float_format="%.12g")
+    params = [f.name for f in cfg.free]
+    result = IdentificationResult(
+        front=front, parameters=params, units={n: cfg.model.parameters.spec(n).unit for n in params},
+        utopia=utopia, nadir=nadir, chosen=_point_dict(chosen), direct=_point_dict(direct),
+        time_domain=_point_dict(ps.anchor_points["A"]),
+        info={"config": str(cfg.path), "dataset": str(cfg.dataset), "objectives": list(cfg.objectives),
+              "build_time": t_build, "solver_setup_time": setup, "total_time": time.perf_counter() - t0,
+              "maneuvers": [mv.name for mv in data.maneuvers], "solver": cfg.pareto.solver,
+              "grid": [cfg.pareto.points, cfg.linear.points],
+              "eps_trim": list(ps.eps_trim), "eps_linear": list(ps.eps_linear),
+              "bi_objective": {"chosen": _point_dict(bi), "utopia": list(bi_utopia), "nadir": list(bi_nadir)},
+              "failed_points": int((~front["success"].astype(bool)).sum())})
+    result.save(out)
+    return result

@@ -1,0 +1,68 @@
+"""The [linear] table of an identification config: which frequency responses J_linear uses.
+
+Example (studies/case1_tri.toml):
+
+    [objectives]
+    use = ["time", "trim", "linear"]
+
+    [linear]
+    pairs = [["q", "lon"], ["n_z", "col"]]   # (output, input)
+    speeds_kt = [0, 80]                      # flight conditions (maneuver trim speeds)
+    coherence_min = 0.9                      # coherent band: coherence at least this ...
+    input_power_min = 0.2                    # ... and input autospectrum at least this of its peak
+    window_s = 5.12                          # Welch segment length
+    omega_min_rad_s = 0.9
+    omega_max_rad_s = 20.0
+    points = 3                               # epsilon grid points on J_linear (the front is points x this)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .dataset.frequency_response import DEFAULT_PAIRS, SpectralSettings
+from .units import KT
+
+_OUTPUTS = ("q", "theta", "n_x", "n_z")
+_INPUTS = ("col", "lon")
+
+
+@dataclass
+class LinearSettings:
+    pairs: tuple = DEFAULT_PAIRS
+    speeds: tuple = (0.0, 80.0 * KT)  # [m/s]
+    spectral: SpectralSettings = field(default_factory=SpectralSettings)
+    points: int = 3
+
+    @classmethod
+    def from_table(cls, t: dict) -> "LinearSettings":
+        known = {"pairs", "speeds_kt", "coherence_min", "input_power_min", "window_s", "overlap",
+                 "omega_min_rad_s", "omega_max_rad_s", "points"}
+        unknown = sorted(set(t) - known)
+        if unknown:
+            raise ValueError(f"unknown field(s) {unknown}; expected {sorted(known)}")
+        pairs = t.get("pairs", [list(p) for p in DEFAULT_PAIRS])
+        if not isinstance(pairs, list) or not all(isinstance(p, list) and len(p) == 2 for p in pairs):
+            raise ValueError("field 'pairs' must be a list of [output, input] pairs")
+        for o, i in pairs:
+            if o not in _OUTPUTS:
+                raise ValueError(f"field 'pairs': unknown output '{o}'; choose from {', '.join(_OUTPUTS)}")
+            if i not in _INPUTS:
+                raise ValueError(f"field 'pairs': unknown input '{i}'; choose from {', '.join(_INPUTS)}")
+        speeds = t.get("speeds_kt", [0, 80])
+        if not isinstance(speeds, list) or not speeds or not all(isinstance(v, (int, float)) and 0 <= v <= 150
+                                                                 for v in speeds):
+            raise ValueError("field 'speeds_kt' must be a non-empty list of speeds in 0..150 kt")
+        points = t.get("points", 3)
+        if not isinstance(points, int) or isinstance(points, bool) or points < 2:
+            raise ValueError(f"field 'points' must be an integer of at least 2, got {points!r}")
+        kw = {}
+        for key, name in (("coherence_min", "coherence_min"), ("input_power_min", "input_power_min"),
+                          ("window_s", "window_s"), ("overlap", "overlap"), ("omega_min_rad_s", "omega_min"),
+                          ("omega_max_rad_s", "omega_max")):
+            if key in t:
+                v = t[key]
+                if isinstance(v, bool) or not isinstance(v, (int, float)):
+                    raise ValueError(f"field '{key}' must be a number, got {v!r}")
+                kw[name] = float(v)
+        return cls(pairs=tuple((o, i) for o, i in pairs), speeds=tuple(float(v) * KT for v in speeds),
+                   spectral=SpectralSettings(**kw), points=points)

@@ -132,7 +132,7 @@ def cmd_identify(args) -> int:
     cfg = load_identification_config(args.config, overrides)
     print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
           f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
-    result = run_identification(cfg, args.out)
+    result = run_identification(cfg, args.out, uncertainty=not getattr(args, "no_uncertainty", False))
     if not args.no_report:
         from .report.identification import write_report
 
@@ -196,6 +196,8 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--no-report", action="store_true", help="skip figures and report")
     i.add_argument("--cold-check", action="store_true",
                    help="also solve every interior front point cold ([pareto] cold_check), to measure warm starts")
+    i.add_argument("--no-uncertainty", action="store_true",
+                   help="skip the Cramer-Rao standard errors and identifiability analysis")
     i.set_defaults(func=cmd_identify)
 
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")

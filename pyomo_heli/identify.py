@@ -38,8 +38,14 @@ def build_problem(cfg: IdentificationConfig):
     return m, data, ft
 
 
-def run_identification(cfg: IdentificationConfig, out: str | Path, progress=print) -> IdentificationResult:
-    """Solve anchors, front and choice; write each front point to ``out/front.csv`` as it finishes."""
+def run_identification(cfg: IdentificationConfig, out: str | Path, progress=print,
+                       uncertainty: bool = False) -> IdentificationResult:
+    """Solve anchors, front and choice; write each front point to ``out/front.csv`` as it finishes.
+
+    uncertainty: then add Cramer-Rao standard errors of every point and the
+    identifiability at the chosen point (pyomo_heli.uncertainty.front); the
+    command line does this unless ``--no-uncertainty`` is given.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -83,4 +89,11 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
               "mean_iterations_front": _mean(front.loc[front.kind == "eps", "iterations"]),
               "mean_iterations_front_cold": _mean(front.loc[front.kind == "eps", "cold_iterations"])})
     result.save(out)
+    if uncertainty:
+        from .uncertainty.front import add_uncertainty
+
+        t2 = time.perf_counter()
+        add_uncertainty(result, cfg, data, out, progress)
+        result.info["uncertainty_time"] = time.perf_counter() - t2
+        result.save(out)
     return result

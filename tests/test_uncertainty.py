@@ -158,3 +158,38 @@ def test_swapping_measured_data_equals_building_from_it():
         assert pyo.value(m.R_hat[o, o]) == pytest.approx(pyo.value(fixed.R_hat[o, o]), rel=1e-12)
     with pytest.raises(ValueError, match="mutable_data"):
         set_measurements(fixed, noisy)
+
+
+def test_standard_errors_are_written_to_front_chosen_and_report(tmp_path):
+    """add_uncertainty on a hand-made result (no solve): se_ columns and at_bound in front.csv, the
+    uncertainty entries in chosen.json / time_domain.json, identifiability.csv and the report section;
+    the time-domain point's twist sits at its upper bound and is projected out."""
+    import pandas as pd
+
+    from pyomo_heli.pareto.result import IdentificationResult
+    from pyomo_heli.report.uncertainty import uncertainty_section
+    from pyomo_heli.uncertainty.front import add_uncertainty
+
+    cfg = load_identification_config(CONFIGS / "small_case1.toml")
+    data = prepare_data(load_flight_test(cfg.dataset), ["lon3211_80kt_a"], resample_hz=25, max_duration=4.0)
+    data.trims = data.trims.iloc[::6].reset_index(drop=True)
+    noisy = noisy_copy(data, SIGMA, {"col": 0.07 * DEG, "lon": 0.07 * DEG, "theta": 0.14 * DEG}, seed=3, k=0)
+    base = {"epsilon": None, "J_time": -1.0, "J_trim": 0.2, "success": True, "status": "Solve_Succeeded",
+            "iterations": 1, "wall_time": 0.0}
+    pts = [dict(base, index=0, kind="A", parameters={"theta_twist": 0.0, "CL_alpha_HT": 6.2}),
+           dict(base, index=1, kind="eps", parameters={"theta_twist": TRUTH["theta_twist"], "CL_alpha_HT": 6.2})]
+    front = pd.DataFrame([{**{k: v for k, v in p.items() if k != "parameters"}, **p["parameters"]} for p in pts])
+    res = IdentificationResult(front=front, parameters=["theta_twist", "CL_alpha_HT"],
+                               units={"theta_twist": "rad/m", "CL_alpha_HT": "1/rad"}, utopia=(0, 0), nadir=(1, 1),
+                               chosen=pts[1], direct=None, time_domain=pts[0])
+    add_uncertainty(res, cfg, noisy, tmp_path, progress=lambda *_: None)
+    f = pd.read_csv(tmp_path / "front.csv")
+    assert f.loc[0, "at_bound"] == "theta_twist:upper" and math.isnan(f.loc[0, "se_theta_twist"])
+    assert (f["se_CL_alpha_HT"] > 0).all() and f.loc[1, "se_theta_twist"] > 0
+    again = IdentificationResult.load(tmp_path)
+    u = again.chosen["uncertainty"]
+    assert u["combination"] in ("weighted", "time", "trim") and u["correlation"][0][0] == pytest.approx(1.0)
+    assert again.time_domain["uncertainty"]["se"]["theta_twist"] is None
+    assert (tmp_path / "identifiability.csv").is_file()
+    text = "\n".join(uncertainty_section(again, tmp_path, cfg.model))
+    assert "at upper bound, projected out" in text and "weakest direction" in text

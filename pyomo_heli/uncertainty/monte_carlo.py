@@ -96,7 +96,20 @@ def _row(task, estimator, p, cfg, noisy, t0) -> dict:
 
 
 def run_realization(task: RealizationTask) -> list[dict]:
-    """Solve one realization; rows for the time-domain estimate and (optionally) the multi-objective one."""
+    """Solve one realization; rows for the time-domain estimate and (optionally) the multi-objective one.
+
+    A solve that raises (e.g. a failed anchor) gives a row with success False
+    and the error as its status, so one bad realization never stops the study.
+    """
+    try:
+        return _run_realization(task)
+    except Exception as exc:  # noqa: BLE001 - recorded, not swallowed: the row carries the error
+        est = ("time", "multi") if task.multi_objective else ("time",)
+        return [{"realization": task.k, "estimator": e, "success": False,
+                 "status": f"error: {type(exc).__name__}: {exc}"[:300]} for e in est]
+
+
+def _run_realization(task: RealizationTask) -> list[dict]:
     t0 = time.perf_counter()
     cfg, data, m, ps = _problem(task.problem)
     ps._snap_initial.restore()  # the same start for every realization, whatever ran before
@@ -199,7 +212,8 @@ def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: d
             pd.DataFrame(rows).to_csv(csv, index=False, float_format="%.12g")
         r = new[0]
         progress(f"  realization {r['realization']:>3}: " + "; ".join(
-            f"{x['estimator']} " + " ".join(f"{p}={x[p]:.6g}" for p in params) + f" [{x['status']}]" for x in new)
+            f"{x['estimator']} " + " ".join(f"{p}={x.get(p, float('nan')):.6g}" for p in params)
+            + f" [{x['status']}]" for x in new)
             + f" ({time.perf_counter() - t0:.0f} s)")
 
     if executor is None and workers == 0:

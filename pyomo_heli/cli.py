@@ -142,6 +142,26 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def cmd_uncertainty(args) -> int:
+    import shutil
+    from pathlib import Path
+
+    from .config import load_identification_config
+    from .dataset import load_flight_test
+    from .nlp.identification import prepare_data
+    from .pareto.result import IdentificationResult
+    from .uncertainty.front import add_uncertainty
+
+    cfg = load_identification_config(args.config)
+    result = IdentificationResult.load(args.results)
+    if args.out and Path(args.out).resolve() != Path(args.results).resolve():
+        shutil.copytree(args.results, args.out, dirs_exist_ok=True)
+    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    add_uncertainty(result, cfg, data, args.out or args.results, points=args.points)
+    print(f"standard errors in {args.out or args.results} (front.csv, chosen.json, identifiability.csv)")
+    return 0
+
+
 def cmd_demo(args) -> int:
     from pathlib import Path
 
@@ -199,6 +219,14 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--no-uncertainty", action="store_true",
                    help="skip the Cramer-Rao standard errors and identifiability analysis")
     i.set_defaults(func=cmd_identify)
+
+    u = sub.add_parser("uncertainty", help="standard errors and identifiability of an existing results folder")
+    u.add_argument("config", help="the identification config the results came from")
+    u.add_argument("--results", required=True, help="results folder of `identify`")
+    u.add_argument("--out", help="write a copy with standard errors here (default: into --results)")
+    u.add_argument("--points", choices=("all", "chosen"), default="all",
+                   help="every front point, or only A, the chosen point and the direct solve")
+    u.set_defaults(func=cmd_uncertainty)
 
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")
     d.add_argument("--out", default="demo_out")

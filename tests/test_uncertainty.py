@@ -193,3 +193,13 @@ def test_standard_errors_are_written_to_front_chosen_and_report(tmp_path):
     assert (tmp_path / "identifiability.csv").is_file()
     text = "\n".join(uncertainty_section(again, tmp_path, cfg.model))
     assert "at upper bound, projected out" in text and "weakest direction" in text
+
+
+def test_uncertainty_command_names_a_missing_results_folder(tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "pyomo_heli", "uncertainty", str(CONFIGS / "small_case1.toml"),
+                           "--results", str(tmp_path / "nowhere")], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1 and "nowhere" in proc.stderr and "front.csv" in proc.stderr

@@ -23,15 +23,22 @@ def _information(cfg, data, parameters):
                              cfg.nlp.trim_outputs)
 
 
-def add_uncertainty(result, cfg, data, out=None, progress=print):
-    """Compute and attach standard errors (every front point, A, chosen, direct); save to ``out``."""
+def add_uncertainty(result, cfg, data, out=None, progress=print, points: str = "all"):
+    """Compute and attach standard errors (every front point, A, chosen, direct); save to ``out``.
+
+    points: "all" front points, or "chosen" (only A, the chosen point and the direct solve).
+    """
+    if points not in ("all", "chosen"):
+        raise ValueError(f"points must be 'all' or 'chosen', got {points!r}")
     names = list(result.parameters)
     front = result.front
     for c in [f"se_{n}" for n in names] + ["at_bound"]:
         front[c] = float("nan") if c != "at_bound" else ""
+    front["at_bound"] = front["at_bound"].astype(object)
+    wanted = {int(result.time_domain["index"]), int(result.chosen["index"])}
     by_index = {}
     for i, r in front.iterrows():
-        if not bool(r["success"]):
+        if not bool(r["success"]) or (points == "chosen" and int(r["index"]) not in wanted):
             continue
         params = {n: float(r[n]) for n in names}
         info = _information(cfg, data, params)

@@ -203,3 +203,13 @@ def test_uncertainty_command_names_a_missing_results_folder(tmp_path):
                            "--results", str(tmp_path / "nowhere")], capture_output=True, text=True)
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1 and "nowhere" in proc.stderr and "front.csv" in proc.stderr
+
+
+def test_a_direction_no_objective_sees_gets_an_infinite_error():
+    """A pure trim fit cannot see a parameter the trims do not depend on (like Iyy): infinite, not zero."""
+    info = _linear_info(np.random.default_rng(6))
+    info.S_trim["col"][:, 2] = 0.0
+    r = cramer_rao(info, _free(3), weights=(0.0, 1.0))
+    assert r.se["p2"] == math.inf and np.isfinite([r.se["p0"], r.se["p1"]]).all()
+    np.testing.assert_allclose([r.se["p0"], r.se["p1"]],
+                               np.sqrt(np.diag(np.linalg.inv(info.fisher_trim()[:2, :2]))), rtol=1e-8)

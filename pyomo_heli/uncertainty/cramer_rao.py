@@ -242,14 +242,18 @@ def cramer_rao(info: PointInformation, free, kind: str = "A", weights: tuple | N
     G = a * a * Ft + b * b * info.gradient_covariance_trim()[np.ix_(idx, idx)]
     cov_free = np.full((len(idx), len(idx)), np.nan)
     if idx:
-        try:
-            Hi = np.linalg.pinv(H, rcond=1e-14, hermitian=True)
-            cov_free = Hi @ G @ Hi
-        except np.linalg.LinAlgError:
-            pass
+        # H singular along some direction: the data do not determine it; the parameters taking part
+        # in it get an infinite standard error instead of the zero a pseudo-inverse would give
+        w, V = np.linalg.eigh(H)
+        null = w <= 1e-12 * max(w.max(), 1e-300)
+        Hi = (V[:, ~null] / w[~null]) @ V[:, ~null].T
+        cov_free = Hi @ G @ Hi
+        blind = np.abs(V[:, null]).max(axis=1) > 1e-6 if null.any() else np.zeros(len(idx), bool)
+        cov_free[blind, :] = cov_free[:, blind] = np.nan
+        cov_free[blind, blind] = np.inf
     cov = np.full((n, n), np.nan)
     cov[np.ix_(idx, idx)] = cov_free
-    se_arr = np.sqrt(np.clip(np.diag(cov), 0, None))
+    se_arr = np.sqrt(np.clip(np.diag(cov), 0, None))  # nan (at a bound) and inf (not determined) pass
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(se_arr, se_arr)
     combination = "time" if b == 0 else ("trim" if a == 0 else "weighted")

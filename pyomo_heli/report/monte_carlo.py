@@ -44,8 +44,10 @@ def plot_monte_carlo(res, path: str | Path | None = None) -> Figure:
     """Per parameter: the estimates of every realization per estimator, the truth, and mean +- CRB."""
     params = list(res.parameters)
     est = res.estimates[res.estimates.success.astype(bool)]
-    estimators = list(dict.fromkeys(est.estimator))
-    fig = Figure(figsize=(5.0 * len(params), 3.6), constrained_layout=True)
+    estimators = sorted(dict.fromkeys(est.estimator), key=lambda e: (e not in ESTIMATOR_LABELS,
+                                                                     list(ESTIMATOR_LABELS).index(e)
+                                                                     if e in ESTIMATOR_LABELS else 0, e))
+    fig = Figure(figsize=(5.0 * len(params), 3.9), layout="constrained")
     axes = fig.subplots(1, len(params), squeeze=False)[0]
     for ax, p in zip(axes, params):
         unit, f = display(p)
@@ -65,7 +67,8 @@ def plot_monte_carlo(res, path: str | Path | None = None) -> Figure:
         ax.set_xlabel(f"{p} [{unit}]")
         ax.set_title(f"{p}: estimates, mean $\\pm$ median CRB", fontsize=9)
         ax.set_ylim(-0.6, len(estimators) - 0.3)
-    axes[0].legend(fontsize=7, loc="lower left")
+    fig.legend(*axes[0].get_legend_handles_labels(), fontsize=7, loc="outside lower center",
+               ncol=len(estimators) + 1)
     if path is not None:
         fig.savefig(path, dpi=110)
     return fig

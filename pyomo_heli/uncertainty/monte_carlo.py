@@ -141,7 +141,7 @@ class MonteCarloResult:
         """Per estimator and parameter: mean, bias, spread (std), median CRB and spread/CRB."""
         rows = []
         est = self.estimates[self.estimates.success.astype(bool)]
-        for e in dict.fromkeys(est.estimator):
+        for e in sorted(dict.fromkeys(est.estimator), key=lambda e: (e != "time", e)):
             d = est[est.estimator == e]
             for p in self.parameters:
                 x = d[p].to_numpy(dtype=float)

@@ -132,7 +132,7 @@ def cmd_identify(args) -> int:
     cfg = load_identification_config(args.config, overrides)
     print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
           f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
-    result = run_identification(cfg, args.out, uncertainty=not getattr(args, "no_uncertainty", False))
+    result = run_identification(cfg, args.out, uncertainty=getattr(args, "uncertainty", "all"))
     if not args.no_report:
         from .report.identification import write_report
 
@@ -216,8 +216,9 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--no-report", action="store_true", help="skip figures and report")
     i.add_argument("--cold-check", action="store_true",
                    help="also solve every interior front point cold ([pareto] cold_check), to measure warm starts")
-    i.add_argument("--no-uncertainty", action="store_true",
-                   help="skip the Cramer-Rao standard errors and identifiability analysis")
+    i.add_argument("--uncertainty", choices=("all", "chosen", "none"), default="all",
+                   help="Cramer-Rao standard errors for every front point (all, default), only for A, the chosen "
+                        "point and the direct solve (chosen, faster), or none")
     i.set_defaults(func=cmd_identify)
 
     u = sub.add_parser("uncertainty", help="standard errors and identifiability of an existing results folder")

@@ -169,6 +169,7 @@ def cmd_demo(args) -> int:
     if not config.is_file():
         raise UserError(f"demo config {config} not found (the demo runs from a source checkout)")
     args.config, args.no_report = str(config), False
+    args.uncertainty = "chosen"  # standard errors of A, C and the direct solve: keeps the demo's duration
     return cmd_identify(args)
 
 

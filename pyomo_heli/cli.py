@@ -180,7 +180,7 @@ def cmd_identify(args) -> int:
     cfg = load_identification_config(args.config, overrides)
     print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
           f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
-    result = run_identification(cfg, args.out)
+    result = run_identification(cfg, args.out, uncertainty=getattr(args, "uncertainty", "all"))
     if not args.no_report and "linear" in cfg.objectives:
         from .report.linear import write_linear_report
 
@@ -194,6 +194,26 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def cmd_uncertainty(args) -> int:
+    import shutil
+    from pathlib import Path
+
+    from .config import load_identification_config
+    from .dataset import load_flight_test
+    from .nlp.identification import prepare_data
+    from .pareto.result import IdentificationResult
+    from .uncertainty.front import add_uncertainty
+
+    cfg = load_identification_config(args.config)
+    result = IdentificationResult.load(args.results)
+    if args.out and Path(args.out).resolve() != Path(args.results).resolve():
+        shutil.copytree(args.results, args.out, dirs_exist_ok=True)
+    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    add_uncertainty(result, cfg, data, args.out or args.results, points=args.points)
+    print(f"standard errors in {args.out or args.results} (front.csv, chosen.json, identifiability.csv)")
+    return 0
+
+
 def cmd_demo(args) -> int:
     from pathlib import Path
 
@@ -201,6 +221,7 @@ def cmd_demo(args) -> int:
     if not config.is_file():
         raise UserError(f"demo config {config} not found (the demo runs from a source checkout)")
     args.config, args.no_report = str(config), False
+    args.uncertainty = "chosen"  # standard errors of A, C and the direct solve: keeps the demo's duration
     return cmd_identify(args)
 
 
@@ -278,6 +299,9 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--no-report", action="store_true", help="skip figures and report")
     i.add_argument("--cold-check", action="store_true",
                    help="also solve every interior front point cold ([pareto] cold_check), to measure warm starts")
+    i.add_argument("--uncertainty", choices=("all", "chosen", "none"), default="all",
+                   help="Cramer-Rao standard errors for every front point (all, default), only for A, the chosen "
+                        "point and the direct solve (chosen, faster), or none")
     i.set_defaults(func=cmd_identify)
 
     cl = sub.add_parser("close-loop", help="identify, attribute the residual to a candidate effect, add it, "
@@ -286,6 +310,14 @@ def build_parser() -> argparse.ArgumentParser:
     cl.add_argument("--out", required=True, help="results folder (loop.json, loop_report.md, iter_*/)")
     cl.add_argument("--max-iterations", type=int, help="override [loop] max_iterations")
     cl.set_defaults(func=cmd_close_loop)
+
+    u = sub.add_parser("uncertainty", help="standard errors and identifiability of an existing results folder")
+    u.add_argument("config", help="the identification config the results came from")
+    u.add_argument("--results", required=True, help="results folder of `identify`")
+    u.add_argument("--out", help="write a copy with standard errors here (default: into --results)")
+    u.add_argument("--points", choices=("all", "chosen"), default="all",
+                   help="every front point, or only A, the chosen point and the direct solve")
+    u.set_defaults(func=cmd_uncertainty)
 
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")
     d.add_argument("--out", default="demo_out")

@@ -38,12 +38,19 @@ def build_problem(cfg: IdentificationConfig):
     return m, data, ft
 
 
-def run_identification(cfg: IdentificationConfig, out: str | Path, progress=print) -> IdentificationResult:
-    """Solve anchors, front and choice; write each front point to ``out/front.csv`` as it finishes."""
+def run_identification(cfg: IdentificationConfig, out: str | Path, progress=print,
+                       uncertainty: bool | str = False) -> IdentificationResult:
+    """Solve anchors, front and choice; write each front point to ``out/front.csv`` as it finishes.
+
+    uncertainty: True or "all": then add Cramer-Rao standard errors of every
+    front point and the identifiability at the chosen point
+    (pyomo_heli.uncertainty.front); "chosen": only for A, the chosen point and
+    the direct solve; False or "none": skip. The command line's default is "all".
+    """
     if "linear" in getattr(cfg, "objectives", ()):
         from .identify_linear import run_tri_identification
 
-        return run_tri_identification(cfg, out, progress)
+        return run_tri_identification(cfg, out, progress)  # uncertainty: two-objective runs only
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -87,4 +94,11 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
               "mean_iterations_front": _mean(front.loc[front.kind == "eps", "iterations"]),
               "mean_iterations_front_cold": _mean(front.loc[front.kind == "eps", "cold_iterations"])})
     result.save(out)
+    if uncertainty and uncertainty != "none":
+        from .uncertainty.front import add_uncertainty
+
+        t2 = time.perf_counter()
+        add_uncertainty(result, cfg, data, out, progress, points="chosen" if uncertainty == "chosen" else "all")
+        result.info["uncertainty_time"] = time.perf_counter() - t2
+        result.save(out)
     return result

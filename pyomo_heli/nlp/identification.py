@@ -42,6 +42,10 @@ class NLPOptions:
     covariance: str = "diagonal"
     ncp: int = 2
     scheme: str = "LAGRANGE-RADAU"
+    #: measured outputs and trims as variables pinned by equal bounds (``y_meas``,
+    #: ``m.trim_meas``) instead of numbers, so that :func:`set_measurements` can swap
+    #: in another data set (a noise realization) and re-solve without a rebuild
+    mutable_data: bool = False
 
     def __post_init__(self):
         bad = [o for o in self.time_outputs if o not in TIME_OUTPUTS]
@@ -103,9 +107,14 @@ def build_identification_nlp(data: IdentificationData, model: HelicopterModel, f
 
     # --- trim objective
     trim_res = []
-    for _, row in data.trims.iterrows():
+    if opts.mutable_data:
+        m.trim_meas = pyo.Var(range(len(data.trims)), list(opts.trim_outputs))
+    for i, (_, row) in enumerate(data.trims.iterrows()):
         blk = m.trim[data.speed_index(row["V"])]
-        trim_res.append([row[k] - getattr(blk, k) for k in opts.trim_outputs])
+        if opts.mutable_data:
+            trim_res.append([m.trim_meas[i, k] - getattr(blk, k) for k in opts.trim_outputs])
+        else:
+            trim_res.append([row[k] - getattr(blk, k) for k in opts.trim_outputs])
     if trim_res and opts.trim_outputs:
         add_trim_objective(m, trim_res)
     else:
@@ -126,9 +135,14 @@ def build_identification_nlp(data: IdentificationData, model: HelicopterModel, f
         tp = float_trims[i]
         sim = simulate(sim_model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=2)
         initialise_from(blk, sim, sim_model.state_names)
+        if opts.mutable_data:
+            blk.y_meas = pyo.Var(list(opts.time_outputs), blk.samples)
         for o in opts.time_outputs:
             meas = mv.data[o].to_numpy()
-            residuals[o].extend(float(y) - blk.y[o, tt] for y, tt in zip(meas, blk.samples))
+            if opts.mutable_data:
+                residuals[o].extend(blk.y_meas[o, tt] - blk.y[o, tt] for tt in blk.samples)
+            else:
+                residuals[o].extend(float(y) - blk.y[o, tt] for y, tt in zip(meas, blk.samples))
             init_res[o].extend(meas - sim[o].to_numpy())
     if data.maneuvers and opts.time_outputs:
         add_time_objective(m, residuals, list(opts.time_outputs), opts.covariance,
@@ -147,7 +161,45 @@ def build_identification_nlp(data: IdentificationData, model: HelicopterModel, f
     m.eps_con = pyo.Constraint(expr=m.J_trim <= m.eps_trim)
     m.objective = pyo.Objective(expr=m.J_time)
     m.options = opts
+    if opts.mutable_data:
+        set_measurements(m, data)
     return m
+
+
+def _pin(var, value: float) -> None:
+    var.setlb(value)
+    var.setub(value)
+    var.set_value(value, skip_validation=True)
+
+
+def set_measurements(m: pyo.ConcreteModel, data: IdentificationData) -> None:
+    """Pin the measured outputs and trims of an NLP built with ``mutable_data`` to ``data``.
+
+    ``data`` must have the NLP's maneuvers (same names and sample times) and
+    trim speeds in the same order; only the measured values may differ. A
+    solver adapter picks the new values up as bounds on the next re-solve.
+    """
+    if m.component("trim_meas") is None and not any(m.man[n].component("y_meas") is not None
+                                                     for n in m.maneuver_names):
+        raise ValueError("the NLP was built without NLPOptions(mutable_data=True)")
+    opts = m.options
+    if [mv.name for mv in data.maneuvers] != list(m.maneuver_names):
+        raise ValueError(f"maneuvers {[mv.name for mv in data.maneuvers]} differ from the NLP's "
+                         f"{list(m.maneuver_names)}")
+    for mv in data.maneuvers:
+        blk = m.man[mv.name]
+        samples = list(blk.samples)
+        if len(samples) != len(mv.data) or not np.allclose(samples, mv.data["t"].to_numpy()):
+            raise ValueError(f"maneuver {mv.name}: sample times differ from the NLP's")
+        for o in opts.time_outputs:
+            for tt, y in zip(samples, mv.data[o].to_numpy()):
+                _pin(blk.y_meas[o, tt], float(y))
+    if m.component("trim_meas") is not None:
+        if len(data.trims) != len({i for i, _ in m.trim_meas}):
+            raise ValueError(f"{len(data.trims)} trim points differ from the NLP's")
+        for i, (_, row) in enumerate(data.trims.iterrows()):
+            for k in opts.trim_outputs:
+                _pin(m.trim_meas[i, k], float(row[k]))
 
 
 def set_objective(m: pyo.ConcreteModel, expr) -> None:

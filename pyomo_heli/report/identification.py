@@ -449,6 +449,10 @@ def write_report(out_dir, cfg, results_dir=None) -> Path:
 
     L += ["## Parameters", "", "Table: [parameters.md](parameters.md) (also `parameters.csv`).", "", ptab_md, ""]
 
+    from .uncertainty import uncertainty_section
+
+    L += uncertainty_section(result, results_dir if results_dir is not None else out, cfg.model)
+
     L += ["## Trim predictions", "", "![Trim vs speed](trim_vs_speed.png)", "",
           f"RMS of data minus model over the {len(trims)} trim points "
           f"({int(trims['source'].eq('level').sum()) if 'source' in trims else len(trims)} level-flight, the rest "

@@ -1,0 +1,262 @@
+"""Cramer-Rao standard errors and correlations of an estimate.
+
+The information of each objective comes from the output sensitivities of
+:mod:`pyomo_heli.simulation.sensitivity` at the estimate, with every residual
+covariance *as estimated* from the residuals there:
+
+- J_time (output-error ML, paper Eqs. 5-6): Fisher information
+  ``F_time = sum_o S_o^T S_o / R_o`` with ``R_o = mean(e_o^2) + r_floor_o^2``,
+  the same diagonal R the NLP estimates (nlp/objectives.py). It is also the
+  Gauss-Newton Hessian of J_time, and the covariance of its gradient.
+- J_trim (paper Eq. 7, mean square in degrees): the trim residual covariance
+  ``Sigma_o = mean(r_o^2)`` per trim output; Fisher information
+  ``F_trim = sum_o S_o^T S_o / Sigma_o``.
+
+A front point of the epsilon-constraint method minimises J_time subject to
+J_trim <= eps; by its KKT conditions it is a stationary point of the weighted
+sum ``a J_time + b J_trim`` (b/a = the constraint multiplier). Its covariance
+is the sandwich (M-estimator) covariance of that weighted sum,
+
+    cov = H^-1 G H^-1,   H = a F_time + b H_trim,   G = a^2 F_time + b^2 G_trim,
+
+with ``H_trim`` the Gauss-Newton Hessian of J_trim and ``G_trim`` the
+covariance of its gradient under the estimated trim noise. The weights (a, b)
+are found from the two gradients at the point (``a g_time + b g_trim = 0``):
+point A has (1, 0) (pure ML: cov = F_time^-1), the trim anchor B the limit
+b >> a, an interior point its own ratio. This needs no solver multipliers, so
+it works for any parameter set read back from ``front.csv``.
+
+Parameters at an active bound are reported as such and projected out: their
+rows and columns are removed before the inversion (they are treated as known),
+so they get no standard error instead of a meaningless one.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from ..nlp.objectives import R_FLOOR
+from ..simulation.sensitivity import sensitivities
+from ..units import DEG
+
+#: a parameter counts as at a bound when it is this many scales (or less) from it
+BOUND_TOL = 1e-4
+#: trim residual variance floor [rad^2], so noise-free data give huge, finite information
+TRIM_FLOOR = (1e-6) ** 2
+
+
+def active_bounds(values: dict, free, tol: float = BOUND_TOL) -> dict:
+    """name -> "lower", "upper" or "" for each free parameter (FreeParameter list)."""
+    out = {}
+    for f in free:
+        v = values[f.name]
+        if v - f.lower <= tol * f.scale:
+            out[f.name] = "lower"
+        elif f.upper - v <= tol * f.scale:
+            out[f.name] = "upper"
+        else:
+            out[f.name] = ""
+    return out
+
+
+@dataclass
+class PointInformation:
+    """Sensitivities, residuals and residual covariances at one estimate (SI units).
+
+    S_time[o]: (N, n) output sensitivities of time output o (maneuvers
+    concatenated); e_time[o]: measured minus model; R_time[o]: its estimated
+    variance. The same with ``trim`` for the trim outputs (M trim points).
+    """
+
+    names: list
+    values: dict
+    scale: np.ndarray
+    S_time: dict = field(default_factory=dict)
+    e_time: dict = field(default_factory=dict)
+    R_time: dict = field(default_factory=dict)
+    S_trim: dict = field(default_factory=dict)
+    e_trim: dict = field(default_factory=dict)
+    R_trim: dict = field(default_factory=dict)
+
+    @property
+    def n_trims(self) -> int:
+        return len(next(iter(self.e_trim.values()))) if self.e_trim else 0
+
+    def fisher_time(self) -> np.ndarray:
+        n = len(self.names)
+        return sum((S.T @ S / self.R_time[o] for o, S in self.S_time.items()), np.zeros((n, n)))
+
+    def fisher_trim(self) -> np.ndarray:
+        n = len(self.names)
+        return sum((S.T @ S / self.R_trim[o] for o, S in self.S_trim.items()), np.zeros((n, n)))
+
+    def grad_time(self) -> np.ndarray:
+        """Gradient of J_time (concentrated, R at its estimate)."""
+        n = len(self.names)
+        return sum((-S.T @ self.e_time[o] / self.R_time[o] for o, S in self.S_time.items()), np.zeros(n))
+
+    def grad_trim(self) -> np.ndarray:
+        """Gradient of J_trim = (1/M) sum (r/DEG)^2."""
+        n, M = len(self.names), max(self.n_trims, 1)
+        return sum((-2.0 / (M * DEG**2) * S.T @ self.e_trim[o] for o, S in self.S_trim.items()), np.zeros(n))
+
+    def hessian_trim(self) -> np.ndarray:
+        """Gauss-Newton Hessian of J_trim."""
+        n, M = len(self.names), max(self.n_trims, 1)
+        return sum((2.0 / (M * DEG**2) * S.T @ S for S in self.S_trim.values()), np.zeros((n, n)))
+
+    def gradient_covariance_trim(self) -> np.ndarray:
+        """Covariance of J_trim's gradient when trim output o has noise variance R_trim[o]."""
+        n, M = len(self.names), max(self.n_trims, 1)
+        c = (2.0 / (M * DEG**2)) ** 2
+        return sum((c * self.R_trim[o] * S.T @ S for o, S in self.S_trim.items()), np.zeros((n, n)))
+
+    def scaled_time(self) -> np.ndarray:
+        """Noise-normalised sensitivities of the time outputs, per unit of each parameter's scale."""
+        rows = [S / math.sqrt(self.R_time[o]) for o, S in self.S_time.items()]
+        return (np.vstack(rows) if rows else np.zeros((0, len(self.names)))) * self.scale
+
+    def scaled_trim(self) -> np.ndarray:
+        rows = [S / math.sqrt(self.R_trim[o]) for o, S in self.S_trim.items()]
+        return (np.vstack(rows) if rows else np.zeros((0, len(self.names)))) * self.scale
+
+
+def point_information(model, free, values: dict, maneuvers, trims, time_outputs, trim_outputs,
+                      rel_step: float = 1e-5) -> PointInformation:
+    """Sensitivities and estimated residual covariances at ``values`` (free parameter values, SI).
+
+    maneuvers: dataset Maneuver objects (as in the NLP: resampled, cropped);
+    trims: DataFrame with V and the trim outputs (or None).
+    """
+    names = [f.name for f in free]
+    mdl = model.with_parameters(**{n: float(values[n]) for n in names})
+    time_outputs, trim_outputs = list(time_outputs), list(trim_outputs)
+    has_trims = trims is not None and len(trims) and trim_outputs
+    s = sensitivities(mdl, names, maneuvers=list(maneuvers), time_outputs=time_outputs,
+                      trim_speeds=list(trims["V"]) if has_trims else [], trim_out=trim_outputs if has_trims else [],
+                      rel_step=rel_step)
+    info = PointInformation(names=names, values={n: float(values[n]) for n in names},
+                            scale=np.array([f.scale for f in free]))
+    for o in s.time:
+        meas = np.concatenate([mv.data[o].to_numpy() for mv in maneuvers])
+        e = meas - s.y_time[o]
+        info.S_time[o], info.e_time[o] = s.time[o], e
+        info.R_time[o] = float(np.mean(e**2) + R_FLOOR[o] ** 2)
+    for o in s.trim:
+        e = trims[o].to_numpy(dtype=float) - s.y_trim[o]
+        info.S_trim[o], info.e_trim[o] = s.trim[o], e
+        info.R_trim[o] = float(np.mean(e**2) + TRIM_FLOOR)
+    return info
+
+
+@dataclass
+class ParameterUncertainty:
+    """Standard errors [SI] and correlations of one estimate; at-bound parameters projected out."""
+
+    names: list
+    values: dict
+    se: dict  # name -> standard error (nan when at a bound)
+    at_bound: dict  # name -> "lower" / "upper" / ""
+    correlation: list  # n x n, nan rows/columns for at-bound parameters
+    combination: str  # "time", "trim" or "weighted"
+    weights: tuple = (1.0, 0.0)  # (a, b) of a J_time + b J_trim
+
+    def correlation_frame(self) -> pd.DataFrame:
+        return pd.DataFrame(np.array(self.correlation, dtype=float), index=self.names, columns=self.names)
+
+    def row(self) -> dict:
+        """Columns for front.csv: se_<name> and at_bound (e.g. 'theta_twist:upper')."""
+        d = {f"se_{n}": self.se[n] for n in self.names}
+        d["at_bound"] = ";".join(f"{n}:{b}" for n, b in self.at_bound.items() if b)
+        return d
+
+    def to_dict(self) -> dict:
+        def clean(x):
+            return None if (isinstance(x, float) and not math.isfinite(x)) else x
+
+        return {"names": list(self.names), "values": self.values, "se": {k: clean(v) for k, v in self.se.items()},
+                "at_bound": self.at_bound, "correlation": [[clean(float(x)) for x in r] for r in self.correlation],
+                "combination": self.combination, "weights": list(self.weights)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ParameterUncertainty":
+        nan = float("nan")
+        return cls(names=d["names"], values=d["values"], se={k: nan if v is None else v for k, v in d["se"].items()},
+                   at_bound=d["at_bound"], correlation=[[nan if x is None else x for x in r] for r in d["correlation"]],
+                   combination=d["combination"], weights=tuple(d["weights"]))
+
+    def table(self) -> pd.DataFrame:
+        rows = []
+        for n in self.names:
+            v, s = self.values[n], self.se[n]
+            rows.append({"parameter": n, "estimate": v,
+                         "standard error": s if math.isfinite(s) else float("nan"),
+                         "relative %": 100 * s / abs(v) if (math.isfinite(s) and v != 0) else float("nan"),
+                         "note": f"at {self.at_bound[n]} bound, projected out" if self.at_bound[n] else ""})
+        return pd.DataFrame(rows)
+
+    def __str__(self) -> str:
+        return (self.table().to_string(index=False, float_format=lambda x: f"{x:.4g}") + "\n\ncorrelation:\n"
+                + self.correlation_frame().to_string(float_format=lambda x: f"{x:+.3f}"))
+
+
+def objective_weights(info: PointInformation, kind: str, free_idx) -> tuple[float, float]:
+    """(a, b) with the point stationary for a J_time + b J_trim; see the module docstring."""
+    if kind == "A" or not info.S_trim:
+        return 1.0, 0.0
+    if not info.S_time:
+        return 0.0, 1.0
+    Ft, Hr = info.fisher_time()[np.ix_(free_idx, free_idx)], info.hessian_trim()[np.ix_(free_idx, free_idx)]
+    if kind == "B":
+        # lexicographic trim anchor: J_trim dominates; J_time only decides what trims cannot see
+        return 1e-6 * np.linalg.norm(Hr) / max(np.linalg.norm(Ft), 1e-300), 1.0
+    sc = info.scale[free_idx]
+    G = np.column_stack([info.grad_time()[free_idx] * sc, info.grad_trim()[free_idx] * sc])
+    G = G / np.maximum(np.linalg.norm(G, axis=0), 1e-300)  # balance, then undo below
+    v = np.linalg.svd(G)[2][-1]
+    v = v if v.sum() >= 0 else -v
+    a, b = max(v[0], 0.0), max(v[1], 0.0)
+    nt, nr = np.linalg.norm(info.grad_time()[free_idx] * sc), np.linalg.norm(info.grad_trim()[free_idx] * sc)
+    a, b = a / max(nt, 1e-300), b / max(nr, 1e-300)
+    s = a + b
+    return (a / s, b / s) if s > 0 else (1.0, 0.0)
+
+
+def cramer_rao(info: PointInformation, free, kind: str = "A", weights: tuple | None = None) -> ParameterUncertainty:
+    """Standard errors and correlations at ``info``'s estimate for a front point of ``kind``.
+
+    kind "A" (time domain): F_time^-1. "B" / "eps" / "direct": the sandwich
+    covariance of the weighted sum it is stationary for (module docstring).
+    ``weights`` (a, b) overrides the weights found from the gradients.
+    """
+    names = info.names
+    bounds = active_bounds(info.values, free)
+    idx = [i for i, n in enumerate(names) if not bounds[n]]
+    n = len(names)
+    a, b = weights if weights is not None else objective_weights(info, kind, idx)
+    Ft = info.fisher_time()[np.ix_(idx, idx)]
+    H = a * Ft + b * info.hessian_trim()[np.ix_(idx, idx)]
+    G = a * a * Ft + b * b * info.gradient_covariance_trim()[np.ix_(idx, idx)]
+    cov_free = np.full((len(idx), len(idx)), np.nan)
+    if idx:
+        # H singular along some direction: the data do not determine it; the parameters taking part
+        # in it get an infinite standard error instead of the zero a pseudo-inverse would give
+        w, V = np.linalg.eigh(H)
+        null = w <= 1e-12 * max(w.max(), 1e-300)
+        Hi = (V[:, ~null] / w[~null]) @ V[:, ~null].T
+        cov_free = Hi @ G @ Hi
+        blind = np.abs(V[:, null]).max(axis=1) > 1e-6 if null.any() else np.zeros(len(idx), bool)
+        cov_free[blind, :] = cov_free[:, blind] = np.nan
+        cov_free[blind, blind] = np.inf
+    cov = np.full((n, n), np.nan)
+    cov[np.ix_(idx, idx)] = cov_free
+    se_arr = np.sqrt(np.clip(np.diag(cov), 0, None))  # nan (at a bound) and inf (not determined) pass
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(se_arr, se_arr)
+    combination = "time" if b == 0 else ("trim" if a == 0 else "weighted")
+    return ParameterUncertainty(names=list(names), values=dict(info.values),
+                                se={nm: float(se_arr[i]) for i, nm in enumerate(names)}, at_bound=bounds,
+                                correlation=corr.tolist(), combination=combination, weights=(float(a), float(b)))

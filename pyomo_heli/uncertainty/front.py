@@ -1,0 +1,66 @@
+"""Standard errors of every front point and of the chosen points of an identification result.
+
+Adds to an :class:`~pyomo_heli.pareto.result.IdentificationResult`:
+
+- ``front.csv``: columns ``se_<parameter>`` (SI, empty when the parameter is at
+  a bound) and ``at_bound`` (e.g. ``theta_twist:upper``) for every solved point;
+- ``chosen.json``: an ``uncertainty`` entry (standard errors, correlation
+  matrix, at-bound flags, the objective weights used) in ``chosen``,
+  ``direct`` and in ``time_domain.json``;
+- ``identifiability.csv``: singular values and directions of the scaled
+  sensitivity matrices (time, trim, combined) at the chosen point.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .cramer_rao import cramer_rao, point_information
+from .identifiability import identifiability
+
+
+def _information(cfg, data, parameters):
+    return point_information(cfg.model, cfg.free, parameters, data.maneuvers, data.trims, cfg.nlp.time_outputs,
+                             cfg.nlp.trim_outputs)
+
+
+def add_uncertainty(result, cfg, data, out=None, progress=print, points: str = "all"):
+    """Compute and attach standard errors (every front point, A, chosen, direct); save to ``out``.
+
+    points: "all" front points, or "chosen" (only A, the chosen point and the direct solve).
+    """
+    if points not in ("all", "chosen"):
+        raise ValueError(f"points must be 'all' or 'chosen', got {points!r}")
+    names = list(result.parameters)
+    front = result.front
+    for c in [f"se_{n}" for n in names] + ["at_bound"]:
+        front[c] = float("nan") if c != "at_bound" else ""
+    front["at_bound"] = front["at_bound"].astype(object)
+    wanted = {int(result.time_domain["index"]), int(result.chosen["index"])}
+    by_index = {}
+    for i, r in front.iterrows():
+        if not bool(r["success"]) or (points == "chosen" and int(r["index"]) not in wanted):
+            continue
+        params = {n: float(r[n]) for n in names}
+        info = _information(cfg, data, params)
+        u = cramer_rao(info, cfg.free, kind=str(r["kind"]))
+        for k, v in u.row().items():
+            front.at[i, k] = v
+        by_index[int(r["index"])] = (u, info)
+        progress(f"  standard errors, point {int(r['index']):>2}: "
+                 + " ".join(f"{n}={u.values[n]:.6g}+-{u.se[n]:.3g}" if not u.at_bound[n] else f"{n} at {u.at_bound[n]} bound"
+                            for n in names))
+    for point in (result.time_domain, result.chosen):
+        if point and int(point["index"]) in by_index:
+            point["uncertainty"] = by_index[int(point["index"])][0].to_dict()
+    if result.direct and result.direct.get("success"):
+        u = cramer_rao(_information(cfg, data, result.direct["parameters"]), cfg.free, kind="direct")
+        result.direct["uncertainty"] = u.to_dict()
+    ident = None
+    if int(result.chosen["index"]) in by_index:
+        ident = identifiability(by_index[int(result.chosen["index"])][1])
+        progress("identifiability at the chosen point:\n" + ident.summary())
+    if out is not None:
+        result.save(out)
+        if ident is not None:
+            ident.save(Path(out) / "identifiability.csv")
+    return result, ident

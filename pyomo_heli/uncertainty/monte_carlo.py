@@ -1,0 +1,240 @@
+"""Monte Carlo over seeded noise realizations: time-domain and multi-objective estimates.
+
+Each realization adds known white noise (:mod:`.realizations`) to a
+noise-free data set, re-solves point A (time domain) and, optionally, the
+Pareto front and its Eq. 11 choice (multi-objective), and computes the
+Cramer-Rao standard errors at each estimate. The spread of the estimates over
+realizations is an independent check of those standard errors.
+
+Speed: a worker process builds the NLP once, with the measured data held in
+variables pinned by bounds (``NLPOptions.mutable_data``); every realization
+restores the same initial point, pins the new data and re-solves, so no NL
+file is rewritten and the result of a realization does not depend on which
+worker ran it or what it ran before.
+
+Parallelism: the realizations are independent tasks
+(:func:`run_realization` on a picklable :class:`RealizationTask`). By default
+they run in a ``concurrent.futures.ProcessPoolExecutor``; any object with the
+``concurrent.futures.Executor`` interface can be passed instead, e.g. a Dask
+cluster's ``distributed.Client(...).get_executor()`` (Dask is not a
+dependency). ``workers=0`` runs them in this process. Each finished
+realization is appended to ``realizations.csv`` at once, and a rerun into the
+same folder skips realizations already there.
+"""
+from __future__ import annotations
+
+import concurrent.futures as cf
+import dataclasses
+import json
+import math
+import multiprocessing
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..config import load_identification_config
+from ..dataset import load_flight_test
+from ..nlp.identification import build_identification_nlp, prepare_data, set_measurements
+from ..pareto.front import ParetoSolver
+from .cramer_rao import cramer_rao, point_information
+from .realizations import noisy_copy
+
+
+@dataclass(frozen=True)
+class ProblemSpec:
+    """An identification config plus overrides of its tables (e.g. a shorter horizon)."""
+
+    config: str
+    overrides: str = "{}"  # JSON text, so the spec is hashable and picklable
+
+    @classmethod
+    def make(cls, config, overrides: dict | None = None) -> "ProblemSpec":
+        return cls(str(Path(config).resolve()), json.dumps(overrides or {}, sort_keys=True))
+
+
+@dataclass(frozen=True)
+class RealizationTask:
+    problem: ProblemSpec
+    k: int
+    seed: int
+    sigma: tuple  # ((output, sigma SI), ...)
+    trim_sigma: tuple
+    multi_objective: bool = True
+    crb: bool = True
+
+
+_CACHE: dict = {}
+
+
+def _problem(spec: ProblemSpec):
+    """(cfg, data, nlp, pareto solver) of a spec, built once per process."""
+    if spec not in _CACHE:
+        _CACHE.clear()
+        cfg = load_identification_config(spec.config, json.loads(spec.overrides))
+        cfg.nlp = dataclasses.replace(cfg.nlp, mutable_data=True)
+        ft = load_flight_test(cfg.dataset)
+        data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+        m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
+        ps = ParetoSolver(m, cfg.pareto)
+        _CACHE[spec] = (cfg, data, m, ps)
+    return _CACHE[spec]
+
+
+def _row(task, estimator, p, cfg, noisy, t0) -> dict:
+    row = {"realization": task.k, "estimator": estimator, "front_index": p.index, "kind": p.kind,
+           "success": bool(p.success), "status": p.status, "iterations": p.iterations, "J_time": p.J_time,
+           "J_trim": p.J_trim, **{n: float(v) for n, v in p.parameters.items()}}
+    if task.crb and p.success:
+        info = point_information(cfg.model, cfg.free, p.parameters, noisy.maneuvers, noisy.trims,
+                                 cfg.nlp.time_outputs, cfg.nlp.trim_outputs)
+        row.update(cramer_rao(info, cfg.free, kind=p.kind).row())
+    row["wall_time"] = time.perf_counter() - t0
+    return row
+
+
+def run_realization(task: RealizationTask) -> list[dict]:
+    """Solve one realization; rows for the time-domain estimate and (optionally) the multi-objective one.
+
+    A solve that raises (e.g. a failed anchor) gives a row with success False
+    and the error as its status, so one bad realization never stops the study.
+    """
+    try:
+        return _run_realization(task)
+    except Exception as exc:  # noqa: BLE001 - recorded, not swallowed: the row carries the error
+        est = ("time", "multi") if task.multi_objective else ("time",)
+        return [{"realization": task.k, "estimator": e, "success": False,
+                 "status": f"error: {type(exc).__name__}: {exc}"[:300]} for e in est]
+
+
+def _run_realization(task: RealizationTask) -> list[dict]:
+    t0 = time.perf_counter()
+    cfg, data, m, ps = _problem(task.problem)
+    ps._snap_initial.restore()  # the same start for every realization, whatever ran before
+    noisy = noisy_copy(data, dict(task.sigma), dict(task.trim_sigma), task.seed, task.k)
+    set_measurements(m, noisy)
+    if task.multi_objective:
+        points = ps.front()
+        a = points[0]
+        rows = [_row(task, "time", a, cfg, noisy, t0)]
+        chosen, _ = ps.choose()
+        rows.append(_row(task, "multi", chosen, cfg, noisy, t0))
+    else:
+        # point A alone: J_time from the initial guess, as the front's first anchor
+        a = ps._solve("time", 0, "A", math.inf, "none")
+        rows = [_row(task, "time", a, cfg, noisy, t0)]
+    return rows
+
+
+@dataclass
+class MonteCarloResult:
+    """Estimates per realization and estimator, the truth, and the summary statistics."""
+
+    estimates: pd.DataFrame
+    parameters: list
+    truth: dict
+    info: dict = field(default_factory=dict)
+
+    def summary(self) -> pd.DataFrame:
+        """Per estimator and parameter: mean, bias, spread (std), median CRB and spread/CRB."""
+        rows = []
+        est = self.estimates[self.estimates.success.astype(bool)]
+        for e in sorted(dict.fromkeys(est.estimator), key=lambda e: (e != "time", e)):
+            d = est[est.estimator == e]
+            for p in self.parameters:
+                x = d[p].to_numpy(dtype=float)
+                tr = self.truth.get(p, float("nan"))
+                se_col = f"se_{p}"
+                se = d[se_col].to_numpy(dtype=float) if se_col in d else np.array([np.nan])
+                crb = float(np.nanmedian(se)) if np.isfinite(se).any() else float("nan")
+                std = float(np.std(x, ddof=1)) if len(x) > 1 else float("nan")
+                at_bound = int(d["at_bound"].astype(object).fillna("").astype(str).str.contains(p).sum()) if "at_bound" in d else 0
+                rows.append({"estimator": e, "parameter": p, "n": len(x), "truth": tr, "mean": float(np.mean(x)),
+                             "bias": float(np.mean(x)) - tr, "bias %": 100 * (float(np.mean(x)) - tr) / abs(tr)
+                             if tr else float("nan"), "std": std, "crb": crb,
+                             "std/crb": std / crb if crb and math.isfinite(crb) else float("nan"),
+                             "at bound": at_bound})
+        return pd.DataFrame(rows)
+
+    def save(self, out) -> None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        self.estimates.to_csv(out / "realizations.csv", index=False, float_format="%.12g")
+        self.summary().to_csv(out / "summary.csv", index=False, float_format="%.8g")
+        (out / "monte_carlo.json").write_text(json.dumps({"parameters": self.parameters, "truth": self.truth,
+                                                          "info": self.info}, indent=2, sort_keys=True) + "\n")
+
+    @classmethod
+    def load(cls, out) -> "MonteCarloResult":
+        out = Path(out)
+        meta = json.loads((out / "monte_carlo.json").read_text())
+        return cls(estimates=pd.read_csv(out / "realizations.csv"), parameters=meta["parameters"],
+                   truth=meta["truth"], info=meta.get("info", {}))
+
+    def __str__(self) -> str:
+        return self.summary().to_string(index=False, float_format=lambda x: f"{x:.5g}")
+
+
+def _default_executor(workers: int):
+    # spawn: fresh interpreters, no forked solver threads; tasks and results are plain data
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+
+
+def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: dict, trim_sigma: dict,
+                    truth: dict, out=None, multi_objective: bool = True, crb: bool = True, workers: int = 2,
+                    executor: cf.Executor | None = None, progress=print) -> MonteCarloResult:
+    """Run (or finish) ``realizations`` noise realizations; write each one to ``out`` as it finishes.
+
+    executor: any concurrent.futures Executor (e.g. ``dask.distributed.Client().get_executor()``);
+    default a process pool of ``workers`` processes, or this process when ``workers == 0``.
+    """
+    cfg = load_identification_config(problem.config, json.loads(problem.overrides))
+    params = [f.name for f in cfg.free]
+    csv = Path(out) / "realizations.csv" if out is not None else None
+    rows: list[dict] = []
+    if csv is not None:
+        csv.parent.mkdir(parents=True, exist_ok=True)
+        if csv.exists():
+            rows = pd.read_csv(csv).to_dict("records")
+    done = {int(r["realization"]) for r in rows}
+    tasks = [RealizationTask(problem, k, seed, tuple(sorted(sigma.items())), tuple(sorted(trim_sigma.items())),
+                             multi_objective, crb) for k in range(realizations) if k not in done]
+    if done:
+        progress(f"{len(done)} realizations already in {csv}; running {len(tasks)}")
+    t0 = time.perf_counter()
+
+    def finished(new):
+        rows.extend(new)
+        rows.sort(key=lambda r: (int(r["realization"]), str(r["estimator"])))
+        if csv is not None:
+            pd.DataFrame(rows).to_csv(csv, index=False, float_format="%.12g")
+        r = new[0]
+        progress(f"  realization {r['realization']:>3}: " + "; ".join(
+            f"{x['estimator']} " + " ".join(f"{p}={x.get(p, float('nan')):.6g}" for p in params)
+            + f" [{x['status']}]" for x in new)
+            + f" ({time.perf_counter() - t0:.0f} s)")
+
+    if executor is None and workers == 0:
+        for t in tasks:
+            finished(run_realization(t))
+    else:
+        own = executor is None
+        ex = _default_executor(workers) if own else executor
+        try:
+            futures = [ex.submit(run_realization, t) for t in tasks]
+            for f in cf.as_completed(futures):
+                finished(f.result())
+        finally:
+            if own:
+                ex.shutdown()
+    est = pd.DataFrame(rows)
+    result = MonteCarloResult(estimates=est, parameters=params, truth={p: float(truth[p]) for p in params},
+                              info={"config": problem.config, "overrides": json.loads(problem.overrides),
+                                    "realizations": realizations, "seed": seed, "sigma": sigma,
+                                    "trim_sigma": trim_sigma, "multi_objective": multi_objective,
+                                    "wall_time_this_run": time.perf_counter() - t0})
+    if out is not None:
+        result.save(out)
+    return result

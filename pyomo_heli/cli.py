@@ -132,7 +132,11 @@ def cmd_identify(args) -> int:
     cfg = load_identification_config(args.config, overrides)
     print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
           f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
-    result = run_identification(cfg, args.out)
+    result = run_identification(cfg, args.out, restart=getattr(args, "restart", False))
+    if result.chosen is None:
+        print(result)
+        print(f"no front point converged; every status is in {args.out}/front.csv", file=sys.stderr)
+        return 1
     if not args.no_report:
         from .report.identification import write_report
 
@@ -140,6 +144,21 @@ def cmd_identify(args) -> int:
     print(result)
     print(f"results in {args.out}")
     return 0
+
+
+def cmd_multistart(args) -> int:
+    from .config import load_identification_config
+    from .multistart import run_multistart
+
+    cfg = load_identification_config(args.config)
+    problem = "time" if args.epsilon is None else "epsilon"
+    print(f"multi-start of {', '.join(f.name for f in cfg.free)} from {args.starts} random initial guesses "
+          f"(seed {args.seed}) on {cfg.dataset}")
+    result = run_multistart(cfg, args.out, starts=args.starts, seed=args.seed, problem=problem, epsilon=args.epsilon,
+                            rtol=args.rtol, restart=args.restart)
+    print(result)
+    print(f"results in {args.out}")
+    return 0 if result.best is not None else 1
 
 
 def cmd_demo(args) -> int:
@@ -196,7 +215,21 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--no-report", action="store_true", help="skip figures and report")
     i.add_argument("--cold-check", action="store_true",
                    help="also solve every interior front point cold ([pareto] cold_check), to measure warm starts")
+    i.add_argument("--restart", action="store_true",
+                   help="discard finished points in --out instead of resuming from them")
     i.set_defaults(func=cmd_identify)
+
+    ms = sub.add_parser("multistart", help="solve from seeded random initial guesses within the bounds")
+    ms.add_argument("config")
+    ms.add_argument("--starts", type=int, default=20, help="number of starts (default 20)")
+    ms.add_argument("--seed", type=int, default=0, help="seed of the initial guesses (default 0)")
+    ms.add_argument("--epsilon", type=float, default=None,
+                    help="solve min J_time s.t. J_trim <= EPSILON (one front point) instead of min J_time")
+    ms.add_argument("--rtol", type=float, default=1e-6,
+                    help="relative objective tolerance for 'reached the best optimum' (default 1e-6)")
+    ms.add_argument("--out", required=True, help="results folder (resumed if it holds finished starts)")
+    ms.add_argument("--restart", action="store_true", help="discard finished starts in --out")
+    ms.set_defaults(func=cmd_multistart)
 
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")
     d.add_argument("--out", default="demo_out")
@@ -220,6 +253,7 @@ def main(argv=None) -> int:
     from .simulation.inputs import InputSpecError
     from .simulation.trim import TrimError
     from .solvers.errors import SolverError
+    from .pareto.store import StoreMismatchError
 
     argv = sys.argv[1:] if argv is None else argv
     try:
@@ -231,7 +265,7 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (UserError, InputSpecError, ConfigError, IdentificationConfigError, DatasetError, TrimError, SolverError,
-            FileNotFoundError, KeyError, ValueError, RuntimeError) as exc:
+            StoreMismatchError, FileNotFoundError, KeyError, ValueError, RuntimeError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
         print(f"pyomo-heli {cmd}: error: {msg}", file=sys.stderr)
         return 2

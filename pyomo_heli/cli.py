@@ -128,7 +128,7 @@ def cmd_identify(args) -> int:
     from .config import load_identification_config
     from .identify import run_identification
 
-    overrides = {"pareto": {"cold_check": True}} if args.cold_check else None
+    overrides = {"pareto": {"cold_check": True}} if getattr(args, "cold_check", False) else None
     cfg = load_identification_config(args.config, overrides)
     print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
           f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
@@ -233,6 +233,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")
     d.add_argument("--out", default="demo_out")
+    d.add_argument("--restart", action="store_true", help="discard finished points in --out instead of resuming")
     d.set_defaults(func=cmd_demo)
 
     n = sub.add_parser("inspect", help="print the NLP of a config without solving")

@@ -167,26 +167,35 @@ def test_draw_starts_seeded_within_bounds():
 
 
 def test_multistart_share_and_resume(reference, tmp_path):
-    """5 random starts reach anchor A of the front; a rerun after losing starts gives the same table."""
+    """5 random starts reach anchor A of the front; a killed multistart resumes to the same table."""
     cfg = load_identification_config(TINY)
-    res = run_multistart(cfg, tmp_path, starts=5, seed=1, progress=lambda *_: None)
+    res = run_multistart(cfg, tmp_path / "whole", starts=5, seed=1, progress=lambda *_: None)
     a = pd.read_csv(reference / "front.csv").set_index("index").loc[0]  # anchor A, from the config's guess
     assert res.best["objective"] == pytest.approx(a["J_time"], rel=1e-9)
     for f in cfg.free:
         assert res.best["parameters"][f.name] == pytest.approx(a[f.name], rel=1e-5, abs=1e-6)
     assert res.share >= 0.9 and res.n_reached == int(res.starts["reached_best"].sum())
-    assert len(pd.read_csv(tmp_path / "starts.csv")) == 5
-    # lose the last two starts (as a kill would) and rerun: they are solved again, the rest loaded
-    for k in (3, 4):
-        (tmp_path / "points" / f"start{k:03d}.npz").unlink()
-    again = run_multistart(cfg, tmp_path, starts=5, seed=1, progress=lambda *_: None)
-    assert again.info["resumed_starts"] == 3
+    assert len(pd.read_csv(tmp_path / "whole" / "starts.csv")) == 5
+    # the same command in a real process, SIGKILLed once two starts are on disk, then run again
+    out = tmp_path / "killed"
+    proc = _cli("multistart", TINY, "--starts", 5, "--seed", 1, "--out", out)
+    deadline = time.monotonic() + 600
+    while not (out / "points" / "start001.npz").exists():
+        assert proc.poll() is None, "the run ended before it could be killed"
+        assert time.monotonic() < deadline
+        time.sleep(0.005)
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate(timeout=60)
+    done = len(list((out / "points").glob("*.npz")))
+    assert 2 <= done < 5 and not (out / "multistart.json").exists()
+    again = run_multistart(cfg, out, starts=5, seed=1, progress=lambda *_: None)
+    assert again.info["resumed_starts"] == done
     cols = [c for c in res.starts.columns if c != "wall_time"]
     pd.testing.assert_frame_equal(again.starts[cols], res.starts[cols], check_exact=True)
-    loaded = MultistartResult.load(tmp_path)
+    loaded = MultistartResult.load(out)
     assert loaded.share == again.share and "reached the best optimum" in str(loaded)
     with pytest.raises(StoreMismatchError):
-        run_multistart(cfg, tmp_path, starts=5, seed=2, progress=lambda *_: None)
+        run_multistart(cfg, out, starts=5, seed=2, progress=lambda *_: None)
 
 
 @pytest.mark.slow

@@ -46,7 +46,7 @@ def identification_fingerprint(cfg: IdentificationConfig) -> str:
 
 def run_identification(cfg: IdentificationConfig, out: str | Path, progress=print,
                        restart: bool = False) -> IdentificationResult:
-    """Solve anchors, front and choice; write each point to disk as it finishes.
+    """Solve anchors, front and choice; write each front point to ``out/front.csv`` as it finishes.
 
     Each finished point goes to ``out/front.csv`` (a readable table) and to
     ``out/points/`` (its exact record and full solution). Running again on the

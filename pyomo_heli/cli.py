@@ -176,11 +176,16 @@ def cmd_identify(args) -> int:
     from .config import load_identification_config
     from .identify import run_identification
 
-    overrides = {"pareto": {"cold_check": True}} if args.cold_check else None
+    overrides = {"pareto": {"cold_check": True}} if getattr(args, "cold_check", False) else None
     cfg = load_identification_config(args.config, overrides)
     print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
           f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
-    result = run_identification(cfg, args.out, uncertainty=getattr(args, "uncertainty", "all"))
+    result = run_identification(cfg, args.out, uncertainty=getattr(args, "uncertainty", "all"),
+                                restart=getattr(args, "restart", False))
+    if result.chosen is None:
+        print(result)
+        print(f"no front point converged; every status is in {args.out}/front.csv", file=sys.stderr)
+        return 1
     if not args.no_report and "linear" in cfg.objectives:
         from .report.linear import write_linear_report
 
@@ -212,6 +217,21 @@ def cmd_uncertainty(args) -> int:
     add_uncertainty(result, cfg, data, args.out or args.results, points=args.points)
     print(f"standard errors in {args.out or args.results} (front.csv, chosen.json, identifiability.csv)")
     return 0
+
+
+def cmd_multistart(args) -> int:
+    from .config import load_identification_config
+    from .multistart import run_multistart
+
+    cfg = load_identification_config(args.config)
+    problem = "time" if args.epsilon is None else "epsilon"
+    print(f"multi-start of {', '.join(f.name for f in cfg.free)} from {args.starts} random initial guesses "
+          f"(seed {args.seed}) on {cfg.dataset}")
+    result = run_multistart(cfg, args.out, starts=args.starts, seed=args.seed, problem=problem, epsilon=args.epsilon,
+                            rtol=args.rtol, restart=args.restart)
+    print(result)
+    print(f"results in {args.out}")
+    return 0 if result.best is not None else 1
 
 
 def cmd_demo(args) -> int:
@@ -319,8 +339,26 @@ def build_parser() -> argparse.ArgumentParser:
                    help="every front point, or only A, the chosen point and the direct solve")
     u.set_defaults(func=cmd_uncertainty)
 
+
+    i.add_argument("--restart", action="store_true",
+                   help="discard finished points in --out instead of resuming from them")
+    i.set_defaults(func=cmd_identify)
+
+    ms = sub.add_parser("multistart", help="solve from seeded random initial guesses within the bounds")
+    ms.add_argument("config")
+    ms.add_argument("--starts", type=int, default=20, help="number of starts (default 20)")
+    ms.add_argument("--seed", type=int, default=0, help="seed of the initial guesses (default 0)")
+    ms.add_argument("--epsilon", type=float, default=None,
+                    help="solve min J_time s.t. J_trim <= EPSILON (one front point) instead of min J_time")
+    ms.add_argument("--rtol", type=float, default=1e-6,
+                    help="relative objective tolerance for 'reached the best optimum' (default 1e-6)")
+    ms.add_argument("--out", required=True, help="results folder (resumed if it holds finished starts)")
+    ms.add_argument("--restart", action="store_true", help="discard finished starts in --out")
+    ms.set_defaults(func=cmd_multistart)
+
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")
     d.add_argument("--out", default="demo_out")
+    d.add_argument("--restart", action="store_true", help="discard finished points in --out instead of resuming")
     d.set_defaults(func=cmd_demo)
 
     n = sub.add_parser("inspect", help="print the NLP of a config without solving")
@@ -364,6 +402,7 @@ def main(argv=None) -> int:
     from .simulation.inputs import InputSpecError
     from .simulation.trim import TrimError
     from .solvers.errors import SolverError
+    from .pareto.store import StoreMismatchError
 
     argv = sys.argv[1:] if argv is None else argv
     try:
@@ -375,7 +414,7 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (UserError, InputSpecError, ConfigError, IdentificationConfigError, DatasetError, TrimError, SolverError,
-            FileNotFoundError, KeyError, ValueError, RuntimeError) as exc:
+            StoreMismatchError, FileNotFoundError, KeyError, ValueError, RuntimeError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
         print(f"pyomo-heli {cmd}: error: {msg}", file=sys.stderr)
         return 2

@@ -17,6 +17,7 @@ from .dataset import load_flight_test
 from .nlp.identification import build_identification_nlp, prepare_data
 from .pareto.front import ParetoSolver, utopia_distance
 from .pareto.result import IdentificationResult
+from .pareto.store import PointStore, fingerprint
 
 
 def _point_dict(p) -> dict:
@@ -38,9 +39,21 @@ def build_problem(cfg: IdentificationConfig):
     return m, data, ft
 
 
+def identification_fingerprint(cfg: IdentificationConfig) -> str:
+    """What must not change between a killed run and its resumption: the config (after overrides) and data."""
+    return fingerprint(cfg.raw, cfg.dataset, command="identify")
+
+
 def run_identification(cfg: IdentificationConfig, out: str | Path, progress=print,
-                       uncertainty: bool | str = False) -> IdentificationResult:
+                       restart: bool = False, uncertainty: bool | str = False) -> IdentificationResult:
     """Solve anchors, front and choice; write each front point to ``out/front.csv`` as it finishes.
+
+    Each finished point goes to ``out/front.csv`` (a readable table) and to
+    ``out/points/`` (its exact record and full solution). Running again on the
+    same ``out`` resumes: finished points are loaded, the rest is solved from
+    the last finished point's stored solution, and the results equal those of
+    an uninterrupted run. A folder holding points of another config is
+    refused (StoreMismatchError) unless ``restart`` discards them.
 
     uncertainty: True or "all": then add Cramer-Rao standard errors of every
     front point and the identifiability at the chosen point
@@ -50,9 +63,12 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
     if "linear" in getattr(cfg, "objectives", ()):
         from .identify_linear import run_tri_identification
 
-        return run_tri_identification(cfg, out, progress)  # uncertainty: two-objective runs only
+        return run_tri_identification(cfg, out, progress)  # uncertainty, resume: two-objective runs only
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    store = PointStore(out, identification_fingerprint(cfg), restart=restart, what="identification")
+    if store.keys():
+        progress(f"resuming: {len(store.keys())} finished point(s) in {store.dir}")
     t0 = time.perf_counter()
     m, data, ft = build_problem(cfg)
     t_build = time.perf_counter() - t0
@@ -67,34 +83,45 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
         rows.append(p.row())
         pd.DataFrame(rows).to_csv(front_csv, index=False, float_format="%.12g")
         params = " ".join(f"{k}={v:.6g}" for k, v in p.parameters.items())
+        where = " (from disk)" if getattr(p, "from_disk", False) else ""
         progress(f"  point {p.index:>2} {p.kind:<3} J_time={p.J_time:.6g} J_trim={p.J_trim:.6g} {params} "
-                 f"[{p.status}, {p.iterations} it, {p.wall_time:.1f} s]")
+                 f"[{p.status}, {p.iterations} it, {p.wall_time:.1f} s]{where}")
 
     t1 = time.perf_counter()
-    ps = ParetoSolver(m, cfg.pareto, on_point=on_point)
+    ps = ParetoSolver(m, cfg.pareto, on_point=on_point, store=store)
     setup = time.perf_counter() - t1
     points = ps.front()
     chosen, dist = ps.choose()
-    direct = ps.direct_choice(chosen)
-    progress(f"  chosen: front point {chosen.index} (Eq. 11); direct Eq. 11 solve: {direct.status}")
     utopia, nadir = ps.utopia_nadir()
+    if chosen is not None:
+        direct = ps.direct_choice(chosen)
+        progress(f"  chosen: front point {chosen.index} (Eq. 11); direct Eq. 11 solve: {direct.status}")
+    else:
+        direct = None
+        progress("  no front point converged: nothing to choose (statuses in front.csv)")
     front = pd.DataFrame(rows).sort_values("index").reset_index(drop=True)
     ok = front["success"].astype(bool)
     front["utopia_distance"] = float("nan")
-    front.loc[ok, "utopia_distance"] = utopia_distance(front.loc[ok, "J_time"], front.loc[ok, "J_trim"], utopia, nadir)
+    if ok.any():
+        front.loc[ok, "utopia_distance"] = utopia_distance(front.loc[ok, "J_time"], front.loc[ok, "J_trim"],
+                                                           utopia, nadir)
     params = [f.name for f in cfg.free]
+    failed = front.loc[~ok, ["index", "kind", "status"]].to_dict("records")
     result = IdentificationResult(
         front=front, parameters=params, units={n: cfg.model.parameters.spec(n).unit for n in params},
-        utopia=utopia, nadir=nadir, chosen=_point_dict(chosen), direct=_point_dict(direct),
+        utopia=utopia, nadir=nadir, chosen=_point_dict(chosen) if chosen is not None else None,
+        direct=_point_dict(direct) if direct is not None else None,
         time_domain=_point_dict(points[0]),
         info={"config": str(cfg.path), "dataset": str(cfg.dataset), "build_time": t_build,
               "solver_setup_time": setup, "total_time": time.perf_counter() - t0,
               "maneuvers": [mv.name for mv in data.maneuvers], "extensions": [e.name for e in cfg.model.extensions],
               "solver": cfg.pareto.solver,
+              "failed_points": failed,
+              "resumed_points": sum(bool(getattr(p, "from_disk", False)) for p in points),
               "mean_iterations_front": _mean(front.loc[front.kind == "eps", "iterations"]),
               "mean_iterations_front_cold": _mean(front.loc[front.kind == "eps", "cold_iterations"])})
     result.save(out)
-    if uncertainty and uncertainty != "none":
+    if uncertainty and uncertainty != "none" and result.chosen is not None:
         from .uncertainty.front import add_uncertainty
 
         t2 = time.perf_counter()

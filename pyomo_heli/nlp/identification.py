@@ -242,3 +242,49 @@ def prepare_data(ft, maneuvers="identification", resample_hz: float | None = Non
 def maneuver_outputs(m: pyo.ConcreteModel, name: str, outputs) -> dict[str, np.ndarray]:
     blk = m.man[name]
     return {o: np.array([pyo.value(blk.y[o, t]) for t in blk.samples]) for o in outputs}
+
+
+def initialise_at(m: pyo.ConcreteModel, data: IdentificationData, model: HelicopterModel,
+                  free: list[FreeParameter], values: dict) -> None:
+    """Move the start of a built NLP to other parameter values, without rebuilding it.
+
+    Sets the free parameters to ``values`` (SI) and every state, flapping,
+    output and Cholesky variable to what float trims and simulations at those
+    values give, exactly as :func:`build_identification_nlp` initialises at
+    the configured initial guess (used by multi-start). Raises TrimError when
+    the model cannot be trimmed at ``values``.
+    """
+    from .objectives import R_FLOOR
+
+    by_name = {f.name: f for f in free}
+    for n in m.free_parameters:
+        m.theta_s[n].set_value(float(values[n]) / by_name[n].scale)
+    sim_model = model.with_parameters(**{n: float(values[n]) for n in m.free_parameters})
+    float_trims = trim_sweep(sim_model, data.speeds)
+    for i, tp in enumerate(float_trims):
+        blk = m.trim[i]
+        guess = {**tp.to_dict(), **tp.extra_states}
+        for name in ("col", "lon", "theta", "lambda_i", *FLAPPING, *(s for e in model.extensions for s in e.states)):
+            if name in guess:
+                getattr(blk, name).set_value(float(guess[name]), skip_validation=True)
+        blk.V.set_value(float(data.speeds[i]), skip_validation=True)
+    outputs = list(m.time_outputs) if m.component("time_outputs") is not None else []
+    init_res = {o: [] for o in outputs}
+    for mv in data.maneuvers:
+        i = data.speed_index(mv.trim_speed)
+        t = mv.data["t"].to_numpy()
+        inc = mv.increments()
+        sim = simulate(sim_model, float_trims[i], t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4",
+                       substeps=2)
+        initialise_from(m.man[mv.name], sim, sim_model.state_names)
+        for o in outputs:
+            init_res[o].extend(mv.data[o].to_numpy() - sim[o].to_numpy())
+    if outputs and m.component("L") is not None:
+        E = np.array([init_res[o] for o in outputs])
+        R0 = E @ E.T / E.shape[1] + np.diag([R_FLOOR[o] ** 2 for o in outputs])
+        if m.options.covariance == "diagonal":
+            R0 = np.diag(np.diag(R0))
+        L0 = np.linalg.cholesky(R0 + 1e-14 * np.eye(len(outputs)))
+        idx = {o: k for k, o in enumerate(outputs)}
+        for a, b in m.cov_pairs:
+            m.L[a, b].set_value(float(L0[idx[a], idx[b]]), skip_validation=True)

@@ -21,6 +21,14 @@ parameters.
 Scaling lives at optimizer level only (paper Fig. 4): a single-objective
 solve is divided by |J(theta_0)|, and each objective of a multi-objective
 solve by its utopia value.
+
+A solve that fails or does not converge is recorded with its status and
+never stops the sweep (an anchor included: the sweep goes on from its last
+iterate, and the choice only considers converged points). With a
+:class:`~pyomo_heli.pareto.store.PointStore`, every finished point is written
+to disk as it finishes, and a rerun loads the finished points instead of
+solving them (see store.py): the warm-start chain restarts from the last
+finished point's stored solution and gives the same numbers.
 """
 from __future__ import annotations
 
@@ -32,7 +40,7 @@ import numpy as np
 import pyomo.environ as pyo
 
 from ..nlp.parameters import free_parameter_values
-from ..solvers import make_solver
+from ..solvers import SolverError, make_solver
 
 
 @dataclass
@@ -111,10 +119,11 @@ class _Snapshot:
 class ParetoSolver:
     """Anchors, front and choice on one identification NLP built by nlp.identification."""
 
-    def __init__(self, m, settings: ParetoSettings | None = None, on_point=None):
+    def __init__(self, m, settings: ParetoSettings | None = None, on_point=None, store=None):
         self.m = m
         self.settings = settings or ParetoSettings()
         self.on_point = on_point or (lambda p: None)
+        self.store = store  # a PointStore: finished points to disk, resume from them
         self.s_time = max(abs(pyo.value(m.J_time)), 1.0)
         self.s_trim = max(pyo.value(m.J_trim), 1e-12)
         m.del_component("eps_con")
@@ -154,59 +163,99 @@ class ParetoSolver:
     def _solve(self, kind, index, point_kind, epsilon, warm_start, options=None, **obj):
         solver = self._set_objective(kind, **obj)
         self.m.eps_trim = (epsilon / self.s_trim) if math.isfinite(epsilon) else 1e20
-        res = solver.solve(warm_start=warm_start, options=options)
-        p = FrontPoint(index=index, kind=point_kind, epsilon=epsilon, J_time=pyo.value(self.m.J_time),
-                       J_trim=pyo.value(self.m.J_trim), parameters=free_parameter_values(self.m),
-                       success=res.success, status=res.status, iterations=res.iterations,
-                       wall_time=res.wall_time, setup_time=res.setup_time, warm_start=warm_start)
+        try:
+            res = solver.solve(warm_start=warm_start, options=options)
+            success, status, iterations, wall, setup = (res.success, res.status, res.iterations, res.wall_time,
+                                                        res.setup_time)
+        except SolverError as exc:  # no solution at all: record it, the sweep goes on
+            success, status, iterations, wall, setup = False, f"{type(exc).__name__}: {exc}", -1, 0.0, 0.0
+        p = FrontPoint(index=index, kind=point_kind, epsilon=epsilon, J_time=_value(self.m.J_time),
+                       J_trim=_value(self.m.J_trim), parameters=free_parameter_values(self.m),
+                       success=success, status=status, iterations=iterations,
+                       wall_time=wall, setup_time=setup, warm_start=warm_start)
+        return p
+
+    def solve_objective(self, objective: str = "time", epsilon: float = math.inf, index: int = 0,
+                        kind: str = "single", warm_start: str = "none") -> FrontPoint:
+        """One solve of min J_time (``"time"``) or J_trim (``"trim"``) s.t. J_trim <= epsilon, from the
+        model's current values (multi-start); a failure is returned as a point with its status."""
+        return self._solve(objective, index, kind, epsilon, warm_start)
+
+    def solve_point(self, key: str, solve) -> FrontPoint:
+        """``solve()`` a point, or load it from the store when an earlier run finished it.
+
+        A loaded point's stored solution is put back into the model, so what
+        follows starts from the same values as in an uninterrupted run. A
+        solved point is written to the store at once.
+        """
+        if self.store is not None and self.store.has(key):
+            p = FrontPoint(**self.store.record(key))
+            self.store.restore(key, self.m)
+            p.from_disk = True
+            return p
+        p = solve()
+        if self.store is not None:
+            self.store.save(key, asdict(p), self.m, duals=self.settings.warm_start == "full")
         return p
 
     def anchors(self) -> tuple[FrontPoint, FrontPoint]:
-        """A: min J_time. B: min J_trim, then min J_time keeping J_trim at its minimum (lexicographic)."""
-        a = self._solve("time", 0, "A", math.inf, "none")
-        if not a.success:
-            raise RuntimeError(f"anchor A (J_time alone) failed: {a.status}")
+        """A: min J_time. B: min J_trim, then min J_time keeping J_trim at its minimum (lexicographic).
+
+        A failed anchor is recorded with its status (``success`` False) and
+        the next solve starts from its last iterate.
+        """
+        a = self.solve_point("A", lambda: self._solve("time", 0, "A", math.inf, "none"))
         self._snap_a = _Snapshot(self.m)
-        b1 = self._solve("trim", -1, "B1", math.inf, "primal")
-        if not b1.success:
-            raise RuntimeError(f"anchor B (J_trim alone) failed: {b1.status}")
-        eps_b = b1.J_trim * (1 + self.settings.lexicographic_tol) + 1e-12
-        b = self._solve("time", self.settings.points - 1, "B", eps_b, "primal")
-        b.iterations += b1.iterations
-        b.wall_time += b1.wall_time
-        b.setup_time += b1.setup_time
-        if not b.success:
-            raise RuntimeError(f"anchor B, second stage, failed: {b.status}")
+
+        def solve_b():
+            b1 = self._solve("trim", -1, "B1", math.inf, "primal")
+            eps_b = b1.J_trim * (1 + self.settings.lexicographic_tol) + 1e-12
+            b = self._solve("time", self.settings.points - 1, "B", eps_b, "primal")
+            b.iterations += b1.iterations
+            b.wall_time += b1.wall_time
+            b.setup_time += b1.setup_time
+            if not b1.success:
+                b.success, b.status = False, f"first stage (min J_trim): {b1.status}; second stage: {b.status}"
+            return b
+
+        b = self.solve_point("B", solve_b)
         self._snap_b = _Snapshot(self.m)
         return a, b
 
     def front(self) -> list[FrontPoint]:
         """Anchors, then the interior points from A towards B, each warm-started from the previous.
 
-        A failed point is recorded with its status and the sweep goes on from
-        the last point that succeeded.
+        Each point is handed to ``on_point`` as soon as it is finished (A, B,
+        then the interior points). A failed point is recorded with its status
+        and the sweep goes on from the last point that succeeded (from the
+        initial guess if that is none).
         """
         s = self.settings
         a, b = self.anchors()
-        self.points = [a]
+        self.points = [a, b]
         self.snapshots = {a.index: self._snap_a, b.index: self._snap_b}
         self.on_point(a)
+        self.on_point(b)
         eps = epsilon_grid(a.J_trim, b.J_trim, s.points, s.spacing)
-        last_good = self._snap_a
+        last_good = self._snap_a if a.success else self._snap_initial
         last_good.restore()
         # objectives of multi-objective solves are scaled by their utopia value
+        scale = max(abs(a.J_time), 1.0) if math.isfinite(a.J_time) else self.s_time
         for k in range(1, s.points - 1):
-            p = self._solve("time", k, "eps", float(eps[k]), s.warm_start, scale=max(abs(a.J_time), 1.0))
-            if s.cold_check:
-                self._cold_check(p, last_good, scale=max(abs(a.J_time), 1.0))
+            def solve_k(k=k):
+                p = self._solve("time", k, "eps", float(eps[k]), s.warm_start, scale=scale)
+                if s.cold_check:
+                    self._cold_check(p, last_good, scale=scale)
+                return p
+
+            p = self.solve_point(f"eps{k:03d}", solve_k)
             if p.success:
                 last_good = self.snapshots[k] = _Snapshot(self.m)
             else:
                 last_good.restore()
             self.points.append(p)
             self.on_point(p)
-        self.points.append(b)
-        self.on_point(b)
+        self.points.sort(key=lambda p: p.index)
         return self.points
 
     def _cold_check(self, p: FrontPoint, back, scale: float) -> None:
@@ -224,10 +273,15 @@ class ParetoSolver:
         b = next(p for p in self.points if p.kind == "B")
         return (a.J_time, b.J_trim), (b.J_time, a.J_trim)
 
-    def choose(self) -> tuple[FrontPoint, np.ndarray]:
-        """The front point closest to utopia (Eq. 11, post hoc), and all distances."""
+    def choose(self) -> tuple[FrontPoint | None, np.ndarray]:
+        """The converged front point closest to utopia (Eq. 11, post hoc), and all distances.
+
+        None when no point converged.
+        """
         utopia, nadir = self.utopia_nadir()
         ok = [p for p in self.points if p.success]
+        if not ok:
+            return None, np.array([])
         d = utopia_distance([p.J_time for p in ok], [p.J_trim for p in ok], utopia, nadir)
         return ok[int(np.argmin(d))], d
 
@@ -236,4 +290,13 @@ class ParetoSolver:
         utopia, nadir = self.utopia_nadir()
         start = start or self.choose()[0]
         self.snapshots[start.index].restore()
-        return self._solve("utopia", -1, "direct", math.inf, "primal", utopia=utopia, nadir=nadir)
+        return self.solve_point("direct", lambda: self._solve("utopia", -1, "direct", math.inf, "primal",
+                                                             utopia=utopia, nadir=nadir))
+
+
+def _value(expr) -> float:
+    """Value of an objective expression at the model's current values; NaN if it cannot be evaluated."""
+    try:
+        return float(pyo.value(expr))
+    except (ValueError, ZeroDivisionError, OverflowError, TypeError):
+        return float("nan")

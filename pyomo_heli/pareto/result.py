@@ -70,8 +70,11 @@ class IdentificationResult:
         lines = ["Pareto front (parameters in SI units):",
                  self.front[cols].to_string(index=False, float_format=lambda x: f"{x:.6g}"), "",
                  f"utopia (J_time, J_trim) = ({self.utopia[0]:.6g}, {self.utopia[1]:.6g}); "
-                 f"nadir = ({self.nadir[0]:.6g}, {self.nadir[1]:.6g})",
-                 f"chosen (Eq. 11, post hoc): front point {self.chosen['index']}"]
+                 f"nadir = ({self.nadir[0]:.6g}, {self.nadir[1]:.6g})"]
+        if self.chosen is None:  # a sweep in which no point converged still ends with its statuses on disk
+            lines.append("no front point converged: nothing chosen")
+            return "\n".join(lines)
+        lines.append(f"chosen (Eq. 11, post hoc): front point {self.chosen['index']}")
         rows = [("time domain (A)", self.time_domain), ("multi-objective (chosen)", self.chosen)]
         if self.direct:
             rows.append(("Eq. 11 direct", self.direct))

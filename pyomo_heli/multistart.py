@@ -1,0 +1,185 @@
+"""Multi-start: the same identification NLP solved from seeded random initial guesses.
+
+Why: the NLP is non-convex; a single solve from one initial guess says
+nothing about other local optima. Here the NLP is built once, and for each
+start the free parameters are drawn uniformly within their bounds (start k
+uses its own generator seeded by (seed, k), so a start's guess does not
+depend on how many starts are run), the states are re-initialised by float
+trims and simulations at that guess (:func:`~pyomo_heli.nlp.identification.initialise_at`),
+and the problem is solved cold. A start whose model cannot be trimmed or
+whose solve fails is recorded with its status; the sweep goes on.
+
+Problems: ``time`` (min J_time, anchor A: classic output error) or
+``epsilon`` (min J_time subject to J_trim <= epsilon, one point of the front,
+e.g. the chosen one).
+
+Each finished start is written at once to ``DIR/starts.csv`` and to
+``DIR/points/`` (exact record and full solution); running the same command
+again on the same folder loads finished starts and solves only the rest.
+
+A start *reaches the best optimum* when it converged and its objective is
+within ``rtol`` (relative) of the best converged objective.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .config import IdentificationConfig
+from .identify import build_problem
+from .nlp.identification import initialise_at
+from .pareto.front import FrontPoint, ParetoSolver, _Snapshot
+from .pareto.result import write_json
+from .pareto.store import PointStore, fingerprint
+
+PROBLEMS = ("time", "epsilon")
+
+
+def draw_starts(free, n: int, seed: int) -> list[dict]:
+    """``n`` initial guesses (SI), uniform within each parameter's bounds; start k from rng (seed, k)."""
+    starts = []
+    for k in range(n):
+        u = np.random.default_rng([seed, k]).random(len(free))
+        starts.append({f.name: float(f.lower + uk * (f.upper - f.lower)) for f, uk in zip(free, u)})
+    return starts
+
+
+@dataclass
+class MultistartResult:
+    """One row per start (``starts``) and the summary: best objective, share reaching it."""
+
+    starts: pd.DataFrame
+    parameters: list
+    problem: str
+    epsilon: float | None
+    seed: int
+    rtol: float
+    best: dict | None = None
+    info: dict = field(default_factory=dict)
+
+    @property
+    def n_reached(self) -> int:
+        return int(self.starts["reached_best"].sum())
+
+    @property
+    def share(self) -> float:
+        return self.n_reached / len(self.starts) if len(self.starts) else float("nan")
+
+    def save(self, out: str | Path) -> None:
+        out = Path(out)
+        self.starts.to_csv(out / "starts.csv", index=False, float_format="%.12g")
+        write_json(out / "multistart.json", {"parameters": self.parameters, "problem": self.problem,
+                                             "epsilon": self.epsilon, "seed": self.seed, "rtol": self.rtol,
+                                             "best": self.best, "n_starts": len(self.starts),
+                                             "n_reached_best": self.n_reached, "share_reached_best": self.share,
+                                             "info": self.info})
+
+    @classmethod
+    def load(cls, out: str | Path) -> "MultistartResult":
+        out = Path(out)
+        for name in ("starts.csv", "multistart.json"):
+            if not (out / name).is_file():
+                raise FileNotFoundError(f"{out}: no {name}; is this a multistart results folder?")
+        d = json.loads((out / "multistart.json").read_text())
+        return cls(starts=pd.read_csv(out / "starts.csv"), parameters=d["parameters"], problem=d["problem"],
+                   epsilon=d["epsilon"], seed=d["seed"], rtol=d["rtol"], best=d["best"], info=d["info"])
+
+    def __str__(self) -> str:
+        cols = (["start"] + [f"initial_{p}" for p in self.parameters] + self.parameters
+                + ["objective", "status", "iterations", "reached_best"])
+        lines = [f"multi-start ({self.problem}{'' if self.epsilon is None else f', J_trim <= {self.epsilon:.6g}'}), "
+                 f"seed {self.seed}, parameters in SI units:",
+                 self.starts[cols].to_string(index=False, float_format=lambda x: f"{x:.6g}"), ""]
+        if self.best is None:
+            lines.append("no start converged")
+        else:
+            params = ", ".join(f"{p} = {self.best['parameters'][p]:.6g}" for p in self.parameters)
+            lines.append(f"best objective {self.best['objective']:.10g} (start {self.best['start']}: {params})")
+        lines.append(f"reached the best optimum (converged, objective within rtol {self.rtol:g}): "
+                     f"{self.n_reached} of {len(self.starts)} starts = {100 * self.share:.0f} %")
+        return "\n".join(lines)
+
+
+def _row(k: int, guess: dict, p: FrontPoint, objective: float) -> dict:
+    row = {"start": k, **{f"initial_{n}": v for n, v in guess.items()}, **p.parameters,
+           "J_time": p.J_time, "J_trim": p.J_trim, "objective": objective, "success": p.success,
+           "status": p.status, "iterations": p.iterations, "wall_time": p.wall_time}
+    return row
+
+
+def run_multistart(cfg: IdentificationConfig, out: str | Path, starts: int = 20, seed: int = 0,
+                   problem: str = "time", epsilon: float | None = None, rtol: float = 1e-6,
+                   restart: bool = False, progress=print) -> MultistartResult:
+    """Solve ``problem`` from ``starts`` random initial guesses; every start on disk as it finishes."""
+    if problem not in PROBLEMS:
+        raise ValueError(f"problem must be one of {', '.join(PROBLEMS)}, got {problem!r}")
+    if (problem == "epsilon") != (epsilon is not None):
+        raise ValueError("an epsilon (J_trim bound) is needed for problem 'epsilon', and only there")
+    if starts < 1:
+        raise ValueError(f"--starts must be at least 1, got {starts}")
+    out = Path(out)
+    store = PointStore(out, fingerprint(cfg.raw, cfg.dataset, command="multistart", seed=seed, problem=problem,
+                                        epsilon=epsilon), restart=restart, what="multi-start")
+    if store.keys():
+        progress(f"resuming: {len(store.keys())} finished start(s) in {store.dir}")
+    t0 = time.perf_counter()
+    m, data, _ = build_problem(cfg)
+    ps = ParetoSolver(m, cfg.pareto)  # its one solver and the switchable objective; no front is traced
+    progress(f"built NLP and solver in {time.perf_counter() - t0:.1f} s")
+    initial = _Snapshot(m)
+    guesses = draw_starts(cfg.free, starts, seed)
+    eps = math.inf if epsilon is None else float(epsilon)
+    rows, resumed = [], 0
+    for k, guess in enumerate(guesses):
+        key = f"start{k:03d}"
+        if store.has(key):
+            row = store.record(key)
+            resumed += 1
+            where = " (from disk)"
+        else:
+            initial.restore()  # every start from the same model state: independent of the others
+            try:
+                initialise_at(m, data, cfg.model, cfg.free, guess)
+            except (RuntimeError, ValueError, ArithmeticError) as exc:
+                p = FrontPoint(index=k, kind="start", epsilon=eps, J_time=math.nan, J_trim=math.nan,
+                               parameters={n: math.nan for n in guess}, success=False,
+                               status=f"initialisation failed: {exc}", iterations=0, wall_time=0.0)
+            else:
+                p = ps.solve_objective("time", epsilon=eps, index=k, kind="start")
+            objective = p.J_time
+            row = _row(k, guess, p, objective)
+            store.save(key, row, m if p.iterations > 0 else None)
+            where = ""
+        rows.append(row)
+        pd.DataFrame(rows).to_csv(out / "starts.csv", index=False, float_format="%.12g")
+        params = " ".join(f"{n}={guess[n]:.6g}->{row[n]:.6g}" for n in guess)
+        progress(f"  start {k:>3}: {params} objective={row['objective']:.10g} "
+                 f"[{row['status']}, {row['iterations']} it, {row['wall_time']:.1f} s]{where}")
+    table = pd.DataFrame(rows)
+    ok = table["success"].astype(bool) & np.isfinite(table["objective"])
+    best = None
+    table["reached_best"] = False
+    if ok.any():
+        kb = int(table.loc[ok, "objective"].idxmin())
+        fb = float(table.loc[kb, "objective"])
+        table["reached_best"] = ok & (np.abs(table["objective"] - fb) <= rtol * max(abs(fb), 1.0))
+        best = {"start": int(table.loc[kb, "start"]), "objective": fb,
+                "parameters": {f.name: float(table.loc[kb, f.name]) for f in cfg.free},
+                "J_time": float(table.loc[kb, "J_time"]), "J_trim": float(table.loc[kb, "J_trim"])}
+        # how far the starts that reached it are from the best parameters, in scaled units
+        scaled = np.column_stack([(table[f.name] - best["parameters"][f.name]) / f.scale for f in cfg.free])
+        table["distance_to_best_scaled"] = np.linalg.norm(scaled, axis=1)
+    result = MultistartResult(starts=table, parameters=[f.name for f in cfg.free], problem=problem,
+                              epsilon=epsilon, seed=seed, rtol=rtol, best=best,
+                              info={"config": str(cfg.path), "dataset": str(cfg.dataset),
+                                    "total_time": time.perf_counter() - t0,
+                                    "bounds": {f.name: [f.lower, f.upper] for f in cfg.free},
+                                    "resumed_starts": resumed})
+    result.save(out)
+    return result

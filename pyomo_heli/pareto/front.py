@@ -161,9 +161,13 @@ class ParetoSolver:
                        wall_time=res.wall_time, setup_time=res.setup_time, warm_start=warm_start)
         return p
 
+    def point_a(self) -> FrontPoint:
+        """Anchor A alone (min J_time, the classic time-domain estimate) from the model's current values."""
+        return self._solve("time", 0, "A", math.inf, "none")
+
     def anchors(self) -> tuple[FrontPoint, FrontPoint]:
         """A: min J_time. B: min J_trim, then min J_time keeping J_trim at its minimum (lexicographic)."""
-        a = self._solve("time", 0, "A", math.inf, "none")
+        a = self.point_a()
         if not a.success:
             raise RuntimeError(f"anchor A (J_time alone) failed: {a.status}")
         self._snap_a = _Snapshot(self.m)

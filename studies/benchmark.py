@@ -48,6 +48,8 @@ def main(argv=None) -> int:
                          "shooting run at the first)")
     ap.add_argument("--points", type=int, help="front points (default: the config's)")
     ap.add_argument("--max-duration", type=float, help="crop every maneuver to this many seconds")
+    ap.add_argument("--warm-start", choices=["primal", "full", "none"],
+                    help="warm start of the front points (default: the config's; full = primal + duals)")
     ap.add_argument("--no-front", action="store_true", help="point A only (no front, no cold front)")
     ap.add_argument("--shooting", choices=["solve_ivp", "rk4", "none"], default=None,
                     help="integrator of the single-shooting fit (rk4: fixed-step, solve_ivp: scipy adaptive; "
@@ -63,6 +65,8 @@ def main(argv=None) -> int:
         if args.points < 2:
             ap.exit(2, f"benchmark: --points must be at least 2, got {args.points}\n")
         overrides["pareto"] = {"points": args.points}
+    if args.warm_start is not None:
+        overrides["pareto"] = {**overrides.get("pareto", {}), "warm_start": args.warm_start}
     if args.max_duration is not None:
         if args.max_duration <= 0:
             ap.exit(2, f"benchmark: --max-duration must be positive, got {args.max_duration}\n")
@@ -70,7 +74,8 @@ def main(argv=None) -> int:
     config, sizes = args.config, args.size
     if args.quick:
         config, sizes = QUICK["config"], QUICK["sizes"]
-        overrides = {**QUICK["overrides"], **overrides}
+        overrides = {k: {**QUICK["overrides"].get(k, {}), **overrides.get(k, {})}
+                     for k in set(QUICK["overrides"]) | set(overrides)}
     shooting = "none" if args.no_shooting else (args.shooting or (QUICK["shooting"] if args.quick else "rk4"))
     command = "python studies/benchmark.py " + " ".join(shlex.quote(a) for a in (argv if argv is not None
                                                                                  else sys.argv[1:]))

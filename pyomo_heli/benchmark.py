@@ -171,7 +171,7 @@ def check_targets(ratios: dict) -> dict:
     out = {}
     for key, (limit, kind) in TARGETS.items():
         v = ratios.get(key)
-        met = None if v is None else (v <= limit if kind == "max" else v >= limit)
+        met = None if v is None else bool(v <= limit if kind == "max" else v >= limit)
         out[key] = {"value": v, "limit": limit, "kind": kind, "met": met}
     return out
 

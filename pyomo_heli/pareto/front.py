@@ -198,13 +198,17 @@ class ParetoSolver:
             self.store.save(key, asdict(p), self.m, duals=self.settings.warm_start == "full")
         return p
 
+    def point_a(self) -> FrontPoint:
+        """Anchor A alone (min J_time, the classic time-domain estimate) from the model's current values."""
+        return self._solve("time", 0, "A", math.inf, "none")
+
     def anchors(self) -> tuple[FrontPoint, FrontPoint]:
         """A: min J_time. B: min J_trim, then min J_time keeping J_trim at its minimum (lexicographic).
 
         A failed anchor is recorded with its status (``success`` False) and
         the next solve starts from its last iterate.
         """
-        a = self.solve_point("A", lambda: self._solve("time", 0, "A", math.inf, "none"))
+        a = self.solve_point("A", self.point_a)
         self._snap_a = _Snapshot(self.m)
 
         def solve_b():

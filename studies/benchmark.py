@@ -1,0 +1,97 @@
+"""Rerunnable performance benchmark (see docs/performance.md and pyomo_heli/benchmark.py).
+
+    python studies/benchmark.py                               # Case 1 config, front + single shooting, size 1x
+    python studies/benchmark.py --shooting solve_ivp          # classic shooting over scipy solve_ivp (slow)
+    python studies/benchmark.py --size 1,2,4,8 --no-front --no-shooting --max-duration 5   # scaling
+    python studies/benchmark.py --quick                       # seconds; what the test suite runs
+
+Prints markdown tables and writes JSON (default results/benchmark.json) after
+every finished part. Bad options exit with status 2 and a one-line message.
+"""
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # run as a script from a checkout
+    sys.path.insert(0, str(ROOT))
+
+from pyomo_heli.benchmark import BenchmarkSettings, format_tables, run_benchmark  # noqa: E402
+from pyomo_heli.config import ConfigError  # noqa: E402
+
+#: --quick: a tiny instance (two maneuvers cut to 1 s, 3 front points, sizes 1x and 2x) and no single
+#: shooting unless --shooting is given: on this flat problem the RK4 fit took 131 s (914 simulations)
+#: and the solve_ivp fit 615 s, see docs/performance.md
+QUICK = {"config": ROOT / "tests" / "configs" / "small_case1_noisy.toml", "sizes": [1, 2], "shooting": "none",
+         "overrides": {"data": {"maneuvers": ["lon3211_80kt_a", "coldoublet_hover"], "max_duration_s": 1.0},
+                       "pareto": {"points": 3}}}
+
+
+def parse_sizes(text: str) -> list[int]:
+    try:
+        sizes = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--size: expected integers like 1,2,4,8, got {text!r}") from None
+    if not sizes or any(s < 1 for s in sizes):
+        raise argparse.ArgumentTypeError(f"--size: expected positive integers like 1,2,4,8, got {text!r}")
+    return sizes
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--config", type=Path, default=ROOT / "studies" / "case1.toml", help="identification config")
+    ap.add_argument("--size", type=parse_sizes, default=[1],
+                    help="comma-separated repeat factors of the maneuver set, e.g. 1,2,4,8 (front and single "
+                         "shooting run at the first)")
+    ap.add_argument("--points", type=int, help="front points (default: the config's)")
+    ap.add_argument("--max-duration", type=float, help="crop every maneuver to this many seconds")
+    ap.add_argument("--warm-start", choices=["primal", "full", "none"],
+                    help="warm start of the front points (default: the config's; full = primal + duals)")
+    ap.add_argument("--no-front", action="store_true", help="point A only (no front, no cold front)")
+    ap.add_argument("--shooting", choices=["solve_ivp", "rk4", "none"], default=None,
+                    help="integrator of the single-shooting fit (rk4: fixed-step, solve_ivp: scipy adaptive; "
+                         "see docs/performance.md), or none")
+    ap.add_argument("--no-shooting", action="store_true", help="same as --shooting none")
+    ap.add_argument("--shooting-max-sims", type=int, default=150,
+                    help="stop the single-shooting fit after about this many simulations (0: no cap)")
+    ap.add_argument("--quick", action="store_true", help="tiny instance in seconds (ignores --config/--size)")
+    ap.add_argument("--out", type=Path, default=Path("results") / "benchmark.json", help="JSON output")
+    args = ap.parse_args(argv)
+    overrides: dict = {}
+    if args.points is not None:
+        if args.points < 2:
+            ap.exit(2, f"benchmark: --points must be at least 2, got {args.points}\n")
+        overrides["pareto"] = {"points": args.points}
+    if args.warm_start is not None:
+        overrides["pareto"] = {**overrides.get("pareto", {}), "warm_start": args.warm_start}
+    if args.max_duration is not None:
+        if args.max_duration <= 0:
+            ap.exit(2, f"benchmark: --max-duration must be positive, got {args.max_duration}\n")
+        overrides["data"] = {"max_duration_s": args.max_duration}
+    config, sizes = args.config, args.size
+    if args.quick:
+        config, sizes = QUICK["config"], QUICK["sizes"]
+        overrides = {k: {**QUICK["overrides"].get(k, {}), **overrides.get(k, {})}
+                     for k in set(QUICK["overrides"]) | set(overrides)}
+    shooting = "none" if args.no_shooting else (args.shooting or (QUICK["shooting"] if args.quick else "rk4"))
+    command = "python studies/benchmark.py " + " ".join(shlex.quote(a) for a in (argv if argv is not None
+                                                                                 else sys.argv[1:]))
+    settings = BenchmarkSettings(config=config, sizes=sizes, front=not args.no_front, shooting=shooting,
+                                 shooting_max_simulations=args.shooting_max_sims or None,
+                                 overrides=overrides, command=command.strip())
+    try:
+        result = run_benchmark(settings, args.out, progress=lambda msg: print(msg, flush=True))
+    except ConfigError as exc:
+        print(f"benchmark: {exc}", file=sys.stderr)
+        return 2
+    print()
+    print(format_tables(result))
+    print(f"\nwritten: {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

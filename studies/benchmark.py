@@ -48,8 +48,9 @@ def main(argv=None) -> int:
                          "shooting run at the first)")
     ap.add_argument("--points", type=int, help="front points (default: the config's)")
     ap.add_argument("--max-duration", type=float, help="crop every maneuver to this many seconds")
-    ap.add_argument("--warm-start", choices=["primal", "full", "none"],
-                    help="warm start of the front points (default: the config's; full = primal + duals)")
+    ap.add_argument("--warm-start", choices=["continuation", "full", "primal", "none"],
+                    help="warm start of the front points (default: the config's; full = primal + duals, "
+                         "continuation = full with the barrier from tol/10)")
     ap.add_argument("--no-front", action="store_true", help="point A only (no front, no cold front)")
     ap.add_argument("--shooting", choices=["solve_ivp", "rk4", "none"], default=None,
                     help="integrator of the single-shooting fit (rk4: fixed-step, solve_ivp: scipy adaptive; "

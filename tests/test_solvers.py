@@ -12,7 +12,9 @@ from pyomo_heli.solvers import (
     SolverUnavailableError,
     available_solvers,
     make_solver,
+    scale_multipliers,
 )
+from pyomo_heli.solvers.casadi_ipopt import resolve_options
 
 AVAILABLE = available_solvers()
 BACKENDS = [
@@ -142,7 +144,7 @@ def test_eps_resolve_without_rebuild_matches_fresh_model():
 
 
 @pytest.mark.parametrize("name", BACKENDS)
-@pytest.mark.parametrize("mode", ["primal", "full"])
+@pytest.mark.parametrize("mode", ["primal", "full", "continuation"])
 def test_warm_resolve_is_cheaper_than_cold(name, mode):
     m = rosenbrock_eps(2.0)
     solver = make_solver(m, name)
@@ -153,6 +155,31 @@ def test_warm_resolve_is_cheaper_than_cold(name, mode):
     assert warm.success and cold.success
     assert warm.objective == pytest.approx(cold.objective, rel=1e-6)
     assert warm.iterations < cold.iterations
+
+
+def test_continuation_starts_the_barrier_at_tol_over_ten():
+    opts, _, _ = resolve_options({"tol": 1e-6}, None, "continuation")
+    assert opts["mu_init"] == pytest.approx(1e-7) and opts["warm_start_init_point"] == "yes"
+    assert "warm_start_bound_push" not in opts  # Ipopt's default push
+    assert resolve_options({"mu_init": 1e-3}, None, "continuation")[0]["mu_init"] == 1e-3  # the user's value wins
+    assert "mu_init" not in resolve_options(None, None, "primal")[0]
+
+
+@pytest.mark.parametrize("name", BACKENDS)
+def test_rescaled_multipliers_warm_start_a_rescaled_objective(name):
+    """Multipliers scale with the objective: after scale_multipliers the continuation start is consistent."""
+    m = rosenbrock_eps(2.0)
+    solver = make_solver(m, name)
+    assert solver.solve(warm_start="none").success
+    d0 = m.dual[m.eps_con]
+    m.o.deactivate()
+    m.o10 = pyo.Objective(expr=10 * m.o.expr)
+    solver = make_solver(m, name)  # new objective: a new NL
+    scale_multipliers(m, 10.0)
+    assert m.dual[m.eps_con] == pytest.approx(10 * d0)
+    res = solver.solve(warm_start="continuation")
+    assert res.success and res.iterations <= 3
+    assert m.dual[m.eps_con] == pytest.approx(10 * d0, rel=1e-5)
 
 
 @pytest.mark.skipif("pounce" not in AVAILABLE, reason="pounce not available")

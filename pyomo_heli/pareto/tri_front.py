@@ -26,8 +26,8 @@ import numpy as np
 import pyomo.environ as pyo
 
 from ..nlp.parameters import free_parameter_values
-from ..solvers import make_solver
-from .front import FrontPoint, ParetoSettings, _Snapshot, epsilon_grid
+from ..solvers import make_solver, scale_multipliers
+from .front import FrontPoint, ParetoSettings, _Snapshot, epsilon_grid, solve_with_fallback
 
 OBJECTIVES = ("time", "trim", "linear")
 #: fraction of the anchor range kept above each objective's minimum at the tight end of the grid
@@ -157,16 +157,19 @@ class TriParetoSolver:
         self.eps_trim = epsilon_grid(a.J_trim, lo_t, n1, s.spacing)
         self.eps_linear = epsilon_grid(a.J_linear, lo_l, n2, s.spacing)
         scale = max(abs(a.J_time), 1.0)
-        last_good = self.snapshots["A"]
-        last_good.restore()
+        self.snapshots["A"].restore()
+        scale_multipliers(self.m, self.scale["time"] / scale)  # A's multipliers belong to A's objective scale
+        last_good = _Snapshot(self.m)
         index = 1
         for i in range(n1):
             cols = range(n2) if i % 2 == 0 else range(n2 - 1, -1, -1)
             for j in cols:
                 if i == 0 and j == 0:
                     continue  # point A itself (both bounds inactive)
-                p = self._solve("time", index, "eps", float(self.eps_trim[i]), float(self.eps_linear[j]),
-                                s.warm_start, scale=scale, grid=(i, j))
+                p = solve_with_fallback(
+                    lambda ws, i=i, j=j: self._solve("time", index, "eps", float(self.eps_trim[i]),
+                                                     float(self.eps_linear[j]), ws, scale=scale, grid=(i, j)),
+                    s.warm_start, last_good)
                 if p.success:
                     last_good = self.snapshots[index] = _Snapshot(self.m)
                 else:

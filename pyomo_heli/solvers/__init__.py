@@ -17,12 +17,14 @@ convention, and returns a :class:`SolveResult`.
 from __future__ import annotations
 
 from .errors import ModelChangedError, SolverError, SolverFailedError, SolverUnavailableError
+from .casadi_ipopt import MULTIPLIER_MODES, scale_multipliers
 from .result import SUCCESS_STATUSES, SolveResult
 
 #: Valid names for make_solver, the default first.
 SOLVER_NAMES = ("casadi-ipopt", "pounce", "ipopt")
 
 __all__ = [
+    "MULTIPLIER_MODES",
     "SOLVER_NAMES",
     "SUCCESS_STATUSES",
     "ModelChangedError",
@@ -32,6 +34,7 @@ __all__ = [
     "SolverUnavailableError",
     "available_solvers",
     "make_solver",
+    "scale_multipliers",
 ]
 
 

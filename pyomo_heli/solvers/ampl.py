@@ -27,7 +27,7 @@ from pyomo.common.errors import ApplicationError
 from pyomo.common.log import LoggingIntercept
 from pyomo.opt import TerminationCondition as TC
 
-from .casadi_ipopt import _active_objective, ensure_suffix, resolve_options
+from .casadi_ipopt import MULTIPLIER_MODES, _active_objective, ensure_suffix, resolve_options
 from .errors import SolverFailedError, SolverUnavailableError
 from .result import IPOPT_EXIT_MESSAGES, SUCCESS_STATUSES, SolveResult, status_from_exit_message
 
@@ -99,7 +99,7 @@ class AmplSolver:
 
     def _prepare_suffixes(self, warm_start: str) -> None:
         m = self.model
-        full = warm_start == "full"
+        full = warm_start in MULTIPLIER_MODES
         ensure_suffix(m, "dual", pyo.Suffix.IMPORT_EXPORT if full else pyo.Suffix.IMPORT)
         zl_out = ensure_suffix(m, "ipopt_zL_out", pyo.Suffix.IMPORT)
         zu_out = ensure_suffix(m, "ipopt_zU_out", pyo.Suffix.IMPORT)

@@ -64,9 +64,17 @@ WARM_START_OPTIONS = {
 
 #: ``"none"``: start from the Pyomo values as given (first solve).
 #: ``"primal"``: the same mechanics, meant as a re-solve from the previous
-#: solution loaded into the model - the robust default for Pareto sweeps.
+#: solution loaded into the model.
 #: ``"full"``: primal + multipliers from the model suffixes + WARM_START_OPTIONS.
-WARM_START_MODES = ("none", "primal", "full")
+#: ``"continuation"``: as ``"full"``, but the barrier restarts at ``tol / 10``
+#: instead of 1e-4: the start is the solution of a neighbouring problem (the
+#: previous epsilon of a front), so Ipopt only has to correct it, not follow
+#: the central path down again. Measured on the identification fronts: 3-4
+#: iterations per front point against 15-23 with ``"full"`` and 20-32 with
+#: ``"primal"`` (docs/performance.md). The Pareto default.
+WARM_START_MODES = ("none", "primal", "full", "continuation")
+#: warm-start modes that pass the multipliers stored in the model suffixes
+MULTIPLIER_MODES = ("full", "continuation")
 
 
 def resolve_options(base: dict | None, call: dict | None, warm_start: str) -> tuple[dict, bool, set]:
@@ -82,8 +90,29 @@ def resolve_options(base: dict | None, call: dict | None, warm_start: str) -> tu
     merged = dict(DEFAULT_OPTIONS)
     if warm_start == "full":
         merged.update(WARM_START_OPTIONS)
+    elif warm_start == "continuation":
+        # Ipopt's default pushes (1e-3): with 1e-6 the step off an anchor where a parameter sits at
+        # its bound took 20 iterations instead of 4 (Case 1, full size, docs/performance.md)
+        merged["warm_start_init_point"] = "yes"
     merged.update(user)
+    if warm_start == "continuation" and "mu_init" not in user:
+        merged["mu_init"] = float(merged["tol"]) / 10.0
     return merged, verbose, set(user)
+
+
+def scale_multipliers(model, factor: float) -> None:
+    """Multiply the multipliers stored in the model suffixes by ``factor``.
+
+    Multipliers scale with the objective: when the next solve minimises
+    ``factor`` times the objective the stored multipliers belong to (a new
+    objective scale, paper Fig. 4), this keeps a multiplier warm start
+    consistent.
+    """
+    for name in ("dual", "ipopt_zL_out", "ipopt_zU_out"):
+        suffix = model.component(name)
+        if isinstance(suffix, pyo.Suffix):
+            for key, value in list(suffix.items()):
+                suffix[key] = value * factor
 
 
 def ensure_suffix(model, name: str, direction) -> pyo.Suffix:
@@ -180,6 +209,7 @@ class CasadiIpoptSolver:
         # The NL row bound differs from con.lb/ub by the constants Pyomo moved
         # out of the body; remember that offset to shift bounds on re-solve.
         g_lb, g_ub = np.array(nl.g_lb, float), np.array(nl.g_ub, float)
+        self._g_lb, self._g_ub = g_lb, g_ub  # constant rows keep these; Param rows are refreshed
         self._row_offset = np.zeros(len(self.constraints))
         for i, con in enumerate(self.constraints):
             if con.ub is not None and np.isfinite(g_ub[i]):
@@ -234,10 +264,13 @@ class CasadiIpoptSolver:
             (p, pyo.value(p)) for comp in model.component_objects(pyo.Param, descend_into=True) if comp.mutable
             for p in comp.values())
         self._bound_params = ComponentSet()
-        for con in self.constraints:
+        self._param_rows = []
+        for i, con in enumerate(self.constraints):
             for bound in (con.lower, con.upper):
                 if bound is not None and not isinstance(bound, (int, float)) and not bound.is_constant():
                     self._bound_params.update(identify_mutable_parameters(bound))
+                    self._param_rows.append(i)
+        self._param_rows = sorted(set(self._param_rows))
 
     def _jacobian_function(self, x, g):
         """Constraint Jacobian built block-wise, or None for casadi's default.
@@ -335,6 +368,12 @@ class CasadiIpoptSolver:
         # while without it the same solve takes 3 iterations (measured on a
         # 15k-variable 80 kt maneuver: 41 s and failure vs 0.3 s).
         ipopt.setdefault("mumps_permuting_scaling", 0)
+        # QAMD ordering: it detects the quasi-dense rows and columns of these NLPs (the covariance
+        # rows sum over every sample, the parameters enter every collocation point). The automatic
+        # choice spent 8.5 s of a 31.7 s point-A solve in the symbolic analysis, which every
+        # re-solve repeats; QAMD 0.3 s, same 26 iterations, 10.9 s in all (Case 1, 106k variables,
+        # one run; docs/performance.md).
+        ipopt.setdefault("mumps_pivot_order", 6)
         ipopt.setdefault("print_level", 5 if verbose else 0)
         if not verbose:
             ipopt.setdefault("sb", "yes")
@@ -386,18 +425,26 @@ class CasadiIpoptSolver:
             raise ModelChangedError(f"objective {self.objective.name} was deactivated; {hint}")
 
     def _numeric_inputs(self) -> dict:
-        n = len(self.variables)
-        lbx, ubx, x0 = np.empty(n), np.empty(n), np.empty(n)
-        for i, var in enumerate(self.variables):
-            lbx[i] = _bound(var.lb, -np.inf)
-            ubx[i] = _bound(var.ub, np.inf)
-            x0[i] = 0.0 if var.value is None else var.value
+        """x0 and the bounds, read from the model (list comprehensions: ~0.1 s at 100k variables).
+
+        Every variable bound is read again (pinned objective settings and measurements change
+        them); constraint bounds are constants in the NL except the rows whose bound holds a
+        mutable Param (``self._param_rows``), which are re-evaluated.
+        """
+        bounds = [v.bounds for v in self.variables]
+        lbx = np.array([b[0] for b in bounds], dtype=float)  # None -> nan
+        ubx = np.array([b[1] for b in bounds], dtype=float)
+        lbx[np.isnan(lbx)] = -np.inf
+        ubx[np.isnan(ubx)] = np.inf
+        x0 = np.array([v.value for v in self.variables], dtype=float)
+        x0[np.isnan(x0)] = 0.0
         x0 = np.clip(x0, lbx, ubx)
-        m = len(self.constraints)
-        lbg, ubg = np.empty(m), np.empty(m)
-        for i, con in enumerate(self.constraints):
+        lbg, ubg = self._g_lb.copy(), self._g_ub.copy()
+        for i in self._param_rows:
+            con = self.constraints[i]
             lbg[i] = _bound(con.lb, -np.inf) + self._row_offset[i]
             ubg[i] = _bound(con.ub, np.inf) + self._row_offset[i]
+        self._bounded = np.flatnonzero(np.isfinite(lbx) | np.isfinite(ubx))
         return {"x0": x0, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
 
     def _multipliers_from_model(self) -> dict:
@@ -406,13 +453,16 @@ class CasadiIpoptSolver:
         dual = self.model.component("dual")
         zl = self.model.component("ipopt_zL_out")
         zu = self.model.component("ipopt_zU_out")
-        lam_g = np.array([-s * (dual.get(c, 0.0) if dual is not None else 0.0) for c in self.constraints])
-        lam_x = np.array(
-            [
-                -s * ((zl.get(v, 0.0) if zl is not None else 0.0) + (zu.get(v, 0.0) if zu is not None else 0.0))
-                for v in self.variables
-            ]
-        )
+        lam_g = np.zeros(len(self.constraints))
+        if dual is not None:
+            lam_g = -s * np.array([dual.get(c, 0.0) for c in self.constraints], dtype=float)
+        lam_x = np.zeros(len(self.variables))
+        bounded = [self.variables[i] for i in self._bounded]  # bound multipliers exist only there
+        z = np.zeros(len(bounded))
+        for suffix in (zl, zu):
+            if suffix is not None:
+                z += np.array([suffix.get(v, 0.0) for v in bounded], dtype=float)
+        lam_x[self._bounded] = -s * z
         return {"lam_x0": lam_x, "lam_g0": lam_g}
 
     # ------------------------------------------------------------------ solve
@@ -423,7 +473,8 @@ class CasadiIpoptSolver:
         in the model (``"primal"`` names the re-solve-from-previous-solution
         intent); ``"full"`` also passes the multipliers stored in the
         ``dual``/``ipopt_zL_out``/``ipopt_zU_out`` suffixes and switches on
-        Ipopt's warm-start options. ``options`` override the constructor
+        Ipopt's warm-start options; ``"continuation"`` does the same with the
+        barrier parameter starting at ``tol / 10``. ``options`` override the constructor
         options for this call only.
 
         The final iterate is loaded even when the solve fails, as Ipopt's AMPL
@@ -433,7 +484,7 @@ class CasadiIpoptSolver:
         self._check_unchanged()
         solver = self._solver_for(ipopt_options, verbose)
         args = self._numeric_inputs()
-        if warm_start == "full":
+        if warm_start in MULTIPLIER_MODES:
             args.update(self._multipliers_from_model())
         t0 = time.perf_counter()
         try:
@@ -459,19 +510,22 @@ class CasadiIpoptSolver:
     def _load(self, sol) -> None:
         """Write primal values and multipliers (ASL sign convention) into the model."""
         s = self.sense_sign
-        x = np.asarray(sol["x"]).ravel()
-        lam_x = np.asarray(sol["lam_x"]).ravel()
-        lam_g = np.asarray(sol["lam_g"]).ravel()
+        x = np.asarray(sol["x"]).ravel().tolist()
+        neg_lam_x = -np.asarray(sol["lam_x"]).ravel()
+        lam_g = (-s * np.asarray(sol["lam_g"]).ravel()).tolist()
         for var, val in zip(self.variables, x):
-            var.set_value(float(val), skip_validation=True)
+            var.set_value(val, skip_validation=True)
         dual = ensure_suffix(self.model, "dual", self._import_direction("dual"))
         for con, lam in zip(self.constraints, lam_g):
-            dual[con] = -s * float(lam)
+            dual[con] = lam
         zl = ensure_suffix(self.model, "ipopt_zL_out", pyo.Suffix.IMPORT)
         zu = ensure_suffix(self.model, "ipopt_zU_out", pyo.Suffix.IMPORT)
-        for var, lam in zip(self.variables, lam_x):
-            zl[var] = s * max(0.0, -float(lam))
-            zu[var] = s * min(0.0, -float(lam))
+        # Only bounded variables have bound multipliers; the others stay absent (read as 0).
+        lam_b = neg_lam_x[self._bounded]
+        for i, lo, up in zip(self._bounded.tolist(), np.maximum(lam_b, 0.0).tolist(), np.minimum(lam_b, 0.0).tolist()):
+            var = self.variables[i]
+            zl[var] = s * lo
+            zu[var] = s * up
 
     def _import_direction(self, name: str):
         """Keep an existing IMPORT_EXPORT direction (an AMPL backend may share the model)."""

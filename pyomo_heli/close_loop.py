@@ -178,8 +178,9 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     ft = load_flight_test(cfg.dataset)
-    id_data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
-    val_mans = list(prepare_data(ft, cfg.validation).maneuvers) if cfg.validation else []
+    id_data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
+    val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
+                if cfg.validation else [])
     trims = ft.trims.reset_index(drop=True)
     doc = {"config": str(cfg.path), "dataset": str(cfg.dataset), "settings": dataclasses.asdict(settings),
            "units": "SI (rad, rad/s, m/s, g)", "iterations": [], "stopped": None}

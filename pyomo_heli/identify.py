@@ -34,7 +34,7 @@ def _mean(series):
 def build_problem(cfg: IdentificationConfig):
     """Load the data and build the NLP of a config (no solve). Returns (nlp, data, flight_test)."""
     ft = load_flight_test(cfg.dataset)
-    data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
     m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
     return m, data, ft
 

@@ -364,7 +364,8 @@ def write_report(out_dir, cfg, results_dir=None) -> Path:
     result = IdentificationResult.load(results_dir if results_dir is not None else out)
     ft = load_flight_test(cfg.dataset)
     truth = read_truth(cfg.dataset)
-    val_mans = list(prepare_data(ft, cfg.validation).maneuvers)  # full records at the recorded rate
+    # full records at the recorded rate
+    val_mans = list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
     trims = ft.trims.reset_index(drop=True)
 
     speeds = list(CURVE_SPEEDS) + list(trims["V"])

@@ -98,7 +98,8 @@ def write_loop_report(out, cfg) -> Path:
     doc = load_loop(out)
     ft = load_flight_test(cfg.dataset)
     trims = ft.trims.reset_index(drop=True)
-    val_mans = list(prepare_data(ft, cfg.validation).maneuvers) if cfg.validation else []
+    val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
+                if cfg.validation else [])
     its = doc["iterations"]
     preds = {label(it): predict(label(it), iteration_model(cfg.model, it), it["parameters"],
                                 list(CURVE_SPEEDS) + list(trims["V"]), val_mans) for it in its}

@@ -59,7 +59,7 @@ class RotorWakeOnTail(Candidate):
     cylinder is zero outside it. An algebraic tail such as 1/(1 + xi^6)
     would leave a downwash gradient at high speed, where the wake lies
     almost in the disc plane and a 1 m/s change of w moves its boundary past
-    the tail by about half a radius. The fully developed wake carries twice
+    the tail by 0.6-0.8 wake radii (60-100 kt). The fully developed wake carries twice
     the disc-induced velocity, hence 2 lambda_i Omega R; k_wt scales it.
     """
 

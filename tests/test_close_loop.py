@@ -245,3 +245,19 @@ def test_bad_loop_table_is_one_line_exit_2(tmp_path, capsys, loop, message):
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_an_older_form_of_a_candidate_is_not_reused():
+    """The loop reuses a finished identification only for the same effect forms (source hash) and input reference."""
+    from pyomo_heli.diagnosis.candidates import RotorWakeOnTail, make_candidate
+    from pyomo_heli.identify import extension_forms
+
+    class OlderWake(RotorWakeOnTail):
+        def tail_downwash(self, ctx):
+            return 0.0
+
+    now = extension_forms([make_candidate("rotor_wake_on_tail")])
+    assert set(now) == {"rotor_wake_on_tail"} and len(now["rotor_wake_on_tail"]) == 12
+    assert extension_forms([make_candidate("rotor_wake_on_tail")]) == now
+    assert extension_forms([OlderWake()]) != now
+    assert extension_forms([]) == {}

@@ -11,7 +11,7 @@ Evaluation only: it reads the dataset's truth.json (the identification never doe
 
 by their trim increments over M0 (col, lon, theta vs speed), their immersion fraction, the pitch derivative
 M_w at 60 and 80 kt, the sensitivity of the tail's wake coordinate to w, and the validation RMS (80 kt doublets) of the loop's iteration-1 parameters with each
-form. ``--fit`` adds a noise-free check: (twist, CL_alpha_HT, strength) of each form fitted by least squares
+form, and the effect of the input reference (first sample or lead-in mean). ``--fit`` adds a noise-free check: (twist, CL_alpha_HT, strength) of each form fitted by least squares
 to E1's exact trim curves; a form that matched E1 would return the truth values (a few minutes).
 """
 from __future__ import annotations
@@ -142,6 +142,44 @@ def validation_table(mods: dict, dataset: Path, it0: dict) -> None:
     print("\n(q in deg/s, theta and beta_0 in deg, n_x and n_z in g, TAS in m/s)\n")
 
 
+def input_reference_table(truth: dict, dataset: Path) -> None:
+    """The first-sample input reference: how much a constant input offset moves theta, and what the lead-in mean
+    changes in the truth model's own validation replay."""
+    from pyomo_heli.simulation.integrate import simulate
+
+    tp = {k: truth["parameters"][k] for k in FREE}
+    e1 = {k: truth["parameters"][k] for k in ("K_lamT", "d_t", "s_w")}
+    tm = HelicopterModel(extensions=(WakeOnTail(),)).with_parameters(**tp, **e1)
+    print("## Input reference\n")
+    print("Truth model, constant input offset of 0.01 deg from trim: theta change [deg] after 1, 2, 5, 10, 15 s\n")
+    print("| V [kt] | input | 1 s | 2 s | 5 s | 10 s | 15 s |")
+    print("|---|---|---|---|---|---|---|")
+    t = np.linspace(0.0, 15.0, 751)
+    for v in (20, 80):
+        tr = trim_float(tm, v * KT)
+        for ch in ("lon", "col"):
+            sim = simulate(tm, tr, t, {ch: lambda tt: 0.01 * DEG + 0.0 * tt}, method="rk4", substeps=2)
+            d = [(float(np.interp(x, t, sim["theta"])) - tr.theta) / DEG for x in (1, 2, 5, 10, 15)]
+            print(f"| {v} | {ch} | " + " | ".join(f"{x:+.3f}" for x in d) + " |")
+    ft = load_flight_test(dataset)
+    print("\nBundled dataset: first input sample minus the mean of the 1.9 s lead-in [deg] of each maneuver's excited"
+          " channel\n")
+    for mv in ft.maneuvers.values():
+        ch = mv.inputs[0]
+        x, tt = mv.data[ch].to_numpy(), mv.t
+        print(f"- {mv.name} ({ch}): {(x[0] - x[tt <= tt[0] + 1.9].mean()) / DEG:+.4f}")
+    outs = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
+    shown = {"q": 1 / DEG, "theta": 1 / DEG, "beta_0": 1 / DEG}
+    print("\nTruth model's validation RMS on the bundled data (80 kt doublets) by input reference\n")
+    print("| input_reference_s | " + " | ".join(outs) + " |")
+    print("|---|" + "---|" * len(outs))
+    for ref in (0.0, 1.9):
+        val = list(prepare_data(ft, "validation", input_reference_s=ref).maneuvers)
+        r = validation_rms(predict("t", tm, {}, [], val), val)["all"]
+        print(f"| {ref:g} | " + " | ".join(f"{r[o] * shown.get(o, 1.0):.4g}" for o in outs) + " |")
+    print()
+
+
 def fit_table(truth: dict) -> None:
     """Noise-free: fit (twist, CL_alpha_HT, strength) of each form to E1's exact trim curves."""
     from scipy.optimize import least_squares
@@ -152,18 +190,20 @@ def fit_table(truth: dict) -> None:
     target = np.array([[t.col, t.lon, t.theta] for t in trim_sweep(
         HelicopterModel(extensions=(WakeOnTail(),)).with_parameters(**tp, **e1), [v * KT for v in speeds])]) / DEG
     print("## Noise-free trim fit to E1 (twist, CL_alpha_HT, strength free)\n")
-    print("| form | twist error | CL_alpha_HT error | strength | pooled trim misfit [deg] | largest theta misfit [deg] at |")
+    print("| form | twist error | CL_alpha_HT error | strength (shape) | pooled trim misfit [deg] | largest theta misfit [deg] at |")
     print("|---|---|---|---|---|---|")
-    forms = {"M0 (no wake)": None, "old form": OldRotorWakeOnTail(), "new form": make_candidate("rotor_wake_on_tail")}
-    for label, ext in forms.items():
+    forms = {"M0 (no wake)": (None, []), "old form": (OldRotorWakeOnTail(), ["k_wt"]),
+             "new form": (make_candidate("rotor_wake_on_tail"), ["k_wt"]),
+             "new form, z_ht free": (make_candidate("rotor_wake_on_tail"), ["k_wt", "z_ht"])}
+    for label, (ext, extra) in forms.items():
         base = HelicopterModel(extensions=(ext,) if ext else ())
-        names = ["theta_twist", "CL_alpha_HT"] + (["k_wt"] if ext else [])
+        names = ["theta_twist", "CL_alpha_HT"] + extra
 
         def res(x):
             s = trim_sweep(base.with_parameters(**dict(zip(names, x))), [v * KT for v in speeds])
             return (np.array([[t.col, t.lon, t.theta] for t in s]) / DEG - target).ravel()
 
-        x0 = [-0.03, 6.0] + ([0.6] if ext else [])
+        x0 = [-0.03, 6.0] + [{"k_wt": 0.6, "z_ht": 1.7}[n] for n in extra]
         sol = least_squares(res, x0, x_scale=[0.05 if n == "theta_twist" else 1.0 for n in names], diff_step=1e-4)
         est = dict(zip(names, sol.x))
         r = sol.fun.reshape(-1, 3)
@@ -171,7 +211,8 @@ def fit_table(truth: dict) -> None:
         j = int(np.argmax(np.abs(r[:, 2])))
         print(f"| {label} | {100 * (est['theta_twist'] / tp['theta_twist'] - 1):+.2f} % | "
               f"{100 * (est['CL_alpha_HT'] / tp['CL_alpha_HT'] - 1):+.2f} % | "
-              f"{est.get('k_wt', float('nan')):.3f} | {pooled:.4f} | {r[j, 2]:+.3f} at {speeds[j]} kt |")
+              f"{est.get('k_wt', float('nan')):.3f}" + (f", z_ht {est['z_ht']:.3f} m" if "z_ht" in est else "")
+              + f" | {pooled:.4f} | {r[j, 2]:+.3f} at {speeds[j]} kt |")
     print()
 
 
@@ -190,6 +231,7 @@ def main() -> None:
     derivative_table(mods)
     skew_sensitivity(mods)
     validation_table(mods, Path(a.dataset), its[0]["parameters"])
+    input_reference_table(truth, Path(a.dataset))
     if a.fit:
         fit_table(truth)
 

@@ -168,29 +168,12 @@ t_start_s = 2.0
 
 
 def _truth_replay_errors(cfg, doc):
-    """Validation RMS of each iteration's model against the truth simulator replayed the same way (same
-    measured input increments, each model from its own trim): the model error without the sensor noise."""
-    import numpy as np
+    """Validation RMS of each iteration's model minus the truth replay, and the truth model's own RMS."""
+    from pyomo_heli.report.loop import truth_replay_errors
 
-    from pyomo_heli.flighttest.truth_effects import make_effect
-    from pyomo_heli.physics.model import HelicopterModel
-    from pyomo_heli.report.identification import VALIDATION_OUTPUTS, predict, validation_rms
-    from pyomo_heli.report.loop import iteration_model
-
-    truth = json.loads((cfg.dataset / "truth.json").read_text())
-    effects = tuple(make_effect(n) for n in truth["effects"])
-    tmodel = HelicopterModel(extensions=effects)
-    tparams = {k: v for k, v in truth["parameters"].items() if k in tmodel.parameters}
     val = list(prepare_data(load_flight_test(cfg.dataset), cfg.validation,
                             input_reference_s=cfg.input_reference_s).maneuvers)
-    tpred = predict("truth", tmodel, tparams, [], val)
-    out = []
-    for it in doc["iterations"]:
-        pred = predict("it", iteration_model(cfg.model, it), it["parameters"], [], val)
-        out.append({o: float(np.sqrt(np.mean(np.concatenate(
-            [(pred.maneuvers[mv.name][o] - tpred.maneuvers[mv.name][o]).to_numpy() for mv in val]) ** 2)))
-            for o in VALIDATION_OUTPUTS})
-    return out, validation_rms(tpred, val)["all"]
+    return truth_replay_errors(cfg, doc, val)
 
 
 def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
@@ -225,6 +208,7 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
     assert abs(it1["parameters"]["Iyy"] - truth["Iyy"]) <= 0.015 * truth["Iyy"]
     report = (tmp_path / "loop" / "loop_report.md").read_text()
     assert "## Error before and after" in report and "## Parameters vs truth" in report
+    assert "minus the truth simulator replayed the same way" in report
     assert (tmp_path / "loop" / "loop_trim_vs_speed.png").is_file()
     assert (tmp_path / "loop" / "loop_validation.png").is_file()
 

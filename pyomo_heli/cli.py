@@ -213,7 +213,7 @@ def cmd_uncertainty(args) -> int:
     result = IdentificationResult.load(args.results)
     if args.out and Path(args.out).resolve() != Path(args.results).resolve():
         shutil.copytree(args.results, args.out, dirs_exist_ok=True)
-    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
     add_uncertainty(result, cfg, data, args.out or args.results, points=args.points)
     print(f"standard errors in {args.out or args.results} (front.csv, chosen.json, identifiability.csv)")
     return 0

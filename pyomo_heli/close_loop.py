@@ -22,7 +22,8 @@ finished is lost. Settings come from the config's ``[loop]`` table:
 ``candidates`` (names, default the whole library), ``alpha``, ``ratio``,
 ``confound_corr``, ``robust``, ``point`` (``direct``: the Eq. 11 solution solved
 directly, default; ``chosen``: the closest sampled front point) (see :mod:`pyomo_heli.diagnosis.attribution`). A finished
-iteration found in ``out/iter_i`` (same config, model and free parameters) is reused, not redone.
+iteration found in ``out/iter_i`` (same config, model - including the source of its effects - free parameters and
+input reference) is reused, not redone.
 """
 from __future__ import annotations
 
@@ -146,8 +147,12 @@ def _finished(cfg: IdentificationConfig, folder: Path):
         res = IdentificationResult.load(folder)
     except (FileNotFoundError, ValueError, KeyError):
         return None
+    from .identify import extension_forms
+
     same = (res.parameters == [f.name for f in cfg.free]
             and res.info.get("extensions") == [e.name for e in cfg.model.extensions]
+            and res.info.get("extension_forms", {}) == extension_forms(cfg.model.extensions)
+            and res.info.get("input_reference_s", 0.0) == cfg.input_reference_s
             and Path(res.info.get("config", "")).resolve() == Path(cfg.path).resolve()
             and len(res.front) == cfg.pareto.points)
     return res if same else None
@@ -178,8 +183,9 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     ft = load_flight_test(cfg.dataset)
-    id_data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
-    val_mans = list(prepare_data(ft, cfg.validation).maneuvers) if cfg.validation else []
+    id_data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
+    val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
+                if cfg.validation else [])
     trims = ft.trims.reset_index(drop=True)
     doc = {"config": str(cfg.path), "dataset": str(cfg.dataset), "settings": dataclasses.asdict(settings),
            "units": "SI (rad, rad/s, m/s, g)", "iterations": [], "stopped": None}

@@ -39,6 +39,7 @@ class IdentificationConfig:
     raw: dict = field(default_factory=dict)
     objectives: tuple = ("time", "trim")  # [objectives] use
     linear: object = None  # LinearSettings when "linear" is used
+    input_reference_s: float = 0.0  # [data] input_reference_s (0: increments from the first sample)
 
 
 def _need(d, key, where, types, default=...):
@@ -91,6 +92,9 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     max_dur = data.get("max_duration_s")
     if max_dur is not None and not (isinstance(max_dur, (int, float)) and max_dur > 0):
         raise ConfigError(f"{f} [data]: field 'max_duration_s' must be a positive number")
+    in_ref = data.get("input_reference_s", 0.0)
+    if isinstance(in_ref, bool) or not isinstance(in_ref, (int, float)) or not 0 <= in_ref < float("inf"):
+        raise ConfigError(f"{f} [data]: field 'input_reference_s' must be a number >= 0, got {in_ref!r}")
 
     mdl = raw.get("model", {})
     extensions = []
@@ -181,7 +185,8 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     return IdentificationConfig(path=path, dataset=ds, maneuvers=mans, validation=val,
                                 resample_hz=float(resample) if resample else None,
                                 max_duration=float(max_dur) if max_dur else None, model=model, free=free,
-                                nlp=nlp, pareto=pareto, raw=raw, objectives=use, linear=linear)
+                                nlp=nlp, pareto=pareto, raw=raw, objectives=use, linear=linear,
+                                input_reference_s=float(in_ref))
 
 
 #: the objective sets an identification can use ([objectives] use)

@@ -20,6 +20,20 @@ from .pareto.result import IdentificationResult
 from .pareto.store import PointStore, fingerprint
 
 
+def extension_forms(extensions) -> dict:
+    """name -> short hash of the extension class's source: tells a result of an older form of an effect apart."""
+    import hashlib
+    import inspect
+
+    out = {}
+    for e in extensions:
+        try:
+            src = inspect.getsource(type(e))
+        except (OSError, TypeError):
+            src = type(e).__qualname__
+        out[e.name] = hashlib.sha1(src.encode()).hexdigest()[:12]
+    return out
+
 def _point_dict(p) -> dict:
     d = asdict(p)
     d["epsilon"] = None if not math.isfinite(d["epsilon"]) else d["epsilon"]
@@ -34,14 +48,20 @@ def _mean(series):
 def build_problem(cfg: IdentificationConfig):
     """Load the data and build the NLP of a config (no solve). Returns (nlp, data, flight_test)."""
     ft = load_flight_test(cfg.dataset)
-    data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
     m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
     return m, data, ft
 
 
 def identification_fingerprint(cfg: IdentificationConfig) -> str:
-    """What must not change between a killed run and its resumption: the config (after overrides) and data."""
-    return fingerprint(cfg.raw, cfg.dataset, command="identify")
+    """What must not change between a killed run and its resumption: the config (after overrides) and data.
+
+    With extensions (e.g. a candidate the closed loop added, which is not in the config's text), also their
+    forms and the free parameters, so that points of an older form of an effect are not resumed.
+    """
+    extra = ({"extensions": extension_forms(cfg.model.extensions), "free": [f.name for f in cfg.free]}
+             if cfg.model.extensions else {})
+    return fingerprint(cfg.raw, cfg.dataset, command="identify", **extra)
 
 
 def run_identification(cfg: IdentificationConfig, out: str | Path, progress=print,
@@ -115,6 +135,8 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
         info={"config": str(cfg.path), "dataset": str(cfg.dataset), "build_time": t_build,
               "solver_setup_time": setup, "total_time": time.perf_counter() - t0,
               "maneuvers": [mv.name for mv in data.maneuvers], "extensions": [e.name for e in cfg.model.extensions],
+              "extension_forms": extension_forms(cfg.model.extensions),
+              "input_reference_s": cfg.input_reference_s,
               "solver": cfg.pareto.solver,
               "failed_points": failed,
               "resumed_points": sum(bool(getattr(p, "from_disk", False)) for p in points),

@@ -49,7 +49,7 @@ def run_tri_identification(cfg, out, progress=print) -> IdentificationResult:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     ft = load_flight_test(cfg.dataset)
-    data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
     responses = data_responses(cfg, ft)
     if not responses:
         raise ValueError(f"{cfg.path} [linear]: no maneuver at speeds_kt moves exactly one input of the pairs")

@@ -64,17 +64,17 @@ FREE = {
 
 
 def make_case(root, effect: str = "", seed: int = 11, free=("theta_twist", "CL_alpha_HT", "Iyy"), points: int = 3,
-              loop: str = ""):
+              loop: str = "", maneuvers: str = MANEUVERS, input_reference_s: float = 0.0):
     """Generate a small dataset with ``effect`` (a [truth.effects.*] table) and write its identification config."""
     root.mkdir(parents=True, exist_ok=True)
     gen = (f'[dataset]\nname = "small"\naircraft = "Bo-105 (small test)"\nseed = {seed}\n\n[truth]\nparameters = {{}}\n'
            f"{textwrap.dedent(effect)}\n[sensors]\nnoise = true\n\n[trims]\n"
-           "speeds_kt = [10, 15, 20, 25, 30, 40, 50, 60, 80, 100, 120]\n" + MANEUVERS)
+           "speeds_kt = [10, 15, 20, 25, 30, 40, 50, 60, 80, 100, 120]\n" + maneuvers)
     (root / "gen.toml").write_text(gen)
     generate_from_file(root / "gen.toml", root / "data")
     params = "".join(f"\n[parameters.{n}]\n{FREE[n]}\n" for n in free)
-    ident = (f'[data]\ndataset = "data"\nresample_hz = 25\n{params}\n[pareto]\npoints = {points}\n\n'
-             f'[solver]\nname = "casadi-ipopt"\n{loop}')
+    ident = (f'[data]\ndataset = "data"\nresample_hz = 25\ninput_reference_s = {input_reference_s}\n{params}\n'
+             f'[pareto]\npoints = {points}\n\n[solver]\nname = "casadi-ipopt"\n{loop}')
     (root / "ident.toml").write_text(ident)
     return load_identification_config(root / "ident.toml")
 
@@ -139,39 +139,76 @@ def test_flapping_lag_is_found_or_reported_confounded_with_iyy(tmp_path):
         assert att.accepted is None and row["like"] == "Iyy"
 
 
-def _rss(d: dict) -> float:
-    return sum(v**2 for v in d.values()) ** 0.5
+def _pooled_trim(trim_rms: dict) -> float:
+    """Root-sum-square of the trim RMS errors over col, lon and theta."""
+    return sum(trim_rms[c] ** 2 for c in ("col", "lon", "theta")) ** 0.5
+
+
+# The wake instance: 2 s of quiet lead-in before each input (the generator's default), 6 s records, and the
+# input increments referred to the lead-in mean (input_reference_s = 1.9 s). With increments from the first
+# sample (1 s lead-in, 5 s records, the other tests' MANEUVERS) the 0.02 deg noise of that one sample acts
+# as a constant input offset, and at 80 kt a 0.01 deg lon offset moves theta by 0.46 deg after 5 s: the
+# time-domain anchor of the front then sat at the twist bound and the Eq. 11 point was decided by that
+# artefact, not by the model (docs/close_loop.md, "What the tests show").
+WAKE_MANEUVERS = "".join(
+    f'''
+[[maneuvers]]
+name = "{name}"
+role = "{role}"
+speed_kt = {speed}
+channel = "lon"
+shape = "{shape}"
+amplitude_deg = 0.5
+step_s = {step}
+duration_s = 6
+t_start_s = 2.0
+''' for name, role, speed, shape, step in (("lon_20kt", "identification", 20, "doublet", 1.0),
+                                        ("lon3211_80kt", "identification", 80, "3211", 0.5),
+                                        ("lon_80kt_val", "validation", 80, "doublet", 1.0)))
+
+
+def _truth_replay_errors(cfg, doc):
+    """Validation RMS of each iteration's model minus the truth replay, and the truth model's own RMS."""
+    from pyomo_heli.report.loop import truth_replay_errors
+
+    val = list(prepare_data(load_flight_test(cfg.dataset), cfg.validation,
+                            input_reference_s=cfg.input_reference_s).maneuvers)
+    return truth_replay_errors(cfg, doc, val)
 
 
 def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
-    """The acceptance of the loop on a small instance of the synthetic flight test (truth: M0 + wake on tail)."""
+    """The acceptance of issue 5 on a small instance of the synthetic flight test (truth: M0 + wake on tail)."""
     cfg = make_case(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
-                    loop="\n[loop]\nmax_iterations = 1\n")
+                    loop="\n[loop]\nmax_iterations = 1\n", maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
     assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
     doc = json.loads((tmp_path / "loop" / "loop.json").read_text())
     it0, it1 = doc["iterations"][0], doc["iterations"][-1]
     print(json.dumps({k: (it0[k], it1[k]) for k in ("trim_rms", "validation_rms", "parameters")}, indent=1))
+    # the wake is picked first, and after it nothing else is significant (no false positive on the second round)
     assert it0["attribution"]["decision"] == "accepted"
     assert it0["attribution"]["accepted"] == "rotor_wake_on_tail"
     assert it1["extensions"] == ["rotor_wake_on_tail"] and it1["parameters"]["k_wt"] > 0
-    # after the wake, nothing else is significant (no false positive on the second round)
     assert it1["attribution"]["decision"] == "none"
     # the new model dominates the old one at the diagnosed (Eq. 11) point: both objectives fall
     assert it1["J_time"] < it0["J_time"] and it1["J_trim"] < it0["J_trim"]
-    # the wake's trim channels improve
-    for c in ("lon", "theta"):
-        assert it1["trim_rms"][c] < it0["trim_rms"][c], c
-    # at the trim anchor B the model with the wake recovers twist, tail lift slope and Iyy (truth known)
+    # the RMS trim error (col, lon, theta pooled) falls by at least 50 %
+    assert _pooled_trim(it1["trim_rms"]) <= 0.5 * _pooled_trim(it0["trim_rms"])
+    # the validation error does not rise on any output: the model's error against the truth replayed the same way
+    # (the sensor noise removed) falls on every output, q, theta, n_x, n_z, TAS and beta_0
+    model_err, _ = _truth_replay_errors(cfg, doc)
+    print("validation RMS of model minus truth replay:", model_err)
+    for o, e0 in model_err[0].items():
+        assert model_err[-1][o] < e0, o
+    # the errors of twist and tail lift slope against truth fall at the diagnosed point; Iyy stays within 1.5 %
     truth = json.loads((cfg.dataset / "truth.json").read_text())["parameters"]
-    import pandas as pd
-    b0, b1 = (pd.read_csv(tmp_path / "loop" / f"iter_{i}" / "front.csv").set_index("kind").loc["B"] for i in (0, 1))
+    for n in ("theta_twist", "CL_alpha_HT"):
+        assert abs(it1["parameters"][n] - truth[n]) < abs(it0["parameters"][n] - truth[n]), n
     for n in ("theta_twist", "CL_alpha_HT", "Iyy"):
-        assert abs(b1[n] - truth[n]) < abs(b0[n] - truth[n]), n
-        assert b1[n] == pytest.approx(truth[n], rel=0.05), n
-    # Not asserted on this small instance (reported in docs/close_loop.md): the 50 % fall of the pooled trim
-    # RMS, validation RMS not rising and the truth errors at the Eq. 11 point; the full-size study checks them.
+        assert it1["parameters"][n] == pytest.approx(truth[n], rel=0.05), n
+    assert abs(it1["parameters"]["Iyy"] - truth["Iyy"]) <= 0.015 * truth["Iyy"]
     report = (tmp_path / "loop" / "loop_report.md").read_text()
     assert "## Error before and after" in report and "## Parameters vs truth" in report
+    assert "minus the truth simulator replayed the same way" in report
     assert (tmp_path / "loop" / "loop_trim_vs_speed.png").is_file()
     assert (tmp_path / "loop" / "loop_validation.png").is_file()
 
@@ -192,3 +229,19 @@ def test_bad_loop_table_is_one_line_exit_2(tmp_path, capsys, loop, message):
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_an_older_form_of_a_candidate_is_not_reused():
+    """The loop reuses a finished identification only for the same effect forms (source hash) and input reference."""
+    from pyomo_heli.diagnosis.candidates import RotorWakeOnTail, make_candidate
+    from pyomo_heli.identify import extension_forms
+
+    class OlderWake(RotorWakeOnTail):
+        def tail_downwash(self, ctx):
+            return 0.0
+
+    now = extension_forms([make_candidate("rotor_wake_on_tail")])
+    assert set(now) == {"rotor_wake_on_tail"} and len(now["rotor_wake_on_tail"]) == 12
+    assert extension_forms([make_candidate("rotor_wake_on_tail")]) == now
+    assert extension_forms([OlderWake()]) != now
+    assert extension_forms([]) == {}

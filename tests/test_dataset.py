@@ -118,6 +118,28 @@ def test_si_conversion_against_hand_values(ds):
     assert list(tr["source"]) == ["level"] * 4 + NAMES
 
 
+
+def test_increments_refer_to_the_lead_in_mean_when_asked(ds):
+    """input_reference_s > 0: inputs minus their mean over the quiet lead-in, not minus one noisy sample."""
+    import dataclasses
+
+    from pyomo_heli.nlp.identification import prepare_data
+
+    lon = load_flight_test(ds).maneuvers["lon3211_80kt"]
+    d = lon.data.copy()
+    lead = d["t"] <= d["t"].iloc[0] + 0.5
+    noise = np.where(np.arange(lead.sum()) % 2 == 0, 0.02, -0.02) * DEG   # +-0.02 deg, mean 0 over 26 samples
+    d.loc[lead, "lon"] = d.loc[lead, "lon"] + noise
+    noisy = dataclasses.replace(lon, data=d)
+    first = noisy.increments()["lon"]
+    assert first[0] == 0.0 and first[-1] == pytest.approx(-0.02 * DEG, rel=1e-9)  # that sample's noise, held
+    ref = dataclasses.replace(noisy, input_reference_s=0.5).increments()["lon"]
+    assert ref[-1] == pytest.approx(0.0, abs=1e-15) and np.max(ref) == pytest.approx(0.5 * DEG, rel=1e-12)
+    # prepare_data passes the setting on; the default stays the first sample
+    ft = load_flight_test(ds)
+    assert prepare_data(ft, ["lon3211_80kt"]).maneuvers[0].input_reference_s == 0.0
+    assert prepare_data(ft, ["lon3211_80kt"], input_reference_s=0.5).maneuvers[0].input_reference_s == 0.5
+
 def test_gamma_fp_defaults_to_zero(ds):
     df = pd.read_csv(ds / "trims.csv").drop(columns=["gamma_fp_deg"])
     df.to_csv(ds / "trims.csv", index=False)

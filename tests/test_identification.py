@@ -156,6 +156,18 @@ def test_bad_configs_name_the_field(tmp_path, extra, message):
     assert "bad.toml" in proc.stderr
 
 
+
+@pytest.mark.parametrize("value", [-0.5, "1 s", True])
+def test_bad_input_reference_is_named(value):
+    with pytest.raises(ConfigError, match="field 'input_reference_s' must be a number >= 0"):
+        load_identification_config(CONFIGS / "small_case1.toml", overrides={"data": {"input_reference_s": value}})
+
+
+def test_input_reference_is_read_and_defaults_to_the_first_sample():
+    assert load_identification_config(CONFIGS / "small_case1.toml").input_reference_s == 0.0
+    cfg = load_identification_config(CONFIGS / "small_case1.toml", overrides={"data": {"input_reference_s": 0.9}})
+    assert cfg.input_reference_s == 0.9
+
 def test_missing_dataset_is_named(tmp_path):
     cfg = tmp_path / "c.toml"
     cfg.write_text((CONFIGS / "small_case1.toml").read_text().replace("../../data/bo105_clean", "nowhere"))

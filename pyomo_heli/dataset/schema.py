@@ -151,6 +151,9 @@ class Maneuver:
     data: pd.DataFrame
     file: str = ""
     description: str | None = None
+    #: inputs are referred to their mean over the first ``input_reference_s`` seconds of the record
+    #: (0: to the first sample); set by :func:`pyomo_heli.nlp.identification.prepare_data`
+    input_reference_s: float = 0.0
 
     @property
     def t(self) -> np.ndarray:
@@ -178,11 +181,18 @@ class Maneuver:
         return [c for c in self.data.columns if c != "t"]
 
     def increments(self, channels=INPUT_CHANNELS) -> dict[str, np.ndarray]:
-        """Input increments on trim: channel -> input minus its first sample (rad)."""
+        """Input increments on trim: channel -> input minus its reference (rad).
+
+        The reference is the first sample, or, with ``input_reference_s`` > 0, the mean over the
+        samples with t <= t[0] + input_reference_s (the quiet lead-in before the first input): the
+        noise of one sample would otherwise act as a constant input offset over the whole record.
+        """
+        t = self.t
+        lead = t <= t[0] + self.input_reference_s if self.input_reference_s > 0 else slice(0, 1)
         out = {}
         for ch in channels:
             x = self.data[ch].to_numpy(dtype=float)
-            out[ch] = x - x[0]
+            out[ch] = x - float(np.mean(x[lead]))
         return out
 
 

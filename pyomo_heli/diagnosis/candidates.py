@@ -20,6 +20,8 @@ from __future__ import annotations
 from ..physics.extensions import Extension
 from ..physics.parameters import DEG, ParameterSpec
 
+LN2 = 0.6931471805599453
+
 
 class Candidate(Extension):
     """An extension offered to the diagnosis: one strength, a physical reason, a score-test step."""
@@ -35,13 +37,30 @@ class Candidate(Extension):
 class RotorWakeOnTail(Candidate):
     """Rotor wake on the horizontal tail: downwash w_dw = k_wt g(xi) 2 lambda_i Omega R at the tail.
 
-    The wake is a cylinder of radius R leaving the disc along the skew angle
-    chi, tan(chi) = mu_d / lambda_d (disc-frame flow). At the stabiliser's
-    depth z_ht below the hub its centre line is z_ht tan(chi) aft of the hub;
-    the tail, l_t + x_h aft of the hub, is xi = (l_t + x_h - z_ht tan chi)/R
-    wake radii from it. Immersion is a smooth top hat g = 1/(1 + xi^6)
-    (inside |xi| < 1). The fully developed wake carries twice the
-    disc-induced velocity, hence 2 lambda_i Omega R; k_wt scales it.
+    The wake is a cylinder of radius R leaving the tip-path plane (TPP) along
+    the skew angle chi, tan(chi) = mu_d / lambda_d. That angle is measured in
+    the disc frame, so the tail's position is taken into the same frame: the
+    stabiliser, l_th = l_t + x_h aft of the hub and z_ht below it in body axes,
+    is, in the frame of the disc tilted forward by a = gamma_s + beta_1c_tpp
+    (the tilt that carries the thrust),
+
+        aft   = l_th cos a - z_ht sin a      (along the disc plane)
+        depth = z_ht cos a + l_th sin a      (below the disc plane)
+
+    A forward-tilted disc thus puts the tail deeper below the wake origin
+    (by about l_th a, 0.2-0.3 m). At that depth the wake centre line is
+    depth tan(chi) aft of the hub, and the tail is
+    xi = (aft - depth tan chi) / R wake radii from it.
+
+    Immersion is a smooth top hat g = 2^(-xi^6) = exp(-ln 2 xi^6): 1 on the
+    centre line, 1/2 on the wake boundary |xi| = 1 (a point on a vortex sheet
+    sees the mean of the velocities on its two sides) and, outside, falling
+    faster than exponentially: the axial velocity induced by a vortex
+    cylinder is zero outside it. An algebraic tail such as 1/(1 + xi^6)
+    would leave a downwash gradient at high speed, where the wake lies
+    almost in the disc plane and a 1 m/s change of w moves its boundary past
+    the tail by 0.6-0.8 wake radii (60-100 kt). The fully developed wake carries twice
+    the disc-induced velocity, hence 2 lambda_i Omega R; k_wt scales it.
     """
 
     name = "rotor_wake_on_tail"
@@ -56,12 +75,21 @@ class RotorWakeOnTail(Candidate):
             ParameterSpec("z_ht", 1.7, "m", "candidate: stabiliser depth below the hub (drawing value)", "choice"),
         ]
 
-    def tail_downwash(self, ctx):
-        p = ctx.p
+    @staticmethod
+    def immersion(ctx):
+        """xi (distance of the tail from the wake centre line in wake radii) and g(xi), at ``ctx``."""
+        p, ops = ctx.p, ctx.ops
+        a = p["gamma_s"] + ctx.beta_1c_tpp
+        l_th = ctx.l_t + ctx.x_h
+        aft = l_th * ops.cos(a) - p["z_ht"] * ops.sin(a)
+        depth = p["z_ht"] * ops.cos(a) + l_th * ops.sin(a)
         tan_chi = ctx.disc.mu_d / ctx.disc.lambda_d
-        xi = (ctx.l_t + ctx.x_h - p["z_ht"] * tan_chi) / p["R"]
-        g = 1.0 / (1.0 + xi**6)
-        return p["k_wt"] * g * 2.0 * ctx.x["lambda_i"] * ctx.flow.v_tip
+        xi = (aft - depth * tan_chi) / p["R"]
+        return xi, ops.exp(-LN2 * xi**6)
+
+    def tail_downwash(self, ctx):
+        _, g = self.immersion(ctx)
+        return ctx.p["k_wt"] * g * 2.0 * ctx.x["lambda_i"] * ctx.flow.v_tip
 
 
 class FlappingLag(Candidate):

@@ -277,8 +277,8 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
         sel = selection[role]
         if sel == "validation" and not any(mv.role == "validation" for mv in ft.maneuvers.values()):
             continue
-        data = (prepare_data(ft, sel, cfg.resample_hz, cfg.max_duration) if role == "identification"
-                else prepare_data(ft, sel))
+        data = (prepare_data(ft, sel, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
+                if role == "identification" else prepare_data(ft, sel, input_reference_s=cfg.input_reference_s))
         mans += [(role, mv) for mv in data.maneuvers]
     problems: list[str] = []
     trims = ft.trims.reset_index(drop=True)

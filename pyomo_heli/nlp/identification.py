@@ -209,11 +209,13 @@ def set_objective(m: pyo.ConcreteModel, expr) -> None:
 
 
 def prepare_data(ft, maneuvers="identification", resample_hz: float | None = None,
-                 max_duration: float | None = None) -> IdentificationData:
+                 max_duration: float | None = None, input_reference_s: float = 0.0) -> IdentificationData:
     """Select maneuvers of a loaded FlightTest, keep every k-th sample and crop the record.
 
     Keeping every k-th sample (k = rate / resample_hz, an integer) leaves the
     measurement times on the element boundaries: nothing is snapped.
+    ``input_reference_s``: the input increments are referred to the mean over the first
+    ``input_reference_s`` seconds of each record (0: its first sample), see ``Maneuver.increments``.
     """
     import dataclasses
 
@@ -235,7 +237,7 @@ def prepare_data(ft, maneuvers="identification", resample_hz: float | None = Non
             df = df.iloc[:: int(round(k))]
         if max_duration is not None:
             df = df[df["t"] <= df["t"].iloc[0] + max_duration + 1e-9]
-        out.append(dataclasses.replace(mv, data=df.reset_index(drop=True)))
+        out.append(dataclasses.replace(mv, data=df.reset_index(drop=True), input_reference_s=float(input_reference_s)))
     return IdentificationData(maneuvers=out, trims=ft.trims)
 
 

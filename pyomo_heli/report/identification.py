@@ -252,6 +252,15 @@ def read_truth(dataset: Path) -> dict | None:
         return json.load(fh)["parameters"]
 
 
+def read_truth_effects(dataset: Path) -> dict | None:
+    """Truth effects of a synthetic dataset (name -> their parameters, SI), or None without ``truth.json``."""
+    f = Path(dataset) / "truth.json"
+    if not f.is_file():
+        return None
+    with open(f) as fh:
+        return json.load(fh).get("effects", {})
+
+
 def parameter_table(result: IdentificationResult, cfg, truth: dict | None = None) -> pd.DataFrame:
     """Parameters in display units: initial, time-domain, multi-objective, Eq. 11 direct (+ truth and errors)."""
     initial = {f.name: f.initial for f in cfg.free}
@@ -364,7 +373,8 @@ def write_report(out_dir, cfg, results_dir=None) -> Path:
     result = IdentificationResult.load(results_dir if results_dir is not None else out)
     ft = load_flight_test(cfg.dataset)
     truth = read_truth(cfg.dataset)
-    val_mans = list(prepare_data(ft, cfg.validation).maneuvers)  # full records at the recorded rate
+    # full records at the recorded rate
+    val_mans = list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
     trims = ft.trims.reset_index(drop=True)
 
     speeds = list(CURVE_SPEEDS) + list(trims["V"])

@@ -25,7 +25,7 @@ from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
 from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
-                             read_truth)
+                             read_truth, read_truth_effects, validation_rms)
 
 
 def iteration_model(base: HelicopterModel, it: dict) -> HelicopterModel:
@@ -90,6 +90,34 @@ def truth_errors(doc: dict, base: HelicopterModel, truth: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def truth_replay_errors(cfg, doc: dict, val_mans) -> tuple[list[dict], dict] | None:
+    """Validation RMS of each iteration's model minus the truth simulator replayed the same way (same measured
+    input increments, each model from its own trim): the model error without the sensor noise. Also the truth
+    model's own data-minus-model RMS. None without ``truth.json``. Evaluation only."""
+    import numpy as np
+
+    from ..flighttest.truth_effects import make_effect
+
+    truth, effects = read_truth(cfg.dataset), read_truth_effects(cfg.dataset)
+    if truth is None or effects is None or not val_mans:
+        return None
+    tmodel = HelicopterModel(extensions=tuple(make_effect(n) for n in effects))
+    tpred = predict("truth", tmodel, {k: v for k, v in truth.items() if k in tmodel.parameters}, [], val_mans)
+    out = []
+    for it in doc["iterations"]:
+        pred = predict(label(it), iteration_model(cfg.model, it), it["parameters"], [], val_mans)
+        row = {}
+        for o in VALIDATION_OUTPUTS:
+            runs = [(pred.maneuvers.get(mv.name), tpred.maneuvers.get(mv.name)) for mv in val_mans]
+            if any(a is None or b is None or o not in a for a, b in runs):
+                row[o] = None
+                continue
+            e = np.concatenate([(a[o] - b[o]).to_numpy(dtype=float) for a, b in runs])
+            row[o] = float(np.sqrt(np.mean(e**2)))
+        out.append(row)
+    return out, validation_rms(tpred, val_mans)["all"]
+
+
 def write_loop_report(out, cfg) -> Path:
     """Figures and ``loop_report.md`` of the loop in ``out`` (``cfg``: the loop's identification config)."""
     from ..close_loop import load_loop
@@ -98,7 +126,8 @@ def write_loop_report(out, cfg) -> Path:
     doc = load_loop(out)
     ft = load_flight_test(cfg.dataset)
     trims = ft.trims.reset_index(drop=True)
-    val_mans = list(prepare_data(ft, cfg.validation).maneuvers) if cfg.validation else []
+    val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
+                if cfg.validation else [])
     its = doc["iterations"]
     preds = {label(it): predict(label(it), iteration_model(cfg.model, it), it["parameters"],
                                 list(CURVE_SPEEDS) + list(trims["V"]), val_mans) for it in its}
@@ -128,6 +157,19 @@ def write_loop_report(out, cfg) -> Path:
     if truth is not None:
         L += ["## Parameters vs truth", "", "From the dataset's `truth.json` (read only by this report).", "",
               markdown_table(truth_errors(doc, cfg.model, truth), digits=5), ""]
+        tr = truth_replay_errors(cfg, doc, val_mans)
+        if tr is not None:
+            errs, truth_rms = tr
+            rows = [{"model": label(it), **{f"{o} [{plots.UNITS[o][0]}]": (None if errs[k][o] is None
+                                                                          else float(plots.shown(o, errs[k][o])))
+                                          for o in VALIDATION_OUTPUTS}} for k, it in enumerate(its)]
+            rows.append({"model": "truth model: data minus truth (noise floor)",
+                         **{f"{o} [{plots.UNITS[o][0]}]": (None if truth_rms.get(o) is None
+                                                           else float(plots.shown(o, truth_rms[o])))
+                            for o in VALIDATION_OUTPUTS}})
+            L += ["Validation RMS of each model minus the truth simulator replayed the same way (the model error "
+                  "without the sensor noise; the last row is the truth model's own data-minus-model RMS, the "
+                  "floor of the table above):", "", markdown_table(pd.DataFrame(rows), digits=4), ""]
     L += ["## Iterations", ""]
     for it in its:
         L += [f"### {label(it)}", "", f"Results: `{it['results_dir']}/` (front, report). "

@@ -76,7 +76,7 @@ def _problem(spec: ProblemSpec):
         cfg = load_identification_config(spec.config, json.loads(spec.overrides))
         cfg.nlp = dataclasses.replace(cfg.nlp, mutable_data=True)
         ft = load_flight_test(cfg.dataset)
-        data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+        data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
         m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
         ps = ParetoSolver(m, cfg.pareto)
         _CACHE[spec] = (cfg, data, m, ps)

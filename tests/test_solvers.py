@@ -160,7 +160,6 @@ def test_warm_resolve_is_cheaper_than_cold(name, mode):
 def test_continuation_starts_the_barrier_at_tol_over_ten():
     opts, _, _ = resolve_options({"tol": 1e-6}, None, "continuation")
     assert opts["mu_init"] == pytest.approx(1e-7) and opts["warm_start_init_point"] == "yes"
-    assert "warm_start_bound_push" not in opts  # Ipopt's default push
     assert resolve_options({"mu_init": 1e-3}, None, "continuation")[0]["mu_init"] == 1e-3  # the user's value wins
     assert "mu_init" not in resolve_options(None, None, "primal")[0]
 

@@ -143,6 +143,13 @@ class _Snapshot:
                 suffix[key] = val
 
 
+#: Options of the first step off anchor A. There the active set changes (the epsilon bound becomes
+#: active, a parameter at its bound in A may leave it), and the small bound pushes of a warm start
+#: pin the iterate: with 1e-6 that step took 20 Ipopt iterations, with Ipopt's default 1e-3 four,
+#: while the later steps take 3 with 1e-6 and 5 with 1e-3 (Case 1, full size, docs/performance.md).
+LEAVE_ANCHOR_OPTIONS = {"warm_start_bound_push": 1e-3, "warm_start_mult_bound_push": 1e-3}
+
+
 def solve_with_fallback(solve, mode: str, start: _Snapshot):
     """``solve(mode)``; if a multiplier warm start fails, once more from ``start`` with ``solve("primal")``.
 
@@ -223,9 +230,10 @@ class ParetoSolver:
                        wall_time=wall, setup_time=setup, warm_start=warm_start)
         return p
 
-    def _solve_warm(self, kind, index, point_kind, epsilon, start: "_Snapshot", **obj):
+    def _solve_warm(self, kind, index, point_kind, epsilon, start: "_Snapshot", options=None, **obj):
         """A re-solve with the configured warm start, retried with the primal one if it fails."""
-        return solve_with_fallback(lambda ws: self._solve(kind, index, point_kind, epsilon, ws, **obj),
+        return solve_with_fallback(lambda ws: self._solve(kind, index, point_kind, epsilon, ws,
+                                                          options if ws in MULTIPLIER_MODES else None, **obj),
                                    self.settings.warm_start, start)
 
     def _near_start_options(self) -> dict | None:
@@ -317,7 +325,8 @@ class ParetoSolver:
         last_good = _Snapshot(self.m)
         for k in range(1, s.points - 1):
             def solve_k(k=k, start=last_good):
-                p = self._solve_warm("time", k, "eps", float(eps[k]), start, scale=scale)
+                p = self._solve_warm("time", k, "eps", float(eps[k]), start,
+                                     LEAVE_ANCHOR_OPTIONS if k == 1 else None, scale=scale)
                 if s.cold_check:
                     self._cold_check(p, last_good, scale=scale)
                 return p

@@ -27,7 +27,7 @@ import pyomo.environ as pyo
 
 from ..nlp.parameters import free_parameter_values
 from ..solvers import make_solver, scale_multipliers
-from .front import FrontPoint, ParetoSettings, _Snapshot, epsilon_grid, solve_with_fallback
+from .front import LEAVE_ANCHOR_OPTIONS, FrontPoint, ParetoSettings, _Snapshot, epsilon_grid, solve_with_fallback
 
 OBJECTIVES = ("time", "trim", "linear")
 #: fraction of the anchor range kept above each objective's minimum at the tight end of the grid
@@ -94,7 +94,8 @@ class TriParetoSolver:
             w[k].set_value(v)
 
     def _solve(self, objective: str, index: int, kind: str, eps_trim=math.inf, eps_linear=math.inf,
-               warm_start="primal", scale=None, utopia=None, nadir=None, grid=(-1, -1)) -> TriFrontPoint:
+               warm_start="primal", scale=None, utopia=None, nadir=None, grid=(-1, -1),
+               options=None) -> TriFrontPoint:
         if objective == "utopia":
             pins = {"w_utopia": 1.0}
             for k, u, n in zip(OBJECTIVES, utopia, nadir):
@@ -104,7 +105,7 @@ class TriParetoSolver:
             self._pin(**{f"w_{objective}": 1.0 / (scale or self.scale[objective])})
         self.m.eps_trim = eps_trim / self.scale["trim"] if math.isfinite(eps_trim) else 1e20
         self.m.eps_linear = eps_linear / self.scale["linear"] if math.isfinite(eps_linear) else 1e20
-        res = self.solver.solve(warm_start=warm_start)
+        res = self.solver.solve(warm_start=warm_start, options=options)
         return TriFrontPoint(index=index, kind=kind, epsilon=eps_trim, J_time=pyo.value(self.m.J_time),
                              J_trim=pyo.value(self.m.J_trim), parameters=free_parameter_values(self.m),
                              success=res.success, status=res.status, iterations=res.iterations,
@@ -166,9 +167,12 @@ class TriParetoSolver:
             for j in cols:
                 if i == 0 and j == 0:
                     continue  # point A itself (both bounds inactive)
+                # the first grid point leaves anchor A (see front.LEAVE_ANCHOR_OPTIONS)
+                opts = LEAVE_ANCHOR_OPTIONS if index == 1 else None
                 p = solve_with_fallback(
-                    lambda ws, i=i, j=j: self._solve("time", index, "eps", float(self.eps_trim[i]),
-                                                     float(self.eps_linear[j]), ws, scale=scale, grid=(i, j)),
+                    lambda ws, i=i, j=j, opts=opts: self._solve(
+                        "time", index, "eps", float(self.eps_trim[i]), float(self.eps_linear[j]), ws, scale=scale,
+                        grid=(i, j), options=opts if ws != "primal" else None),
                     s.warm_start, last_good)
                 if p.success:
                     last_good = self.snapshots[index] = _Snapshot(self.m)

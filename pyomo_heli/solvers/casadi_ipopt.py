@@ -88,12 +88,8 @@ def resolve_options(base: dict | None, call: dict | None, warm_start: str) -> tu
     user = {**(base or {}), **(call or {})}
     verbose = bool(user.pop("verbose", False))
     merged = dict(DEFAULT_OPTIONS)
-    if warm_start == "full":
+    if warm_start in MULTIPLIER_MODES:
         merged.update(WARM_START_OPTIONS)
-    elif warm_start == "continuation":
-        # Ipopt's default pushes (1e-3): with 1e-6 the step off an anchor where a parameter sits at
-        # its bound took 20 iterations instead of 4 (Case 1, full size, docs/performance.md)
-        merged["warm_start_init_point"] = "yes"
     merged.update(user)
     if warm_start == "continuation" and "mu_init" not in user:
         merged["mu_init"] = float(merged["tol"]) / 10.0

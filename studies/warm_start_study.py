@@ -1,7 +1,7 @@
 """Which warm start makes a front cheap? Iterations per front point for several Ipopt start options.
 
     python studies/warm_start_study.py tests/configs/small_case1_noisy.toml --max-duration 2
-    python studies/warm_start_study.py studies/case1.toml --anchor-b           # full size, ~5 min
+    python studies/warm_start_study.py studies/case1.toml --anchor-b           # full size, ~10 min
 
 On one NLP (built once), point A is solved cold; then the interior points of an 11-point front are
 solved along the epsilon grid from A, once per start option (each chain from A's solution, its

@@ -178,6 +178,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
         pareto = ParetoSettings(points=points, spacing=_need(par, "spacing", f"{f} [pareto]", str, "geometric"),
                                 warm_start=_need(par, "warm_start", f"{f} [pareto]", str, "continuation"),
                                 cold_check=bool(_need(par, "cold_check", f"{f} [pareto]", bool, False)),
+                                predictor=_need(par, "predictor", f"{f} [pareto]", str, "secant"),
                                 solver=solver, solver_options=dict(_need(sol, "options", f"{f} [solver]", dict, {})))
     except ValueError as exc:
         raise ConfigError(f"{f} [pareto]: {exc}") from None

@@ -29,13 +29,15 @@ from pyomo_heli.pareto.front import ParetoSolver, _Snapshot, epsilon_grid  # noq
 from pyomo_heli.solvers import scale_multipliers  # noqa: E402
 
 PUSH_1E3 = {"warm_start_bound_push": 1e-3, "warm_start_mult_bound_push": 1e-3}
-CHAINS = [  # (label, warm-start mode, extra Ipopt options)
-    ("primal (Ipopt mu_init 0.1)", "primal", None),
-    ("full (mu_init 1e-4)", "full", None),
-    ("full, mu_init 1e-6", "full", {"mu_init": 1e-6}),
-    ("full, mu_init 1e-8", "full", {"mu_init": 1e-8}),
-    ("continuation (mu_init tol/10)", "continuation", None),
-    ("continuation, pushes 1e-3", "continuation", PUSH_1E3),
+CHAINS = [  # (label, warm-start mode, extra Ipopt options, options of the first step off A, predictor)
+    ("primal (Ipopt mu_init 0.1)", "primal", None, None, "none"),
+    ("full (mu_init 1e-4)", "full", None, None, "none"),
+    ("full, mu_init 1e-6", "full", {"mu_init": 1e-6}, None, "none"),
+    ("full, mu_init 1e-8", "full", {"mu_init": 1e-8}, None, "none"),
+    ("continuation (mu_init tol/10)", "continuation", None, None, "none"),
+    ("continuation, pushes 1e-3", "continuation", PUSH_1E3, PUSH_1E3, "none"),
+    ("continuation, 1e-3 on step 1", "continuation", None, PUSH_1E3, "none"),
+    ("same + secant predictor", "continuation", None, PUSH_1E3, "secant"),
 ]
 B_FIRST = [("Ipopt default", None), ("mu_init 1e-4", {"mu_init": 1e-4}), ("mu_init 1e-6", {"mu_init": 1e-6})]
 B_SECOND = [("Ipopt default", None), ("mu_init 1e-9", {"mu_init": 1e-9}), ("mu_init 1e-6", {"mu_init": 1e-6})]
@@ -47,6 +49,8 @@ def main(argv=None) -> int:
     ap.add_argument("--max-duration", type=float, help="crop every maneuver to this many seconds")
     ap.add_argument("--points", type=int, default=11)
     ap.add_argument("--anchor-b", action="store_true", help="also compare the start options of anchor B")
+    ap.add_argument("--chains", type=lambda t: [int(x) for x in t.split(",")],
+                    help="indices into CHAINS to run (default: all), e.g. 0,6,7")
     args = ap.parse_args(argv)
     over = {"data": {"max_duration_s": args.max_duration}} if args.max_duration else {}
     cfg = load_identification_config(args.config, over)
@@ -59,15 +63,20 @@ def main(argv=None) -> int:
     b1 = ps._solve("trim", -1, "B1", math.inf, "primal")
     eps = epsilon_grid(a.J_trim, b1.J_trim, args.points)
     ref = None
-    for label, mode, opts in CHAINS:
+    chains = [c for i, c in enumerate(CHAINS) if args.chains is None or i in args.chains]
+    for label, mode, opts, first, predictor in chains:
         snap_a.restore()
         scale_multipliers(m, ps.s_time / scale)
         its, times, J = [], [], []
+        last, previous = _Snapshot(m), None
         for k in range(1, args.points - 1):
-            p = ps._solve("time", k, "eps", float(eps[k]), mode, opts, scale=scale)
+            if previous is not None and predictor == "secant":  # as ParetoSolver.front
+                last.extrapolated(previous, (eps[k] - eps[k - 1]) / (eps[k - 1] - eps[k - 2])).restore()
+            p = ps._solve("time", k, "eps", float(eps[k]), mode, first if k == 1 else opts, scale=scale)
             its.append(p.iterations if p.success else f"{p.iterations}({p.status})")
             times.append(p.wall_time)
             J.append(p.J_time)
+            previous, last = (last if k > 1 else None), _Snapshot(m)
         ref = np.array(J) if ref is None else ref
         total = sum(i if isinstance(i, int) else 0 for i in its)
         print(f"{label:32s} iterations {its} total {total}, {sum(times):.1f} s; "

@@ -25,10 +25,11 @@ sys.path.insert(0, str(ROOT))
 
 from pyomo_heli.config import load_identification_config  # noqa: E402
 from pyomo_heli.identify import build_problem  # noqa: E402
-from pyomo_heli.pareto.front import ParetoSolver, _Snapshot, epsilon_grid  # noqa: E402
+from pyomo_heli.pareto.front import FRONT_STEP_OPTIONS, ParetoSolver, _Snapshot, epsilon_grid  # noqa: E402
 from pyomo_heli.solvers import scale_multipliers  # noqa: E402
 
 PUSH_1E3 = {"warm_start_bound_push": 1e-3, "warm_start_mult_bound_push": 1e-3}
+PUSH_1E8 = FRONT_STEP_OPTIONS
 CHAINS = [  # (label, warm-start mode, extra Ipopt options, options of the first step off A, predictor)
     ("primal (Ipopt mu_init 0.1)", "primal", None, None, "none"),
     ("full (mu_init 1e-4)", "full", None, None, "none"),
@@ -38,9 +39,14 @@ CHAINS = [  # (label, warm-start mode, extra Ipopt options, options of the first
     ("continuation, pushes 1e-3", "continuation", PUSH_1E3, PUSH_1E3, "none"),
     ("continuation, 1e-3 on step 1", "continuation", None, PUSH_1E3, "none"),
     ("same + secant predictor", "continuation", None, PUSH_1E3, "secant"),
+    ("same, mu_init 1e-10", "continuation", {"mu_init": 1e-10}, PUSH_1E3, "secant"),
+    ("same, pushes 1e-8", "continuation", PUSH_1E8, PUSH_1E3, "secant"),
 ]
-B_FIRST = [("Ipopt default", None), ("mu_init 1e-4", {"mu_init": 1e-4}), ("mu_init 1e-6", {"mu_init": 1e-6})]
-B_SECOND = [("Ipopt default", None), ("mu_init 1e-9", {"mu_init": 1e-9}), ("mu_init 1e-6", {"mu_init": 1e-6})]
+TIGHT = {"bound_push": 1e-8, "bound_frac": 1e-8, "slack_bound_push": 1e-8, "slack_bound_frac": 1e-8}
+B_FIRST = [("Ipopt default", None), ("mu_init 1e-4", {"mu_init": 1e-4}), ("mu_init 1e-6", {"mu_init": 1e-6}),
+           ("1e-6, pushes 1e-8", {"mu_init": 1e-6, **TIGHT})]
+B_SECOND = [("Ipopt default", None), ("mu_init 1e-9", {"mu_init": 1e-9}), ("mu_init 1e-6", {"mu_init": 1e-6}),
+            ("1e-6, pushes 1e-8", {"mu_init": 1e-6, **TIGHT})]
 
 
 def main(argv=None) -> int:
@@ -49,6 +55,8 @@ def main(argv=None) -> int:
     ap.add_argument("--max-duration", type=float, help="crop every maneuver to this many seconds")
     ap.add_argument("--points", type=int, default=11)
     ap.add_argument("--anchor-b", action="store_true", help="also compare the start options of anchor B")
+    ap.add_argument("--b-options", type=lambda t: [int(x) for x in t.split(",")],
+                    help="indices into B_FIRST/B_SECOND to run (default: all)")
     ap.add_argument("--chains", type=lambda t: [int(x) for x in t.split(",")],
                     help="indices into CHAINS to run (default: all), e.g. 0,6,7")
     args = ap.parse_args(argv)
@@ -82,7 +90,7 @@ def main(argv=None) -> int:
         print(f"{label:32s} iterations {its} total {total}, {sum(times):.1f} s; "
               f"max |J_time - first| {np.max(np.abs(np.array(J) - ref)):.2e}", flush=True)
     if args.anchor_b:
-        for label, opts in B_FIRST:
+        for label, opts in [c for i, c in enumerate(B_FIRST) if args.b_options is None or i in args.b_options]:
             snap_a.restore()
             p = ps._solve("trim", -1, "B1", math.inf, "primal", opts)
             print(f"B first stage, {label:14s}: {p.iterations} iterations, {p.wall_time:.2f} s, J_trim {p.J_trim:.10f}",
@@ -91,7 +99,7 @@ def main(argv=None) -> int:
         b1 = ps._solve("trim", -1, "B1", math.inf, "primal")
         snap_b1 = _Snapshot(m)
         eps_b = b1.J_trim * (1 + ps.settings.lexicographic_tol) + 1e-12
-        for label, opts in B_SECOND:
+        for label, opts in [c for i, c in enumerate(B_SECOND) if args.b_options is None or i in args.b_options]:
             snap_b1.restore()
             p = ps._solve("time", args.points - 1, "B", eps_b, "primal", opts, scale=scale)
             print(f"B second stage, {label:14s}: {p.iterations} iterations, {p.wall_time:.2f} s, J_time {p.J_time:.6f}",

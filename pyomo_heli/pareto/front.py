@@ -27,7 +27,9 @@ fails is retried once from the same start with the primal warm start, so a
 warm start can cost time but never a point. From the third interior point on,
 the start is the secant predictor (``ParetoSettings.predictor = "secant"``):
 the last two solutions, primal and multipliers, extrapolated linearly in
-epsilon, which saves about one Ipopt iteration per point (docs/performance.md).
+epsilon, which saves about one Ipopt iteration per point; the steps after the
+first one off anchor A keep that start with bound pushes of 1e-8
+(``FRONT_STEP_OPTIONS``; docs/performance.md).
 Anchor B's two stages start from
 a feasible solution (A's, then the first stage's): with ``"continuation"``
 their barrier starts at 100 tol instead of Ipopt's 0.1.
@@ -184,11 +186,20 @@ class _Snapshot:
                 suffix[key] = val
 
 
-#: Options of the first step off anchor A. There the active set changes (the epsilon bound becomes
+#: Options of a step that starts from anchor A (the first interior point, or the next one while
+#: every earlier one failed). There the active set changes (the epsilon bound becomes
 #: active, a parameter at its bound in A may leave it), and the small bound pushes of a warm start
 #: pin the iterate: with 1e-6 that step took 20 Ipopt iterations, with Ipopt's default 1e-3 four,
 #: while the later steps take 3 with 1e-6 and 5 with 1e-3 (Case 1, full size, docs/performance.md).
 LEAVE_ANCHOR_OPTIONS = {"warm_start_bound_push": 1e-3, "warm_start_mult_bound_push": 1e-3}
+
+#: Options of the later steps with ``"continuation"``: the start is (nearly) the solution, on the same
+#: active set, so it is left where it is: bound and slack pushes 1e-8 instead of 1e-6 (primal) and 1e-3
+#: (fractions and slacks). Case 1, full size, with the secant predictor: 29 -> 25 iterations over the
+#: 9 interior points, the same front (studies/warm_start_study.py, docs/performance.md).
+FRONT_STEP_OPTIONS = {"warm_start_bound_push": 1e-8, "warm_start_mult_bound_push": 1e-8,
+                      "warm_start_slack_bound_push": 1e-8, "warm_start_bound_frac": 1e-8,
+                      "warm_start_slack_bound_frac": 1e-8}
 
 
 def solve_with_fallback(solve, mode: str, start: _Snapshot):
@@ -365,6 +376,7 @@ class ParetoSolver:
         scale_multipliers(self.m, self.s_time / scale)
         last_good = _Snapshot(self.m)
         previous = None  # (snapshot, epsilon) of the interior point before last_good, for the predictor
+        leaving = True  # the next start is anchor A's solution (no interior point solved yet)
         for k in range(1, s.points - 1):
             start = last_good
             if previous is not None and s.predictor == "secant" and s.warm_start != "none":
@@ -374,9 +386,10 @@ class ParetoSolver:
                 start = last_good.extrapolated(snap_prev, (float(eps[k]) - eps_last) / (eps_last - eps_prev))
                 start.restore()
 
-            def solve_k(k=k, start=start):
+            def solve_k(k=k, start=start, leaving=leaving):
+                step = FRONT_STEP_OPTIONS if s.warm_start == "continuation" else None
                 p = self._solve_warm("time", k, "eps", float(eps[k]), start,
-                                     LEAVE_ANCHOR_OPTIONS if k == 1 else None, scale=scale)
+                                     LEAVE_ANCHOR_OPTIONS if leaving else step, scale=scale)
                 if s.cold_check:
                     self._cold_check(p, last_good, scale=scale)
                 return p
@@ -385,6 +398,7 @@ class ParetoSolver:
             if p.success:
                 previous = (last_good, float(eps[k - 1])) if k > 1 and self.points[-1].success else None
                 last_good = self.snapshots[k] = _Snapshot(self.m)
+                leaving = False
             else:
                 previous = None
                 last_good.restore()

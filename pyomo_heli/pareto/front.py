@@ -19,7 +19,7 @@ Ipopt treats the pinned variables as parameters.
 Warm starts (``ParetoSettings.warm_start``): ``"continuation"`` (default)
 passes the previous point's primal values *and* multipliers and starts the
 barrier parameter at tol/10, so each interior point is a few corrector steps
-from its neighbour (3-4 Ipopt iterations per point on the identification
+from its neighbour (2-4 Ipopt iterations per point on the identification
 NLPs, against 20-30 with ``"primal"``, the previous default; measured in
 docs/performance.md). The multipliers are rescaled when the objective scale
 changes (A is scaled by J(theta_0), the front by J_time(A)). A warm solve that

@@ -129,6 +129,7 @@ BAD = [
     ("[parameters.Iyy]\ninitial = 9000.0\nlower = 2000.0\nupper = 8000.0\n", "outside its bounds"),
     ("[objectives]\ntime_outputs = [\"q\", \"r\"]\n", "unknown output 'r'"),
     ("[pareto]\npoints = 0\n", "'points'"),
+    ("[pareto]\npredictor = \"quadratic\"\n", "pareto.predictor must be one of secant, none"),
     ("[parameters.theta_twist]\nunit = \"furlong\"\n", "unit 'furlong' not recognised"),
     ("[solver]\nname = \"snopt\"\n", "unknown solver 'snopt'"),
 ]

@@ -90,6 +90,21 @@ def growth_exponent(samples, times) -> float | None:
     return float(np.polyfit(np.log(s), np.log(t), 1)[0])
 
 
+#: casadi's per-function wall times of one Ipopt call (``solver.stats()``)
+_FUNCTION_TIMES = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
+
+
+def solve_breakdown(stats: dict | None, total: float) -> dict | None:
+    """Where one solve's wall time ``total`` went: function evaluations (casadi's ``t_wall_nlp_*``) and
+    the rest of Ipopt, which is mostly the linear algebra (MUMPS factorisation and solves)."""
+    if not stats or "t_wall_nlp_f" not in stats:
+        return None
+    out = {f: float(stats.get(f"t_wall_{f}", 0.0)) for f in _FUNCTION_TIMES}
+    out["total"] = float(total)
+    out["ipopt_rest"] = out["total"] - sum(out[f] for f in _FUNCTION_TIMES)
+    return out
+
+
 def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=print) -> dict:
     """Build, set up and solve point A (and, if ``front``, the whole front) with the maneuvers repeated k times."""
     data = repeat_maneuvers(base, k)
@@ -117,6 +132,7 @@ def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=pr
         "point_a": _point(a),
         "a_solve_time": a.wall_time, "a_iterations": a.iterations,
         "a_time_per_iteration": a.wall_time / max(a.iterations, 1),
+        "a_solve_breakdown": solve_breakdown(getattr(ps.solver, "last_stats", None), a.wall_time) if not front else None,
     }
     progress(f"size {k}: set-up {setup:.1f} s, point A {a.status} in {a.iterations} it, {a.wall_time:.1f} s")
     if front:
@@ -242,6 +258,16 @@ def format_tables(result: dict) -> str:
         lines.append(f"| {s['size']}x | {s['samples']} | {_fmt(s['variables'])} | {_fmt(s['build_time'])} | "
                      f"{_fmt(s['setup_time'])} | {_fmt(s['a_solve_time'])} | {s['a_iterations']} | "
                      f"{_fmt(s['a_time_per_iteration'])} |")
+    split = [s for s in result["sizes"] if s.get("a_solve_breakdown")]
+    if split:
+        lines += ["", "Point A's solve per iteration [s]: function evaluations (casadi) and the rest of Ipopt "
+                  "(mostly MUMPS)", "", "| size | objective + gradient | constraints + Jacobian | Hessian | rest of Ipopt |",
+                  "|---|---|---|---|---|"]
+        for s in split:
+            b, n = s["a_solve_breakdown"], max(s["a_iterations"], 1)
+            lines.append(f"| {s['size']}x | {_fmt((b['nlp_f'] + b['nlp_grad_f']) / n)} | "
+                         f"{_fmt((b['nlp_g'] + b['nlp_jac_g']) / n)} | {_fmt(b['nlp_hess_l'] / n)} | "
+                         f"{_fmt(b['ipopt_rest'] / n)} |")
     first = result["sizes"][0] if result["sizes"] else None
     if first and first.get("setup_breakdown"):
         b = first["setup_breakdown"]

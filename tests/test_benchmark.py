@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyomo_heli.benchmark import compute_ratios, growth_exponent, parameter_difference, repeat_maneuvers
+from pyomo_heli.benchmark import compute_ratios, growth_exponent, parameter_difference, repeat_maneuvers, solve_breakdown
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -81,6 +81,14 @@ def test_shooting_ratio_and_exponent_arithmetic():
     # relative to the magnitude, or to the scale for a value at 0
     assert parameter_difference({"a": 1.0001, "b": 1e-5}, {"a": 1.0, "b": 0.0}, {"a": 0.5, "b": 0.01}) == \
         pytest.approx(1e-3)  # b: 1e-5 / scale 0.01 dominates a: 1e-4 / |1.0|
+
+
+def test_solve_breakdown_splits_function_time_from_the_rest():
+    stats = {"t_wall_nlp_f": 0.5, "t_wall_nlp_grad_f": 0.5, "t_wall_nlp_g": 1.0, "t_wall_nlp_jac_g": 1.0,
+             "t_wall_nlp_hess_l": 2.0, "iter_count": 5}
+    b = solve_breakdown(stats, 10.0)
+    assert b["ipopt_rest"] == pytest.approx(5.0) and b["total"] == 10.0 and b["nlp_hess_l"] == 2.0
+    assert solve_breakdown(None, 1.0) is None and solve_breakdown({"iter_count": 3}, 1.0) is None
 
 
 def test_repeat_maneuvers_renames_copies():

@@ -489,6 +489,7 @@ class CasadiIpoptSolver:
             raise SolverFailedError(f"casadi-ipopt failed to run: {exc}") from exc
         wall = time.perf_counter() - t0
         stats = solver.stats()
+        self.last_stats = stats  # casadi's solver statistics of this call (iterations, t_wall_* per function)
         self._load(sol)
         status = stats.get("return_status", "unknown")
         setup, self._pending_setup = self._pending_setup, 0.0

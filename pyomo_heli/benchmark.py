@@ -34,7 +34,7 @@ from .config import load_identification_config
 from .dataset import load_flight_test
 from .nlp.identification import IdentificationData, build_identification_nlp, prepare_data
 from .nlp.single_shooting import fit_single_shooting
-from .pareto.front import ParetoSolver
+from .pareto.front import ParetoSolver, _Snapshot
 
 #: the issue's targets: (ratio key, limit, "max" = value must be at most the limit, "min" = at least)
 TARGETS = {
@@ -53,6 +53,9 @@ class BenchmarkSettings:
     front: bool = True  # front (warm + cold interior) at the first size
     shooting: str = "rk4"  # "rk4", "solve_ivp" or "none"
     shooting_max_simulations: int | None = 150  # cap of the single-shooting fit (None: until converged)
+    #: cold point-A solves per size without a front (the median is the size's solve time): one solve on a shared
+    #: machine varies by 10-30 % between runs, enough to move the growth exponent by 0.1 (docs/performance.md)
+    repeats: int = 1
     overrides: dict = field(default_factory=dict)  # config table overrides, as load_identification_config
     command: str = ""
 
@@ -105,8 +108,12 @@ def solve_breakdown(stats: dict | None, total: float) -> dict | None:
     return out
 
 
-def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=print) -> dict:
-    """Build, set up and solve point A (and, if ``front``, the whole front) with the maneuvers repeated k times."""
+def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=print, repeats: int = 1) -> dict:
+    """Build, set up and solve point A (and, if ``front``, the whole front) with the maneuvers repeated k times.
+
+    Without the front, point A is solved ``repeats`` times from the same initial point (each solve cold); the
+    size's solve time is the median, and every solve's time is kept in ``a_solve_times``.
+    """
     data = repeat_maneuvers(base, k)
     samples = sum(len(mv.data) for mv in data.maneuvers)
     t0 = time.perf_counter()
@@ -116,12 +123,25 @@ def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=pr
     settings = dataclasses.replace(cfg.pareto, cold_check=front)
     t1 = time.perf_counter()
     ps = ParetoSolver(m, settings)
+    times, iters = [], []
     if front:
         points = ps.front()
     else:
+        start = _Snapshot(m)
         points = [ps.point_a()]
+        times.append(points[0].wall_time)
+        iters.append(points[0].iterations)
+        for _ in range(repeats - 1):
+            start.restore()
+            again = ps.point_a()
+            if again.iterations != points[0].iterations or again.status != points[0].status:
+                progress(f"size {k}: a repeated point A took {again.iterations} it ({again.status}), "
+                         f"the first {points[0].iterations} it ({points[0].status})")
+            times.append(again.wall_time)
+            iters.append(again.iterations)
     clock = time.perf_counter() - t1
     a = points[0]
+    a_time = float(np.median(times)) if times else a.wall_time
     setup = sum(p.setup_time for p in points)
     row = {
         "size": k, "samples": samples, "maneuvers": len(data.maneuvers),
@@ -130,11 +150,13 @@ def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=pr
         "build_time": build, "setup_time": setup,
         "setup_breakdown": dict(getattr(ps.solver, "setup_breakdown", {})),
         "point_a": _point(a),
-        "a_solve_time": a.wall_time, "a_iterations": a.iterations,
-        "a_time_per_iteration": a.wall_time / max(a.iterations, 1),
+        "a_solve_time": a_time, "a_solve_times": times or [a.wall_time],
+        "a_solve_iterations": iters or [a.iterations], "a_iterations": a.iterations,
+        "a_time_per_iteration": a_time / max(a.iterations, 1),
         "a_solve_breakdown": solve_breakdown(getattr(ps.solver, "last_stats", None), a.wall_time) if not front else None,
     }
-    progress(f"size {k}: set-up {setup:.1f} s, point A {a.status} in {a.iterations} it, {a.wall_time:.1f} s")
+    progress(f"size {k}: set-up {setup:.1f} s, point A {a.status} in {a.iterations} it, {a_time:.2f} s"
+             + (f" (median of {len(times)}: {', '.join(f'{t:.2f}' for t in times)})" if len(times) > 1 else ""))
     if front:
         interior = [p for p in points if p.kind == "eps"]
         row["front"] = {
@@ -216,7 +238,8 @@ def run_benchmark(settings: BenchmarkSettings, out: str | Path | None = None, pr
             Path(out).write_text(json.dumps(result, indent=1, default=float))
 
     for i, k in enumerate(settings.sizes):
-        result["sizes"].append(measure_size(cfg, base, int(k), settings.front and i == 0, progress))
+        result["sizes"].append(measure_size(cfg, base, int(k), settings.front and i == 0, progress,
+                                            settings.repeats))
         save()
         if i == 0 and settings.shooting != "none":
             progress(f"single shooting ({settings.shooting}) on size {k} ...")
@@ -258,6 +281,11 @@ def format_tables(result: dict) -> str:
         lines.append(f"| {s['size']}x | {s['samples']} | {_fmt(s['variables'])} | {_fmt(s['build_time'])} | "
                      f"{_fmt(s['setup_time'])} | {_fmt(s['a_solve_time'])} | {s['a_iterations']} | "
                      f"{_fmt(s['a_time_per_iteration'])} |")
+    reps = [s for s in result["sizes"] if len(s.get("a_solve_times", [])) > 1]
+    if reps:
+        lines += ["", "Point A solved cold " + str(len(reps[0]["a_solve_times"])) + " times per size (the table "
+                  "gives the median) [s]: " + "; ".join(f"{s['size']}x " + ", ".join(_fmt(t) for t in s["a_solve_times"])
+                                                       for s in reps)]
     split = [s for s in result["sizes"] if s.get("a_solve_breakdown")]
     if split:
         lines += ["", "Point A's solve per iteration [s]: function evaluations (casadi) and the rest of Ipopt "

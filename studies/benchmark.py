@@ -2,7 +2,7 @@
 
     python studies/benchmark.py                               # Case 1 config, front + single shooting, size 1x
     python studies/benchmark.py --shooting solve_ivp          # classic shooting over scipy solve_ivp (slow)
-    python studies/benchmark.py --size 1,2,4,8 --no-front --no-shooting --max-duration 5   # scaling
+    python studies/benchmark.py --size 1,2,4,8 --no-front --no-shooting --max-duration 1.5 --repeat 3   # scaling
     python studies/benchmark.py --quick                       # seconds; what the test suite runs
 
 Prints markdown tables and writes JSON (default results/benchmark.json) after
@@ -58,6 +58,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-shooting", action="store_true", help="same as --shooting none")
     ap.add_argument("--shooting-max-sims", type=int, default=150,
                     help="stop the single-shooting fit after about this many simulations (0: no cap)")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="cold point-A solves per size without a front; the median is the size's solve time")
     ap.add_argument("--quick", action="store_true", help="tiny instance in seconds (ignores --config/--size)")
     ap.add_argument("--out", type=Path, default=Path("results") / "benchmark.json", help="JSON output")
     args = ap.parse_args(argv)
@@ -72,6 +74,8 @@ def main(argv=None) -> int:
         if args.max_duration <= 0:
             ap.exit(2, f"benchmark: --max-duration must be positive, got {args.max_duration}\n")
         overrides["data"] = {"max_duration_s": args.max_duration}
+    if args.repeat < 1:
+        ap.exit(2, f"benchmark: --repeat must be at least 1, got {args.repeat}\n")
     config, sizes = args.config, args.size
     if args.quick:
         config, sizes = QUICK["config"], QUICK["sizes"]
@@ -82,7 +86,7 @@ def main(argv=None) -> int:
                                                                                  else sys.argv[1:]))
     settings = BenchmarkSettings(config=config, sizes=sizes, front=not args.no_front, shooting=shooting,
                                  shooting_max_simulations=args.shooting_max_sims or None,
-                                 overrides=overrides, command=command.strip())
+                                 overrides=overrides, command=command.strip(), repeats=args.repeat)
     try:
         result = run_benchmark(settings, args.out, progress=lambda msg: print(msg, flush=True))
     except ConfigError as exc:

@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench") / "benchmark.json"
-    proc = subprocess.run([sys.executable, str(ROOT / "studies" / "benchmark.py"), "--quick", "--out", str(out)],
+    proc = subprocess.run([sys.executable, str(ROOT / "studies" / "benchmark.py"), "--quick", "--repeat", "2", "--out", str(out)],
                           capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-2000:]
     return json.loads(out.read_text()), proc.stdout
@@ -47,6 +47,11 @@ def test_quick_json_structure(quick):
     assert [p["kind"] for p in f["points"]] == ["A", "eps", "B"]
     assert f["points"][1]["cold_iterations"] > 0
     assert "front_over_cold_a" in stdout and "| size |" in stdout
+    # --repeat 2: the size without a front solves point A twice from the same cold start, the same way each
+    # time (same iterations), and its solve time is the median of the two
+    assert len(two["a_solve_times"]) == 2 and len(set(two["a_solve_iterations"])) == 1
+    assert two["a_solve_time"] == pytest.approx(float(np.median(two["a_solve_times"])))
+    assert len(one["a_solve_times"]) == 1  # the front's size: one point A
 
 
 def test_quick_ratio_arithmetic(quick):

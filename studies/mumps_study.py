@@ -39,8 +39,8 @@ SETS = {
     "base": {},  # QAMD (6), the adapter default
     "amd": {"mumps_pivot_order": 0},
     "amf": {"mumps_pivot_order": 2},
-    "scotch": {"mumps_pivot_order": 3},
-    "pord": {"mumps_pivot_order": 4},
+    "scotch": {"mumps_pivot_order": 3},  # not built into casadi's MUMPS: falls back to METIS
+    "pord": {"mumps_pivot_order": 4},  # not built in either: METIS
     "metis": {"mumps_pivot_order": 5},
     "auto": {"mumps_pivot_order": 7},
     "pivtol1e-8": {"mumps_pivtol": 1e-8},
@@ -151,6 +151,9 @@ def main():
     if args.analyse:
         analyse(args.analyse)
         return
+    unknown = [n for n in args.sets.split(",") if n.removesuffix("_nommap") not in SETS]
+    if unknown:
+        ap.error(f"--sets: unknown option set(s) {unknown}; choose from {', '.join(SETS)}")
     LOGS = args.out / "logs"
     LOGS.mkdir(parents=True, exist_ok=True)
     args.json = args.out / "results.jsonl"

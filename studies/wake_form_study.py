@@ -114,6 +114,9 @@ def main() -> None:
                     help="the full-size loop's results folder (loop.json, iter_0, iter_1)")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated: " + ", ".join(VARIANTS))
     args = ap.parse_args()
+    unknown = [v for v in args.variants.split(",") if v not in VARIANTS]
+    if unknown:
+        ap.error(f"--variants: unknown {unknown}; choose from {', '.join(VARIANTS)}")
     cfg = load_identification_config(ROOT / "studies/close_loop.toml")
     loop = json.loads((args.loop / "loop.json").read_text())
     start = loop["iterations"][0]["parameters"]

@@ -34,7 +34,7 @@ from .config import load_identification_config
 from .dataset import load_flight_test
 from .nlp.identification import IdentificationData, build_identification_nlp, prepare_data
 from .nlp.single_shooting import fit_single_shooting
-from .pareto.front import ParetoSolver, _Snapshot
+from .pareto.front import ParetoSolver
 
 #: the issue's targets: (ratio key, limit, "max" = value must be at most the limit, "min" = at least)
 TARGETS = {
@@ -127,12 +127,11 @@ def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=pr
     if front:
         points = ps.front()
     else:
-        start = _Snapshot(m)
         points = [ps.point_a()]
         times.append(points[0].wall_time)
         iters.append(points[0].iterations)
         for _ in range(repeats - 1):
-            start.restore()
+            ps.restore_initial_guess()
             again = ps.point_a()
             if again.iterations != points[0].iterations or again.status != points[0].status:
                 progress(f"size {k}: a repeated point A took {again.iterations} it ({again.status}), "

@@ -407,10 +407,14 @@ class ParetoSolver:
         self.points.sort(key=lambda p: p.index)
         return self.points
 
+    def restore_initial_guess(self) -> None:
+        """Put the model's values back to the initial guess it had when this solver was made (cold starts)."""
+        self._snap_initial.restore()
+
     def _cold_check(self, p: FrontPoint, back, scale: float) -> None:
         """Solve the same epsilon point from the initial guess; keep the warm solution in the model."""
         warm = _Snapshot(self.m)
-        self._snap_initial.restore()
+        self.restore_initial_guess()
         cold = self._solve("time", p.index, "eps", p.epsilon, "none", scale=scale)
         p.cold_iterations, p.cold_status, p.cold_J_time = cold.iterations, cold.status, cold.J_time
         p.cold_wall_time = cold.wall_time

@@ -14,6 +14,9 @@ iteration 0's diagnosed parameters, it re-identifies the whole front with M0 plu
   frame) with its fixed profile 2^(-xi^6) replaced by a top hat with logistic edges
   S((1 - xi)/w) S((1 + xi)/w) whose width w (wake radii, from 0.1 = the fixed profile's sharpness) is
   freed with the strength: the variant tried in this study, not adopted (see docs/close_loop.md);
+- ``width_from_a``: the same soft-edged candidate with the width held at the value the time series chose
+  at free_width's anchor A (identifiable there), only the strength freed, so that the trims cannot trade
+  the width against CL_alpha_HT along the front (needs free_width first);
 
 and tabulates both beside the loop's own iterations (``--loop``: iter_0 and iter_1): J_time and J_trim
 at the time-domain anchor A and at the Eq. 11 point solved directly, and the errors of twist,
@@ -71,15 +74,27 @@ class SoftEdgedWake(RotorWakeOnTail):
         return ctx.p["k_wt"] * g * 2.0 * ctx.x["lambda_i"] * ctx.flow.v_tip
 
 
+def width_at_free_width_a(out: Path) -> dict:
+    """w_wt of the free_width variant's time-domain anchor A (that variant must have run first)."""
+    f = out / "free_width" / "time_domain.json"
+    if not f.is_file():
+        raise SystemExit(f"wake_form_study: variant width_from_a needs {f}: run the free_width variant first")
+    return {"w_wt": float(json.loads(f.read_text())["parameters"]["w_wt"])}
+
+
 VARIANTS = {
-    # name: (effect, extra free parameters (name, initial, lower, upper, scale))
-    "truth_form": (WakeOnTail, [("K_lamT", 1.0, 0.0, 5.0, 1.0)]),
-    "free_width": (SoftEdgedWake, [("k_wt", 0.7, 0.0, 5.0, 1.0), ("w_wt", 0.1, 0.03, 1.0, 0.1)]),
+    # name: (effect, extra free parameters (name, initial, lower, upper, scale), fixed values from OUT or None)
+    "truth_form": (WakeOnTail, [("K_lamT", 1.0, 0.0, 5.0, 1.0)], None),
+    "free_width": (SoftEdgedWake, [("k_wt", 0.7, 0.0, 5.0, 1.0), ("w_wt", 0.1, 0.03, 1.0, 0.1)], None),
+    # the width the time series chose at free_width's anchor A, held fixed along the whole front
+    "width_from_a": (SoftEdgedWake, [("k_wt", 0.7, 0.0, 5.0, 1.0)], width_at_free_width_a),
 }
 
 
-def model_of(variant: str, cfg) -> HelicopterModel:
-    return HelicopterModel(parameters=cfg.model.parameters, extensions=(VARIANTS[variant][0](),))
+def model_of(variant: str, cfg, out: Path) -> HelicopterModel:
+    effect, _, fixed = VARIANTS[variant]
+    model = HelicopterModel(parameters=cfg.model.parameters, extensions=(effect(),))
+    return model.with_parameters(**fixed(out)) if fixed else model
 
 
 def identify(variant: str, cfg, start: dict, out: Path) -> IdentificationResult:
@@ -87,7 +102,7 @@ def identify(variant: str, cfg, start: dict, out: Path) -> IdentificationResult:
         return IdentificationResult.load(out / variant)
     free = [dataclasses.replace(f, initial=start[f.name]) for f in cfg.free]
     free += [FreeParameter(*e) for e in VARIANTS[variant][1]]
-    return run_identification(dataclasses.replace(cfg, model=model_of(variant, cfg), free=free), out / variant,
+    return run_identification(dataclasses.replace(cfg, model=model_of(variant, cfg, out), free=free), out / variant,
                               progress=lambda s: print(f"[{variant}] {s}", flush=True), uncertainty=False)
 
 
@@ -129,7 +144,7 @@ def main() -> None:
                                         extensions=[make_candidate(n) for n in it["extensions"]])
     for v in args.variants.split(","):
         results[f"M0 + {v}"] = identify(v, cfg, start, args.out)
-        models[f"M0 + {v}"] = model_of(v, cfg)
+        models[f"M0 + {v}"] = model_of(v, cfg, args.out)
     print("\nErrors against truth in % (A = time-domain anchor, E = Eq. 11 solved directly); "
           f"truth: twist {truth['theta_twist'] / DEG:.4f} deg/m, CL_alpha_HT {truth['CL_alpha_HT']:.4f} 1/rad, "
           f"Iyy {truth['Iyy']:.0f} kg m^2\n")

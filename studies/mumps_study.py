@@ -6,7 +6,7 @@
 
 The scaling instance of studies/benchmark.py (Case 1 config, maneuvers cropped to 1.5 s, repeated k times).
 
-Each size is built once; for every option set the model's initial values (ParetoSolver._snap_initial)
+Each size is built once; for every option set the model's initial values (ParetoSolver.restore_initial_guess)
 are restored and point A is solved cold (warm_start "none", as ParetoSolver.point_a). Ipopt's and
 MUMPS' own output of every solve is captured (fd 1 redirected) into logs/<size>x_<set>.log and parsed.
 """
@@ -28,7 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from pyomo_heli.benchmark import repeat_maneuvers  # noqa: E402
+from pyomo_heli.benchmark import growth_exponent, repeat_maneuvers  # noqa: E402
 from pyomo_heli.config import load_identification_config  # noqa: E402
 from pyomo_heli.dataset import load_flight_test  # noqa: E402
 from pyomo_heli.nlp.identification import build_identification_nlp, prepare_data  # noqa: E402
@@ -116,7 +116,7 @@ def set_nommap(on: bool):
 
 
 def solve_captured(ps, opts: dict, log: Path):
-    ps._snap_initial.restore()
+    ps.restore_initial_guess()
     sys.stdout.flush()
     fd = os.open(str(log), os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
     saved = os.dup(1)
@@ -217,9 +217,8 @@ def analyse(path):
         by[(r["set"], r["size"])].append(r)
     sets = list(dict.fromkeys(r["set"] for r in rows))
     def slope(xs, ys):
-        xs, ys = np.asarray(xs, float), np.asarray(ys, float)
-        if len(xs) < 2 or np.any(ys <= 0): return float("nan")
-        return np.polyfit(np.log(xs), np.log(ys), 1)[0]
+        e = growth_exponent(xs, ys)  # the benchmark's fit; None when it cannot be fitted
+        return float("nan") if e is None else e
     def med(v): return float(np.median(v))
     print("| set | size | runs | iterations | factorisations | MUMPS solves | solve [s] | functions [s] | factorisation [s] | per factorisation [s] | MUMPS solve phase [s] | analysis [s] | rest [s] | flops/fact | factor entries | delayed pivots |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")

@@ -68,10 +68,7 @@ class SoftEdgedWake(RotorWakeOnTail):
             return 1.0 / (1.0 + ops.exp(-z))
 
         return xi, edge((1.0 - xi) / w) * edge((1.0 + xi) / w)
-
-    def tail_downwash(self, ctx):
-        _, g = self.immersion(ctx)
-        return ctx.p["k_wt"] * g * 2.0 * ctx.x["lambda_i"] * ctx.flow.v_tip
+    # tail_downwash is the candidate's own: it calls self.immersion
 
 
 def width_at_free_width_a(out: Path) -> dict:

@@ -211,6 +211,10 @@ def cmd_uncertainty(args) -> int:
 
     cfg = load_identification_config(args.config)
     result = IdentificationResult.load(args.results)
+    if result.info.get("extensions"):  # an iteration of close-loop: the config plus the effects the loop added
+        from .close_loop import config_of_result
+
+        cfg = config_of_result(cfg, result)
     if args.out and Path(args.out).resolve() != Path(args.results).resolve():
         shutil.copytree(args.results, args.out, dirs_exist_ok=True)
     data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)

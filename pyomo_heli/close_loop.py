@@ -14,14 +14,19 @@
 5. if a candidate is accepted and the iteration limit is not reached: add it
    to the model with its strength free (initial value: the score test's
    one-step estimate, clipped to the bounds; the other free parameters start
-   from this iteration's chosen values) and go on.
+   from this iteration's chosen values) and go on. A candidate with shape
+   parameters (the wake's profile order) gets them by the shape rule first
+   (:func:`select_shape`): freed at the time-domain anchor A only, kept there
+   if a likelihood-ratio test against their defaults is significant, and held
+   fixed along the whole front.
 
 ``out/loop.json`` is rewritten as each iteration finishes, so nothing
 finished is lost. Settings come from the config's ``[loop]`` table:
 ``max_iterations`` (identifications after the first, default 3),
 ``candidates`` (names, default the whole library), ``alpha``, ``ratio``,
 ``confound_corr``, ``robust``, ``point`` (``direct``: the Eq. 11 solution solved
-directly, default; ``chosen``: the closest sampled front point) (see :mod:`pyomo_heli.diagnosis.attribution`). A finished
+directly, default; ``chosen``: the closest sampled front point) (see :mod:`pyomo_heli.diagnosis.attribution`),
+``shape`` (``time_domain``: the shape rule, default; ``default``: shape parameters stay at their defaults). A finished
 iteration found in ``out/iter_i`` (same config, model - including the source of its effects - free parameters and
 input reference) is reused, not redone.
 """
@@ -37,7 +42,7 @@ from .config import ConfigError, IdentificationConfig
 from .dataset import load_flight_test
 from .diagnosis import attribution as attr
 from .diagnosis.candidates import CANDIDATES, make_candidate
-from .identify import run_identification
+from .identify import build_problem, identification_fingerprint, run_identification, shape_values
 from .nlp.identification import prepare_data
 from .nlp.parameters import FreeParameter
 from .pareto.result import write_json
@@ -56,6 +61,7 @@ class LoopSettings:
     confound_corr: float = attr.CONFOUND_CORR
     robust: bool = True
     point: str = "direct"
+    shape: str = "time_domain"
 
 
 def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
@@ -93,6 +99,10 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
         if raw["point"] not in ("direct", "chosen"):
             raise ConfigError(f"{where}: field 'point' must be \"direct\" or \"chosen\", got {raw['point']!r}")
         s.point = raw["point"]
+    if "shape" in raw:
+        if raw["shape"] not in ("time_domain", "default"):
+            raise ConfigError(f"{where}: field 'shape' must be \"time_domain\" or \"default\", got {raw['shape']!r}")
+        s.shape = raw["shape"]
     if "robust" in raw:
         if not isinstance(raw["robust"], bool):
             raise ConfigError(f"{where}: field 'robust' must be true or false, got {raw['robust']!r}")
@@ -117,6 +127,96 @@ def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: f
     init = min(max(kappa, lo + 0.05 * (hi - lo) if cand.one_sided else lo), hi)
     free = [dataclasses.replace(f, initial=min(max(chosen[f.name], f.lower), f.upper)) for f in cfg.free]
     free.append(FreeParameter(cand.strength, init, lo, hi, spec.scale or 1.0))
+    return dataclasses.replace(cfg, model=model, free=free)
+
+
+def select_shape(cfg: IdentificationConfig, cand, file: Path, alpha: float,
+                 progress=print) -> tuple[IdentificationConfig, dict]:
+    """The shape rule: a candidate's shape parameters from the time series, tested against their defaults.
+
+    ``cfg`` already has the candidate in its model with its strength free. Anchor A (min J_time, the
+    time series alone) is solved twice on one NLP: with the shape parameters pinned at their defaults
+    (by equal bounds), then freed, starting from the first solution. J_time is the negative
+    log-likelihood (Eq. 5-6), so LR = 2 (J_A,default - J_A,free) is chi^2 with one degree of freedom per
+    shape parameter when the default shape is right (nominal level for white residuals; a misfit that is
+    still coloured makes the test liberal, which here only means the fitted shape is used). If
+    p < ``alpha`` the shape is held at A's values, otherwise at the defaults; the returned config has
+    them fixed in its model for the whole front. Why not free along the front: the trim anchor B would
+    then trade the shape against the tail lift slope (docs/close_loop.md, "How much of the full-size
+    miss is the candidate's form?"). The decision is written to ``file`` and read back when the same
+    config asks again, so a rerun of the loop resumes without solving it again.
+    """
+    from scipy.stats import chi2
+
+    from .pareto.front import ParetoSolver
+
+    names = list(cand.shape_parameters)
+    specs = {n: cfg.model.parameters.spec(n) for n in names}
+    free = list(cfg.free) + [FreeParameter(n, specs[n].value, *specs[n].bounds, specs[n].scale or 1.0) for n in names]
+    cfg_s = dataclasses.replace(cfg, free=free)
+    key = {"fingerprint": identification_fingerprint(cfg_s), "initial": {f.name: f.initial for f in free}}
+    if file.is_file():
+        doc = json.loads(file.read_text())
+        if doc.get("key") == key:
+            progress(f"  shape of {cand.name}: reusing {file} ({doc['decision']})")
+            return dataclasses.replace(cfg, model=cfg.model.with_parameters(**doc["values"])), doc
+    t0 = time.perf_counter()
+    m, _, _ = build_problem(cfg_s)
+    ps = ParetoSolver(m, cfg.pareto)
+    for n in names:  # pinned at the defaults by equal bounds: the same NLP serves both solves
+        v = specs[n].value / m.theta_scale[n]
+        m.theta_s[n].setlb(v)
+        m.theta_s[n].setub(v)
+        m.theta_s[n].set_value(v)
+    a0 = ps.point_a()
+    for f in free[len(cfg.free):]:
+        m.theta_s[f.name].setlb(f.lower / f.scale)
+        m.theta_s[f.name].setub(f.upper / f.scale)
+    a1 = ps.point_a()
+    doc = {"key": key, "candidate": cand.name, "defaults": {n: specs[n].value for n in names},
+           "A_default": {"J_time": a0.J_time, "parameters": a0.parameters, "success": a0.success,
+                         "status": a0.status, "iterations": a0.iterations},
+           "A_free": {"J_time": a1.J_time, "parameters": a1.parameters, "success": a1.success,
+                      "status": a1.status, "iterations": a1.iterations}}
+    if a0.success and a1.success:
+        lr = max(2.0 * (a0.J_time - a1.J_time), 0.0)
+        pval = float(chi2.sf(lr, len(names)))
+        fitted = pval < alpha
+        doc.update(LR=lr, dof=len(names), p=pval, alpha=alpha)
+        doc["decision"] = (f"fitted at anchor A (LR {lr:.4g}, p = {pval:.3g} < {alpha:g})" if fitted
+                           else f"defaults kept (LR {lr:.4g}, p = {pval:.3g} >= {alpha:g})")
+    else:
+        fitted = False
+        doc["decision"] = f"defaults kept (anchor A solves: {a0.status}; {a1.status})"
+    doc["values"] = {n: (a1.parameters[n] if fitted else specs[n].value) for n in names}
+    doc["wall_time"] = time.perf_counter() - t0
+    write_json(file, doc)
+    progress(f"  shape of {cand.name}: {doc['decision']}: "
+             + ", ".join(f"{n} = {v:.4g}" for n, v in doc["values"].items()))
+    return dataclasses.replace(cfg, model=cfg.model.with_parameters(**doc["values"])), doc
+
+
+def config_of_result(cfg: IdentificationConfig, result) -> IdentificationConfig:
+    """The config of a loop iteration's identification: ``cfg`` (the loop's config) plus the candidates the loop
+    added (``result.info['extensions']``), their strengths free and their shape parameters at the values the
+    iteration used (``result.info['shape_parameters']``). Lets commands that take a config and a results folder
+    (``pyomo-heli uncertainty``) work on ``DIR/iter_i``. ConfigError if the folder does not fit the config.
+    """
+    have = [e.name for e in cfg.model.extensions]
+    listed = list(result.info.get("extensions", []))
+    if listed[:len(have)] != have:
+        raise ConfigError(f"{cfg.path}: the results were identified with extensions {listed}, the config declares {have}")
+    model = HelicopterModel(parameters=cfg.model.parameters,
+                            extensions=tuple(cfg.model.extensions) + tuple(make_candidate(n) for n in listed[len(have):]))
+    model = model.with_parameters(**result.info.get("shape_parameters", {}))
+    free = list(cfg.free)
+    for n in result.parameters[len(free):]:
+        spec = model.parameters.spec(n)
+        lo, hi = spec.bounds
+        free.append(FreeParameter(n, min(max(spec.value, lo), hi), lo, hi, spec.scale or 1.0))
+    if [f.name for f in free] != list(result.parameters):
+        raise ConfigError(f"{cfg.path}: the results' free parameters {result.parameters} do not extend the config's "
+                          f"{[f.name for f in cfg.free]}")
     return dataclasses.replace(cfg, model=model, free=free)
 
 
@@ -149,7 +249,7 @@ def _finished(cfg: IdentificationConfig, folder: Path):
         return None
     from .identify import extension_forms
 
-    same = (res.parameters == [f.name for f in cfg.free]
+    same = (res.info.get("shape_parameters", {}) == shape_values(cfg.model) and res.parameters == [f.name for f in cfg.free]
             and res.info.get("extensions") == [e.name for e in cfg.model.extensions]
             and res.info.get("extension_forms", {}) == extension_forms(cfg.model.extensions)
             and res.info.get("input_reference_s", 0.0) == cfg.input_reference_s
@@ -190,6 +290,7 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
     doc = {"config": str(cfg.path), "dataset": str(cfg.dataset), "settings": dataclasses.asdict(settings),
            "units": "SI (rad, rad/s, m/s, g)", "iterations": [], "stopped": None}
     i = 0
+    added_shape = None  # the shape rule's record for the candidate added last
     while True:
         t0 = time.perf_counter()
         names = [e.name for e in cfg.model.extensions]
@@ -216,6 +317,7 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
             "iteration": i, "extensions": names, "results_dir": f"iter_{i}",
             "free": [f.name for f in cfg.free], "parameters": chosen,
             "units": {n: cfg.model.parameters.spec(n).unit for n in chosen},
+            "shape_parameters": shape_values(cfg.model), "shape_selection": added_shape,
             "point": which, "J_time": point["J_time"], "J_trim": point["J_trim"],
             **errs, "attribution": att.to_dict() if att is not None else None,
             "wall_time": time.perf_counter() - t0})
@@ -234,6 +336,10 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
         row = att.accepted_row()
         progress(f"adding {att.accepted} with {row['strength']} free (score-test estimate {row['kappa_hat']:.4g})")
         cfg = _with_candidate(cfg, chosen, att.accepted, float(row["kappa_hat"]))
+        cand = cfg.model.extensions[-1]
+        added_shape = None
+        if cand.shape_parameters and settings.shape == "time_domain":
+            cfg, added_shape = select_shape(cfg, cand, out / f"shape_{i + 1}.json", settings.alpha, progress)
         i += 1
 
 

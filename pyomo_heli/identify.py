@@ -34,6 +34,16 @@ def extension_forms(extensions) -> dict:
         out[e.name] = hashlib.sha1(src.encode()).hexdigest()[:12]
     return out
 
+
+def shape_values(model) -> dict:
+    """name -> value of the shape parameters of a model's extensions (e.g. the wake's profile order n_wt).
+
+    Shape parameters are fixed model parameters chosen by the closed loop's shape rule, so they must be part of
+    what tells one identification apart from another (fingerprint, reuse of a finished iteration).
+    """
+    return {n: float(model.parameters[n]) for e in model.extensions for n in getattr(e, "shape_parameters", ())}
+
+
 def _point_dict(p) -> dict:
     d = asdict(p)
     d["epsilon"] = None if not math.isfinite(d["epsilon"]) else d["epsilon"]
@@ -61,6 +71,8 @@ def identification_fingerprint(cfg: IdentificationConfig) -> str:
     """
     extra = ({"extensions": extension_forms(cfg.model.extensions), "free": [f.name for f in cfg.free]}
              if cfg.model.extensions else {})
+    if shape_values(cfg.model):
+        extra["shape"] = shape_values(cfg.model)
     return fingerprint(cfg.raw, cfg.dataset, command="identify", **extra)
 
 
@@ -136,6 +148,7 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
               "solver_setup_time": setup, "total_time": time.perf_counter() - t0,
               "maneuvers": [mv.name for mv in data.maneuvers], "extensions": [e.name for e in cfg.model.extensions],
               "extension_forms": extension_forms(cfg.model.extensions),
+              "shape_parameters": shape_values(cfg.model),
               "input_reference_s": cfg.input_reference_s,
               "solver": cfg.pareto.solver,
               "failed_points": failed,

@@ -63,6 +63,10 @@ def table(out: Path) -> None:
               f"last {i1['parameters'][n]:.6g} ({e[1]:+.2f} %)")
     if "k_wt" in i1["parameters"]:
         print(f"k_wt {i1['parameters']['k_wt']:.4f}")
+    for it in its:
+        if it.get("shape_selection"):
+            print(f"iteration {it['iteration']} shape rule: {it['shape_selection']['decision']}; held at "
+                  f"{it['shape_parameters']}")
 
 
 def main() -> None:

@@ -1,6 +1,6 @@
 """Diagnostic of the rotor_wake_on_tail candidate against the truth effect E1 (docs/close_loop.md, "Wake candidate").
 
-    python studies/wake_candidate_check.py [--loop docs/results/close_loop/loop.json] [--fit]
+    python studies/wake_candidate_check.py [--loop docs/results/close_loop_fixed_profile/loop.json] [--fit]
 
 Evaluation only: it reads the dataset's truth.json (the identification never does). It compares
 
@@ -219,7 +219,7 @@ def fit_table(truth: dict) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--dataset", default=str(ROOT / "data" / "bo105_synthetic"))
-    ap.add_argument("--loop", default=str(ROOT / "docs" / "results" / "close_loop" / "loop.json"),
+    ap.add_argument("--loop", default=str(ROOT / "docs" / "results" / "close_loop_fixed_profile" / "loop.json"),
                     help="loop.json of a full-size loop run with the old form (iteration 1 = M0 + wake)")
     ap.add_argument("--fit", action="store_true", help="add the noise-free trim fit (a few minutes)")
     a = ap.parse_args()

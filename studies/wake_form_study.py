@@ -1,6 +1,6 @@
 """How much of the full-size loop's remaining parameter error is the wake candidate's form? (docs/close_loop.md)
 
-    python studies/wake_form_study.py --out results/wake_form [--loop docs/results/close_loop]
+    python studies/wake_form_study.py --out results/wake_form [--loop docs/results/close_loop_fixed_profile]
 
 Evaluation only: it uses the truth simulator's own effect and reads the dataset's truth.json; the
 identification and the loop never do. On the loop's config (studies/close_loop.toml: Case 2 parameters,
@@ -122,8 +122,9 @@ def row(label: str, res: IdentificationResult, truth: dict) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True, type=Path)
-    ap.add_argument("--loop", type=Path, default=ROOT / "docs/results/close_loop",
-                    help="the full-size loop's results folder (loop.json, iter_0, iter_1)")
+    ap.add_argument("--loop", type=Path, default=ROOT / "docs/results/close_loop_fixed_profile",
+                    help="the full-size loop's results folder (loop.json, iter_0, iter_1); default: the loop run with "
+                         "the candidate's fixed profile, before the shape rule")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated: " + ", ".join(VARIANTS))
     args = ap.parse_args()
     unknown = [v for v in args.variants.split(",") if v not in VARIANTS]
@@ -138,7 +139,8 @@ def main() -> None:
         label = f"loop iter {it['iteration']} ({' + '.join(['M0'] + it['extensions'])})"
         results[label] = IdentificationResult.load(args.loop / it["results_dir"])
         models[label] = HelicopterModel(parameters=cfg.model.parameters,
-                                        extensions=[make_candidate(n) for n in it["extensions"]])
+                                        extensions=[make_candidate(n) for n in it["extensions"]]
+                                        ).with_parameters(**it.get("shape_parameters", {}))
     for v in args.variants.split(","):
         results[f"M0 + {v}"] = identify(v, cfg, start, args.out)
         models[f"M0 + {v}"] = model_of(v, cfg, args.out)

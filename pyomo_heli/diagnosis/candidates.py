@@ -21,6 +21,7 @@ from ..physics.extensions import Extension
 from ..physics.parameters import DEG, ParameterSpec
 
 LN2 = 0.6931471805599453
+XI_EPS = 1e-12  # [wake radii^2] keeps |xi|^n smooth at xi = 0
 
 
 class Candidate(Extension):
@@ -32,6 +33,10 @@ class Candidate(Extension):
     one_sided: bool = False
     #: what the effect does to the data, shown in reports
     signature: str = ""
+    #: shape parameters (not the strength): at their defaults the candidate has its documented form; the
+    #: closed loop may free them at the time-domain anchor only, with a likelihood-ratio test against the
+    #: defaults, and then holds them for the whole front (pyomo_heli.close_loop.select_shape)
+    shape_parameters: tuple[str, ...] = ()
 
 
 class RotorWakeOnTail(Candidate):
@@ -61,18 +66,26 @@ class RotorWakeOnTail(Candidate):
     almost in the disc plane and a 1 m/s change of w moves its boundary past
     the tail by 0.6-0.8 wake radii (60-100 kt). The fully developed wake carries twice
     the disc-induced velocity, hence 2 lambda_i Omega R; k_wt scales it.
+
+    n_wt is a shape parameter: how sharp the wake boundary is depends on the
+    roll-up of the tip vortices, which this model does not resolve. It is
+    held at 6 unless the time series show otherwise (the closed loop's
+    shape rule); |xi|^n is written (xi^2 + 1e-12)^(n/2), smooth in n and xi.
     """
 
     name = "rotor_wake_on_tail"
     strength = "k_wt"
     one_sided = True
     signature = "low-speed bump (10-50 kt) in trim lon/theta; q/theta in low-speed maneuvers"
+    shape_parameters = ("n_wt",)
 
     def parameters(self):
         return [
             ParameterSpec("k_wt", 0.0, "-", "candidate: wake downwash at the tail / twice the induced velocity",
                           "choice", (0.0, 5.0), 1.0),
             ParameterSpec("z_ht", 1.7, "m", "candidate: stabiliser depth below the hub (drawing value)", "choice"),
+            ParameterSpec("n_wt", 6.0, "-", "candidate: order of the immersion profile 2^(-|xi|^n) (shape)",
+                          "choice (the sharpness of the first form, 1/(1 + xi^6))", (2.0, 24.0), 1.0),
         ]
 
     @staticmethod
@@ -85,7 +98,8 @@ class RotorWakeOnTail(Candidate):
         depth = p["z_ht"] * ops.cos(a) + l_th * ops.sin(a)
         tan_chi = ctx.disc.mu_d / ctx.disc.lambda_d
         xi = (aft - depth * tan_chi) / p["R"]
-        return xi, ops.exp(-LN2 * xi**6)
+        # |xi|^n as (xi^2 + eps)^(n/2): differentiable in n also on the centre line
+        return xi, ops.exp(-LN2 * (xi**2 + XI_EPS) ** (0.5 * p["n_wt"]))
 
     def tail_downwash(self, ctx):
         _, g = self.immersion(ctx)

@@ -29,9 +29,11 @@ from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _f
 
 
 def iteration_model(base: HelicopterModel, it: dict) -> HelicopterModel:
-    """The model of one loop iteration: the config's base model plus that iteration's extensions."""
+    """The model of one loop iteration: the config's base model plus that iteration's extensions (with the
+    shape parameters the loop's shape rule fixed for them)."""
     exts = [make_candidate(n) for n in it["extensions"]]
-    return HelicopterModel(parameters=base.parameters, extensions=tuple(base.extensions) + tuple(exts))
+    model = HelicopterModel(parameters=base.parameters, extensions=tuple(base.extensions) + tuple(exts))
+    return model.with_parameters(**it.get("shape_parameters", {}))
 
 
 def label(it: dict) -> str:
@@ -87,6 +89,36 @@ def truth_errors(doc: dict, base: HelicopterModel, truth: dict) -> pd.DataFrame:
             r[f"iter {it['iteration']} error %"] = (None if v is None or not truth[n]
                                                    else 100 * (v - truth[n]) / abs(truth[n]))
         rows.append(r)
+    return pd.DataFrame(rows)
+
+
+def validation_change_table(pred0, pred1, val_mans, segment_s: float = 1.0, alpha: float = 0.01) -> pd.DataFrame:
+    """Per output: validation RMS of data minus model for two predictions and the paired test of the change
+    (Diebold-Mariano with batch means over ``segment_s`` segments, :mod:`pyomo_heli.diagnosis.validation_change`)."""
+    import numpy as np
+
+    from ..diagnosis.validation_change import mean_square_change
+
+    rows = []
+    for o in VALIDATION_OUTPUTS:
+        r0, r1, seg = [], [], []
+        for mv in val_mans:
+            a, b = pred0.maneuvers.get(mv.name), pred1.maneuvers.get(mv.name)
+            if a is None or b is None or o not in mv.data or o not in a or o not in b:
+                break
+            y = mv.data[o].to_numpy(dtype=float)
+            r0.append(y - a[o].to_numpy(dtype=float))
+            r1.append(y - b[o].to_numpy(dtype=float))
+            seg.append(max(int(round(segment_s / float(np.median(np.diff(mv.t))))), 1))
+        else:
+            if not r0:
+                continue
+            c = mean_square_change(r0, r1, seg, alpha)
+            unit = plots.UNITS[o][0]
+            rows.append({"output": o, f"RMS before": float(plots.shown(o, c.ms0**0.5)),
+                         f"RMS after": float(plots.shown(o, c.ms1**0.5)), "unit": unit,
+                         "change [%]": c.rms_change_pct, "z": c.z, "p (rise)": c.p_rise, "segments": c.segments,
+                         "significant rise": c.rise_significant})
     return pd.DataFrame(rows)
 
 
@@ -150,6 +182,14 @@ def write_loop_report(out, cfg) -> Path:
     ch = change_table(doc)
     if len(ch):
         L += [f"Change from iteration 0 to iteration {its[-1]['iteration']}:", "", markdown_table(ch, digits=4), ""]
+    if val_mans and len(its) > 1:
+        first, last = preds[label(its[0])], preds[label(its[-1])]
+        L += [f"Is a change of the validation error a real one? Paired test of iteration {its[-1]['iteration']} "
+              "against iteration 0 on the same records (Diebold-Mariano, squared error, batch means over 1 s "
+              "segments; `pyomo_heli/diagnosis/validation_change.py`): a rise counts as significant when its "
+              "one-sided p < 0.01. At the sensor-noise floor the same noise enters both models' residuals and "
+              "does not cancel, so small changes of either sign are expected without any change of the model "
+              "error.", "", markdown_table(validation_change_table(first, last, val_mans), digits=4), ""]
     L += ["![Trim vs speed before and after](loop_trim_vs_speed.png)", ""]
     if val_mans:
         L += ["![Validation before and after](loop_validation.png)", ""]
@@ -175,6 +215,12 @@ def write_loop_report(out, cfg) -> Path:
         L += [f"### {label(it)}", "", f"Results: `{it['results_dir']}/` (front, report). "
               f"Parameters at the diagnosed point ({it.get('point', 'closest front point')}, SI): " + ", ".join(f"{k} = {_fmt(v, 6)}" for k, v in it["parameters"].items())
               + f"; J_time = {_fmt(it['J_time'], 8)}, J_trim = {_fmt(it['J_trim'], 5)}.", ""]
+        sh = it.get("shape_selection")
+        if sh:
+            L += [f"Shape of {sh['candidate']} (shape rule: anchor A with the shape at its defaults "
+                  f"{sh['defaults']}, J_time = {_fmt(sh['A_default']['J_time'], 8)}, and with it free, "
+                  f"J_time = {_fmt(sh['A_free']['J_time'], 8)}): **{sh['decision']}**; held at "
+                  + ", ".join(f"{n} = {_fmt(v, 5)}" for n, v in sh["values"].items()) + " for the whole front.", ""]
         a = it.get("attribution")
         if a is None:
             L += ["No candidate left to score.", ""]

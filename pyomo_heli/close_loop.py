@@ -152,6 +152,10 @@ def select_shape(cfg: IdentificationConfig, cand, file: Path, alpha: float,
 
     names = list(cand.shape_parameters)
     specs = {n: cfg.model.parameters.spec(n) for n in names}
+    for n, spec in specs.items():
+        if not spec.bounds or not spec.bounds[0] <= spec.value <= spec.bounds[1]:
+            raise ConfigError(f"candidate {cand.name}: shape parameter {n} needs bounds around its default "
+                              f"{spec.value} to be fitted (got {spec.bounds}); declare them in its ParameterSpec")
     free = list(cfg.free) + [FreeParameter(n, specs[n].value, *specs[n].bounds, specs[n].scale or 1.0) for n in names]
     cfg_s = dataclasses.replace(cfg, free=free)
     key = {"fingerprint": identification_fingerprint(cfg_s), "initial": {f.name: f.initial for f in free}}

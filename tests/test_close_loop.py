@@ -320,3 +320,27 @@ def test_shape_rule_finds_a_known_profile_order_and_keeps_a_right_default(tmp_pa
     # a rerun reads the decision back instead of solving again
     again_cfg, again = select_shape(cfg, cfg.model.extensions[-1], out, alpha=0.01, progress=lambda s: None)
     assert again == json.loads(out.read_text()) and again_cfg.model.parameters["n_wt"] == doc["values"]["n_wt"]
+
+
+def test_a_shape_parameter_without_bounds_is_a_clear_error(tmp_path):
+    """select_shape refuses a candidate whose shape parameter has no bounds, naming candidate and parameter."""
+    import dataclasses
+
+    from pyomo_heli.close_loop import ConfigError, _with_candidate, select_shape
+    from pyomo_heli.diagnosis.candidates import RotorWakeOnTail
+    from pyomo_heli.physics.model import HelicopterModel
+    from pyomo_heli.physics.parameters import ParameterSpec
+
+    class Unbounded(RotorWakeOnTail):
+        def parameters(self):
+            return [s if s.name != "n_wt" else ParameterSpec("n_wt", 6.0, "-", "no bounds", "test")
+                    for s in super().parameters()]
+
+    cfg = load_identification_config(make_case(tmp_path, maneuvers=WAKE_MANEUVERS).path)
+    cfg = _with_candidate(cfg, {f.name: f.initial for f in cfg.free}, "rotor_wake_on_tail", 0.5)
+    # the same model with the candidate's n_wt spec replaced by one without bounds
+    others = type(cfg.model.parameters)([s for s in cfg.model.parameters.specs() if s.name != "n_wt"])
+    cfg = dataclasses.replace(cfg, model=HelicopterModel(parameters=others, extensions=(Unbounded(),)))
+    with pytest.raises(ConfigError, match="candidate rotor_wake_on_tail: shape parameter n_wt needs bounds"):
+        select_shape(cfg, cfg.model.extensions[-1], tmp_path / "s.json", 0.01, progress=lambda s: None)
+    assert not (tmp_path / "s.json").exists()

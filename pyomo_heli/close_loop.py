@@ -215,6 +215,9 @@ def config_of_result(cfg: IdentificationConfig, result) -> IdentificationConfig:
     model = model.with_parameters(**result.info.get("shape_parameters", {}))
     free = list(cfg.free)
     for n in result.parameters[len(free):]:
+        if n not in model.parameters:
+            raise ConfigError(f"{cfg.path}: the results' free parameter {n!r} is neither in the config nor a strength of "
+                              f"the effects {listed[len(have):]}")
         spec = model.parameters.spec(n)
         lo, hi = spec.bounds
         free.append(FreeParameter(n, min(max(spec.value, lo), hi), lo, hi, spec.scale or 1.0))

@@ -344,3 +344,23 @@ def test_a_shape_parameter_without_bounds_is_a_clear_error(tmp_path):
     with pytest.raises(ConfigError, match="candidate rotor_wake_on_tail: shape parameter n_wt needs bounds"):
         select_shape(cfg, cfg.model.extensions[-1], tmp_path / "s.json", 0.01, progress=lambda s: None)
     assert not (tmp_path / "s.json").exists()
+
+
+def test_config_of_result_rebuilds_a_loop_iteration_or_names_the_mismatch():
+    """config_of_result: the loop's config plus the added effects, strengths free, shape held; clear errors."""
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from pyomo_heli.close_loop import ConfigError, config_of_result
+
+    cfg = load_identification_config(Path(__file__).resolve().parent.parent / "studies" / "close_loop.toml")
+    base = ["theta_twist", "CL_alpha_HT", "Iyy"]
+    it1 = SimpleNamespace(info={"extensions": ["rotor_wake_on_tail"], "shape_parameters": {"n_wt": 3.5}},
+                          parameters=base + ["k_wt"])
+    c = config_of_result(cfg, it1)
+    assert [f.name for f in c.free] == base + ["k_wt"] and c.model.parameters["n_wt"] == 3.5
+    assert [e.name for e in c.model.extensions] == ["rotor_wake_on_tail"]
+    with pytest.raises(ConfigError, match="free parameter 'tau_b' is neither in the config nor a strength"):
+        config_of_result(cfg, SimpleNamespace(info={"extensions": ["rotor_wake_on_tail"]}, parameters=base + ["tau_b"]))
+    with pytest.raises(ConfigError, match=r"do not extend the config's"):
+        config_of_result(cfg, SimpleNamespace(info={"extensions": ["rotor_wake_on_tail"]}, parameters=["Iyy", "k_wt"]))

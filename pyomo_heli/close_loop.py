@@ -26,7 +26,9 @@ finished is lost. Settings come from the config's ``[loop]`` table:
 ``candidates`` (names, default the whole library), ``alpha``, ``ratio``,
 ``confound_corr``, ``robust``, ``point`` (``direct``: the Eq. 11 solution solved
 directly, default; ``chosen``: the closest sampled front point) (see :mod:`pyomo_heli.diagnosis.attribution`),
-``shape`` (``time_domain``: the shape rule, default; ``default``: shape parameters stay at their defaults). A finished
+``shape`` (``time_domain``: the shape rule, default; ``default``: shape parameters stay at their defaults),
+``uncertainty`` (``chosen``: Cramer-Rao standard errors of A, the chosen point and the direct solve of every
+iteration, default; ``none``). A finished
 iteration found in ``out/iter_i`` (same config, model - including the source of its effects - free parameters and
 input reference) is reused, not redone.
 """
@@ -62,6 +64,7 @@ class LoopSettings:
     robust: bool = True
     point: str = "direct"
     shape: str = "time_domain"
+    uncertainty: str = "chosen"
 
 
 def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
@@ -103,6 +106,10 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
         if raw["shape"] not in ("time_domain", "default"):
             raise ConfigError(f"{where}: field 'shape' must be \"time_domain\" or \"default\", got {raw['shape']!r}")
         s.shape = raw["shape"]
+    if "uncertainty" in raw:
+        if raw["uncertainty"] not in ("chosen", "none"):
+            raise ConfigError(f"{where}: field 'uncertainty' must be \"chosen\" or \"none\", got {raw['uncertainty']!r}")
+        s.uncertainty = raw["uncertainty"]
     if "robust" in raw:
         if not isinstance(raw["robust"], bool):
             raise ConfigError(f"{where}: field 'robust' must be true or false, got {raw['robust']!r}")
@@ -307,7 +314,8 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
         if result is not None:
             progress(f"  iteration {i}: reusing the finished identification in {out / f'iter_{i}'}")
         else:
-            result = run_identification(cfg, out / f"iter_{i}", progress=lambda s: progress("  " + s))
+            result = run_identification(cfg, out / f"iter_{i}", progress=lambda s: progress("  " + s),
+                                        uncertainty=settings.uncertainty if settings.uncertainty != "none" else False)
         point, which = _diagnosed_point(result, settings.point)
         chosen = point["parameters"]
         errs = errors_of(cfg.model, chosen, id_data.maneuvers, val_mans, trims, f"iteration {i}")
@@ -326,6 +334,8 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
             "units": {n: cfg.model.parameters.spec(n).unit for n in chosen},
             "shape_parameters": shape_values(cfg.model), "shape_selection": added_shape,
             "point": which, "J_time": point["J_time"], "J_trim": point["J_trim"],
+            # Cramer-Rao standard errors at the diagnosed point (None: not computed, or at a bound)
+            "standard_errors": (point.get("uncertainty") or {}).get("se"),
             **errs, "attribution": att.to_dict() if att is not None else None,
             "wall_time": time.perf_counter() - t0})
         if att is not None and att.decision != "accepted":

@@ -240,6 +240,9 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
                  "--out", str(tmp_path / "se1"), "--points", "chosen"]) == 0
     se = json.loads((tmp_path / "se1" / "chosen.json").read_text())["direct"]["uncertainty"]["se"]
     assert set(se) == {"theta_twist", "CL_alpha_HT", "Iyy", "k_wt"} and se["k_wt"] > 0
+    # ... the same standard errors as the loop computed itself at the diagnosed point (its own model, not rebuilt)
+    assert it1["standard_errors"] == pytest.approx(se, rel=1e-9)
+    assert "iter 1 error / SE" in report
 
 
 @pytest.mark.parametrize("loop, message", [
@@ -250,6 +253,7 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
     ('point = "best"', "[loop]: field 'point' must be \"direct\" or \"chosen\""),
     ('robust = "yes"', "[loop]: field 'robust' must be true or false"),
     ('shape = "free"', "[loop]: field 'shape' must be \"time_domain\" or \"default\""),
+    ('uncertainty = "all"', "[loop]: field 'uncertainty' must be \"chosen\" or \"none\""),
 ])
 def test_bad_loop_table_is_one_line_exit_2(tmp_path, capsys, loop, message):
     (tmp_path / "data").mkdir()

@@ -72,7 +72,8 @@ def change_table(doc: dict) -> pd.DataFrame:
 
 
 def truth_errors(doc: dict, base: HelicopterModel, truth: dict) -> pd.DataFrame:
-    """Identified parameters of every iteration vs truth (display units) and their errors [%]."""
+    """Identified parameters of every iteration vs truth (display units) and their errors [%]; with the loop's
+    standard errors (``[loop] uncertainty``) also each SE and the error in units of it."""
     rows = []
     names = []
     for it in doc["iterations"]:
@@ -88,6 +89,11 @@ def truth_errors(doc: dict, base: HelicopterModel, truth: dict) -> pd.DataFrame:
             r[f"iter {it['iteration']}"] = None if v is None else v * fac
             r[f"iter {it['iteration']} error %"] = (None if v is None or not truth[n]
                                                    else 100 * (v - truth[n]) / abs(truth[n]))
+            se = (it.get("standard_errors") or {}).get(n)
+            if any(j.get("standard_errors") for j in doc["iterations"]):
+                # the error in units of the estimate's own standard error: is a change of the error beyond noise?
+                r[f"iter {it['iteration']} SE"] = None if se is None else se * fac
+                r[f"iter {it['iteration']} error / SE"] = None if (v is None or not se) else (v - truth[n]) / se
         rows.append(r)
     return pd.DataFrame(rows)
 

@@ -126,9 +126,18 @@ def errors_of(model: HelicopterModel, params: dict, id_mans, val_mans, trims, la
             "trim_rms": trim_rms(pred, trims)["all"], "problems": pred.problems}
 
 
+def model_with_candidates(model: HelicopterModel, names, shape: dict | None = None) -> HelicopterModel:
+    """``model`` plus the candidate extensions ``names`` (in order), their shape parameters at ``shape`` (the
+    values a loop iteration held; defaults for those not given). The one place a loop iteration's model is
+    rebuilt from its record (the loop, ``config_of_result``, the loop report)."""
+    out = HelicopterModel(parameters=model.parameters,
+                          extensions=tuple(model.extensions) + tuple(make_candidate(n) for n in names))
+    return out.with_parameters(**(shape or {}))
+
+
 def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: float) -> IdentificationConfig:
-    cand = make_candidate(name)
-    model = HelicopterModel(parameters=cfg.model.parameters, extensions=tuple(cfg.model.extensions) + (cand,))
+    model = model_with_candidates(cfg.model, [name])
+    cand = model.extensions[-1]
     spec = model.parameters.spec(cand.strength)
     lo, hi = spec.bounds
     init = min(max(kappa, lo + 0.05 * (hi - lo) if cand.one_sided else lo), hi)
@@ -217,9 +226,7 @@ def config_of_result(cfg: IdentificationConfig, result) -> IdentificationConfig:
     listed = list(result.info.get("extensions", []))
     if listed[:len(have)] != have:
         raise ConfigError(f"{cfg.path}: the results were identified with extensions {listed}, the config declares {have}")
-    model = HelicopterModel(parameters=cfg.model.parameters,
-                            extensions=tuple(cfg.model.extensions) + tuple(make_candidate(n) for n in listed[len(have):]))
-    model = model.with_parameters(**result.info.get("shape_parameters", {}))
+    model = model_with_candidates(cfg.model, listed[len(have):], result.info.get("shape_parameters"))
     free = list(cfg.free)
     for n in result.parameters[len(free):]:
         if n not in model.parameters:

@@ -33,10 +33,10 @@ import dataclasses
 import json
 from pathlib import Path
 
-from pyomo_heli.close_loop import errors_of
+from pyomo_heli.close_loop import errors_of, model_with_candidates
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
-from pyomo_heli.diagnosis.candidates import RotorWakeOnTail, make_candidate
+from pyomo_heli.diagnosis.candidates import RotorWakeOnTail
 from pyomo_heli.flighttest.truth_effects import WakeOnTail
 from pyomo_heli.identify import run_identification
 from pyomo_heli.nlp.identification import prepare_data
@@ -138,9 +138,7 @@ def main() -> None:
     for it in loop["iterations"]:
         label = f"loop iter {it['iteration']} ({' + '.join(['M0'] + it['extensions'])})"
         results[label] = IdentificationResult.load(args.loop / it["results_dir"])
-        models[label] = HelicopterModel(parameters=cfg.model.parameters,
-                                        extensions=[make_candidate(n) for n in it["extensions"]]
-                                        ).with_parameters(**it.get("shape_parameters", {}))
+        models[label] = model_with_candidates(cfg.model, it["extensions"], it.get("shape_parameters"))
     for v in args.variants.split(","):
         results[f"M0 + {v}"] = identify(v, cfg, start, args.out)
         models[f"M0 + {v}"] = model_of(v, cfg, args.out)

@@ -19,7 +19,6 @@ from pathlib import Path
 import pandas as pd
 
 from ..dataset import load_flight_test
-from ..diagnosis.candidates import make_candidate
 from ..nlp.identification import prepare_data
 from ..physics.model import HelicopterModel
 from ..units import KT
@@ -31,9 +30,9 @@ from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _f
 def iteration_model(base: HelicopterModel, it: dict) -> HelicopterModel:
     """The model of one loop iteration: the config's base model plus that iteration's extensions (with the
     shape parameters the loop's shape rule fixed for them)."""
-    exts = [make_candidate(n) for n in it["extensions"]]
-    model = HelicopterModel(parameters=base.parameters, extensions=tuple(base.extensions) + tuple(exts))
-    return model.with_parameters(**it.get("shape_parameters", {}))
+    from ..close_loop import model_with_candidates
+
+    return model_with_candidates(base, it["extensions"], it.get("shape_parameters"))
 
 
 def label(it: dict) -> str:

@@ -113,7 +113,9 @@ def cmd_simulate(args) -> int:
 def cmd_generate_data(args) -> int:
     from .flighttest.generate import generate_from_file
 
-    out = generate_from_file(args.config, args.out)
+    if args.seed is not None and args.seed < 0:
+        raise UserError(f"option --seed must be an integer >= 0, got {args.seed}")
+    out = generate_from_file(args.config, args.out, seed=args.seed)
     print(f"wrote synthetic flight test to {out}")
     return 0
 
@@ -129,7 +131,14 @@ def cmd_close_loop(args) -> int:
     from .config import load_identification_config
     from .report.loop import write_loop_report
 
-    cfg = load_identification_config(args.config)
+    from pathlib import Path
+
+    overrides = None
+    if args.dataset is not None:
+        if not Path(args.dataset).is_dir():
+            raise UserError(f"option --dataset: folder {args.dataset} not found")
+        overrides = {"data": {"dataset": str(Path(args.dataset).resolve())}}
+    cfg = load_identification_config(args.config, overrides)
     settings = loop_settings(cfg)
     if args.max_iterations is not None:
         if args.max_iterations < 0:
@@ -315,6 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("generate-data", help="generate a synthetic flight test from a config")
     g.add_argument("--config", required=True)
     g.add_argument("--out", required=True)
+    g.add_argument("--seed", type=int, help="replace the config's [dataset] seed (another noise realisation)")
     g.set_defaults(func=cmd_generate_data)
 
     i = sub.add_parser("identify", help="multi-objective identification from a config (Pareto front)")
@@ -333,6 +343,8 @@ def build_parser() -> argparse.ArgumentParser:
     cl.add_argument("config")
     cl.add_argument("--out", required=True, help="results folder (loop.json, loop_report.md, iter_*/)")
     cl.add_argument("--max-iterations", type=int, help="override [loop] max_iterations")
+    cl.add_argument("--dataset", help="flight-test folder replacing the config's [data] dataset (e.g. another noise "
+                                      "realisation from generate-data --seed)")
     cl.set_defaults(func=cmd_close_loop)
 
     u = sub.add_parser("uncertainty", help="standard errors and identifiability of an existing results folder")

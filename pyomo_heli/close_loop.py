@@ -29,8 +29,8 @@ directly, default; ``chosen``: the closest sampled front point) (see :mod:`pyomo
 ``shape`` (``time_domain``: the shape rule, default; ``default``: shape parameters stay at their defaults),
 ``uncertainty`` (``chosen``: Cramer-Rao standard errors of A, the chosen point and the direct solve of every
 iteration, default; ``none``). A finished
-iteration found in ``out/iter_i`` (same config, model - including the source of its effects - free parameters and
-input reference) is reused, not redone.
+iteration found in ``out/iter_i`` (same config and dataset, model - including the source of its effects - free
+parameters and input reference) is reused, not redone.
 """
 from __future__ import annotations
 
@@ -275,6 +275,7 @@ def _finished(cfg: IdentificationConfig, folder: Path):
             and res.info.get("extension_forms", {}) == extension_forms(cfg.model.extensions)
             and res.info.get("input_reference_s", 0.0) == cfg.input_reference_s
             and Path(res.info.get("config", "")).resolve() == Path(cfg.path).resolve()
+            and Path(res.info.get("dataset", "")).resolve() == Path(cfg.dataset).resolve()
             and len(res.front) == cfg.pareto.points)
     return res if same else None
 

@@ -368,3 +368,24 @@ def test_config_of_result_rebuilds_a_loop_iteration_or_names_the_mismatch():
         config_of_result(cfg, SimpleNamespace(info={"extensions": ["rotor_wake_on_tail"]}, parameters=base + ["tau_b"]))
     with pytest.raises(ConfigError, match=r"do not extend the config's"):
         config_of_result(cfg, SimpleNamespace(info={"extensions": ["rotor_wake_on_tail"]}, parameters=["Iyy", "k_wt"]))
+
+
+def test_generate_data_seed_option_and_close_loop_dataset_option(tmp_path, capsys):
+    """generate-data --seed gives another noise realisation of the same flight test (the config's own seed gives the
+    same files); close-loop --dataset must name an existing folder."""
+    import filecmp
+
+    cfg = make_case(tmp_path, seed=11)
+    gen = str(tmp_path / "gen.toml")
+    assert main(["generate-data", "--config", gen, "--seed", "11", "--out", str(tmp_path / "same")]) == 0
+    assert main(["generate-data", "--config", gen, "--seed", "12", "--out", str(tmp_path / "other")]) == 0
+    files = ["trims.csv", "truth.json"] + [f"maneuvers/{p.name}" for p in (cfg.dataset / "maneuvers").iterdir()]
+    match, mismatch, errors = filecmp.cmpfiles(cfg.dataset, tmp_path / "same", files, shallow=False)
+    assert not mismatch and not errors
+    a, b = json.loads((cfg.dataset / "truth.json").read_text()), json.loads((tmp_path / "other" / "truth.json").read_text())
+    assert a["parameters"] == b["parameters"] and a["seed"] == 11 and b["seed"] == 12
+    assert (cfg.dataset / "trims.csv").read_text() != (tmp_path / "other" / "trims.csv").read_text()
+    assert main(["generate-data", "--config", gen, "--seed", "-1", "--out", str(tmp_path / "bad")]) == 2
+    assert "option --seed must be an integer >= 0" in capsys.readouterr().err
+    assert main(["close-loop", str(cfg.path), "--dataset", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")]) == 2
+    assert "option --dataset: folder" in capsys.readouterr().err and not (tmp_path / "o").exists()

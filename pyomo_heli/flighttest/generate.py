@@ -106,5 +106,14 @@ def generate(cfg: GeneratorConfig, out: str | Path) -> Path:
     return out
 
 
-def generate_from_file(config: str | Path, out: str | Path) -> Path:
-    return generate(load_config(config), out)
+def generate_from_file(config: str | Path, out: str | Path, seed: int | None = None) -> Path:
+    """Generate the flight test of ``config`` into ``out``; ``seed`` replaces its [dataset] seed (another noise
+    realisation of the same flight test: truth, maneuvers, trims and noise levels unchanged)."""
+    cfg = load_config(config)
+    if seed is not None:
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+        import dataclasses
+
+        cfg = dataclasses.replace(cfg, seed=seed)
+    return generate(cfg, out)

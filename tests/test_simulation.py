@@ -66,3 +66,46 @@ def test_collocation_matches_scipy_simulation():
         y = np.array([pyo.value(m.man.y[k, tt]) for tt in m.man.samples])
         r = ref[k].to_numpy()
         assert np.max(np.abs(y - r)) <= 1e-3 * (r.max() - r.min()), k
+
+
+def test_shared_intermediates_equal_float_model_and_are_defined_variables(tmp_path):
+    """blk.shared (rotor flow, c_t, T, X, Z, M) at a time point equals the float model's values for the same
+    states, flapping and inputs, and the NL writer exports each once as a defined variable."""
+    from pyomo.repn.plugins.nl_writer import NLWriter
+
+    from pyomo_heli.physics.model import SHARED, evaluate
+
+    model = HelicopterModel()
+    tp = trim_float(model, 60 * KT)
+    t = np.arange(0.0, 0.1 + 1e-9, 0.02)
+    m = pyo.ConcreteModel()
+    pmap = add_parameters(m, model.parameters, [])
+    m.trim = pyo.Block()
+    build_trim_block(m.trim, model, pmap, 60 * KT, guess=tp.to_dict())
+    m.man = pyo.Block()
+    build_maneuver_block(m.man, model, pmap, t, {"col": 0.01 * t}, m.trim, ncp=3)
+    rng = np.random.default_rng(7)
+    tt = list(m.man.t)[4]
+    x = {s: tp.state()[s] * (1 + 0.05 * rng.standard_normal()) + 0.01 * rng.standard_normal() for s in STATES}
+    beta = [0.01 * rng.standard_normal() for _ in range(3)]
+    for s in STATES:
+        m.man.x[s, tt].set_value(x[s])
+    for b, v in zip(("beta_0", "beta_1c", "beta_1s"), beta):
+        m.man.beta[b, tt].set_value(v)
+    u = {k: pyo.value(getattr(m.trim, k)) + pyo.value(m.man.du[k, tt]) for k in ("col", "lon")}
+    ref = evaluate(x, u, model.parameters, beta=beta)
+    expected = {"mu": ref.flow.mu, "mu_z": ref.flow.mu_z, "lam": ref.lam, "c_t": ref.c_t, "T": ref.thrust,
+                "X": ref.forces.X, "Z": ref.forces.Z, "M": ref.forces.M}
+    assert set(expected) == set(SHARED)
+    for k, v in expected.items():
+        assert pyo.value(m.man.shared[k, tt]) == pytest.approx(v, rel=1e-12, abs=1e-14), k
+    m.obj = pyo.Objective(expr=0.0)
+    lines = {}
+    for export in (True, False):
+        with open(tmp_path / "m.nl", "w") as f:
+            NLWriter().write(m, f, linear_presolve=False, scale_model=False, export_defined_variables=export)
+        lines[export] = (tmp_path / "m.nl").read_text().splitlines()
+    # every shared intermediate of every time point is a defined variable (Pyomo may add one more
+    # for the linear part of a nonlinear one), and the file is half the size of the inlined one
+    assert sum(1 for line in lines[True] if line.startswith("V")) >= len(SHARED) * len(m.man.t)
+    assert len(lines[True]) < 0.6 * len(lines[False])

@@ -11,9 +11,12 @@ report (``pyomo-heli inspect CONFIG`` prints it):
    trim block, first in a compact form (short names, 6 significant digits,
    with a legend), then in full (``expr.to_string()``, Pyomo's own names).
 
-The physics is inlined in the constraints (no named Expressions), so the
-compact form is what makes an equation readable; the full form is the
-exact text the solver sees.
+In a maneuver block the intermediates that several equations of a time
+point share (rotor flow, thrust coefficient, thrust, total forces:
+``blk.shared``, physics.model.SHARED) are named Expressions; the compact form
+prints them by name and lists their definitions first, the full form inlines
+them, which is the exact mathematics the solver sees (the NL file holds each
+once, as a defined variable).
 """
 from __future__ import annotations
 
@@ -24,7 +27,8 @@ import textwrap
 
 import pyomo.environ as pyo
 from pyomo.core.expr.symbol_map import SymbolMap
-from pyomo.core.expr.visitor import expression_to_string
+from pyomo.core.base.expression import ExpressionData
+from pyomo.core.expr.visitor import _ToStringVisitor
 
 from ..units import KT
 
@@ -75,7 +79,7 @@ class _ShortNames:
     components (``theta_s[...]``) keep their names. ``legend`` records label -> full name.
     """
 
-    RENAME = {"x": "{}", "dx": "{}_dot", "beta": "{}", "du": "du_{}", "y": "y_{}"}
+    RENAME = {"x": "{}", "dx": "{}_dot", "beta": "{}", "du": "du_{}", "y": "y_{}", "shared": "{}"}
 
     def __init__(self, model, home, t=None):
         self.model, self.home, self.t = model, home, t
@@ -112,14 +116,54 @@ class _ShortNames:
         return label
 
 
+class _KeepNamed(_ToStringVisitor):
+    """Pyomo's to-string visitor that prints a named Expression by its label and records it."""
+
+    def __init__(self, smap):
+        super().__init__(verbose=False, smap=smap)
+        self.named: list = []
+
+    def visiting_potential_leaf(self, node):
+        if isinstance(node, ExpressionData):
+            if all(node is not e for e in self.named):
+                self.named.append(node)
+            return True, self.smap.getSymbol(node)
+        return super().visiting_potential_leaf(node)
+
+
 def _equations(model, home, constraints, t=None) -> list[str]:
-    """Compact form of each constraint (with legend), then the full to_string() form."""
+    """Compact form of each constraint (named intermediates first, with legend), then the full to_string() form."""
     names = _ShortNames(model, home, t)
     smap = SymbolMap(names)
-    out = ["compact form (short names, numbers to 6 significant digits):"]
+
+    def compact(expr) -> tuple[str, list]:
+        visitor = _KeepNamed(smap)
+        return _round_numbers(visitor.dfs_postorder_stack(expr)), visitor.named
+
+    rows, used = [], []
     for c in constraints:
-        s = _round_numbers(expression_to_string(c.expr, smap=smap, compute_values=False))
-        out += [f"  {c.local_name if c.parent_block() is home else c.name}:", _wrap(s)]
+        text, named = compact(c.expr)
+        rows.append((c.local_name if c.parent_block() is home else c.name, text))
+        used += named
+    defs, seen = [], set()
+
+    def define(e) -> None:  # depth first: an intermediate is listed after those it uses
+        if id(e) in seen:
+            return
+        seen.add(id(e))
+        text, named = compact(e.expr)
+        for d in named:
+            define(d)
+        defs.append((smap.getSymbol(e), text))
+
+    for e in used:
+        define(e)
+    out = ["compact form (short names, numbers to 6 significant digits):"]
+    if defs:
+        out.append("  named intermediates (each defined once, used by the equations below):")
+        out += [_wrap(f"{label} := {text}", indent="    ") for label, text in defs]
+    for label, s in rows:
+        out += [f"  {label}:", _wrap(s)]
     out += ["", "legend (short name = Pyomo component):"]
     for label, full in sorted(names.legend.items(), key=lambda kv: kv[0].lower()):
         if label != full:

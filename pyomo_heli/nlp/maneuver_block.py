@@ -17,7 +17,7 @@ import numpy as np
 import pyomo.dae as dae
 import pyomo.environ as pyo
 
-from ..physics.model import FLAPPING, INPUTS, STATES, HelicopterModel, evaluate
+from ..physics.model import FLAPPING, INPUTS, SHARED, STATES, HelicopterModel, evaluate
 from ..physics.ops import get_ops
 from .trim_block import STATE_BOUNDS
 
@@ -64,14 +64,25 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
     blk.du = pyo.Param(INPUTS, blk.t, mutable=True,
                        initialize={(k, t): float(inc[k][i]) for k in INPUTS for i, t in enumerate(times)})
 
+    # Named intermediates (rotor flow, thrust coefficient, total forces) of each
+    # time point: the NL writer exports them once as defined variables instead
+    # of inlining them in every equation that uses them (physics.model.SHARED).
+    blk.shared = pyo.Expression(SHARED, blk.t, initialize=0.0)
     ctxs: dict = {}
+
+    def share_at(t):
+        def share(name, expr):
+            blk.shared[name, t].set_value(expr)
+            return blk.shared[name, t]
+        return share
 
     def ctx_at(t):
         if t not in ctxs:
             x = {s: blk.x[s, t] for s in states}
             u = {k: getattr(start, k) + blk.du[k, t] for k in INPUTS}
             beta = [blk.beta[b, t] for b in FLAPPING]
-            ctxs[t] = evaluate(x, u, pmap, ops=ops, beta=beta, extensions=model.extensions)
+            ops_t = SimpleNamespace(**vars(ops), share=share_at(t))
+            ctxs[t] = evaluate(x, u, pmap, ops=ops_t, beta=beta, extensions=model.extensions)
         return ctxs[t]
 
     def ode_rule(_, s, t):

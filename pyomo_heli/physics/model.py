@@ -24,6 +24,17 @@ STATES = ("u", "w", "q", "theta", "lambda_i")
 INPUTS = ("col", "lon")
 FLAPPING = ("beta_0", "beta_1c", "beta_1s")
 OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
+#: Intermediates that several equations of one time point use (flapping rows,
+#: state rates, load factors). A back end with ``ops.share(name, expr)``
+#: (the collocation blocks) gets each of them once as a named quantity, so the
+#: NL file and the solver's derivative graphs hold it once instead of once per
+#: equation (docs/performance.md); the other back ends use them as they are.
+SHARED = ("mu", "mu_z", "lam", "c_t", "T", "X", "Z", "M")
+
+
+def _share(ops, name: str, expr):
+    share = getattr(ops, "share", None)
+    return expr if share is None else share(name, expr)
 
 
 def evaluate(x: Mapping, inputs: Mapping, p: Mapping, ops=NUMPY, beta: Sequence | None = None,
@@ -48,7 +59,8 @@ def evaluate(x: Mapping, inputs: Mapping, p: Mapping, ops=NUMPY, beta: Sequence 
         e.adjust_controls(ctx)
 
     flow = rotor.hub_flow(u, w, q, p, ops, x_h=ctx.x_h)
-    lam = lambda_i - flow.mu_z
+    flow.mu, flow.mu_z = _share(ops, "mu", flow.mu), _share(ops, "mu_z", flow.mu_z)
+    lam = _share(ops, "lam", lambda_i - flow.mu_z)
     pitch = rotor.blade_pitch(ctx.col, ctx.lon, p)
     if beta is None:
         beta = rotor.solve_flapping(flow, pitch, lam, p)
@@ -62,7 +74,7 @@ def evaluate(x: Mapping, inputs: Mapping, p: Mapping, ops=NUMPY, beta: Sequence 
     for e in extensions:
         e.tip_path_plane(ctx)
 
-    c_t = rotor.thrust_coefficient(flow, pitch, lam, p)
+    c_t = _share(ops, "c_t", rotor.thrust_coefficient(flow, pitch, lam, p))
     disc = inflow.disc_flow(flow, lambda_i, ctx.beta_1c_tpp, ops)
     c_t_gl = inflow.glauert_thrust(lambda_i, disc, ops)
     ctx.tau_lambda = p["tau_lambda"]
@@ -71,7 +83,7 @@ def evaluate(x: Mapping, inputs: Mapping, p: Mapping, ops=NUMPY, beta: Sequence 
     ctx.c_t, ctx.disc, ctx.c_t_glauert = c_t, disc, c_t_gl
     dlambda = inflow.inflow_rate(c_t, c_t_gl, ctx.tau_lambda)
 
-    T = rotor.thrust(c_t, p)
+    T = _share(ops, "T", rotor.thrust(c_t, p))
     X_R, Z_R, M_R = rotor.rotor_forces(T, ctx.beta_1c_tpp, p, ops, x_h=ctx.x_h)
     X_F, Z_F, M_F = fuselage.fuselage_forces(u, w, p, ops)
     ctx.thrust = T
@@ -84,6 +96,7 @@ def evaluate(x: Mapping, inputs: Mapping, p: Mapping, ops=NUMPY, beta: Sequence 
     for e in extensions:
         dX, dZ, dM = e.extra_forces(ctx)
         X, Z, M = X + dX, Z + dZ, M + dM
+    X, Z, M = _share(ops, "X", X), _share(ops, "Z", Z), _share(ops, "M", M)
     ctx.forces = SimpleNamespace(X=X, Z=Z, M=M, X_R=X_R, Z_R=Z_R, M_R=M_R, X_F=X_F, Z_F=Z_F, M_F=M_F,
                                  Z_T=Z_T, M_T=M_T)
 

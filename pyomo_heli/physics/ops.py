@@ -6,6 +6,11 @@ receive an ``ops`` namespace with ``sin``, ``cos``, ``sqrt`` and ``exp``.
 - ``NUMPY``: plain floats or numpy arrays (the simulator, the truth model).
 - ``PYOMO``: Pyomo expressions (collocation equations and trim blocks).
 - ``CASADI``: CasADi symbols (exact Jacobians for linearisation/diagnostics).
+
+A back end may also carry ``share(name, expr)``: :func:`.model.evaluate`
+passes the intermediates listed in ``model.SHARED`` through it. The
+collocation blocks use it to make each of them a named Pyomo Expression
+(written once to the NL file); without it they are used as they are.
 """
 from __future__ import annotations
 

@@ -160,6 +160,11 @@ class CasadiIpoptSolver:
     custom_hessian = True
     #: percentile of the Hessian column degrees that defines "typical" (see _hessian_function)
     hessian_dense_percentile = 90
+    #: named Pyomo Expressions (the collocation blocks' shared intermediates) go to the NL file
+    #: as defined variables, written and differentiated once; False inlines them into every
+    #: equation that uses them (the same functions, a graph about twice as large; kept for
+    #: comparison: studies/profile_setup.py --compare defined-variables)
+    export_defined_variables = True
 
     def __init__(self, model, options: dict | None = None):
         try:
@@ -188,7 +193,8 @@ class CasadiIpoptSolver:
             path = os.path.join(tmp, "model.nl")
             with open(path, "w") as ostream:
                 info = NLWriter().write(
-                    self.model, ostream, linear_presolve=False, scale_model=False
+                    self.model, ostream, linear_presolve=False, scale_model=False,
+                    export_defined_variables=self.export_defined_variables,
                 )
             t_nl = time.perf_counter()
             nl = ca.NlpBuilder()
@@ -217,6 +223,8 @@ class CasadiIpoptSolver:
         x_mx = ca.vertcat(*nl.x)
         g_mx = ca.vertcat(*nl.g) if len(nl.g) else ca.MX(0, 1)
         fun = ca.Function("F", [x_mx], [nl.f, g_mx]).expand()
+        #: size of the expanded expression graph (casadi instructions), for the benchmark
+        self.graph_instructions = int(fun.n_instructions())
         x = ca.SX.sym("x", len(self.variables))
         f, g = fun(x)
         self._nlp = {"x": x, "f": f, "g": g}

@@ -108,6 +108,12 @@ def test_report_equations(report):
         assert f"  man[lon3211_80kt_a].ode[{s},0.02]:" in point  # full form
         assert f"man[lon3211_80kt_a].dx_disc_eq[{s},0.02]" in point
     assert "theta_dot  ==  q" in point  # compact ode[theta]
+    # shared intermediates: defined once, before the equations, each after those it uses; named in the equations
+    defs = point.split("named intermediates")[1].split("  dx_disc_eq[")[0]
+    order = [defs.index(f"    {k} := ") for k in ("mu", "lam", "c_t", "T", "X", "Z", "M")]
+    assert order == sorted(order)
+    assert "q_dot  ==  M/" in point and "y_n_x  ==  X/" in point
+    assert "M                        = man[lon3211_80kt_a].shared[M,0.02]" in point  # legend
     assert "man[lon3211_80kt_a].dx[theta,0.02]  ==  man[lon3211_80kt_a].x[q,0.02]" in point  # to_string()
     assert "flapping[2,0.02]" in point and "output_eq[n_z,0.02]" in point
     assert "col_trim                 = trim[10].col" in point  # legend

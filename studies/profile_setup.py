@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from pyomo_heli.config import load_identification_config  # noqa: E402
+from pyomo_heli.config import ConfigError, load_identification_config  # noqa: E402
 from pyomo_heli.identify import build_problem  # noqa: E402
 from pyomo_heli.pareto.front import ParetoSolver  # noqa: E402
 from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver, resolve_options  # noqa: E402
@@ -75,12 +75,16 @@ def main(argv=None) -> int:
     ap.add_argument("--max-duration", type=float, default=1.0, help="crop every maneuver to this many seconds")
     ap.add_argument("--out", default=None, help="write the rows as JSON here")
     args = ap.parse_args(argv)
-    if args.config is None:
-        cfg = load_identification_config(ROOT / "tests" / "configs" / "small_case1_noisy.toml",
-                                          {"data": {"maneuvers": ["lon3211_80kt_a", "coldoublet_hover"],
-                                                    "max_duration_s": args.max_duration}})
-    else:
-        cfg = load_identification_config(args.config, {"data": {"max_duration_s": args.max_duration}})
+    try:
+        if args.config is None:
+            cfg = load_identification_config(ROOT / "tests" / "configs" / "small_case1_noisy.toml",
+                                              {"data": {"maneuvers": ["lon3211_80kt_a", "coldoublet_hover"],
+                                                        "max_duration_s": args.max_duration}})
+        else:
+            cfg = load_identification_config(args.config, {"data": {"max_duration_s": args.max_duration}})
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     rows = {}
     for name, attributes in COMPARISONS[args.compare].items():
         rows[name] = measure(cfg, attributes)

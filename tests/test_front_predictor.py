@@ -43,6 +43,26 @@ def test_extrapolation_is_linear_clipped_to_bounds_and_keeps_multiplier_signs():
         ParetoSettings(predictor="quadratic")
 
 
+def test_extrapolation_keeps_missing_values_and_new_multipliers():
+    m = pyo.ConcreteModel()
+    m.x = pyo.Var(initialize=1.0)
+    m.z = pyo.Var()  # never given a value
+    m.c = pyo.Constraint(expr=m.x >= 0)
+    m.dual = pyo.Suffix(direction=pyo.Suffix.IMPORT_EXPORT)
+    old = _Snapshot(m)
+    m.x.set_value(2.0)
+    m.dual[m.c] = 0.7  # only the newer snapshot has this multiplier
+    new = _Snapshot(m)
+    m.z.set_value(5.0)
+    new.extrapolated(old, 0.5).restore()
+    assert m.x.value == pytest.approx(2.5)
+    assert m.z.value is None
+    assert m.dual[m.c] == pytest.approx(0.7)
+    m.w = pyo.Var(initialize=0.0)
+    with pytest.raises(ValueError, match="different models"):
+        _Snapshot(m).extrapolated(old, 0.5)
+
+
 def test_secant_start_is_nearer_and_solves_to_the_same_point():
     m = rosenbrock_eps(2.0)
     solver = make_solver(m)

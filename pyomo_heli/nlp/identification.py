@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyomo.environ as pyo
+from pyomo.common.gc_manager import PauseGC
 
 from ..physics.model import FLAPPING, HelicopterModel
 from ..simulation.integrate import sampled, simulate
@@ -91,7 +92,15 @@ def build_identification_nlp(data: IdentificationData, model: HelicopterModel, f
     responses: data frequency responses (coherent band only); if given, the model's
     linearisations and ``m.J_linear`` (paper Eq. 9) are added, see :mod:`.linear_model`.
     """
-    opts = options or NLPOptions()
+    # Pyomo creates hundreds of thousands of small container objects here; Python's cyclic garbage
+    # collector would walk the growing model again and again (3x the build time at Case 1 size,
+    # docs/performance.md). Pyomo's own writers pause it the same way.
+    with PauseGC():
+        return _build(data, model, free, options or NLPOptions(), responses)
+
+
+def _build(data: IdentificationData, model: HelicopterModel, free: list[FreeParameter], opts: NLPOptions,
+           responses) -> pyo.ConcreteModel:
     m = pyo.ConcreteModel(name="identification")
     pmap = add_parameters(m, model.parameters, free)
     m.extensions = [e.name for e in model.extensions]

@@ -24,6 +24,7 @@ import time
 
 import pyomo.environ as pyo
 from pyomo.common.errors import ApplicationError
+from pyomo.common.gc_manager import PauseGC
 from pyomo.common.log import LoggingIntercept
 from pyomo.opt import TerminationCondition as TC
 
@@ -114,6 +115,10 @@ class AmplSolver:
 
     def solve(self, warm_start: str = "primal", options: dict | None = None) -> SolveResult:
         """Solve from the current Pyomo values; see CasadiIpoptSolver.solve for the modes."""
+        with PauseGC():  # the model is written and read back row by row (see CasadiIpoptSolver.rebuild)
+            return self._solve(warm_start, options)
+
+    def _solve(self, warm_start: str, options: dict | None) -> SolveResult:
         opts, verbose, user_keys = resolve_options(self.options, options, warm_start)
         if "print_level" not in user_keys:
             opts["print_level"] = 5  # goes to the log; verbose only decides whether we tee it

@@ -43,6 +43,7 @@ import time
 import numpy as np
 import pyomo.environ as pyo
 from pyomo.common.collections import ComponentMap, ComponentSet
+from pyomo.common.gc_manager import PauseGC
 from pyomo.core.expr.visitor import identify_mutable_parameters
 from pyomo.repn.plugins.nl_writer import NLWriter
 
@@ -104,11 +105,12 @@ def scale_multipliers(model, factor: float) -> None:
     objective scale, paper Fig. 4), this keeps a multiplier warm start
     consistent.
     """
-    for name in ("dual", "ipopt_zL_out", "ipopt_zU_out"):
-        suffix = model.component(name)
-        if isinstance(suffix, pyo.Suffix):
-            for key, value in list(suffix.items()):
-                suffix[key] = value * factor
+    with PauseGC():  # one entry per row and bound (see CasadiIpoptSolver.rebuild)
+        for name in ("dual", "ipopt_zL_out", "ipopt_zU_out"):
+            suffix = model.component(name)
+            if isinstance(suffix, pyo.Suffix):
+                for key, value in list(suffix.items()):
+                    suffix[key] = value * factor
 
 
 def ensure_suffix(model, name: str, direction) -> pyo.Suffix:
@@ -187,6 +189,12 @@ class CasadiIpoptSolver:
     # ------------------------------------------------------------------ build
     def rebuild(self) -> None:
         """Rewrite the NL file and re-import it; needed after structural changes."""
+        # The cyclic garbage collector is paused while the model's components are listed and read
+        # (per-variable and per-row Python lists at 100k rows; see _Snapshot in pareto.front).
+        with PauseGC():
+            self._rebuild()
+
+    def _rebuild(self) -> None:
         ca = self._ca
         t0 = time.perf_counter()
         with tempfile.TemporaryDirectory(prefix="pyomo_heli_nl_") as tmp:
@@ -484,6 +492,10 @@ class CasadiIpoptSolver:
         The final iterate is loaded even when the solve fails, as Ipopt's AMPL
         driver does; check ``result.success``.
         """
+        with PauseGC():  # per-variable Python lists in and out (see rebuild)
+            return self._solve(warm_start, options)
+
+    def _solve(self, warm_start: str, options: dict | None) -> SolveResult:
         ipopt_options, verbose, _ = resolve_options(self.options, options, warm_start)
         self._check_unchanged()
         solver = self._solver_for(ipopt_options, verbose)

@@ -120,6 +120,26 @@ def test_weights_of_an_interior_front_point_make_it_stationary():
     assert u.combination == "weighted" and b / a == pytest.approx(0.25, rel=1e-8)
 
 
+def test_weights_of_a_point_that_is_both_optima_are_the_time_domain_ones():
+    """A degenerate front (noise-free data: A = B = every point): gradients of rounding size in
+    arbitrary directions must not pick the weights; the point is J_time's optimum, so (1, 0), the same
+    standard errors as point A, whatever the rounding noise."""
+    info = _linear_info(np.random.default_rng(6))
+    ref = cramer_rao(info, _free(3), kind="A")
+    for seed in range(5):
+        rng = np.random.default_rng(100 + seed)
+        info.e_time = {o: 1e-13 * rng.normal(size=200) for o in info.S_time}
+        info.e_trim = {"col": 1e-13 * rng.normal(size=info.n_trims)}
+        u = cramer_rao(info, _free(3), kind="eps")
+        assert u.weights == (1.0, 0.0) and u.combination == "time"
+        assert u.se == ref.se
+    # a real interior point (anti-parallel gradients of statistical size) keeps its own weights
+    g = np.random.default_rng(7).normal(size=3)
+    info.e_time = {"y1": -np.linalg.pinv(info.S_time["y1"].T) @ g * info.R_time["y1"], "y2": np.zeros(200)}
+    info.e_trim = {"col": np.linalg.pinv(info.S_trim["col"].T) @ (4 * g) * info.n_trims * DEG**2 / 2}
+    assert cramer_rao(info, _free(3), kind="eps").combination == "weighted"
+
+
 def test_trim_data_separate_what_the_time_series_cannot_see():
     """Case 2 parameters at the truth on clean data (R set to the sensor noise): the time series'
     weakest direction is the twist; trim information lifts the weakest singular value, and the

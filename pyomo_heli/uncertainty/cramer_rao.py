@@ -24,7 +24,12 @@ covariance of its gradient under the estimated trim noise. The weights (a, b)
 are found from the two gradients at the point (``a g_time + b g_trim = 0``):
 point A has (1, 0) (pure ML: cov = F_time^-1), the trim anchor B the limit
 b >> a, an interior point its own ratio. This needs no solver multipliers, so
-it works for any parameter set read back from ``front.csv``.
+it works for any parameter set read back from ``front.csv``. A point whose
+Newton step towards one objective's optimum is below ``STATIONARY_SE``
+standard errors counts as that objective's optimum (weights (1, 0) or
+(0, 1)): on a degenerate front (noise-free data, every point the same
+estimate) both gradients are rounding noise and their directions would pick
+arbitrary weights.
 
 Parameters at an active bound are reported as such and projected out: their
 rows and columns are removed before the inversion (they are treated as known),
@@ -46,6 +51,9 @@ from ..units import DEG
 BOUND_TOL = 1e-4
 #: trim residual variance floor [rad^2], so noise-free data give huge, finite information
 TRIM_FLOOR = (1e-6) ** 2
+#: an epsilon point whose Newton step towards one objective's optimum is below this many standard
+#: errors is that objective's optimum (objective_weights)
+STATIONARY_SE = 1e-3
 
 
 def active_bounds(values: dict, free, tol: float = BOUND_TOL) -> dict:
@@ -203,6 +211,22 @@ class ParameterUncertainty:
                 + self.correlation_frame().to_string(float_format=lambda x: f"{x:+.3f}"))
 
 
+def newton_step_in_standard_errors(H: np.ndarray, G: np.ndarray, g: np.ndarray) -> float:
+    """Largest |H^-1 g| / standard error (sandwich H^-1 G H^-1) over the parameters, or 0 without any.
+
+    How far, in its own standard errors, minimising one objective alone would move the point: a
+    value far below 1 means the point already is that objective's optimum for every statistical
+    purpose, whatever the direction of the (numerically tiny) gradient."""
+    if len(g) == 0:
+        return 0.0
+    Hi = np.linalg.pinv(H)
+    step = Hi @ g
+    se = np.sqrt(np.clip(np.diag(Hi @ G @ Hi), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(se > 0, np.abs(step) / se, np.where(step == 0, 0.0, np.inf))
+    return float(np.max(ratio))
+
+
 def objective_weights(info: PointInformation, kind: str, free_idx) -> tuple[float, float]:
     """(a, b) with the point stationary for a J_time + b J_trim; see the module docstring."""
     if kind == "A" or not info.S_trim:
@@ -210,6 +234,16 @@ def objective_weights(info: PointInformation, kind: str, free_idx) -> tuple[floa
     if not info.S_time:
         return 0.0, 1.0
     Ft, Hr = info.fisher_time()[np.ix_(free_idx, free_idx)], info.hessian_trim()[np.ix_(free_idx, free_idx)]
+    if kind != "B":
+        # An epsilon point that is already J_time's (or J_trim's) optimum to a thousandth of a standard
+        # error: both gradients are rounding noise (a degenerate front, e.g. noise-free data, where
+        # every point is the same estimate), and their directions would give arbitrary weights.
+        gt, gr = info.grad_time()[free_idx], info.grad_trim()[free_idx]
+        if newton_step_in_standard_errors(Ft, Ft, gt) < STATIONARY_SE:
+            return 1.0, 0.0
+        Gr = info.gradient_covariance_trim()[np.ix_(free_idx, free_idx)]
+        if newton_step_in_standard_errors(Hr, Gr, gr) < STATIONARY_SE:
+            return 0.0, 1.0
     if kind == "B":
         # lexicographic trim anchor: J_trim dominates; J_time only decides what trims cannot see
         return 1e-6 * np.linalg.norm(Hr) / max(np.linalg.norm(Ft), 1e-300), 1.0

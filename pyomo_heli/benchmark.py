@@ -51,7 +51,7 @@ class BenchmarkSettings:
     config: Path
     sizes: list = field(default_factory=lambda: [1])
     front: bool = True  # front (warm + cold interior) at the first size
-    shooting: str = "rk4"  # "rk4", "solve_ivp" or "none"
+    shooting: str = "rk4"  # "rk4", "rk4-casadi", "solve_ivp" or "none"
     shooting_max_simulations: int | None = 150  # cap of the single-shooting fit (None: until converged)
     #: cold point-A solves per size without a front (the median is the size's solve time): one solve on a shared
     #: machine varies by 10-30 % between runs, enough to move the growth exponent by 0.1 (docs/performance.md)

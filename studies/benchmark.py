@@ -52,9 +52,9 @@ def main(argv=None) -> int:
                     help="warm start of the front points (default: the config's; full = primal + duals, "
                          "continuation = full with the barrier from tol/10)")
     ap.add_argument("--no-front", action="store_true", help="point A only (no front, no cold front)")
-    ap.add_argument("--shooting", choices=["solve_ivp", "rk4", "none"], default=None,
-                    help="integrator of the single-shooting fit (rk4: fixed-step, solve_ivp: scipy adaptive; "
-                         "see docs/performance.md), or none")
+    ap.add_argument("--shooting", choices=["solve_ivp", "rk4", "rk4-casadi", "none"], default=None,
+                    help="integrator of the single-shooting fit (rk4: fixed-step in Python, rk4-casadi: the same "
+                         "evaluated by casadi, solve_ivp: scipy adaptive; see docs/performance.md), or none")
     ap.add_argument("--no-shooting", action="store_true", help="same as --shooting none")
     ap.add_argument("--shooting-max-sims", type=int, default=150,
                     help="stop the single-shooting fit after about this many simulations (0: no cap)")

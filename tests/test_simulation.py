@@ -11,6 +11,8 @@ from pyomo_heli.nlp.trim_block import build_trim_block, trim_block_values
 from pyomo_heli.nlp.trim_table import trim_table
 from pyomo_heli.physics.model import STATES, HelicopterModel
 from pyomo_heli.simulation.inputs import InputSignal
+from pyomo_heli.diagnosis.candidates import candidate_names, make_candidate
+from pyomo_heli.simulation.compiled import simulate_outputs as compiled_outputs
 from pyomo_heli.simulation.integrate import sampled, simulate
 from pyomo_heli.simulation.trim import TrimPoint, trim_float, trim_sweep
 from pyomo_heli.solvers import available_solvers, make_solver
@@ -39,6 +41,29 @@ def test_simulator_started_at_pyomo_trim_stays_at_trim(speed_kt):
     df = simulate(model, tp, np.linspace(0, 10, 11))
     for s in STATES:
         assert np.max(np.abs(df[s].to_numpy() - df[s].iloc[0])) < 1e-6, s
+
+
+@pytest.mark.parametrize("candidate", [None] + candidate_names())
+def test_compiled_rk4_equals_python_rk4(candidate):
+    """The casadi-evaluated RK4 (simulation.compiled, used by the sensitivities) gives the Python RK4's
+    outputs to rounding, for M0 and M0 + each candidate extension at its parameter scale."""
+    model = HelicopterModel()
+    if candidate is not None:
+        ext = make_candidate(candidate)
+        model = HelicopterModel(extensions=[ext])
+        spec = model.parameters.spec(ext.strength)
+        model = model.with_parameters(**{ext.strength: float(spec.scale)})
+    tp = trim_float(model, 80 * KT)
+    t = np.arange(0.0, 3.0 + 1e-9, 0.04)
+    dlon = InputSignal("lon", "3211", 0.5 * DEG, 0.5, t_start=0.5, ramp=0.1)(t)
+    ref = simulate(model, tp, t, {"lon": sampled(t, dlon)}, method="rk4", substeps=4)
+    outputs = ["q", "theta", "n_x", "n_z", "TAS", "beta_0"]
+    got = compiled_outputs(model, tp, t, {"lon": dlon}, outputs, substeps=4)
+    for o in outputs:
+        r = ref[o].to_numpy()
+        assert np.max(np.abs(got[o] - r)) <= 1e-12 * max(np.max(np.abs(r)), 1e-3), (candidate, o)
+    with pytest.raises(ValueError, match="unknown output"):
+        compiled_outputs(model, tp, t, {"lon": dlon}, ["alpha"])
 
 
 def test_collocation_matches_scipy_simulation():

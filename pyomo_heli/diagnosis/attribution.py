@@ -48,7 +48,7 @@ import pandas as pd
 from scipy import stats
 
 from ..physics.model import HelicopterModel
-from ..simulation.integrate import sampled, simulate
+from ..simulation.compiled import simulate_outputs
 from ..simulation.sensitivity import sensitivities
 from ..simulation.trim import trim_float
 from .candidates import CANDIDATES, make_candidate
@@ -165,16 +165,16 @@ def input_offset_columns(model: HelicopterModel, data, time_outputs, n_trim_rows
         t = mv.data["t"].to_numpy()
         tp = trim_float(model, mv.trim_speed)
         inc = mv.increments()
-        base = simulate(model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=substeps)
+        base = simulate_outputs(model, tp, t, inc, time_outputs, substeps)
         for k in ("col", "lon"):
-            shifted = {c: sampled(t, v + (delta if c == k else 0.0)) for c, v in inc.items()}
+            shifted = {c: v + (delta if c == k else 0.0) for c, v in inc.items()}
             if k not in shifted:
-                shifted[k] = sampled(t, np.full(t.size, delta))
-            sim = simulate(model, tp, t, shifted, method="rk4", substeps=substeps)
+                shifted[k] = np.full(t.size, delta)
+            sim = simulate_outputs(model, tp, t, shifted, time_outputs, substeps)
             col = []
             for o in time_outputs:
                 block = np.zeros(starts[-1])
-                block[starts[i]:starts[i + 1]] = (sim[o].to_numpy() - base[o].to_numpy()) / delta
+                block[starts[i]:starts[i + 1]] = (sim[o] - base[o]) / delta
                 col.append(block)
             col.append(np.zeros(n_trim_rows))
             cols.append(np.concatenate(col))

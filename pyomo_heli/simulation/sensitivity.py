@@ -9,7 +9,8 @@ The model is the output-error model of the identification: each maneuver
 starts from the model's own trim at the maneuver's start speed and is driven
 by the measured input increments; a trim point is the model's trim at the
 measured speed. Derivatives are central differences of the RK4 simulation
-(the same integrator, sub-steps and trims as the single-shooting fit), with a
+(the same integrator, sub-steps and trims as the single-shooting fit; evaluated
+by casadi, :mod:`.compiled`), with a
 step relative to the parameter's magnitude or, at zero, to its declared scale;
 at a lower bound (a strength or time constant at zero) the difference is
 one-sided. A state-adding effect with a tiny time constant is stiff for RK4:
@@ -23,17 +24,29 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..physics.model import HelicopterModel
+from .compiled import simulate_outputs
 from .integrate import sampled, simulate
 from .trim import trim_float, trim_sweep
 
 
-def maneuver_outputs(model: HelicopterModel, maneuvers, outputs, substeps: int = 4) -> dict[str, np.ndarray]:
-    """Model outputs at the samples of every maneuver, concatenated per output (SI)."""
+def maneuver_outputs(model: HelicopterModel, maneuvers, outputs, substeps: int = 4,
+                     compiled: bool = True) -> dict[str, np.ndarray]:
+    """Model outputs at the samples of every maneuver, concatenated per output (SI).
+
+    RK4 with ``substeps`` steps per sample interval, evaluated by casadi (:mod:`.compiled`, about
+    30x faster) or, with ``compiled=False``, by the Python integrator of :mod:`.integrate`; the two
+    agree to rounding.
+    """
     out = {o: [] for o in outputs}
     for mv in maneuvers:
         t = mv.data["t"].to_numpy()
         inc = mv.increments()
         tp = trim_float(model, mv.trim_speed)
+        if compiled:
+            y = simulate_outputs(model, tp, t, inc, outputs, substeps)
+            for o in outputs:
+                out[o].append(y[o])
+            continue
         df = simulate(model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=substeps)
         for o in outputs:
             out[o].append(df[o].to_numpy())

@@ -11,7 +11,7 @@ is the same estimate as the full-discretisation NLP.
 
 Three integrators: ``"rk4"`` (fixed-step, 4 steps per sample interval; fast on
 sampled, piecewise-linear inputs; the Python integrator of the simulator),
-``"rk4-casadi"`` (the same RK4 evaluated by casadi, about 30x faster per
+``"rk4-casadi"`` (the same RK4 evaluated by casadi, about 20x faster per
 simulation; what a classic tool with a compiled simulator would do) and
 ``"solve_ivp"`` (scipy's adaptive ``solve_ivp``, the textbook classic route).
 """

@@ -5,7 +5,8 @@ receive an ``ops`` namespace with ``sin``, ``cos``, ``sqrt`` and ``exp``.
 
 - ``NUMPY``: plain floats or numpy arrays (the simulator, the truth model).
 - ``PYOMO``: Pyomo expressions (collocation equations and trim blocks).
-- ``CASADI``: CasADi symbols (exact Jacobians for linearisation/diagnostics).
+- ``CASADI``: CasADi symbols (the RK4 simulation evaluated by casadi,
+  :mod:`pyomo_heli.simulation.compiled`).
 
 A back end may also carry ``share(name, expr)``: :func:`.model.evaluate`
 passes the intermediates listed in ``model.SHARED`` through it. The

@@ -2,7 +2,7 @@
 
 ``evaluate`` is the one place where the physical parts are wired together.
 It is called with Pyomo expressions (collocation points, trim blocks), CasADi
-symbols (linearisation) or floats (simulation): see :mod:`.ops`.
+symbols (the compiled RK4 of simulation.compiled) or floats (simulation): see :mod:`.ops`.
 
 States x = [u, w, q, theta, lambda_i] (+ extension states), inputs
 [col, lon], algebraic flapping [beta_0, beta_1c, beta_1s], outputs

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..physics.model import INPUTS, HelicopterModel, evaluate
 from ..physics.ops import get_ops
+from .integrate import rk4_step
 from .trim import TrimPoint
 
 #: (structure, substeps) -> (step function, output function, output names); structure keeps the
@@ -59,20 +60,17 @@ def _functions(model: HelicopterModel, substeps: int):
         eqs = context(xv, col, lon).state_eqs
         return ca.vertcat(*[eqs[s][1] / eqs[s][0] for s in states])
 
-    # one sample interval: inputs u0 at its start, u1 at its end, linear in between
+    # one sample interval: inputs u0 at its start, u1 at its end, linear in between (tau: time into it)
     u0, u1, dt = ca.SX.sym("u0", len(INPUTS)), ca.SX.sym("u1", len(INPUTS)), ca.SX.sym("dt")
-    h = dt / substeps
-    y = x
-    for k in range(substeps):
-        def u_at(frac):
-            return u0 + frac * (u1 - u0)
 
-        a, m, b = u_at(k / substeps), u_at((k + 0.5) / substeps), u_at((k + 1) / substeps)
-        k1 = rates(y, a[0], a[1])
-        k2 = rates(y + h / 2 * k1, m[0], m[1])
-        k3 = rates(y + h / 2 * k2, m[0], m[1])
-        k4 = rates(y + h * k3, b[0], b[1])
-        y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    def rhs(tau, y):
+        u = u0 + tau / dt * (u1 - u0)
+        return rates(y, u[0], u[1])
+
+    h, tau, y = dt / substeps, 0.0, x
+    for _ in range(substeps):
+        y = rk4_step(rhs, tau, y, h)
+        tau = tau + h
     step = ca.Function("rk4_interval", [x, ca.vertcat(u0, u1, dt), p], [y])
 
     col, lon = ca.SX.sym("col"), ca.SX.sym("lon")

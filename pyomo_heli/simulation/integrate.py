@@ -25,6 +25,15 @@ def sampled(times, values) -> Increment:
     return lambda t: np.interp(t, times, values)
 
 
+def rk4_step(rhs, t, y, h):
+    """One classic Runge-Kutta step of dy/dt = rhs(t, y) (floats, numpy arrays or casadi symbols)."""
+    k1 = rhs(t, y)
+    k2 = rhs(t + h / 2, y + h / 2 * k1)
+    k3 = rhs(t + h / 2, y + h / 2 * k2)
+    k4 = rhs(t + h, y + h * k3)
+    return y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
 def rk4(rhs, t_eval, y0, substeps: int = 4) -> np.ndarray:
     """Fixed-step classic Runge-Kutta, ``substeps`` steps per interval of ``t_eval``."""
     ys = np.empty((len(y0), len(t_eval)))
@@ -33,11 +42,7 @@ def rk4(rhs, t_eval, y0, substeps: int = 4) -> np.ndarray:
     for i in range(1, len(t_eval)):
         t, h = t_eval[i - 1], (t_eval[i] - t_eval[i - 1]) / substeps
         for _ in range(substeps):
-            k1 = rhs(t, y)
-            k2 = rhs(t + h / 2, y + h / 2 * k1)
-            k3 = rhs(t + h / 2, y + h / 2 * k2)
-            k4 = rhs(t + h, y + h * k3)
-            y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            y = rk4_step(rhs, t, y, h)
             t += h
         if not np.all(np.isfinite(y)):
             raise RuntimeError(f"simulation diverged at t = {t:.3f} s")

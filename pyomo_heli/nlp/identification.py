@@ -93,8 +93,8 @@ def build_identification_nlp(data: IdentificationData, model: HelicopterModel, f
     linearisations and ``m.J_linear`` (paper Eq. 9) are added, see :mod:`.linear_model`.
     """
     # Pyomo creates hundreds of thousands of small container objects here; Python's cyclic garbage
-    # collector would walk the growing model again and again (3x the build time at Case 1 size,
-    # docs/performance.md). Pyomo's own writers pause it the same way.
+    # collector would walk the growing model again and again (Case 1 build 16.2 s with it, 4.4 s
+    # without, docs/performance.md). Pyomo's own writers pause it the same way.
     with PauseGC():
         return _build(data, model, free, options or NLPOptions(), responses)
 

@@ -136,8 +136,9 @@ class _Snapshot:
 
     Values are kept as numpy arrays beside one list of the components, not as (component, value)
     pairs: a few hundred thousand pairs per snapshot made Python's cyclic garbage collector walk
-    the whole Pyomo model again and again (a third of a Case 1 front's wall time,
-    docs/performance.md). A variable without a value is stored as nan and restored as None.
+    the whole Pyomo model again and again (with the collector paused as well, the Python work of a
+    Case 1 front halved, docs/performance.md). A variable without a value is stored as nan and
+    restored as None.
     """
 
     def __init__(self, m):

@@ -34,8 +34,8 @@ def maneuver_outputs(model: HelicopterModel, maneuvers, outputs, substeps: int =
     """Model outputs at the samples of every maneuver, concatenated per output (SI).
 
     RK4 with ``substeps`` steps per sample interval, evaluated by casadi (:mod:`.compiled`, about
-    20x faster, studies/simulation_speed.py) or, with ``compiled=False``, by the Python integrator of :mod:`.integrate`; the two
-    agree to rounding.
+    20x faster: studies/simulation_speed.py) or, with ``compiled=False``, by the Python integrator
+    of :mod:`.integrate`; the two agree to rounding.
     """
     out = {o: [] for o in outputs}
     for mv in maneuvers:

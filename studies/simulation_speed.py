@@ -57,7 +57,8 @@ def main(argv=None) -> int:
     model = cfg.model.with_parameters(**{f.name: f.initial for f in cfg.free})
     data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
     rows = []
-    print("| maneuver | samples | Python RK4 [s] | casadi RK4 [s] | first casadi call [s] | ratio | max rel. difference |")
+    print("| maneuver | samples | Python RK4 [s] | casadi RK4 [s] | first casadi call [s] | ratio "
+          "| max rel. difference |")
     print("|---|---|---|---|---|---|---|")
     for mv in data.maneuvers:
         t = mv.data["t"].to_numpy()

@@ -66,6 +66,21 @@ def test_compiled_rk4_equals_python_rk4(candidate):
         compiled_outputs(model, tp, t, {"lon": dlon}, ["alpha"])
 
 
+def _square_maneuver(model, V, tp, t, dlon):
+    """A trim block and a lon maneuver at V as a square NLP (zero objective), started from the trim
+    held constant, not from the answer."""
+    m = pyo.ConcreteModel()
+    pmap = add_parameters(m, model.parameters, [])
+    m.trim = pyo.Block()
+    build_trim_block(m.trim, model, pmap, V, guess=tp.to_dict())
+    m.man = pyo.Block()
+    build_maneuver_block(m.man, model, pmap, t, {"lon": dlon}, m.trim, ncp=3)
+    for (s, tt), v in m.man.x.items():
+        v.set_value(tp.state()[s])
+    m.obj = pyo.Objective(expr=0.0)
+    return m
+
+
 def test_collocation_matches_scipy_simulation():
     """A 80 kt lon 3-2-1-1 as a square collocation problem equals solve_ivp to 1e-3 of each output's range."""
     model = HelicopterModel()
@@ -75,16 +90,7 @@ def test_collocation_matches_scipy_simulation():
     dlon = InputSignal("lon", "3211", 0.5 * DEG, 0.5, t_start=1.0, ramp=0.1)(t)
     ref = simulate(model, tp, t, {"lon": sampled(t, dlon)}, max_step=0.02)
 
-    m = pyo.ConcreteModel()
-    pmap = add_parameters(m, model.parameters, [])
-    m.trim = pyo.Block()
-    build_trim_block(m.trim, model, pmap, V, guess=tp.to_dict())
-    m.man = pyo.Block()
-    # start the NLP from the trim held constant, not from the answer
-    build_maneuver_block(m.man, model, pmap, t, {"lon": dlon}, m.trim, ncp=3)
-    for (s, tt), v in m.man.x.items():
-        v.set_value(tp.state()[s])
-    m.obj = pyo.Objective(expr=0.0)
+    m = _square_maneuver(model, V, tp, t, dlon)
     res = make_solver(m).solve(warm_start="none")
     assert res.success, res
     for k in ("q", "theta", "n_x", "n_z", "TAS", "beta_0"):
@@ -147,15 +153,7 @@ def test_pounce_solves_collocation_with_defined_variables():
     dlon = InputSignal("lon", "3211", 0.5 * DEG, 0.5, t_start=0.2, ramp=0.1)(t)
     got = {}
     for name in ("casadi-ipopt", "pounce"):
-        m = pyo.ConcreteModel()
-        pmap = add_parameters(m, model.parameters, [])
-        m.trim = pyo.Block()
-        build_trim_block(m.trim, model, pmap, V, guess=tp.to_dict())
-        m.man = pyo.Block()
-        build_maneuver_block(m.man, model, pmap, t, {"lon": dlon}, m.trim, ncp=3)
-        for (s, tt), v in m.man.x.items():
-            v.set_value(tp.state()[s])
-        m.obj = pyo.Objective(expr=0.0)
+        m = _square_maneuver(model, V, tp, t, dlon)
         res = make_solver(m, name).solve(warm_start="none")
         assert res.success, (name, res)
         got[name] = np.array([[pyo.value(m.man.y[k, tt]) for tt in m.man.samples] for k in ("q", "theta", "n_z")])

@@ -36,19 +36,18 @@ _ACCUMULATED: dict = {}
 
 
 def _structure(model: HelicopterModel) -> tuple:
-    exts = model.float_extensions
-    return tuple(id(e) for e in exts), tuple(model.state_names), tuple(model.parameters), exts
+    """What the compiled functions depend on: the float extensions (by identity), states, parameter names."""
+    return (tuple(id(e) for e in model.float_extensions), tuple(model.state_names), tuple(model.parameters))
 
 
 def _functions(model: HelicopterModel, substeps: int):
-    key = (_structure(model)[:3], substeps)
+    key = (_structure(model), substeps)
     if key in _FUNCTIONS:
         return _FUNCTIONS[key][:3]
     import casadi as ca
 
     ops = get_ops("casadi")
-    states, names = model.state_names, list(model.parameters)
-    exts = model.float_extensions
+    states, names, exts = model.state_names, list(model.parameters), model.float_extensions
     x = ca.SX.sym("x", len(states))
     p = ca.SX.sym("p", len(names))
     pmap = dict(zip(names, ca.vertsplit(p)))
@@ -102,7 +101,7 @@ def simulate_outputs(model: HelicopterModel, trim: TrimPoint, t_eval, increments
     p = np.array([model.parameters[name] for name in model.parameters], dtype=float)
     x0 = np.array([trim.state()[s] for s in model.state_names], dtype=float)
     if n > 1:
-        key = (_structure(model)[:3], substeps, n - 1)
+        key = (_structure(model), substeps, n - 1)
         if key not in _ACCUMULATED:
             _ACCUMULATED[key] = step.mapaccum("rk4_record", n - 1)
         intervals = np.vstack([u[:, :-1], u[:, 1:], np.diff(t_eval)[None, :]])

@@ -1,6 +1,7 @@
 """How much of the full-size loop's remaining parameter error is the wake candidate's form? (docs/close_loop.md)
 
     python studies/wake_form_study.py --out results/wake_form [--loop docs/results/close_loop_fixed_profile]
+                                      [--variants truth_form,...] [--dataset DIR]
 
 Evaluation only: it uses the truth simulator's own effect and reads the dataset's truth.json; the
 identification and the loop never do. On the loop's config (studies/close_loop.toml: Case 2 parameters,
@@ -126,12 +127,19 @@ def main() -> None:
                     help="the full-size loop's results folder (loop.json, iter_0, iter_1); default: the loop run with "
                          "the candidate's fixed profile, before the shape rule")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated: " + ", ".join(VARIANTS))
+    ap.add_argument("--dataset", type=Path, default=None,
+                    help="flight-test folder replacing the config's (another noise realisation, e.g. from "
+                         "studies/close_loop_seeds.py); it must be the dataset the --loop folder was run on")
     args = ap.parse_args()
     unknown = [v for v in args.variants.split(",") if v not in VARIANTS]
     if unknown:
         ap.error(f"--variants: unknown {unknown}; choose from {', '.join(VARIANTS)}")
-    cfg = load_identification_config(ROOT / "studies/close_loop.toml")
+    overrides = None if args.dataset is None else {"data": {"dataset": str(args.dataset.resolve())}}
+    cfg = load_identification_config(ROOT / "studies/close_loop.toml", overrides)
     loop = json.loads((args.loop / "loop.json").read_text())
+    ran_on = Path(loop["dataset"]) if Path(loop["dataset"]).is_absolute() else ROOT / loop["dataset"]
+    if ran_on.resolve() != Path(cfg.dataset).resolve():
+        ap.error(f"--loop {args.loop} was run on {loop['dataset']}, not on {cfg.dataset}; pass --dataset")
     start = loop["iterations"][0]["parameters"]
     truth = json.loads((cfg.dataset / "truth.json").read_text())["parameters"]
     results, models = {}, {}

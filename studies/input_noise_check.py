@@ -1,0 +1,111 @@
+"""Does the noise on the measured inputs move the time-domain estimate? (docs/close_loop.md)
+
+    python studies/input_noise_check.py --seeds 20261122 20261125 20261126 --out results/input_noise_check \
+        [--variants bundled,no_input_noise,no_noise]
+
+Evaluation only: it uses the truth simulator's own wake effect and reads truth.json; the identification and
+the loop never do. For every seed it generates the flight test of ``data/bo105_synthetic.toml`` with that
+seed in up to three versions that differ in one setting each:
+
+- ``bundled``: as configured (sensor noise on every channel, the control positions col and lon at
+  0.02 deg);
+- ``no_input_noise``: the same with ``[sensors] sigma`` of col and lon set to 0. The generator draws every
+  channel's noise whatever its sigma, so every other channel keeps exactly the same noise;
+- ``no_noise``: ``[sensors] noise = false`` (no noise, no anti-alias filtering of the records).
+
+On each it solves the time-domain anchor A (min J_time) of the loop's config (studies/close_loop.toml,
+Case 2 parameters) with M0 plus the truth simulator's own effect E1 (its strength K_lamT free, geometry at
+the truth values: the model of exactly the right form, as ``truth_form`` in studies/wake_form_study.py),
+and prints the errors of twist, CL_alpha_HT and Iyy against truth. Each finished solve is written to
+``OUT/<seed>_<variant>.json``; a rerun reads it instead of solving again. About 80 s per solve on one core.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "studies"))
+
+import wake_form_study as W  # noqa: E402  (the truth-form variant is defined there)
+
+from pyomo_heli.cli import main as cli_main  # noqa: E402
+from pyomo_heli.config import load_identification_config  # noqa: E402
+from pyomo_heli.identify import build_problem  # noqa: E402
+from pyomo_heli.nlp.parameters import FreeParameter, free_parameter_values  # noqa: E402
+from pyomo_heli.pareto.front import ParetoSolver  # noqa: E402
+
+VARIANTS = ("bundled", "no_input_noise", "no_noise")
+FREE = ("theta_twist", "CL_alpha_HT", "Iyy")
+
+
+def data_config(variant: str, out: Path) -> Path:
+    """The generator config of a variant (bundled: the committed file; else a copy with one setting changed)."""
+    src = ROOT / "data" / "bo105_synthetic.toml"
+    if variant == "bundled":
+        return src
+    text = src.read_text()
+    if variant == "no_input_noise":
+        old = "col_deg = 0.02, lon_deg = 0.02"
+        new = "col_deg = 0.0, lon_deg = 0.0"
+    else:
+        old, new = "noise = true", "noise = false"
+    if text.count(old) != 1:
+        raise SystemExit(f"{src}: expected one '{old}' to change for variant {variant}")
+    path = out / f"{variant}.toml"
+    path.write_text(text.replace(old, new))
+    tomllib.loads(path.read_text())  # still valid TOML
+    return path
+
+
+def anchor_a(dataset: Path) -> dict:
+    """Anchor A of the loop's config with the truth form on ``dataset``: its parameters and solver status."""
+    cfg = load_identification_config(ROOT / "studies" / "close_loop.toml", {"data": {"dataset": str(dataset.resolve())}})
+    free = list(cfg.free) + [FreeParameter(*e) for e in W.VARIANTS["truth_form"][1]]
+    cfg = dataclasses.replace(cfg, model=W.model_of("truth_form", cfg, dataset), free=free)
+    m, _, _ = build_problem(cfg)
+    point = ParetoSolver(m, cfg.pareto).point_a()
+    return {"status": point.status, "iterations": point.iterations, "J_time": point.J_time,
+            "parameters": free_parameter_values(m)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", required=True)
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated: " + ", ".join(VARIANTS))
+    a = ap.parse_args()
+    variants = a.variants.split(",")
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        ap.error(f"--variants: unknown {unknown}; choose from {', '.join(VARIANTS)}")
+    a.out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for seed in a.seeds:
+        for v in variants:
+            f = a.out / f"{seed}_{v}.json"
+            if not f.is_file():
+                data = a.out / f"data_{seed}_{v}"
+                if not (data / "truth.json").is_file():
+                    assert cli_main(["generate-data", "--config", str(data_config(v, a.out)), "--seed", str(seed),
+                                     "--out", str(data)]) == 0
+                res = anchor_a(data)
+                res["truth"] = json.loads((data / "truth.json").read_text())["parameters"]
+                f.write_text(json.dumps(res, indent=2))
+            res = json.loads(f.read_text())
+            p, t = res["parameters"], res["truth"]
+            rows.append([str(seed), v, res["status"], f"{res['J_time']:.1f}"]
+                        + [f"{100 * (p[n] - t[n]) / abs(t[n]):+.2f}" for n in FREE] + [f"{p['K_lamT']:.3f}"])
+            print(" ".join(rows[-1]), flush=True)
+    head = ["seed", "data", "status", "J_time A", "twist err %", "CL_alpha_HT err %", "Iyy err %", "K_lamT (truth 1.5)"]
+    text = "\n".join(["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + ["| " + " | ".join(r) + " |" for r in rows])
+    (a.out / "input_noise_check.md").write_text(text + "\n")
+    print("\n" + text)
+
+
+if __name__ == "__main__":
+    main()

@@ -485,6 +485,29 @@ def test_same_seed_same_files_other_seed_other_noise(tmp_path):
     assert np.allclose(da.trims["lon"], dc.trims["lon"], atol=6 * np.hypot(0.05, 0.05) * DEG)
 
 
+def test_zero_input_sigma_keeps_every_other_channels_noise(tmp_path):
+    """Setting one channel's sigma to 0 removes its noise and nothing else: the generator draws every
+    channel's noise whatever its sigma (studies/input_noise_check.py relies on this)."""
+    sigma = ("sigma = {{ q_deg_s = 0.2, theta_deg = 0.1, nx_g = 0.005, nz_g = 0.01, tas_m_s = 0.5, "
+             "beta0_deg = 0.05, col_deg = 0.02, lon_deg = 0.02 }}")  # the bundled flight test's line
+    noisy = TINY.replace("noise = true", "noise = true\n" + sigma)
+    quiet = noisy.replace("col_deg = 0.02, lon_deg = 0.02", "col_deg = 0.0, lon_deg = 0.0")
+    a, b, clean = tmp_path / "a", tmp_path / "b", tmp_path / "clean"
+    generate(load_config(_write(tmp_path, noisy.format(seed=7), "bundled.toml")), a)
+    generate(load_config(_write(tmp_path, quiet.format(seed=7), "quiet.toml")), b)
+    generate(load_config(_write(tmp_path, TINY.replace("noise = true", "noise = false").format(seed=7),
+                                "clean.toml")), clean)
+    ma, mb = (load_flight_test(d).maneuvers["lon3211_80kt"].data for d in (a, b))
+    mc = load_flight_test(clean).maneuvers["lon3211_80kt"].data
+    for ch in DEFAULT_SIGMA:
+        if ch in ("col", "lon"):
+            assert not np.array_equal(ma[ch], mb[ch]), ch
+            # without its own noise the input is the truth passed through the anti-alias filter
+            assert np.max(np.abs(mb[ch] - mc[ch])) < 0.2 * DEFAULT_SIGMA[ch], ch
+        else:
+            assert np.array_equal(ma[ch], mb[ch]), ch
+
+
 # ============================================================== 6. bad configs
 BAD = {
     # case: (edit of the tiny config, words the message must contain)

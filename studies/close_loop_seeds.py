@@ -66,6 +66,9 @@ def evaluate(name: str, loop: Path, config: Path) -> dict:
     """One row of the table: the criteria of issue 5 for the loop in ``loop``."""
     doc = json.loads((loop / "loop.json").read_text())
     dataset = Path(doc["dataset"])
+    if not dataset.is_dir():
+        raise SystemExit(f"{loop / 'loop.json'} names the dataset {dataset}, which is not there; regenerate it "
+                         "(pyomo-heli generate-data --config data/bo105_synthetic.toml --seed N --out ...)")
     cfg = load_identification_config(config, {"data": {"dataset": str(dataset.resolve())}})
     truth = read_truth(dataset)
     if truth is None:
@@ -134,6 +137,9 @@ def main() -> None:
     ap.add_argument("--data-config", type=Path, default=ROOT / "data" / "bo105_synthetic.toml")
     ap.add_argument("--existing", type=Path, nargs="*", default=[], help="loop folders run before (tabulated only)")
     a = ap.parse_args()
+    for p in a.existing:
+        if not (p / "loop.json").is_file():
+            ap.error(f"--existing {p}: no loop.json there (a close-loop results folder is needed)")
     a.out.mkdir(parents=True, exist_ok=True)
     loops = [(str(p), p) for p in a.existing]
     for seed in a.seeds:

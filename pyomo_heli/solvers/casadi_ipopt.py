@@ -343,8 +343,8 @@ class CasadiIpoptSolver:
         grad = ca.gradient(lam_f * f + ca.dot(lam_g, g), x)
         # The dense Jacobian columns are D1 whatever their Hessian degree, so the Hessian's
         # sparsity is only needed for the other columns: the pattern of grad[rest] w.r.t.
-        # x[rest]. Without the dense columns casadi's bitwise propagation stays cheap (the
-        # whole pattern cost 2.5-3.6 s at 80k variables, this part 0.8 s).
+        # x[rest]. Without the dense columns casadi's bitwise propagation stays cheap
+        # (docs/performance.md, "What was done" 7).
         d1 = list(self._dense_cols)
         rest = np.setdiff1d(np.arange(n), d1)
         hsp = ca.Function("nlp_grad_l", [x, lam_f, lam_g], [grad[rest.tolist()]]).jac_sparsity(0, 0)
@@ -416,7 +416,7 @@ class CasadiIpoptSolver:
             if self._nlp_function is None:
                 # One NLP Function and one objective gradient for every option set: from the
                 # expression dict, each nlpsol sorted the whole graph again and derived its own
-                # gradient (0.49 s against 0.23 s per instance at 80k variables, one run).
+                # gradient (docs/performance.md, "What was done" 7).
                 ca, (x, f, g) = self._ca, (self._nlp["x"], self._nlp["f"], self._nlp["g"])
                 p = ca.SX.sym("p", 0)
                 self._nlp_function = ca.Function("nlp", [x, p], [f, g], ["x", "p"], ["f", "g"])

@@ -16,7 +16,8 @@ from .tomlfile import read_toml
 from .nlp.identification import TIME_OUTPUTS, TRIM_OUTPUTS, NLPOptions
 from .nlp.parameters import FreeParameter
 from .pareto.front import ParetoSettings
-from .physics.model import HelicopterModel
+from .physics.model import INPUTS, HelicopterModel
+from .units import SENSOR_SIGMA_KEYS
 from .solvers import SOLVER_NAMES
 
 
@@ -159,11 +160,13 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     cov = _need(obj, "covariance", f"{f} [objectives]", str, "diagonal")
     if cov not in ("diagonal", "full"):
         raise ConfigError(f"{f} [objectives]: field 'covariance' must be diagonal or full")
+    in_err, noise_sigma = _input_errors(obj, f, in_ref=raw.get("data", {}).get("input_reference_s", 0.0))
     disc = raw.get("discretization", {})
     ncp = _need(disc, "ncp", f"{f} [discretization]", int, 2)
     if not 1 <= ncp <= 5:
         raise ConfigError(f"{f} [discretization]: field 'ncp' must be 1..5")
-    nlp = NLPOptions(time_outputs=t_out, trim_outputs=r_out, covariance=cov, ncp=ncp)
+    nlp = NLPOptions(time_outputs=t_out, trim_outputs=r_out, covariance=cov, ncp=ncp, input_errors=in_err,
+                     noise_sigma=noise_sigma)
 
     par = raw.get("pareto", {})
     sol = raw.get("solver", {})
@@ -188,6 +191,32 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
                                 max_duration=float(max_dur) if max_dur else None, model=model, free=free,
                                 nlp=nlp, pareto=pareto, raw=raw, objectives=use, linear=linear,
                                 input_reference_s=float(in_ref))
+
+
+def _input_errors(obj: dict, f, in_ref) -> tuple[tuple, dict | None]:
+    """[objectives] input_errors (errors in variables) and the optional [objectives.noise_sigma] table."""
+    chans = tuple(_need(obj, "input_errors", f"{f} [objectives]", list, []))
+    bad = [c for c in chans if c not in INPUTS]
+    if bad:
+        raise ConfigError(f"{f} [objectives]: unknown input channel(s) {bad} in input_errors; choose from "
+                          f"{', '.join(INPUTS)}")
+    table = _need(obj, "noise_sigma", f"{f} [objectives]", dict, None)
+    if table is not None and not chans:
+        raise ConfigError(f"{f} [objectives]: noise_sigma is only used with input_errors")
+    if chans and table is None and not (isinstance(in_ref, (int, float)) and in_ref > 0):
+        raise ConfigError(f"{f} [objectives]: input_errors estimates the noise sigmas from the records' quiet "
+                          f"lead-in; set [data] input_reference_s > 0 or give [objectives.noise_sigma]")
+    sigma = None
+    if table is not None:
+        sigma = {}
+        for k, v in table.items():
+            if k not in SENSOR_SIGMA_KEYS:
+                raise ConfigError(f"{f} [objectives.noise_sigma]: unknown key '{k}'; use {', '.join(SENSOR_SIGMA_KEYS)}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+                raise ConfigError(f"{f} [objectives.noise_sigma]: '{k}' must be a positive number, got {v!r}")
+            ch, factor = SENSOR_SIGMA_KEYS[k]
+            sigma[ch] = float(v) * factor
+    return chans, sigma
 
 
 #: the objective sets an identification can use ([objectives] use)

@@ -12,3 +12,10 @@ def kt_to_ms(v_kt: float) -> float:
 
 def ms_to_kt(v: float) -> float:
     return v / KT
+
+
+#: noise sigma keys of the config files (generator [sensors.sigma], identification [objectives.noise_sigma]):
+#: key with its unit -> (channel, factor to SI)
+SENSOR_SIGMA_KEYS = {"q_deg_s": ("q", DEG), "theta_deg": ("theta", DEG), "nx_g": ("n_x", 1.0), "nz_g": ("n_z", 1.0),
+                     "tas_m_s": ("TAS", 1.0), "beta0_deg": ("beta_0", DEG), "col_deg": ("col", DEG),
+                     "lon_deg": ("lon", DEG)}

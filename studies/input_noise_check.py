@@ -62,11 +62,16 @@ def data_config(variant: str, out: Path) -> Path:
     return path
 
 
-def anchor_a(dataset: Path) -> dict:
-    """Anchor A of the loop's config with the truth form on ``dataset``: its parameters and solver status."""
+def anchor_a(dataset: Path, input_errors: bool = False) -> dict:
+    """Anchor A of the loop's config with the truth form on ``dataset``: its parameters and solver status.
+
+    input_errors: estimate the col and lon measurement errors (errors in variables, noise sigmas from the
+    records' lead-in; ``NLPOptions.input_errors``).
+    """
     cfg = load_identification_config(ROOT / "studies" / "close_loop.toml", {"data": {"dataset": str(dataset.resolve())}})
     free = list(cfg.free) + [FreeParameter(*e) for e in W.VARIANTS["truth_form"][1]]
-    cfg = dataclasses.replace(cfg, model=W.model_of("truth_form", cfg, dataset), free=free)
+    nlp = dataclasses.replace(cfg.nlp, input_errors=("col", "lon")) if input_errors else cfg.nlp
+    cfg = dataclasses.replace(cfg, model=W.model_of("truth_form", cfg, dataset), free=free, nlp=nlp)
     m, _, _ = build_problem(cfg)
     point = ParetoSolver(m, cfg.pareto).point_a()
     return {"status": point.status, "iterations": point.iterations, "J_time": point.J_time,
@@ -78,6 +83,8 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", required=True)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated: " + ", ".join(VARIANTS))
+    ap.add_argument("--input-errors", action="store_true",
+                    help="estimate the input errors (errors in variables); results get the suffix _eiv")
     a = ap.parse_args()
     variants = a.variants.split(",")
     unknown = [v for v in variants if v not in VARIANTS]
@@ -87,23 +94,23 @@ def main() -> None:
     rows = []
     for seed in a.seeds:
         for v in variants:
-            f = a.out / f"{seed}_{v}.json"
+            f = a.out / f"{seed}_{v}{'_eiv' if a.input_errors else ''}.json"
             if not f.is_file():
                 data = a.out / f"data_{seed}_{v}"
                 if not (data / "truth.json").is_file():
                     assert cli_main(["generate-data", "--config", str(data_config(v, a.out)), "--seed", str(seed),
                                      "--out", str(data)]) == 0
-                res = anchor_a(data)
+                res = anchor_a(data, a.input_errors)
                 res["truth"] = json.loads((data / "truth.json").read_text())["parameters"]
                 f.write_text(json.dumps(res, indent=2))
             res = json.loads(f.read_text())
             p, t = res["parameters"], res["truth"]
-            rows.append([str(seed), v, res["status"], f"{res['J_time']:.1f}"]
+            rows.append([str(seed), v + (" + input errors" if a.input_errors else ""), res["status"], f"{res['J_time']:.1f}"]
                         + [f"{100 * (p[n] - t[n]) / abs(t[n]):+.2f}" for n in FREE] + [f"{p['K_lamT']:.3f}"])
             print(" ".join(rows[-1]), flush=True)
     head = ["seed", "data", "status", "J_time A", "twist err %", "CL_alpha_HT err %", "Iyy err %", "K_lamT (truth 1.5)"]
     text = "\n".join(["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + ["| " + " | ".join(r) + " |" for r in rows])
-    (a.out / "input_noise_check.md").write_text(text + "\n")
+    (a.out / f"input_noise_check{'_eiv' if a.input_errors else ''}.md").write_text(text + "\n")
     print("\n" + text)
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from ..tomlfile import read_toml
 
 from ..physics.parameters import bo105
-from ..units import DEG, KT
+from ..units import DEG, KT, SENSOR_SIGMA_KEYS
 from .sensors import DEFAULT_SIGMA, DEFAULT_VIBRATION, SensorConfig
 from .truth_effects import TRUTH_EFFECTS
 
@@ -92,9 +92,7 @@ def load_config(path: str | Path) -> GeneratorConfig:
     noise = bool(_get(sen, "noise", f"{w} [sensors]", bool, True))
     sigma = dict(DEFAULT_SIGMA) if noise else {}
     vib = dict(DEFAULT_VIBRATION) if noise else {}
-    conv = {"q_deg_s": ("q", DEG), "theta_deg": ("theta", DEG), "nx_g": ("n_x", 1.0), "nz_g": ("n_z", 1.0),
-            "tas_m_s": ("TAS", 1.0), "beta0_deg": ("beta_0", DEG), "col_deg": ("col", DEG),
-            "lon_deg": ("lon", DEG)}
+    conv = SENSOR_SIGMA_KEYS
     for table, target in (("sigma", sigma), ("vibration", vib)) if noise else ():
         for k, v in _get(sen, table, f"{w} [sensors]", dict, {}).items():
             if k not in conv:

@@ -22,16 +22,18 @@ import numpy as np
 import pyomo.environ as pyo
 from pyomo.common.gc_manager import PauseGC
 
-from ..physics.model import FLAPPING, HelicopterModel
+from ..physics.model import FLAPPING, INPUTS, HelicopterModel
 from ..simulation.integrate import sampled, simulate
 from ..simulation.trim import trim_sweep
 from .maneuver_block import build_maneuver_block, initialise_from
-from .objectives import add_time_objective, add_trim_objective
+from .objectives import add_known_noise_time_objective, add_time_objective, add_trim_objective, lead_in_sigma
 from .parameters import FreeParameter, add_parameters
 from .trim_block import build_trim_block
 
 TIME_OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
 TRIM_OUTPUTS = ("col", "lon", "theta")
+#: bound of the estimated input errors, in noise sigmas (NLPOptions.input_errors)
+INPUT_ERROR_BOUND = 6.0
 
 
 @dataclass
@@ -47,6 +49,12 @@ class NLPOptions:
     #: ``m.trim_meas``) instead of numbers, so that :func:`set_measurements` can swap
     #: in another data set (a noise realization) and re-solve without a rebuild
     mutable_data: bool = False
+    #: input channels whose measurement errors are estimated (errors in variables, see
+    #: :mod:`.objectives`); J_time then uses known noise sigmas instead of the estimated R
+    input_errors: tuple = ()
+    #: channel -> noise sigma [SI] of the outputs and the error inputs when ``input_errors`` is set;
+    #: None: estimated from the records' quiet lead-in (``objectives.lead_in_sigma``)
+    noise_sigma: dict | None = None
 
     def __post_init__(self):
         bad = [o for o in self.time_outputs if o not in TIME_OUTPUTS]
@@ -57,6 +65,14 @@ class NLPOptions:
             raise ValueError(f"unknown trim output(s) {bad}; choose from {', '.join(TRIM_OUTPUTS)}")
         if not self.time_outputs and not self.trim_outputs:
             raise ValueError("no outputs selected")
+        self.input_errors = tuple(self.input_errors)
+        bad = [c for c in self.input_errors if c not in INPUTS]
+        if bad:
+            raise ValueError(f"unknown input channel(s) {bad} in input_errors; choose from {', '.join(INPUTS)}")
+        if self.noise_sigma is not None:
+            bad = [k for k, v in self.noise_sigma.items() if not (isinstance(v, (int, float)) and v > 0)]
+            if bad:
+                raise ValueError(f"noise_sigma of {bad} must be positive numbers")
 
 
 @dataclass
@@ -140,7 +156,8 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
         blk = m.man[mv.name]
         t = mv.data["t"].to_numpy()
         inc = mv.increments()
-        build_maneuver_block(blk, model, pmap, t, inc, m.trim[i], ncp=opts.ncp, scheme=opts.scheme)
+        build_maneuver_block(blk, model, pmap, t, inc, m.trim[i], ncp=opts.ncp, scheme=opts.scheme,
+                             input_errors=opts.input_errors)
         tp = float_trims[i]
         sim = simulate(sim_model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=2)
         initialise_from(blk, sim, sim_model.state_names)
@@ -153,7 +170,25 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
             else:
                 residuals[o].extend(float(y) - blk.y[o, tt] for y, tt in zip(meas, blk.samples))
             init_res[o].extend(meas - sim[o].to_numpy())
-    if data.maneuvers and opts.time_outputs:
+    if opts.input_errors and opts.mutable_data and opts.noise_sigma is None:
+        raise ValueError("input_errors with mutable_data needs noise_sigma: sigmas estimated from the lead-in "
+                         "of the first data set would be kept for every other one")
+    if data.maneuvers and opts.time_outputs and opts.input_errors:
+        sigma = dict(opts.noise_sigma) if opts.noise_sigma is not None else {}
+        need = [c for c in (*opts.time_outputs, *opts.input_errors) if c not in sigma]
+        if need and opts.noise_sigma is not None:
+            raise ValueError(f"noise_sigma has no value for {need}")
+        sigma.update(lead_in_sigma(data.maneuvers, need) if need else {})
+        m.noise_sigma_source = "given" if opts.noise_sigma is not None else "lead-in"
+        errs = {c: [m.man[n].u_err[c, tt] for n in names for tt in m.man[n].samples] for c in opts.input_errors}
+        for c, vs in errs.items():
+            # An error beyond INPUT_ERROR_BOUND sigmas has no probability worth the name; the bound keeps
+            # the first iterates from a far start (30 % off) from spending the outputs' misfit on the inputs.
+            for v in vs:
+                v.setlb(-INPUT_ERROR_BOUND * sigma[c])
+                v.setub(INPUT_ERROR_BOUND * sigma[c])
+        add_known_noise_time_objective(m, residuals, list(opts.time_outputs), sigma, errs, sigma)
+    elif data.maneuvers and opts.time_outputs:
         add_time_objective(m, residuals, list(opts.time_outputs), opts.covariance,
                            {o: np.array(v) for o, v in init_res.items()})
     else:
@@ -288,8 +323,14 @@ def initialise_at(m: pyo.ConcreteModel, data: IdentificationData, model: Helicop
         sim = simulate(sim_model, float_trims[i], t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4",
                        substeps=2)
         initialise_from(m.man[mv.name], sim, sim_model.state_names)
+        if m.man[mv.name].component("u_err") is not None:
+            for v in m.man[mv.name].u_err.values():
+                v.set_value(0.0)
         for o in outputs:
             init_res[o].extend(mv.data[o].to_numpy() - sim[o].to_numpy())
+    if m.component("mean_square") is not None:  # known-noise J_time (input errors): its mean squares
+        for c in m.mean_square:
+            m.mean_square[c].set_value(pyo.value(m.sum_square[c]) / pyo.value(m.square_count[c]))
     if outputs and m.component("L") is not None:
         E = np.array([init_res[o] for o in outputs])
         R0 = E @ E.T / E.shape[1] + np.diag([R_FLOOR[o] ** 2 for o in outputs])

@@ -224,9 +224,15 @@ def _header(cfg, m, data) -> list[str]:
     opts = m.options
     out = ["identification NLP (built, not solved)", f"config:   {cfg.path}", f"dataset:  {cfg.dataset}",
            f"outputs:  time {', '.join(opts.time_outputs) or '-'}; trim {', '.join(opts.trim_outputs) or '-'}; "
-           f"covariance {opts.covariance}; collocation {opts.scheme}, ncp={opts.ncp}"
+           + (f"covariance {opts.covariance}" if not opts.input_errors else
+              f"input errors {', '.join(opts.input_errors)} (noise sigmas "
+              f"{'given' if opts.noise_sigma is not None else 'from the lead-in'})")
+           + f"; collocation {opts.scheme}, ncp={opts.ncp}"
            + (f"; resample {cfg.resample_hz:g} Hz" if cfg.resample_hz else "")
            + (f"; max duration {cfg.max_duration:g} s" if cfg.max_duration else ""),
+           *([f"noise sigmas ({m.noise_sigma_source}, SI: rad, rad/s, g, m/s): "
+              + ", ".join(f"{k} {pyo.value(v):.4g}" for k, v in m.noise_sigma.items())]
+             if m.component("noise_sigma") is not None else []),
            "", f"maneuvers ({len(data.maneuvers)}):",
            f"  {'name':<24} {'samples':>7} {'duration s':>10} {'start trim kt':>13}"]
     for mv in data.maneuvers:

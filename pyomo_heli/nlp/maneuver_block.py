@@ -24,7 +24,7 @@ from .trim_block import STATE_BOUNDS
 
 def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples, increments: Mapping[str, np.ndarray],
                          start, ncp: int = 3, scheme: str = "LAGRANGE-RADAU",
-                         initial_guess=None) -> None:
+                         initial_guess=None, input_errors: tuple = ()) -> None:
     """Populate ``blk`` with one maneuver.
 
     t_samples: increasing sample times [s] (element boundaries).
@@ -34,6 +34,10 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
     base inputs.
     initial_guess: optional DataFrame (t + state/flap columns) used to
     initialise the variables, e.g. a simulation.
+    input_errors: input channels whose measurement error is estimated (errors in
+    variables): ``blk.u_err[k, t_i]`` at every sample, added to the measured input and,
+    like it, linearly interpolated inside each element (the likelihood term is
+    :func:`.objectives.add_input_error_objective`).
     """
     ops = get_ops("pyomo")
     t_samples = np.asarray(t_samples, dtype=float)
@@ -63,6 +67,7 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
            for k in INPUTS}
     blk.du = pyo.Param(INPUTS, blk.t, mutable=True,
                        initialize={(k, t): float(inc[k][i]) for k in INPUTS for i, t in enumerate(times)})
+    u_err = _input_error_terms(blk, t_samples, times, input_errors)
 
     # Named intermediates (rotor flow, thrust coefficient, total forces) of each
     # time point: the NL writer exports them once as defined variables instead
@@ -79,7 +84,7 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
     def ctx_at(t):
         if t not in ctxs:
             x = {s: blk.x[s, t] for s in states}
-            u = {k: getattr(start, k) + blk.du[k, t] for k in INPUTS}
+            u = {k: getattr(start, k) + blk.du[k, t] + u_err(k, t) for k in INPUTS}
             beta = [blk.beta[b, t] for b in FLAPPING]
             ops_t = SimpleNamespace(**vars(ops), share=share_at(t))
             ctxs[t] = evaluate(x, u, pmap, ops=ops_t, beta=beta, extensions=model.extensions)
@@ -107,6 +112,39 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
     blk.output_eq = pyo.Constraint(out_names, blk.samples, rule=lambda _, k, t: blk.y[k, t] == ctx_at(t).outputs[k])
     if initial_guess is not None:
         initialise_from(blk, initial_guess, states)
+
+
+def _input_error_terms(blk: pyo.Block, t_samples: np.ndarray, times: list, channels: tuple):
+    """``blk.u_err`` (one variable per channel and sample) and a function (k, t) -> its value at t.
+
+    The error at a collocation point is the linear interpolation of the errors at the two samples
+    around it, as the measured input there is the interpolation of the measured samples.
+    """
+    unknown = set(channels) - set(INPUTS)
+    if unknown:
+        raise ValueError(f"unknown input channel(s) {sorted(unknown)} for input errors; choose from {INPUTS}")
+    if not channels:
+        return lambda k, t: 0.0
+    blk.u_err = pyo.Var(list(channels), blk.samples, initialize=0.0)
+    samples = list(blk.samples)
+    where = {}
+    for t in times:
+        i = min(int(np.searchsorted(t_samples, t, side="right")) - 1, len(samples) - 1)
+        if i < 0 or abs(t - samples[i]) < 1e-12 or i == len(samples) - 1:
+            where[t] = (max(i, 0), None, 1.0)
+        else:
+            w = (t - samples[i]) / (samples[i + 1] - samples[i])
+            where[t] = (i, i + 1, 1.0 - w)
+
+    def u_err(k, t):
+        if k not in channels:
+            return 0.0
+        i, j, w = where[t]
+        if j is None:
+            return blk.u_err[k, samples[i]]
+        return w * blk.u_err[k, samples[i]] + (1.0 - w) * blk.u_err[k, samples[j]]
+
+    return u_err
 
 
 def initialise_from(blk: pyo.Block, df, states) -> None:

@@ -18,6 +18,18 @@ parameter value); with it, noise-free data give a weighted least-squares fit
 whose minimum is the true parameter set, and on noisy data the optimum moves
 by O(r_floor^2 / sigma^2), about 1e-5 relative.
 
+With input errors (``NLPOptions.input_errors``, errors in variables) the noise
+sigmas are *known* (given, or estimated from the quiet lead-in of the records,
+:func:`lead_in_sigma`) instead of estimated with the parameters:
+    J_time = sum_k sum_o e_ok^2 / (2 sigma_o^2) + N sum_o ln sigma_o
+           + sum_k sum_c d_ck^2 / (2 sigma_c^2) + N sum_c ln sigma_c,
+the negative log-likelihood of the measured outputs o and of the measured
+inputs c, whose errors d_ck are NLP variables (Eq. 5 with R known, plus the
+inputs' own term). The concentrated form cannot be used there: with the
+inputs free, an output that responds at once to an input (n_z to the
+collective) can be fitted exactly by input errors, and ln det R of the
+estimated R then falls without bound (to the floor below).
+
 J_trim: mean square trim error (paper Eq. 7) over the configured trim
 outputs, in degrees so that the unweighted sum is meaningful.
 """
@@ -84,6 +96,72 @@ def add_time_objective(m: pyo.Block, residuals: dict, outputs: list[str], covari
 
     m.cholesky = pyo.Constraint(m.cov_pairs, rule=chol_rule)
     m.J_time = pyo.Expression(expr=N * n_y / 2 + N * sum(pyo.log(m.L[a, a]) for a in outputs))
+
+
+def add_known_noise_time_objective(m: pyo.Block, residuals: dict, outputs: list[str], sigma: dict,
+                                   input_errors: dict | None = None, input_sigma: dict | None = None) -> None:
+    """``m.J_time`` with known noise sigmas and, optionally, the input-error term (module docstring).
+
+    residuals: output -> residual expressions (all maneuvers); sigma: output -> sigma [SI];
+    input_errors: input channel -> list of error variables (all samples); input_sigma: channel -> sigma [SI].
+    Also ``m.J_output`` and ``m.J_input``, the two parts.
+    """
+    missing = [o for o in outputs if o not in sigma]
+    if missing:
+        raise ValueError(f"no noise sigma for output(s) {missing}")
+    N = len(residuals[outputs[0]])
+    m.time_outputs = pyo.Set(initialize=outputs, ordered=True)
+    m.n_samples = pyo.Param(initialize=N)
+    errs = dict(input_errors or {})
+    m.noise_sigma = pyo.Param(list(outputs) + list(errs), mutable=False,
+                              initialize={**{o: float(sigma[o]) for o in outputs},
+                                          **{c: float(input_sigma[c]) for c in errs}})
+    # Mean squares as variables defined by one equality each (as R_hat and the Cholesky factor
+    # above): J_time then depends on a handful of variables, and the squared J_time of the
+    # utopia-distance objective (Eq. 11) keeps a small dense Hessian block instead of coupling
+    # every residual with every other one.
+    sums = {**{o: residuals[o] for o in outputs}, **errs}
+    m.square_count = pyo.Param(list(sums), initialize={c: len(v) for c, v in sums.items()})
+    m.sum_square = pyo.Expression(list(sums), rule=lambda _, c: sum(e * e for e in sums[c]))
+    m.mean_square = pyo.Var(list(sums), initialize=lambda _, c: pyo.value(m.sum_square[c]) / len(sums[c]))
+    m.mean_square_def = pyo.Constraint(list(sums), rule=lambda _, c: m.mean_square[c] * m.square_count[c]
+                                       == m.sum_square[c])
+
+    def nll(c, n):  # negative log-likelihood of n samples of channel c, without 2 pi
+        s_c = float(m.noise_sigma[c])
+        return n * m.mean_square[c] / (2.0 * s_c**2) + n * math.log(s_c)
+
+    m.J_output = pyo.Expression(expr=sum(nll(o, N) for o in outputs))
+    m.J_input = pyo.Expression(expr=sum(nll(c, len(errs[c])) for c in errs) if errs else 0.0)
+    m.J_time = pyo.Expression(expr=m.J_output + m.J_input)
+
+
+def lead_in_sigma(maneuvers, channels) -> dict:
+    """Noise sigma of each channel from the quiet lead-in of the records (no model involved).
+
+    Over the samples with t <= t0 + ``input_reference_s`` (the aircraft in trim, before the first
+    input) each record's channel is constant up to its noise: sigma^2 is the pooled variance about
+    each lead-in's own mean. Raises ValueError when the maneuvers have no lead-in set or too short a one.
+    """
+    out = {}
+    for ch in channels:
+        ss, dof = 0.0, 0
+        for mv in maneuvers:
+            if mv.input_reference_s <= 0:
+                raise ValueError(f"maneuver {mv.name}: the noise sigmas come from the quiet lead-in, but no "
+                                 f"lead-in is set: give [data] input_reference_s > 0 or [objectives.noise_sigma]")
+            t = mv.data["t"].to_numpy()
+            x = mv.data[ch].to_numpy(dtype=float)[t <= t[0] + mv.input_reference_s]
+            if len(x) < 3:
+                raise ValueError(f"maneuver {mv.name}: only {len(x)} sample(s) in the {mv.input_reference_s} s "
+                                 f"lead-in; the noise sigma of '{ch}' needs at least 3")
+            ss += float(np.sum((x - x.mean()) ** 2))
+            dof += len(x) - 1
+        out[ch] = math.sqrt(ss / dof)
+        if not out[ch] > 0:
+            raise ValueError(f"channel '{ch}' has no noise in the lead-in of any maneuver (sigma 0); "
+                             f"give [objectives.noise_sigma] instead")
+    return out
 
 
 def j_time_value(residuals: dict, outputs: list[str], covariance: str = "diagonal",

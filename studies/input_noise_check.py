@@ -11,12 +11,18 @@ seed in up to three versions that differ in one setting each:
   0.02 deg);
 - ``no_input_noise``: the same with ``[sensors] sigma`` of col and lon set to 0. The generator draws every
   channel's noise whatever its sigma, so every other channel keeps exactly the same noise;
-- ``no_noise``: ``[sensors] noise = false`` (no noise, no anti-alias filtering of the records).
+- ``no_noise``: ``[sensors] noise = false`` (no noise, no anti-alias filtering of the records);
+- ``input_noise_after_lead_in`` / ``input_noise_in_lead_in``: made from the first two, the col and lon
+  records of ``no_input_noise`` plus the input noise of ``bundled`` (their difference) only after, or only
+  within, the quiet lead-in (t <= t0 + 1.9 s, the config's ``input_reference_s``). The first keeps the
+  noise that drives the model sample by sample; the second only the error of the input reference.
 
 On each it solves the time-domain anchor A (min J_time) of the loop's config (studies/close_loop.toml,
 Case 2 parameters) with M0 plus the truth simulator's own effect E1 (its strength K_lamT free, geometry at
 the truth values: the model of exactly the right form, as ``truth_form`` in studies/wake_form_study.py),
-and prints the errors of twist, CL_alpha_HT and Iyy against truth. Each finished solve is written to
+and prints the errors of twist, CL_alpha_HT and Iyy against truth. With ``--input-errors`` the same
+anchor estimates the col and lon errors with the parameters (``[objectives] input_errors``, noise sigmas
+from the lead-in; results get the suffix ``_eiv``). Each finished solve is written to
 ``OUT/<seed>_<variant>.json``; a rerun reads it instead of solving again. About 80 s per solve on one core.
 """
 from __future__ import annotations
@@ -39,7 +45,36 @@ from pyomo_heli.identify import build_problem  # noqa: E402
 from pyomo_heli.nlp.parameters import FreeParameter, free_parameter_values  # noqa: E402
 from pyomo_heli.pareto.front import ParetoSolver  # noqa: E402
 
-VARIANTS = ("bundled", "no_input_noise", "no_noise")
+VARIANTS = ("bundled", "no_input_noise", "no_noise", "input_noise_after_lead_in", "input_noise_in_lead_in")
+#: variants made from two generated ones (the others come from the generator)
+SPLIT = {"input_noise_after_lead_in": False, "input_noise_in_lead_in": True}
+LEAD_IN_S = 1.9  # studies/close_loop.toml [data] input_reference_s
+
+
+def split_noise(seed: int, variant: str, out: Path) -> Path:
+    """Dataset of a SPLIT variant: no_input_noise's col/lon plus bundled's input noise after/in the lead-in."""
+    import shutil
+
+    import pandas as pd
+
+    noisy, clean = out / f"data_{seed}_bundled", out / f"data_{seed}_no_input_noise"
+    for d, v in ((noisy, "bundled"), (clean, "no_input_noise")):
+        if not (d / "truth.json").is_file():
+            assert cli_main(["generate-data", "--config", str(data_config(v, out)), "--seed", str(seed),
+                             "--out", str(d)]) == 0
+    dst = out / f"data_{seed}_{variant}"
+    shutil.rmtree(dst, ignore_errors=True)
+    shutil.copytree(noisy, dst)
+    for f in sorted((noisy / "maneuvers").glob("*.csv")):
+        a, c = pd.read_csv(f), pd.read_csv(clean / "maneuvers" / f.name)
+        if not a["t_s"].equals(c["t_s"]):
+            raise SystemExit(f"{f}: sample times differ from {clean}")
+        in_lead = a["t_s"] <= a["t_s"].iloc[0] + LEAD_IN_S
+        keep = in_lead if SPLIT[variant] else ~in_lead
+        for ch in ("col_deg", "lon_deg"):
+            a[ch] = c[ch] + (a[ch] - c[ch]).where(keep, 0.0)
+        a.to_csv(dst / "maneuvers" / f.name, index=False, float_format="%.10g")
+    return dst
 FREE = ("theta_twist", "CL_alpha_HT", "Iyy")
 
 
@@ -97,16 +132,25 @@ def main() -> None:
             f = a.out / f"{seed}_{v}{'_eiv' if a.input_errors else ''}.json"
             if not f.is_file():
                 data = a.out / f"data_{seed}_{v}"
-                if not (data / "truth.json").is_file():
+                if v in SPLIT:
+                    data = split_noise(seed, v, a.out)
+                elif not (data / "truth.json").is_file():
                     assert cli_main(["generate-data", "--config", str(data_config(v, a.out)), "--seed", str(seed),
                                      "--out", str(data)]) == 0
-                res = anchor_a(data, a.input_errors)
+                try:
+                    res = anchor_a(data, a.input_errors)
+                except ValueError as exc:  # e.g. input errors on records without input noise: refused
+                    res = {"status": f"refused: {exc}", "parameters": None}
                 res["truth"] = json.loads((data / "truth.json").read_text())["parameters"]
                 f.write_text(json.dumps(res, indent=2))
             res = json.loads(f.read_text())
             p, t = res["parameters"], res["truth"]
-            rows.append([str(seed), v + (" + input errors" if a.input_errors else ""), res["status"], f"{res['J_time']:.1f}"]
-                        + [f"{100 * (p[n] - t[n]) / abs(t[n]):+.2f}" for n in FREE] + [f"{p['K_lamT']:.3f}"])
+            label = v + (" + input errors" if a.input_errors else "")
+            if p is None:
+                rows.append([str(seed), label, res["status"].split(":")[0], "-"] + ["-"] * (len(FREE) + 1))
+            else:
+                rows.append([str(seed), label, res["status"], f"{res['J_time']:.1f}"]
+                            + [f"{100 * (p[n] - t[n]) / abs(t[n]):+.2f}" for n in FREE] + [f"{p['K_lamT']:.3f}"])
             print(" ".join(rows[-1]), flush=True)
     head = ["seed", "data", "status", "J_time A", "twist err %", "CL_alpha_HT err %", "Iyy err %", "K_lamT (truth 1.5)"]
     text = "\n".join(["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + ["| " + " | ".join(r) + " |" for r in rows])

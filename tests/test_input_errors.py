@@ -138,3 +138,11 @@ def test_inspect_and_multistart_know_the_input_errors():
     assert all(v.value == 0.0 for v in m.man["lon3211_80kt_a"].u_err.values())
     for c in m.mean_square:
         assert pyo.value(m.mean_square_def[c].body) == pytest.approx(0.0, abs=1e-9 * pyo.value(m.sum_square[c]))
+
+
+def test_lead_in_without_noise_is_refused():
+    """Noise-free records (bo105_clean) give no lead-in sigma to work with: a clear error, not a bad solve."""
+    ft = load_flight_test(HERE.parent / "data" / "bo105_clean")
+    data = prepare_data(ft, ["lon3211_80kt_a"], 25, 6.0, 1.9)
+    with pytest.raises(ValueError, match="'col' shows no noise in the lead-in.*noise_sigma"):
+        lead_in_sigma(data.maneuvers, ["col"])

@@ -245,6 +245,30 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
     assert "iter 1 error / SE" in report
 
 
+def test_wake_loop_with_input_errors(tmp_path):
+    """The same small wake instance with the measured inputs' errors estimated ([objectives] input_errors):
+    the loop runs with the known-noise likelihood, picks the wake first, and the trim error, the parameter
+    errors against truth and the model's validation error against the truth replay all fall."""
+    loop = '\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\nmax_iterations = 1\n'
+    cfg = make_case(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
+                    loop=loop, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+    assert cfg.nlp.input_errors == ("col", "lon")
+    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
+    doc = json.loads((tmp_path / "loop" / "loop.json").read_text())
+    it0, it1 = doc["iterations"][0], doc["iterations"][-1]
+    assert it0["attribution"]["accepted"] == "rotor_wake_on_tail"
+    assert it1["extensions"] == ["rotor_wake_on_tail"]
+    assert _pooled_trim(it1["trim_rms"]) <= 0.5 * _pooled_trim(it0["trim_rms"])
+    model_err, _ = _truth_replay_errors(cfg, doc)
+    for o, e0 in model_err[0].items():
+        assert model_err[-1][o] < e0, o
+    truth = json.loads((cfg.dataset / "truth.json").read_text())["parameters"]
+    print({n: [f"{100 * (it['parameters'][n] / truth[n] - 1):+.2f} %" for it in (it0, it1)]
+           for n in ("theta_twist", "CL_alpha_HT", "Iyy")})
+    for n in ("theta_twist", "CL_alpha_HT", "Iyy"):
+        assert abs(it1["parameters"][n] - truth[n]) < abs(it0["parameters"][n] - truth[n]), n
+
+
 @pytest.mark.parametrize("loop, message", [
     ('candidates = ["wake"]', "[loop]: field 'candidates': unknown candidate 'wake'"),
     ("max_iterations = -1", "[loop]: field 'max_iterations' must be an integer >= 0"),

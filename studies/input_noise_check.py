@@ -20,7 +20,9 @@ seed in up to three versions that differ in one setting each:
 On each it solves the time-domain anchor A (min J_time) of the loop's config (studies/close_loop.toml,
 Case 2 parameters) with M0 plus the truth simulator's own effect E1 (its strength K_lamT free, geometry at
 the truth values: the model of exactly the right form, as ``truth_form`` in studies/wake_form_study.py),
-and prints the errors of twist, CL_alpha_HT and Iyy against truth. With ``--input-errors`` the same
+and prints the errors of twist, CL_alpha_HT and Iyy against truth, and their standard errors from the
+NLP's reduced Hessian at the solution (``uncertainty/reduced_hessian.py``; "-" for results written before
+that column existed). With ``--input-errors`` the same
 anchor estimates the col and lon errors with the parameters (``[objectives] input_errors``, noise sigmas
 from the lead-in; results get the suffix ``_eiv``). Each finished solve is written to
 ``OUT/<seed>_<variant>.json``; a rerun reads it instead of solving again. About 80 s per solve on one core.
@@ -44,6 +46,7 @@ from pyomo_heli.config import load_identification_config  # noqa: E402
 from pyomo_heli.identify import build_problem  # noqa: E402
 from pyomo_heli.nlp.parameters import FreeParameter, free_parameter_values  # noqa: E402
 from pyomo_heli.pareto.front import ParetoSolver  # noqa: E402
+from pyomo_heli.uncertainty.reduced_hessian import reduced_hessian_covariance  # noqa: E402
 
 VARIANTS = ("bundled", "no_input_noise", "no_noise", "input_noise_after_lead_in", "input_noise_in_lead_in")
 #: variants made from two generated ones (the others come from the generator)
@@ -108,9 +111,13 @@ def anchor_a(dataset: Path, input_errors: bool = False) -> dict:
     nlp = dataclasses.replace(cfg.nlp, input_errors=("col", "lon")) if input_errors else cfg.nlp
     cfg = dataclasses.replace(cfg, model=W.model_of("truth_form", cfg, dataset), free=free, nlp=nlp)
     m, _, _ = build_problem(cfg)
-    point = ParetoSolver(m, cfg.pareto).point_a()
-    return {"status": point.status, "iterations": point.iterations, "J_time": point.J_time,
-            "parameters": free_parameter_values(m)}
+    solver = ParetoSolver(m, cfg.pareto)
+    point = solver.point_a()
+    out = {"status": point.status, "iterations": point.iterations, "J_time": point.J_time,
+           "parameters": free_parameter_values(m)}
+    if point.success:  # standard errors from the NLP's reduced Hessian (uncertainty/reduced_hessian.py)
+        out["se"] = reduced_hessian_covariance(m, solver.solver, 1.0 / solver.s_time)["se"]
+    return out
 
 
 def main() -> None:
@@ -147,12 +154,15 @@ def main() -> None:
             p, t = res["parameters"], res["truth"]
             label = v + (" + input errors" if a.input_errors else "")
             if p is None:
-                rows.append([str(seed), label, res["status"].split(":")[0], "-"] + ["-"] * (len(FREE) + 1))
+                rows.append([str(seed), label, res["status"].split(":")[0], "-"] + ["-"] * (2 * len(FREE) + 1))
             else:
+                se = res.get("se")  # absent in results written before the standard errors were added
                 rows.append([str(seed), label, res["status"], f"{res['J_time']:.1f}"]
-                            + [f"{100 * (p[n] - t[n]) / abs(t[n]):+.2f}" for n in FREE] + [f"{p['K_lamT']:.3f}"])
+                            + [f"{100 * (p[n] - t[n]) / abs(t[n]):+.2f}" for n in FREE] + [f"{p['K_lamT']:.3f}"]
+                            + [f"{100 * se[n] / abs(t[n]):.2f}" if se else "-" for n in FREE])
             print(" ".join(rows[-1]), flush=True)
-    head = ["seed", "data", "status", "J_time A", "twist err %", "CL_alpha_HT err %", "Iyy err %", "K_lamT (truth 1.5)"]
+    head = ["seed", "data", "status", "J_time A", "twist err %", "CL_alpha_HT err %", "Iyy err %", "K_lamT (truth 1.5)",
+            "twist SE %", "CL_alpha_HT SE %", "Iyy SE %"]
     text = "\n".join(["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + ["| " + " | ".join(r) + " |" for r in rows])
     (a.out / f"input_noise_check{'_eiv' if a.input_errors else ''}.md").write_text(text + "\n")
     print("\n" + text)

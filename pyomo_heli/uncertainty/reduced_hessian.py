@@ -32,7 +32,8 @@ def _sparse(ca_matrix) -> sp.csc_matrix:
                          shape=(s.size1(), s.size2()))
 
 
-def reduced_hessian_covariance(m, solver, objective_weight: float, bound_tol: float = 1e-6) -> dict:
+def reduced_hessian_covariance(m, solver, objective_weight: float, bound_tol: float = 1e-6,
+                               permc_spec: str = "MMD_AT_PLUS_A") -> dict:
     """Covariance of the free parameters (SI units) at the solution loaded in ``m``.
 
     m: the identification NLP after a successful min-J_time solve by ``solver`` (a
@@ -91,7 +92,7 @@ def reduced_hessian_covariance(m, solver, objective_weight: float, bound_tol: fl
     rhs = np.zeros((K.shape[0], len(cols)))
     for j, c in enumerate(cols):
         rhs[pos[c], j] = 1.0
-    lu = spla.splu(K)
+    lu = spla.splu(K, permc_spec=permc_spec)  # K is structurally symmetric: minimum degree on A^T + A
     Z = lu.solve(rhs)
     cov_s = np.array([[Z[pos[ci], j] for j in range(len(cols))] for ci in cols]) * objective_weight
     scales = np.array([pyo.value(m.theta_scale[k]) for k in names])

@@ -34,6 +34,7 @@ def test_lead_in_sigma_matches_the_declared_sensor_noise():
     ft = load_flight_test(DATA)
     data = prepare_data(ft, "identification", 25, None, 1.9)
     est = lead_in_sigma(data.maneuvers, ["q", "theta", "n_x", "n_z", "col", "lon"])
+    print("lead-in sigmas (SI):", est)
     for ch, s in est.items():
         assert s == pytest.approx(DEFAULT_SIGMA[ch], rel=0.12), ch
 

@@ -37,7 +37,7 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
     input_errors: input channels whose measurement error is estimated (errors in
     variables): ``blk.u_err[k, t_i]`` at every sample, added to the measured input and,
     like it, linearly interpolated inside each element (the likelihood term is
-    :func:`.objectives.add_input_error_objective`).
+    :func:`.objectives.add_known_noise_time_objective`).
     """
     ops = get_ops("pyomo")
     t_samples = np.asarray(t_samples, dtype=float)

@@ -45,7 +45,6 @@ def reduced_hessian_covariance(m, solver, objective_weight: float, bound_tol: fl
     ca = solver._ca
     if not hasattr(solver, "_jac_g"):
         raise TypeError("the reduced Hessian needs the casadi-ipopt adapter (solver 'casadi-ipopt')")
-    n = len(solver.variables)
     args = solver._numeric_inputs()
     x = np.array([v.value for v in solver.variables], dtype=float)
     lam_g = solver._multipliers_from_model()["lam_g0"]
@@ -94,7 +93,7 @@ def reduced_hessian_covariance(m, solver, objective_weight: float, bound_tol: fl
         rhs[pos[c], j] = 1.0
     lu = spla.splu(K, permc_spec=permc_spec)  # K is structurally symmetric: minimum degree on A^T + A
     Z = lu.solve(rhs)
-    cov_s = np.array([[Z[pos[ci], j] for j in range(len(cols))] for ci in cols]) * objective_weight
+    cov_s = Z[[pos[c] for c in cols], :] * objective_weight
     scales = np.array([pyo.value(m.theta_scale[k]) for k in names])
     cov = cov_s * np.outer(scales, scales)
     return {"names": names, "cov": cov, "se": {k: float(np.sqrt(cov[i, i])) for i, k in enumerate(names)}}

@@ -114,3 +114,85 @@ def simulate_outputs(model: HelicopterModel, trim: TrimPoint, t_eval, increments
         raise RuntimeError(f"simulation diverged at t = {t_eval[np.argmax(bad)]:.3f} s")
     ys = np.asarray(out_fun.map(n)(xs, u, np.tile(p[:, None], (1, n))))
     return {o: ys[out_names.index(o)].copy() for o in outputs}
+
+
+#: (structure, substeps) -> (step Jacobian function, output Jacobian function)
+_JACOBIANS: dict = {}
+
+
+def _jacobian_functions(model: HelicopterModel, substeps: int):
+    """d(next state)/d(state, interval inputs) of one RK4 interval and d(outputs)/d(state, inputs)."""
+    key = (_structure(model), substeps)
+    if key not in _JACOBIANS:
+        import casadi as ca
+
+        step, out_fun, _ = _functions(model, substeps)
+        x = ca.SX.sym("x", step.size1_in(0))
+        iv = ca.SX.sym("iv", step.size1_in(1))
+        u = ca.SX.sym("u", out_fun.size1_in(1))
+        p = ca.SX.sym("p", step.size1_in(2))
+        y = step(x, iv, p)
+        step_jac = ca.Function("rk4_interval_jac", [x, iv, p], [ca.densify(ca.jacobian(y, x)),
+                                                                 ca.densify(ca.jacobian(y, iv))])
+        out = out_fun(x, u, p)
+        out_jac = ca.Function("outputs_jac", [x, u, p], [ca.densify(ca.jacobian(out, x)),
+                                                         ca.densify(ca.jacobian(out, u))])
+        _JACOBIANS[key] = (step_jac, out_jac)
+    return _JACOBIANS[key]
+
+
+def input_sensitivities(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mapping[str, np.ndarray],
+                        outputs, channels, substeps: int = 4) -> tuple[dict, dict]:
+    """Outputs and their derivatives with respect to every sample of the input ``channels``.
+
+    The errors-in-variables counterpart of the parameter sensitivities: how each output sample moves
+    when one measured input sample moves (the input is linear between samples, as in the simulation
+    and the NLP's ``u_err``). Exact derivatives of the RK4 arithmetic of :func:`simulate_outputs`, from
+    the Jacobians of one interval and of the outputs (casadi) chained along the record (numpy):
+    with G_k = dx_k/dU, G_0 = 0 (the start is the model's trim, not the measured inputs) and
+    G_{k+1} = A_k G_k + B0_k E_k + B1_k E_{k+1}.
+
+    Returns ``(y, S)``: output -> values at ``t_eval``; output -> (N, len(channels) * N) matrix whose
+    column ``c * N + k`` is d(output)/d(input ``channels[c]`` at sample k).
+    """
+    t_eval = np.asarray(t_eval, dtype=float)
+    bad = [c for c in channels if c not in INPUTS]
+    if bad:
+        raise ValueError(f"unknown input channel(s) {bad}; choose from {', '.join(INPUTS)}")
+    y = simulate_outputs(model, trim, t_eval, increments, outputs, substeps)  # checks outputs, divergence
+    step, out_fun, out_names = _functions(model, substeps)
+    step_jac, out_jac = _jacobian_functions(model, substeps)
+    n, ni, nc = len(t_eval), len(INPUTS), len(channels)
+    base = trim.inputs()
+    u = np.vstack([base[k] + np.asarray(increments.get(k, np.zeros(n)), dtype=float) for k in INPUTS])
+    p = np.array([model.parameters[name] for name in model.parameters], dtype=float)
+    x0 = np.array([trim.state()[s] for s in model.state_names], dtype=float)
+    nx = len(x0)
+    P = np.tile(p[:, None], (1, n))
+    if n > 1:
+        intervals = np.vstack([u[:, :-1], u[:, 1:], np.diff(t_eval)[None, :]])
+        xs = np.hstack([x0[:, None], np.asarray(_ACCUMULATED[(_structure(model), substeps, n - 1)](
+            x0, intervals, P[:, :-1]))])
+        A, B = (np.asarray(v) for v in step_jac.map(n - 1)(xs[:, :-1], intervals, P[:, :-1]))
+        A = A.reshape(nx, n - 1, nx).transpose(1, 0, 2)  # (interval, next state, state)
+        B = B.reshape(nx, n - 1, 2 * ni + 1).transpose(1, 0, 2)
+    else:
+        xs = x0[:, None]
+    C, D = (np.asarray(v) for v in out_jac.map(n)(xs, u, P))
+    C = C.reshape(len(out_names), n, nx).transpose(1, 0, 2)  # (sample, output, state)
+    D = D.reshape(len(out_names), n, ni).transpose(1, 0, 2)
+    ch = [INPUTS.index(c) for c in channels]
+    rows = [out_names.index(o) for o in outputs]
+    S = {o: np.zeros((n, nc * n)) for o in outputs}
+    G = np.zeros((nx, nc * n))
+    cols = np.arange(nc) * n
+    for k in range(n):
+        out_k = C[k][rows] @ G
+        out_k[:, cols + k] += D[k][np.ix_(rows, ch)]
+        for r, o in enumerate(outputs):
+            S[o][k] = out_k[r]
+        if k < n - 1:
+            G = A[k] @ G
+            G[:, cols + k] += B[k][:, ch]
+            G[:, cols + k + 1] += B[k][:, [ni + c for c in ch]]
+    return y, S

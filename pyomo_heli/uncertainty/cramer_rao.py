@@ -31,6 +31,18 @@ standard errors counts as that objective's optimum (weights (1, 0) or
 estimate) both gradients are rounding noise and their directions would pick
 arbitrary weights.
 
+With errors in variables (``[objectives] input_errors``) the NLP also estimates one error per
+measured input sample, with known noise sigmas for outputs and inputs (nlp/objectives.py). The
+time-domain information is then the information of the parameters *and* those errors with the
+errors eliminated (Schur complement, per maneuver, with exact input sensitivities from
+:func:`pyomo_heli.simulation.compiled.input_sensitivities`):
+
+    F_time = F_tt - sum_m F_te,m F_ee,m^-1 F_et,m,   F_ee,m = S_e,m^T W S_e,m + Sigma_u^-1,
+
+W = diag(1 / sigma_o^2); the gradient is that of J_time with the errors profiled out (Gauss-Newton).
+Without the elimination the bounds would treat the noisy inputs as exact and come out several times
+too small for a parameter the input noise hides (docs/uncertainty.md).
+
 Parameters at an active bound are reported as such and projected out: their
 rows and columns are removed before the inversion (they are treated as known),
 so they get no standard error instead of a meaningless one.
@@ -42,9 +54,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from scipy.linalg import cho_factor, cho_solve
 
-from ..nlp.objectives import R_FLOOR
+from ..nlp.objectives import R_FLOOR, lead_in_sigma
+from ..simulation.compiled import input_sensitivities
 from ..simulation.sensitivity import sensitivities
+from ..simulation.trim import trim_float
 from ..units import DEG
 
 #: a parameter counts as at a bound when it is this many scales (or less) from it
@@ -88,14 +103,40 @@ class PointInformation:
     S_trim: dict = field(default_factory=dict)
     e_trim: dict = field(default_factory=dict)
     R_trim: dict = field(default_factory=dict)
+    #: errors in variables: per maneuver ((first row, end row) in the concatenated time outputs,
+    #: output -> (rows, channels x samples) input sensitivities); empty for output error
+    S_input: list = field(default_factory=list)
+    #: noise sigma [SI] of each input channel whose errors are estimated (order of S_input's columns)
+    input_sigma: dict = field(default_factory=dict)
 
     @property
     def n_trims(self) -> int:
         return len(next(iter(self.e_trim.values()))) if self.e_trim else 0
 
+    def _input_elimination(self) -> tuple[np.ndarray, np.ndarray]:
+        """(sum_m F_te F_ee^-1 F_et, sum_m F_te F_ee^-1 b_e): what eliminating the input errors takes
+        from the information and adds to the gradient (module docstring); zeros for output error."""
+        n = len(self.names)
+        info, grad = np.zeros((n, n)), np.zeros(n)
+        for (a, b), S_e in self.S_input:
+            n_e = next(iter(S_e.values())).shape[1]
+            per = n_e // len(self.input_sigma)
+            prior = np.repeat([1.0 / s**2 for s in self.input_sigma.values()], per)
+            F_ee, F_te, b_e = np.diag(prior), np.zeros((n, n_e)), np.zeros(n_e)
+            for o, Se in S_e.items():
+                w = 1.0 / self.R_time[o]
+                F_ee += w * Se.T @ Se
+                F_te += w * self.S_time[o][a:b].T @ Se
+                b_e += w * Se.T @ self.e_time[o][a:b]
+            c, low = cho_factor(F_ee)
+            info += F_te @ cho_solve((c, low), F_te.T)
+            grad += F_te @ cho_solve((c, low), b_e)
+        return info, grad
+
     def fisher_time(self) -> np.ndarray:
         n = len(self.names)
-        return sum((S.T @ S / self.R_time[o] for o, S in self.S_time.items()), np.zeros((n, n)))
+        F = sum((S.T @ S / self.R_time[o] for o, S in self.S_time.items()), np.zeros((n, n)))
+        return F - self._input_elimination()[0] if self.S_input else F
 
     def fisher_trim(self) -> np.ndarray:
         n = len(self.names)
@@ -104,7 +145,8 @@ class PointInformation:
     def grad_time(self) -> np.ndarray:
         """Gradient of J_time (concentrated, R at its estimate)."""
         n = len(self.names)
-        return sum((-S.T @ self.e_time[o] / self.R_time[o] for o, S in self.S_time.items()), np.zeros(n))
+        g = sum((-S.T @ self.e_time[o] / self.R_time[o] for o, S in self.S_time.items()), np.zeros(n))
+        return g + self._input_elimination()[1] if self.S_input else g
 
     def grad_trim(self) -> np.ndarray:
         """Gradient of J_trim = (1/M) sum (r/DEG)^2."""
@@ -124,6 +166,11 @@ class PointInformation:
 
     def scaled_time(self) -> np.ndarray:
         """Noise-normalised sensitivities of the time outputs, per unit of each parameter's scale."""
+        if self.S_input:
+            # a square root of the (input-error-eliminated) information: same singular values and
+            # directions as the information itself
+            w, V = np.linalg.eigh(self.scale[:, None] * self.fisher_time() * self.scale[None, :])
+            return np.sqrt(np.clip(w, 0.0, None))[:, None] * V.T
         rows = [S / math.sqrt(self.R_time[o]) for o, S in self.S_time.items()]
         return (np.vstack(rows) if rows else np.zeros((0, len(self.names)))) * self.scale
 
@@ -133,11 +180,15 @@ class PointInformation:
 
 
 def point_information(model, free, values: dict, maneuvers, trims, time_outputs, trim_outputs,
-                      rel_step: float = 1e-5) -> PointInformation:
+                      rel_step: float = 1e-5, input_errors=(), noise_sigma: dict | None = None) -> PointInformation:
     """Sensitivities and estimated residual covariances at ``values`` (free parameter values, SI).
 
     maneuvers: dataset Maneuver objects (as in the NLP: resampled, cropped);
     trims: DataFrame with V and the trim outputs (or None).
+    input_errors, noise_sigma: the NLP's errors-in-variables settings (``NLPOptions``); with input
+    errors the time outputs get the known noise sigmas of the NLP (given, or from the records'
+    lead-in as the NLP takes them) instead of the residuals' variance, and the input errors are
+    eliminated from the information (module docstring).
     """
     names = [f.name for f in free]
     mdl = model.with_parameters(**{n: float(values[n]) for n in names})
@@ -148,11 +199,24 @@ def point_information(model, free, values: dict, maneuvers, trims, time_outputs,
                       rel_step=rel_step)
     info = PointInformation(names=names, values={n: float(values[n]) for n in names},
                             scale=np.array([f.scale for f in free]))
+    input_errors = tuple(input_errors)
+    if input_errors and s.time:
+        sigma = dict(noise_sigma or {})
+        need = [c for c in (*s.time, *input_errors) if c not in sigma]
+        sigma.update(lead_in_sigma(maneuvers, need) if need else {})
+        info.input_sigma = {c: float(sigma[c]) for c in input_errors}
+        start = 0
+        for mv in maneuvers:
+            t = mv.data["t"].to_numpy()
+            _, S_e = input_sensitivities(mdl, trim_float(mdl, mv.trim_speed), t, mv.increments(), list(s.time),
+                                         input_errors)
+            info.S_input.append(((start, start + len(t)), S_e))
+            start += len(t)
     for o in s.time:
         meas = np.concatenate([mv.data[o].to_numpy() for mv in maneuvers])
         e = meas - s.y_time[o]
         info.S_time[o], info.e_time[o] = s.time[o], e
-        info.R_time[o] = float(np.mean(e**2) + R_FLOOR[o] ** 2)
+        info.R_time[o] = (float(sigma[o]) ** 2 if info.S_input else float(np.mean(e**2) + R_FLOOR[o] ** 2))
     for o in s.trim:
         e = trims[o].to_numpy(dtype=float) - s.y_trim[o]
         info.S_trim[o], info.e_trim[o] = s.trim[o], e

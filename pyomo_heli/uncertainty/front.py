@@ -20,7 +20,7 @@ from .identifiability import identifiability
 
 def _information(cfg, data, parameters):
     return point_information(cfg.model, cfg.free, parameters, data.maneuvers, data.trims, cfg.nlp.time_outputs,
-                             cfg.nlp.trim_outputs)
+                             cfg.nlp.trim_outputs, input_errors=cfg.nlp.input_errors, noise_sigma=cfg.nlp.noise_sigma)
 
 
 def add_uncertainty(result, cfg, data, out=None, progress=print, points: str = "all"):

@@ -89,7 +89,8 @@ def _row(task, estimator, p, cfg, noisy, t0) -> dict:
            "J_trim": p.J_trim, **{n: float(v) for n, v in p.parameters.items()}}
     if task.crb and p.success:
         info = point_information(cfg.model, cfg.free, p.parameters, noisy.maneuvers, noisy.trims,
-                                 cfg.nlp.time_outputs, cfg.nlp.trim_outputs)
+                                 cfg.nlp.time_outputs, cfg.nlp.trim_outputs, input_errors=cfg.nlp.input_errors,
+                                 noise_sigma=cfg.nlp.noise_sigma)
         row.update(cramer_rao(info, cfg.free, kind=p.kind).row())
     row["wall_time"] = time.perf_counter() - t0
     return row

@@ -19,6 +19,7 @@ import pyomo.environ as pyo
 
 from ..physics.model import FLAPPING, INPUTS, SHARED, STATES, HelicopterModel, evaluate
 from ..physics.ops import get_ops
+from .point_rows import PointRows
 from .trim_block import STATE_BOUNDS
 
 
@@ -67,7 +68,7 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
            for k in INPUTS}
     blk.du = pyo.Param(INPUTS, blk.t, mutable=True,
                        initialize={(k, t): float(inc[k][i]) for k in INPUTS for i, t in enumerate(times)})
-    u_err = _input_error_terms(blk, t_samples, times, input_errors)
+    u_err, err_where = _input_error_terms(blk, t_samples, times, input_errors)
 
     # Named intermediates (rotor flow, thrust coefficient, total forces) of each
     # time point: the NL writer exports them once as defined variables instead
@@ -110,8 +111,71 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
     out_names = list(ctx_at(t0).outputs)
     blk.y = pyo.Var(out_names, blk.samples, initialize=0.0)
     blk.output_eq = pyo.Constraint(out_names, blk.samples, rule=lambda _, k, t: blk.y[k, t] == ctx_at(t).outputs[k])
+    blk.point_rows = _point_rows(blk, model, pmap, start, states, out_names, input_errors, err_where)
     if initial_guess is not None:
         initialise_from(blk, initial_guess, states)
+
+
+def _point_rows(blk, model, pmap, start, states, out_names, channels, err_where) -> PointRows:
+    """The block's ode, flapping and output rows as one casadi function per point (nlp/point_rows.py).
+
+    Leaves of a point: states, their derivatives, flapping angles, outputs (samples only; 0 elsewhere),
+    the start trim's inputs, the two input-error samples around the point per error channel, the
+    free parameters (scaled Vars). Data: the measured input increments and the error weights. The
+    function is :func:`evaluate` with casadi symbols, written as the Pyomo rules above write it.
+    """
+    times, samples = list(blk.t), set(blk.samples)
+    t0 = times[0]
+    free = [n for n in pmap if not isinstance(pmap[n], (int, float))]
+    if set(free) - set(pmap.free):
+        return None  # a parameter that is neither a number nor scale * Var: the NL route only
+    leaf_names = (tuple(f"x:{s}" for s in states) + tuple(f"dx:{s}" for s in states)
+                  + tuple(f"beta:{b}" for b in FLAPPING) + tuple(f"y:{k}" for k in out_names)
+                  + tuple(f"base:{k}" for k in INPUTS) + tuple(f"err_{a}:{k}" for k in channels for a in "ab")
+                  + tuple(f"p:{n}" for n in free))
+    data_names = tuple(f"du:{k}" for k in INPUTS) + tuple(f"w:{k}" for k in channels)
+    fixed = {n: float(pmap[n]) for n in pmap if n not in free}
+    scale = {n: pmap.free[n][1] for n in free}
+    extensions = model.extensions
+
+    def make_function(ca):
+        ops = get_ops("casadi")
+        z, d = ca.SX.sym("z", len(leaf_names)), ca.SX.sym("d", len(data_names))
+        leaf = dict(zip(leaf_names, ca.vertsplit(z)))
+        dat = dict(zip(data_names, ca.vertsplit(d)))
+        u = {}
+        for k in INPUTS:
+            u[k] = leaf[f"base:{k}"] + dat[f"du:{k}"]
+            if k in channels:
+                w = dat[f"w:{k}"]
+                u[k] = u[k] + (w * leaf[f"err_a:{k}"] + (1.0 - w) * leaf[f"err_b:{k}"])
+        p = {**fixed, **{n: scale[n] * leaf[f"p:{n}"] for n in free}}
+        ctx = evaluate({s: leaf[f"x:{s}"] for s in states}, u, p, ops=ops,
+                       beta=[leaf[f"beta:{b}"] for b in FLAPPING], extensions=extensions)
+        rows = [ctx.state_eqs[s][0] * leaf[f"dx:{s}"] - ctx.state_eqs[s][1] for s in states]
+        rows += [ctx.flap_residuals[i] for i in range(3)]
+        rows += [leaf[f"y:{k}"] - ctx.outputs[k] for k in out_names]
+        return ca.Function("collocation_point", [z, d], [ca.vertcat(*rows)], ["z", "d"], ["r"])
+
+    pr = PointRows(leaf_names=leaf_names, data_names=data_names, make_function=make_function)
+    sample_list = list(blk.samples)
+    ns = len(states)
+    for i, t in enumerate(times):
+        errs = []
+        for k in channels:
+            a, b, w = err_where[t]
+            errs += [blk.u_err[k, sample_list[a]], blk.u_err[k, sample_list[a if b is None else b]]]
+        pr.leaves.append([blk.x[s, t] for s in states] + [blk.dx[s, t] for s in states]
+                         + [blk.beta[b, t] for b in FLAPPING]
+                         + [blk.y[k, t] if t in samples else 0.0 for k in out_names]
+                         + [getattr(start, k) for k in INPUTS] + errs + [pmap.free[n][0] for n in free])
+        pr.data_values.append([blk.du[k, t] for k in INPUTS] + [err_where[t][2] for k in channels])
+        if t != t0:
+            pr.rows += [(blk.ode[s, t], i, j) for j, s in enumerate(states)]
+        pr.rows += [(blk.flapping[j, t], i, ns + j) for j in range(3)]
+        if t in samples:
+            pr.rows += [(blk.output_eq[k, t], i, ns + 3 + j) for j, k in enumerate(out_names)]
+    return pr
 
 
 def _input_error_terms(blk: pyo.Block, t_samples: np.ndarray, times: list, channels: tuple):
@@ -124,7 +188,7 @@ def _input_error_terms(blk: pyo.Block, t_samples: np.ndarray, times: list, chann
     if unknown:
         raise ValueError(f"unknown input channel(s) {sorted(unknown)} for input errors; choose from {INPUTS}")
     if not channels:
-        return lambda k, t: 0.0
+        return (lambda k, t: 0.0), {}
     blk.u_err = pyo.Var(list(channels), blk.samples, initialize=0.0)
     samples = list(blk.samples)
     where = {}
@@ -144,7 +208,7 @@ def _input_error_terms(blk: pyo.Block, t_samples: np.ndarray, times: list, chann
             return blk.u_err[k, samples[i]]
         return w * blk.u_err[k, samples[i]] + (1.0 - w) * blk.u_err[k, samples[j]]
 
-    return u_err
+    return u_err, where
 
 
 def initialise_from(blk: pyo.Block, df, states) -> None:

@@ -46,8 +46,10 @@ class FreeParameter:
 class ParameterMap(Mapping):
     """name -> number (fixed) or Pyomo expression (free); what the physics reads."""
 
-    def __init__(self, values: dict):
+    def __init__(self, values: dict, free: dict | None = None):
         self._values = values
+        #: free parameter name -> (its scaled Var, scale): the value is ``scale * var``
+        self.free = dict(free or {})
 
     def __getitem__(self, k):
         return self._values[k]
@@ -72,7 +74,7 @@ def add_parameters(m: pyo.Block, parameters: ParameterSet, free: list[FreeParame
     values: dict = {k: float(v) for k, v in parameters.items()}
     for n in names:
         values[n] = by_name[n].scale * m.theta_s[n]
-    return ParameterMap(values)
+    return ParameterMap(values, {n: (m.theta_s[n], by_name[n].scale) for n in names})
 
 
 def free_parameter_values(m: pyo.Block) -> dict[str, float]:

@@ -48,6 +48,7 @@ from pyomo.core.expr.visitor import identify_mutable_parameters
 from pyomo.repn.plugins.nl_writer import NLWriter
 
 from .errors import ModelChangedError, SolverFailedError, SolverUnavailableError
+from .point_rows import PointRowsAssembly, find_point_rows
 from .result import IPOPT_EXIT_MESSAGES, SUCCESS_STATUSES, SolveResult
 
 #: Options every backend gets unless the caller overrides them.
@@ -167,6 +168,10 @@ class CasadiIpoptSolver:
     #: equation that uses them (the same functions, a graph about twice as large; kept for
     #: comparison: studies/profile_setup.py --compare defined-variables)
     export_defined_variables = True
+    #: blocks that describe their rows point by point (``blk.point_rows``, the maneuver blocks) get
+    #: those rows from one compiled function per point mapped over the points instead of from the
+    #: NL file (solvers/point_rows.py); False: everything through the NL file (kept for comparison)
+    point_rows = True
 
     def __init__(self, model, options: dict | None = None):
         try:
@@ -182,8 +187,8 @@ class CasadiIpoptSolver:
         self.options = dict(options or {})
         self._pending_setup = 0.0
         #: seconds spent per set-up stage, summed over rebuilds (for the benchmark)
-        self.setup_breakdown = {"nl_write": 0.0, "casadi_import": 0.0, "expand": 0.0, "jacobian": 0.0,
-                                "hessian": 0.0, "nlpsol": 0.0}
+        self.setup_breakdown = {"nl_write": 0.0, "casadi_import": 0.0, "expand": 0.0, "point_rows": 0.0,
+                                "jacobian": 0.0, "hessian": 0.0, "nlpsol": 0.0}
         self.rebuild()
 
     # ------------------------------------------------------------------ build
@@ -197,20 +202,37 @@ class CasadiIpoptSolver:
     def _rebuild(self) -> None:
         ca = self._ca
         t0 = time.perf_counter()
+        blocks = find_point_rows(self.model) if self.point_rows else []
+        # the point-described rows are evaluated by their blocks' compiled functions, not the NL file
+        handled = [con for pr in blocks for con, _, _ in pr.rows if con.active]
         with tempfile.TemporaryDirectory(prefix="pyomo_heli_nl_") as tmp:
             path = os.path.join(tmp, "model.nl")
-            with open(path, "w") as ostream:
-                info = NLWriter().write(
-                    self.model, ostream, linear_presolve=False, scale_model=False,
-                    export_defined_variables=self.export_defined_variables,
-                )
+            try:
+                for con in handled:
+                    con.deactivate()
+                with open(path, "w") as ostream:
+                    info = NLWriter().write(
+                        self.model, ostream, linear_presolve=False, scale_model=False,
+                        export_defined_variables=self.export_defined_variables,
+                    )
+            finally:
+                for con in handled:
+                    con.activate()
             t_nl = time.perf_counter()
             nl = ca.NlpBuilder()
             nl.import_nl(path)
             t_import = time.perf_counter()
-            self.variables = list(info.variables)
-            self.constraints = list(info.constraints)
-            self._scan_expressions()
+        self.variables = list(info.variables)
+        self.constraints = list(info.constraints)
+        self._n_nl, self._m_nl = len(self.variables), len(self.constraints)
+        self._assembly = None
+        if blocks:
+            column_of = {id(v): i for i, v in enumerate(self.variables)}
+            self._assembly = PointRowsAssembly(ca, blocks, column_of, len(self.variables))
+            self.variables += self._assembly.extra
+            self.constraints += self._assembly.constraints
+        t_rows = time.perf_counter()
+        self._scan_expressions()
         self.objective = info.objectives[0] if info.objectives else None
         # casadi's import_nl already negates a maximisation objective (it
         # always minimises); sense_sign converts back to the user's objective.
@@ -218,7 +240,9 @@ class CasadiIpoptSolver:
 
         # The NL row bound differs from con.lb/ub by the constants Pyomo moved
         # out of the body; remember that offset to shift bounds on re-solve.
-        g_lb, g_ub = np.array(nl.g_lb, float), np.array(nl.g_ub, float)
+        n_more = len(self.constraints) - self._m_nl  # point-described rows: body == 0
+        g_lb = np.concatenate([np.array(nl.g_lb, float), np.zeros(n_more)])
+        g_ub = np.concatenate([np.array(nl.g_ub, float), np.zeros(n_more)])
         self._g_lb, self._g_ub = g_lb, g_ub  # constant rows keep these; Param rows are refreshed
         self._row_offset = np.zeros(len(self.constraints))
         for i, con in enumerate(self.constraints):
@@ -233,7 +257,7 @@ class CasadiIpoptSolver:
         fun = ca.Function("F", [x_mx], [nl.f, g_mx]).expand()
         #: size of the expanded expression graph (casadi instructions), for the benchmark
         self.graph_instructions = int(fun.n_instructions())
-        x = ca.SX.sym("x", len(self.variables))
+        x = ca.SX.sym("x", self._n_nl)
         f, g = fun(x)
         self._nlp = {"x": x, "f": f, "g": g}
         t_expand = time.perf_counter()
@@ -242,6 +266,8 @@ class CasadiIpoptSolver:
         self._dense_rows = self._dense(np.bincount(np.array(jsp.row(), dtype=int), minlength=g.shape[0]))
         self._dense_cols = self._dense(np.diff(np.array(jsp.colind(), dtype=int)))
         self._jac_g = self._jacobian_function(x, g)
+        if self._assembly is not None:
+            self._jac_g = self._full_jacobian(self._jac_g)
         self._hess_lag = False  # not built yet; built at the first exact-Hessian solve
         self._hessian_split = None  # block sizes {"S", "D2", "D1"} once a custom Hessian is built
         self._solvers = {}
@@ -251,7 +277,8 @@ class CasadiIpoptSolver:
         b = self.setup_breakdown
         b["nl_write"] += t_nl - t0
         b["casadi_import"] += t_import - t_nl
-        b["expand"] += t_expand - t_import
+        b["point_rows"] += t_rows - t_import
+        b["expand"] += t_expand - t_rows
         b["jacobian"] += t_end - t_expand
 
     def _dense(self, counts: np.ndarray, percentile: float = 99) -> list[int]:
@@ -315,8 +342,56 @@ class CasadiIpoptSolver:
         p = ca.SX.sym("p", 0)
         return ca.Function("nlp_jac_g", [x, p], [g, jac], ["x", "p"], ["g", "jac_g_x"])
 
+    # ------------------------------------------------ with point-described rows
+    def _full_jacobian(self, jac_nl):
+        """g and its Jacobian of the whole NLP: the NL part's, then the point-described rows'."""
+        ca, A = self._ca, self._assembly
+        n, n_nl, m_nl = len(self.variables), self._n_nl, self._m_nl
+        if jac_nl is None:
+            x, g = self._nlp["x"], self._nlp["g"]
+            jac_nl = ca.Function("nl_jac_g", [x, ca.SX.sym("p", 0)], [g, ca.jacobian(g, x)])
+        X, P = ca.MX.sym("x", n), ca.MX.sym("p", 0)
+        g_nl, J_nl = jac_nl(X[:n_nl], P)
+        g = ca.vertcat(g_nl, A.rows(X))
+        J = ca.vertcat(ca.horzcat(J_nl, ca.MX(m_nl, n - n_nl)), A.jacobian(X))
+        return ca.Function("nlp_jac_g", [X, P], [g, J], ["x", "p"], ["g", "jac_g_x"])
+
     def _hessian_function(self):
-        """Lagrangian Hessian built block-wise, or None for casadi's default.
+        """The Lagrangian Hessian function of the whole NLP (None: casadi's own, NL route only)."""
+        h_nl = self._nl_hessian_function()
+        if self._assembly is None:
+            return h_nl
+        ca, A = self._ca, self._assembly
+        n, n_nl, m_nl = len(self.variables), self._n_nl, self._m_nl
+        if h_nl is None:
+            x, f, g = self._nlp["x"], self._nlp["f"], self._nlp["g"]
+            lf, lg = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", g.shape[0])
+            h_nl = ca.Function("nl_hess_l", [x, ca.SX.sym("p", 0), lf, lg],
+                               [ca.triu(ca.hessian(lf * f + ca.dot(lg, g), x)[0])])
+        X, P, lf, lg = ca.MX.sym("x", n), ca.MX.sym("p", 0), ca.MX.sym("lam_f"), ca.MX.sym("lam_g", len(self.constraints))
+        H = ca.diagcat(h_nl(X[:n_nl], P, lf, lg[:m_nl]), ca.MX(n - n_nl, n - n_nl)) + A.hessian(X, lg[m_nl:])
+        return ca.Function("nlp_hess_l", [X, P, lf, lg], [H], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+
+    def _nlp_functions(self):
+        """(f, g) and (f, grad f) of the whole NLP as casadi Functions of (x, p)."""
+        ca, (x, f, g) = self._ca, (self._nlp["x"], self._nlp["f"], self._nlp["g"])
+        p = ca.SX.sym("p", 0)
+        nlp = ca.Function("nlp", [x, p], [f, g], ["x", "p"], ["f", "g"])
+        grad = ca.Function("nlp_grad_f", [x, p], [f, ca.gradient(f, x)], ["x", "p"], ["f", "grad_f_x"])
+        if self._assembly is None:
+            return nlp, grad
+        n, n_nl = len(self.variables), self._n_nl
+        X, P = ca.MX.sym("x", n), ca.MX.sym("p", 0)
+        f_nl, g_nl = nlp(X[:n_nl], P)
+        f_g, gf = grad(X[:n_nl], P)
+        return (ca.Function("nlp", [X, P], [f_nl, ca.vertcat(g_nl, self._assembly.rows(X))], ["x", "p"], ["f", "g"]),
+                # dense: casadi hands Ipopt the output buffer as it is, and the structural zeros of a
+                # sparse gradient would be whatever the buffer held (seen: inf_du 1e12 at iteration 0)
+                ca.Function("nlp_grad_f", [X, P], [f_g, ca.densify(ca.vertcat(gf, ca.MX(n - n_nl, 1)))], ["x", "p"],
+                            ["f", "grad_f_x"]))
+
+    def _nl_hessian_function(self):
+        """Lagrangian Hessian of the NL part built block-wise, or None for casadi's default.
 
         casadi's Hessian is one symmetric (star) colouring of the whole
         Hessian and one forward sweep over the gradient graph per colour. On
@@ -417,11 +492,7 @@ class CasadiIpoptSolver:
                 # One NLP Function and one objective gradient for every option set: from the
                 # expression dict, each nlpsol sorted the whole graph again and derived its own
                 # gradient (docs/performance.md, "What was done" 7).
-                ca, (x, f, g) = self._ca, (self._nlp["x"], self._nlp["f"], self._nlp["g"])
-                p = ca.SX.sym("p", 0)
-                self._nlp_function = ca.Function("nlp", [x, p], [f, g], ["x", "p"], ["f", "g"])
-                self._grad_f = ca.Function("nlp_grad_f", [x, p], [f, ca.gradient(f, x)], ["x", "p"],
-                                           ["f", "grad_f_x"])
+                self._nlp_function, self._grad_f = self._nlp_functions()
             opts["grad_f"] = self._grad_f
             self._solvers[key] = self._ca.nlpsol("solver", "ipopt", self._nlp_function, opts)
             self.setup_breakdown["nlpsol"] += time.perf_counter() - t_n

@@ -172,6 +172,10 @@ class CasadiIpoptSolver:
     #: those rows from one compiled function per point mapped over the points instead of from the
     #: NL file (solvers/point_rows.py); False: everything through the NL file (kept for comparison)
     point_rows = True
+    #: with point rows: their rows and their own variables first, the NL file's after. The NL route
+    #: puts the nonlinear rows and variables (these) first too; with them last, MUMPS took about 30 %
+    #: longer per point-A solve on Case 1 (docs/performance.md)
+    point_rows_first = True
 
     def __init__(self, model, options: dict | None = None):
         try:
@@ -225,12 +229,20 @@ class CasadiIpoptSolver:
         self.variables = list(info.variables)
         self.constraints = list(info.constraints)
         self._n_nl, self._m_nl = len(self.variables), len(self.constraints)
+        #: where the NL part's variables and rows sit in the NLP vectors (see point_rows_first)
+        self._nl_col0, self._nl_row0 = 0, 0
         self._assembly = None
         if blocks:
             column_of = {id(v): i for i, v in enumerate(self.variables)}
-            self._assembly = PointRowsAssembly(ca, blocks, column_of, len(self.variables))
-            self.variables += self._assembly.extra
-            self.constraints += self._assembly.constraints
+            A = self._assembly = PointRowsAssembly(ca, blocks, column_of, len(self.variables))
+            if self.point_rows_first:
+                A.shift_columns(self._n_nl, len(A.extra))
+                self.variables = A.extra + self.variables
+                self.constraints = A.constraints + self.constraints
+                self._nl_col0, self._nl_row0 = len(A.extra), A.m
+            else:
+                self.variables += A.extra
+                self.constraints += A.constraints
         t_rows = time.perf_counter()
         self._scan_expressions()
         self.objective = info.objectives[0] if info.objectives else None
@@ -241,8 +253,9 @@ class CasadiIpoptSolver:
         # The NL row bound differs from con.lb/ub by the constants Pyomo moved
         # out of the body; remember that offset to shift bounds on re-solve.
         n_more = len(self.constraints) - self._m_nl  # point-described rows: body == 0
-        g_lb = np.concatenate([np.array(nl.g_lb, float), np.zeros(n_more)])
-        g_ub = np.concatenate([np.array(nl.g_ub, float), np.zeros(n_more)])
+        r0 = self._nl_row0
+        g_lb = np.concatenate([np.zeros(r0), np.array(nl.g_lb, float), np.zeros(n_more - r0)])
+        g_ub = np.concatenate([np.zeros(r0), np.array(nl.g_ub, float), np.zeros(n_more - r0)])
         self._g_lb, self._g_ub = g_lb, g_ub  # constant rows keep these; Param rows are refreshed
         self._row_offset = np.zeros(len(self.constraints))
         for i, con in enumerate(self.constraints):
@@ -351,9 +364,14 @@ class CasadiIpoptSolver:
             x, g = self._nlp["x"], self._nlp["g"]
             jac_nl = ca.Function("nl_jac_g", [x, ca.SX.sym("p", 0)], [g, ca.jacobian(g, x)])
         X, P = ca.MX.sym("x", n), ca.MX.sym("p", 0)
-        g_nl, J_nl = jac_nl(X[:n_nl], P)
-        g = ca.vertcat(g_nl, A.rows(X))
-        J = ca.vertcat(ca.horzcat(J_nl, ca.MX(m_nl, n - n_nl)), A.jacobian(X))
+        c0 = self._nl_col0
+        g_nl, J_nl = jac_nl(X[c0:c0 + n_nl], P)
+        J_nl = ca.horzcat(ca.MX(m_nl, c0), J_nl, ca.MX(m_nl, n - n_nl - c0))
+        g_map, J_map = A.rows_and_jacobian(X)
+        if self._nl_row0:
+            g, J = ca.vertcat(g_map, g_nl), ca.vertcat(J_map, J_nl)
+        else:
+            g, J = ca.vertcat(g_nl, g_map), ca.vertcat(J_nl, J_map)
         return ca.Function("nlp_jac_g", [X, P], [g, J], ["x", "p"], ["g", "jac_g_x"])
 
     def _hessian_function(self):
@@ -369,7 +387,10 @@ class CasadiIpoptSolver:
             h_nl = ca.Function("nl_hess_l", [x, ca.SX.sym("p", 0), lf, lg],
                                [ca.triu(ca.hessian(lf * f + ca.dot(lg, g), x)[0])])
         X, P, lf, lg = ca.MX.sym("x", n), ca.MX.sym("p", 0), ca.MX.sym("lam_f"), ca.MX.sym("lam_g", len(self.constraints))
-        H = ca.diagcat(h_nl(X[:n_nl], P, lf, lg[:m_nl]), ca.MX(n - n_nl, n - n_nl)) + A.hessian(X, lg[m_nl:])
+        c0, r0 = self._nl_col0, self._nl_row0
+        H_nl = h_nl(X[c0:c0 + n_nl], P, lf, lg[r0:r0 + m_nl])
+        lam_map = lg[:r0] if r0 else lg[m_nl:]
+        H = ca.diagcat(ca.MX(c0, c0), H_nl, ca.MX(n - n_nl - c0, n - n_nl - c0)) + A.hessian(X, lam_map)
         return ca.Function("nlp_hess_l", [X, P, lf, lg], [H], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
 
     def _nlp_functions(self):
@@ -380,14 +401,16 @@ class CasadiIpoptSolver:
         grad = ca.Function("nlp_grad_f", [x, p], [f, ca.gradient(f, x)], ["x", "p"], ["f", "grad_f_x"])
         if self._assembly is None:
             return nlp, grad
-        n, n_nl = len(self.variables), self._n_nl
+        n, n_nl, c0 = len(self.variables), self._n_nl, self._nl_col0
         X, P = ca.MX.sym("x", n), ca.MX.sym("p", 0)
-        f_nl, g_nl = nlp(X[:n_nl], P)
-        f_g, gf = grad(X[:n_nl], P)
-        return (ca.Function("nlp", [X, P], [f_nl, ca.vertcat(g_nl, self._assembly.rows(X))], ["x", "p"], ["f", "g"]),
+        f_nl, g_nl = nlp(X[c0:c0 + n_nl], P)
+        f_g, gf = grad(X[c0:c0 + n_nl], P)
+        rows = self._assembly.rows(X)
+        g = ca.vertcat(rows, g_nl) if self._nl_row0 else ca.vertcat(g_nl, rows)
+        return (ca.Function("nlp", [X, P], [f_nl, g], ["x", "p"], ["f", "g"]),
                 # dense: casadi hands Ipopt the output buffer as it is, and the structural zeros of a
                 # sparse gradient would be whatever the buffer held (seen: inf_du 1e12 at iteration 0)
-                ca.Function("nlp_grad_f", [X, P], [f_g, ca.densify(ca.vertcat(gf, ca.MX(n - n_nl, 1)))], ["x", "p"],
+                ca.Function("nlp_grad_f", [X, P], [f_g, ca.densify(ca.vertcat(ca.MX(c0, 1), gf, ca.MX(n - n_nl - c0, 1)))], ["x", "p"],
                             ["f", "grad_f_x"]))
 
     def _nl_hessian_function(self):

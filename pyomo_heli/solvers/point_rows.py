@@ -86,27 +86,40 @@ class PointRowsAssembly:
             lc[lc < 0] = n + (-1 - lc[lc < 0])
         self._jacobian_map = self._hessian_map = None
 
+    def shift_columns(self, n_before: int, n_extra: int) -> None:
+        """Move the appended variables to the front: columns < n_before shift up by n_extra, the
+        appended ones (n_before ... n - 1) go to 0 ... n_extra - 1; constants stay after n."""
+        if self._jacobian_map is not None or self._hessian_map is not None:
+            raise RuntimeError("shift the columns before the derivative maps are built")
+        for b in self._blocks:
+            lc = b["leaf_col"]
+            nl, extra = lc < n_before, (lc >= n_before) & (lc < self.n)
+            lc[nl] += n_extra
+            lc[extra] -= n_before
+
     # ---------------------------------------------------------------- pieces
     def _gather(self, X, b):
         ca = self.ca
         x_ext = ca.vertcat(X, ca.DM(self._consts))
         return ca.reshape(x_ext[b["leaf_col"].ravel().tolist()], b["nz"], b["n_pts"])
 
-    def rows(self, X):
-        """g of the evaluated constraints (m x 1) at the NLP vector X (MX, n x 1)."""
+    def _select_rows(self, parts):
+        """The evaluated constraints' rows out of every block's (rows x points) output, in row order."""
         ca = self.ca
-        parts, where = [], np.empty(self.m, dtype=np.int64)
-        offset = 0
+        where, offset = np.empty(self.m, dtype=np.int64), 0
         for b in self._blocks:
-            R = b["F"].map(b["n_pts"])(self._gather(X, b), ca.DM(b["data"]))
-            parts.append(ca.vec(R))
             rr = b["row_of"].ravel()  # point-major, as vec(R) (column-major, one column per point)
             hit = rr >= 0
             where[rr[hit]] = offset + np.flatnonzero(hit)
             offset += b["nr"] * b["n_pts"]
         if not parts:
             return ca.MX(0, 1)
-        return ca.vertcat(*parts)[where.tolist()]
+        return ca.vertcat(*[ca.vec(R) for R in parts])[where.tolist()]
+
+    def rows(self, X):
+        """g of the evaluated constraints (m x 1) at the NLP vector X (MX, n x 1)."""
+        ca = self.ca
+        return self._select_rows([b["F"].map(b["n_pts"])(self._gather(X, b), ca.DM(b["data"])) for b in self._blocks])
 
     def _scatter(self, entries, shape):
         """(rows, cols, weights, local positions) of all local entries -> sparsity and summing matrix."""
@@ -123,12 +136,15 @@ class PointRowsAssembly:
         return sp, summing
 
     def _local_jacobian(self, b):
+        """One point's rows and the structural nonzeros of their Jacobian, as one function (the two
+        share their subexpressions), with the nonzeros' local (row, leaf)."""
         ca = self.ca
         F = b["F"]
         z, d = ca.SX.sym("z", b["nz"]), ca.SX.sym("d", F.size1_in(1))
-        J = ca.jacobian(F(z, d), z)
+        r_z = F(z, d)
+        J = ca.jacobian(r_z, z)
         r, c = J.sparsity().get_triplet()
-        return ca.Function("point_jac", [z, d], [ca.vertcat(*J.nonzeros()) if J.nnz() else ca.SX(0, 1)]), \
+        return ca.Function("point_jac", [z, d], [r_z, ca.vertcat(*J.nonzeros()) if J.nnz() else ca.SX(0, 1)]), \
             np.array(r, dtype=np.int64), np.array(c, dtype=np.int64)
 
     def _local_hessian(self, b):
@@ -140,8 +156,8 @@ class PointRowsAssembly:
         return ca.Function("point_hess", [z, d, lam], [ca.vertcat(*H.nonzeros()) if H.nnz() else ca.SX(0, 1)]), \
             np.array(r, dtype=np.int64), np.array(c, dtype=np.int64)
 
-    def jacobian(self, X):
-        """d(rows)/dX, m x n sparse MX."""
+    def rows_and_jacobian(self, X):
+        """(rows, d(rows)/dX): m x 1 and m x n sparse MX, from one mapped evaluation per block."""
         ca = self.ca
         if self._jacobian_map is None:
             funs, rows, cols, pos, total = [], [], [], [], 0
@@ -162,10 +178,10 @@ class PointRowsAssembly:
             self._jacobian_map = (funs, *self._scatter(entries, (self.m, self.n)))
         funs, sp, summing = self._jacobian_map
         if not funs:
-            return ca.MX(self.m, self.n)
-        local = ca.vertcat(*[ca.vec(f.map(b["n_pts"])(self._gather(X, b), ca.DM(b["data"])))
-                             for f, b in zip(funs, self._blocks)])
-        return ca.MX(sp, ca.mtimes(summing, local))
+            return ca.MX(0, 1), ca.MX(self.m, self.n)
+        outs = [f.map(b["n_pts"])(self._gather(X, b), ca.DM(b["data"])) for f, b in zip(funs, self._blocks)]
+        local = ca.vertcat(*[ca.vec(jnz) for _, jnz in outs])
+        return self._select_rows([r for r, _ in outs]), ca.MX(sp, ca.mtimes(summing, local))
 
     def hessian(self, X, lam):
         """Upper triangle of sum_i lam_i d2(row_i)/dX2, n x n sparse MX; lam: the rows' multipliers (m x 1)."""

@@ -56,6 +56,9 @@ class BenchmarkSettings:
     #: cold point-A solves per size without a front (the median is the size's solve time): one solve on a shared
     #: machine varies by 10-30 % between runs, enough to move the growth exponent by 0.1 (docs/performance.md)
     repeats: int = 1
+    #: also build, set up and solve point A at the first size with every row through the NL file
+    #: (``CasadiIpoptSolver.point_rows = False``, the route before the point-described rows)
+    compare_nl_route: bool = False
     overrides: dict = field(default_factory=dict)  # config table overrides, as load_identification_config
     command: str = ""
 
@@ -176,6 +179,30 @@ def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=pr
     return row
 
 
+def measure_nl_route(cfg, base: IdentificationData, k: int, progress=print) -> dict:
+    """Build, set-up and point A at size k with every row written to the NL file (no point rows)."""
+    from .solvers.casadi_ipopt import CasadiIpoptSolver
+
+    data = repeat_maneuvers(base, k)
+    t0 = time.perf_counter()
+    m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
+    build = time.perf_counter() - t0
+    old = CasadiIpoptSolver.point_rows
+    CasadiIpoptSolver.point_rows = False
+    try:
+        ps = ParetoSolver(m, dataclasses.replace(cfg.pareto, cold_check=False))
+        a = ps.point_a()
+    finally:
+        CasadiIpoptSolver.point_rows = old
+    row = {"size": k, "build_time": build, "setup_time": a.setup_time,
+           "setup_breakdown": dict(getattr(ps.solver, "setup_breakdown", {})), "point_a": _point(a),
+           "a_solve_time": a.wall_time, "a_iterations": a.iterations,
+           "a_solve_breakdown": solve_breakdown(getattr(ps.solver, "last_stats", None), a.wall_time)}
+    progress(f"NL route, size {k}: build {build:.1f} s, set-up {a.setup_time:.1f} s, point A {a.status} in "
+             f"{a.iterations} it, {a.wall_time:.2f} s")
+    return row
+
+
 def compute_ratios(result: dict) -> dict:
     """The issue's ratios from the raw numbers of one run (also used by the test to check the arithmetic)."""
     r = {}
@@ -190,6 +217,10 @@ def compute_ratios(result: dict) -> dict:
                                           if f["interior_cold_iterations"] else None)
         r["warm_over_cold_time"] = f["interior_warm_time"] / f["interior_cold_time"] if f["interior_cold_time"] else None
         r["setup_share_of_front"] = fixed / (fixed + f["solve_time"])
+    nl = result.get("nl_route")
+    if nl and first is not None:
+        r["nl_route_setup_over_point_rows_setup"] = nl["setup_time"] / first["setup_time"]
+        r["nl_route_a_solve_over_point_rows_a_solve"] = nl["a_solve_time"] / first["a_solve_time"]
     ss = result.get("single_shooting")
     if ss and first is not None:
         a_total = first["build_time"] + first["setup_time"] + first["a_solve_time"]
@@ -257,6 +288,9 @@ def run_benchmark(settings: BenchmarkSettings, out: str | Path | None = None, pr
                      f"{'converged' if ss.converged else 'stopped by the simulation cap'}, "
                      f"parameters {ss.parameters}")
             save()
+        if i == 0 and settings.compare_nl_route:
+            result["nl_route"] = measure_nl_route(cfg, base, int(k), progress)
+            save()
     save()
     return result
 
@@ -309,6 +343,14 @@ def format_tables(result: dict) -> str:
                          f"{p['status']} |")
         lines.append(f"| total | | | | {f['iterations']} | {_fmt(f['solve_time'])} | {f['interior_cold_iterations']} "
                      f"(interior) | {_fmt(f['interior_cold_time'])} (interior) | |")
+    nl = result.get("nl_route")
+    if nl:
+        lines += ["", f"The same size with every row through the NL file (no point rows), same process:", "",
+                  "| route | build [s] | set-up [s] | point A solve [s] | A iterations | J_time |", "|---|---|---|---|---|---|"]
+        for name, s in (("point rows (above)", first), ("NL file only", nl)):
+            lines.append(f"| {name} | {_fmt(s['build_time'])} | {_fmt(s['setup_time'])} | {_fmt(s['a_solve_time'])} | "
+                         f"{s['a_iterations']} | {s['point_a']['J_time']:.10g} |")
+        lines.append("\nNL-route set-up [s]: " + ", ".join(f"{k} {_fmt(v)}" for k, v in nl["setup_breakdown"].items()))
     ss = result.get("single_shooting")
     if ss:
         a = first["point_a"]

@@ -4,6 +4,7 @@
     python studies/benchmark.py --shooting solve_ivp          # classic shooting over scipy solve_ivp (slow)
     python studies/benchmark.py --size 1,2,4,8 --no-front --no-shooting --max-duration 1.5 --repeat 3   # scaling
     python studies/benchmark.py --quick                       # seconds; what the test suite runs
+    python studies/benchmark.py --no-shooting --compare-nl-route   # + set-up and point A with every row in the NL file
 
 Prints markdown tables and writes JSON (default results/benchmark.json) after
 every finished part. Bad options exit with status 2 and a one-line message.
@@ -60,6 +61,8 @@ def main(argv=None) -> int:
                     help="stop the single-shooting fit after about this many simulations (0: no cap)")
     ap.add_argument("--repeat", type=int, default=1,
                     help="cold point-A solves per size without a front; the median is the size's solve time")
+    ap.add_argument("--compare-nl-route", action="store_true",
+                    help="also set up and solve point A (first size) with every row through the NL file")
     ap.add_argument("--quick", action="store_true", help="tiny instance in seconds (ignores --config/--size)")
     ap.add_argument("--out", type=Path, default=Path("results") / "benchmark.json", help="JSON output")
     args = ap.parse_args(argv)
@@ -86,7 +89,8 @@ def main(argv=None) -> int:
                                                                                  else sys.argv[1:]))
     settings = BenchmarkSettings(config=config, sizes=sizes, front=not args.no_front, shooting=shooting,
                                  shooting_max_simulations=args.shooting_max_sims or None,
-                                 overrides=overrides, command=command.strip(), repeats=args.repeat)
+                                 overrides=overrides, command=command.strip(), repeats=args.repeat,
+                                 compare_nl_route=args.compare_nl_route)
     try:
         result = run_benchmark(settings, args.out, progress=lambda msg: print(msg, flush=True))
     except ConfigError as exc:

@@ -22,7 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench") / "benchmark.json"
-    proc = subprocess.run([sys.executable, str(ROOT / "studies" / "benchmark.py"), "--quick", "--repeat", "2", "--out", str(out)],
+    proc = subprocess.run([sys.executable, str(ROOT / "studies" / "benchmark.py"), "--quick", "--repeat", "2", "--compare-nl-route",
+                           "--out", str(out)],
                           capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-2000:]
     return json.loads(out.read_text()), proc.stdout
@@ -52,6 +53,18 @@ def test_quick_json_structure(quick):
     assert len(two["a_solve_times"]) == 2 and len(set(two["a_solve_iterations"])) == 1
     assert two["a_solve_time"] == pytest.approx(float(np.median(two["a_solve_times"])))
     assert len(one["a_solve_times"]) == 1  # the front's size: one point A
+    # --compare-nl-route: the same point A with every row through the NL file (the second route to the
+    # same NLP): the same optimum; the ratio of the set-ups is printed. The rows and variables are in
+    # another order there, which can change MUMPS' pivots and so an iteration or two (here 35 and 36).
+    nl = res["nl_route"]
+    assert abs(nl["a_iterations"] - one["a_iterations"]) <= 2 and nl["point_a"]["success"]
+    assert nl["point_a"]["J_time"] == pytest.approx(one["point_a"]["J_time"], rel=1e-9)
+    for n, v in one["point_a"]["parameters"].items():
+        # twist is nearly flat on this 1 s instance: absolute 1e-6 rad/m (its scale is 1 deg/m = 0.017 rad/m)
+        assert nl["point_a"]["parameters"][n] == pytest.approx(v, rel=1e-6, abs=1e-6), n
+    assert nl["setup_breakdown"]["nl_write"] > one["setup_breakdown"]["nl_write"]  # every row in the NL file
+    assert res["ratios"]["nl_route_setup_over_point_rows_setup"] == pytest.approx(nl["setup_time"] / one["setup_time"])
+    assert "NL file only" in stdout
 
 
 def test_quick_ratio_arithmetic(quick):

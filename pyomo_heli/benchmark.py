@@ -59,6 +59,8 @@ class BenchmarkSettings:
     #: also build, set up and solve point A at the first size with every row through the NL file
     #: (``CasadiIpoptSolver.point_rows = False``, the route before the point-described rows)
     compare_nl_route: bool = False
+    #: the whole benchmark with every row through the NL file (``CasadiIpoptSolver.point_rows = False``)
+    nl_route: bool = False
     overrides: dict = field(default_factory=dict)  # config table overrides, as load_identification_config
     command: str = ""
 
@@ -267,9 +269,17 @@ def run_benchmark(settings: BenchmarkSettings, out: str | Path | None = None, pr
             Path(out).parent.mkdir(parents=True, exist_ok=True)
             Path(out).write_text(json.dumps(result, indent=1, default=float))
 
+    from .solvers.casadi_ipopt import CasadiIpoptSolver
+
+    result["route"] = "NL file only" if settings.nl_route else "point rows"
     for i, k in enumerate(settings.sizes):
-        result["sizes"].append(measure_size(cfg, base, int(k), settings.front and i == 0, progress,
-                                            settings.repeats))
+        old = CasadiIpoptSolver.point_rows
+        CasadiIpoptSolver.point_rows = not settings.nl_route
+        try:
+            result["sizes"].append(measure_size(cfg, base, int(k), settings.front and i == 0, progress,
+                                                settings.repeats))
+        finally:
+            CasadiIpoptSolver.point_rows = old
         save()
         if i == 0 and settings.shooting != "none":
             progress(f"single shooting ({settings.shooting}) on size {k} ...")

@@ -63,6 +63,8 @@ def main(argv=None) -> int:
                     help="cold point-A solves per size without a front; the median is the size's solve time")
     ap.add_argument("--compare-nl-route", action="store_true",
                     help="also set up and solve point A (first size) with every row through the NL file")
+    ap.add_argument("--nl-route", action="store_true",
+                    help="every row through the NL file (no point rows), as before 2026-11-24 afternoon")
     ap.add_argument("--quick", action="store_true", help="tiny instance in seconds (ignores --config/--size)")
     ap.add_argument("--out", type=Path, default=Path("results") / "benchmark.json", help="JSON output")
     args = ap.parse_args(argv)
@@ -90,7 +92,7 @@ def main(argv=None) -> int:
     settings = BenchmarkSettings(config=config, sizes=sizes, front=not args.no_front, shooting=shooting,
                                  shooting_max_simulations=args.shooting_max_sims or None,
                                  overrides=overrides, command=command.strip(), repeats=args.repeat,
-                                 compare_nl_route=args.compare_nl_route)
+                                 compare_nl_route=args.compare_nl_route, nl_route=args.nl_route)
     try:
         result = run_benchmark(settings, args.out, progress=lambda msg: print(msg, flush=True))
     except ConfigError as exc:

@@ -173,8 +173,8 @@ class CasadiIpoptSolver:
     #: NL file (solvers/point_rows.py); False: everything through the NL file (kept for comparison)
     point_rows = True
     #: with point rows: their rows and their own variables first, the NL file's after. The NL route
-    #: puts the nonlinear rows and variables (these) first too; with them last, MUMPS took about 30 %
-    #: longer per point-A solve on Case 1 (docs/performance.md)
+    #: puts the nonlinear rows and variables (these) first too; with them last, point A took 13.5 s
+    #: instead of 11.3 s on Case 1, same iterations (MUMPS' pivoting; docs/performance.md)
     point_rows_first = True
 
     def __init__(self, model, options: dict | None = None):
@@ -357,7 +357,7 @@ class CasadiIpoptSolver:
 
     # ------------------------------------------------ with point-described rows
     def _full_jacobian(self, jac_nl):
-        """g and its Jacobian of the whole NLP: the NL part's, then the point-described rows'."""
+        """g and its Jacobian of the whole NLP: the NL part's and the point-described rows', in NLP order."""
         ca, A = self._ca, self._assembly
         n, n_nl, m_nl = len(self.variables), self._n_nl, self._m_nl
         if jac_nl is None:

@@ -170,9 +170,21 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
 
     par = raw.get("pareto", {})
     sol = raw.get("solver", {})
+    unknown = sorted(set(sol) - {"name", "options", "point_rows"})
+    if unknown:
+        raise ConfigError(f"{f} [solver]: unknown key(s) {', '.join(unknown)}; use name, options, point_rows")
     solver = _need(sol, "name", f"{f} [solver]", str, "casadi-ipopt")
     if solver not in SOLVER_NAMES:
         raise ConfigError(f"{f} [solver]: field 'name': unknown solver '{solver}'; choose from {', '.join(SOLVER_NAMES)}")
+    solver_options = dict(_need(sol, "options", f"{f} [solver]", dict, {}))
+    if "point_rows" in solver_options:
+        raise ConfigError(f"{f} [solver]: point_rows is a [solver] field, not an Ipopt option")
+    if not _need(sol, "point_rows", f"{f} [solver]", bool, True):
+        # every row through the NL file (docs/performance.md, "What was done" 8)
+        if solver != "casadi-ipopt":
+            raise ConfigError(f"{f} [solver]: field 'point_rows' applies to casadi-ipopt only (the AMPL solvers "
+                              f"read every row from the NL file anyway)")
+        solver_options["point_rows"] = False
     points = _need(par, "points", f"{f} [pareto]", int, 11)
     if points < 2:
         raise ConfigError(f"{f} [pareto]: field 'points': the epsilon grid needs at least 2 points (the anchors), "
@@ -182,7 +194,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
                                 warm_start=_need(par, "warm_start", f"{f} [pareto]", str, "continuation"),
                                 cold_check=bool(_need(par, "cold_check", f"{f} [pareto]", bool, False)),
                                 predictor=_need(par, "predictor", f"{f} [pareto]", str, "secant"),
-                                solver=solver, solver_options=dict(_need(sol, "options", f"{f} [solver]", dict, {})))
+                                solver=solver, solver_options=solver_options)
     except ValueError as exc:
         raise ConfigError(f"{f} [pareto]: {exc}") from None
     use, linear = _objectives_use(raw, f)

@@ -93,3 +93,29 @@ def test_point_a_is_the_same_solve():
     assert out[True][1] == pytest.approx(out[False][1], rel=1e-9)
     for n, v in out[False][2].items():
         assert out[True][2][n] == pytest.approx(v, rel=1e-6), n
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[solver]\npoint_rows = false\n", None),
+    ("[solver]\nname = \"pounce\"\npoint_rows = false\n", "point_rows' applies to casadi-ipopt only"),
+    ("[solver]\npoint_row = false\n", "unknown key\\(s\\) point_row"),
+    ("[solver]\noptions = { point_rows = false }\n", "point_rows is a \\[solver\\] field"),
+    ("[solver]\npoint_rows = 0\n", "'point_rows' must be bool"),
+])
+def test_solver_point_rows_setting(tmp_path, text, message):
+    """`[solver] point_rows = false` sends every row through the NL file; wrong uses are named."""
+    from pyomo_heli.config import ConfigError
+
+    src = CONFIGS["input_errors"].read_text().replace("../../data", str(HERE.parent / "data"))
+    assert '[solver]\nname = "casadi-ipopt"' in src
+    f = tmp_path / "c.toml"
+    f.write_text(src.replace('[solver]\nname = "casadi-ipopt"', text))
+    if message is not None:
+        with pytest.raises(ConfigError, match=message):
+            load_identification_config(f)
+        return
+    cfg = load_identification_config(f)
+    m, _, _ = build_problem(cfg)
+    solver = ParetoSolver(m, cfg.pareto).solver
+    assert solver.point_rows is False and solver._assembly is None
+    assert "point_rows" not in solver.options  # not handed to Ipopt

@@ -189,6 +189,8 @@ class CasadiIpoptSolver:
         self._ca = casadi
         self.model = model
         self.options = dict(options or {})
+        if "point_rows" in self.options:  # our own switch, not an Ipopt option ([solver] point_rows)
+            self.point_rows = bool(self.options.pop("point_rows"))
         self._pending_setup = 0.0
         #: seconds spent per set-up stage, summed over rebuilds (for the benchmark)
         self.setup_breakdown = {"nl_write": 0.0, "casadi_import": 0.0, "expand": 0.0, "point_rows": 0.0,

@@ -16,6 +16,7 @@ from typing import Mapping
 import numpy as np
 import pyomo.dae as dae
 import pyomo.environ as pyo
+from pyomo.core.base.var import VarData
 
 from ..physics.model import FLAPPING, INPUTS, SHARED, STATES, HelicopterModel, evaluate
 from ..physics.ops import get_ops
@@ -127,15 +128,16 @@ def _point_rows(blk, model, pmap, start, states, out_names, channels, err_where)
     times, samples = list(blk.t), set(blk.samples)
     t0 = times[0]
     free = [n for n in pmap if not isinstance(pmap[n], (int, float))]
-    if set(free) - set(pmap.free):
-        return None  # a parameter that is neither a number nor scale * Var: the NL route only
+    linear = getattr(pmap, "free", {})  # name -> (Var, scale) for the ParameterMap of add_parameters
+    if set(free) - set(linear) or not all(isinstance(getattr(start, k), (int, float, VarData)) for k in INPUTS):
+        return None  # a parameter or start input that is neither a number nor (scale times) a Var: NL route only
     leaf_names = (tuple(f"x:{s}" for s in states) + tuple(f"dx:{s}" for s in states)
                   + tuple(f"beta:{b}" for b in FLAPPING) + tuple(f"y:{k}" for k in out_names)
                   + tuple(f"base:{k}" for k in INPUTS) + tuple(f"err_{a}:{k}" for k in channels for a in "ab")
                   + tuple(f"p:{n}" for n in free))
     data_names = tuple(f"du:{k}" for k in INPUTS) + tuple(f"w:{k}" for k in channels)
     fixed = {n: float(pmap[n]) for n in pmap if n not in free}
-    scale = {n: pmap.free[n][1] for n in free}
+    scale = {n: linear[n][1] for n in free}
     extensions = model.extensions
 
     def make_function(ca):
@@ -168,7 +170,7 @@ def _point_rows(blk, model, pmap, start, states, out_names, channels, err_where)
         pr.leaves.append([blk.x[s, t] for s in states] + [blk.dx[s, t] for s in states]
                          + [blk.beta[b, t] for b in FLAPPING]
                          + [blk.y[k, t] if t in samples else 0.0 for k in out_names]
-                         + [getattr(start, k) for k in INPUTS] + errs + [pmap.free[n][0] for n in free])
+                         + [getattr(start, k) for k in INPUTS] + errs + [linear[n][0] for n in free])
         pr.data_values.append([blk.du[k, t] for k in INPUTS] + [err_where[t][2] for k in channels])
         if t != t0:
             pr.rows += [(blk.ode[s, t], i, j) for j, s in enumerate(states)]

@@ -21,6 +21,10 @@ import numpy as np
 import pyomo.environ as pyo
 
 
+def _cat(arrays, dtype=np.int64) -> np.ndarray:
+    return np.concatenate(arrays).astype(dtype) if arrays else np.zeros(0, dtype)
+
+
 def find_point_rows(model) -> list:
     """The active blocks of ``model`` that describe their rows point by point."""
     found = []
@@ -171,11 +175,8 @@ class PointRowsAssembly:
                 rows.append(g_row[ok]); cols.append(g_col[ok]); pos.append(local_pos[ok])
                 funs.append(f)
                 total += k * b["n_pts"]
-            entries = (np.concatenate(rows) if rows else np.zeros(0, np.int64),
-                       np.concatenate(cols) if cols else np.zeros(0, np.int64), None,
-                       np.concatenate(pos) if pos else np.zeros(0, np.int64), total)
-            entries = entries[:2] + (np.ones(len(entries[0])),) + entries[3:]
-            self._jacobian_map = (funs, *self._scatter(entries, (self.m, self.n)))
+            rows, cols, pos = (_cat(a) for a in (rows, cols, pos))
+            self._jacobian_map = (funs, *self._scatter((rows, cols, np.ones(len(rows)), pos, total), (self.m, self.n)))
         funs, sp, summing = self._jacobian_map
         if not funs:
             return ca.MX(0, 1), ca.MX(self.m, self.n)
@@ -202,9 +203,7 @@ class PointRowsAssembly:
                 rows.append(i[ok]); cols.append(j[ok]); weights.append(w[ok]); pos.append(local_pos[ok])
                 funs.append(f)
                 total += k * b["n_pts"]
-            cat = (lambda a: np.concatenate(a) if a else np.zeros(0))
-            entries = (cat(rows).astype(np.int64), cat(cols).astype(np.int64), cat(weights),
-                       cat(pos).astype(np.int64), total)
+            entries = (_cat(rows), _cat(cols), _cat(weights, float), _cat(pos), total)
             self._hessian_map = (funs, *self._scatter(entries, (self.n, self.n)))
         funs, sp, summing = self._hessian_map
         if not funs:

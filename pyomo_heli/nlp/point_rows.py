@@ -1,6 +1,6 @@
 """The physics rows of a collocation block, described point by point for a compiling solver.
 
-Why: a maneuver block repeats the same physics at every collocation point (about 10,000 points in
+Why: a maneuver block repeats the same physics at every collocation point (6,610 points in
 Case 1). Written to an NL file and imported, that is one large expression graph whose derivatives
 casadi works out symbolically for the whole graph: most of the solver set-up (docs/performance.md).
 Described as *one function of the point's own variables, mapped over the points*, the derivatives

@@ -94,6 +94,10 @@ def evaluate(name: str, loop: Path, config: Path) -> dict:
     for n in PARAMETERS:
         e0, e1 = (100 * (it["parameters"][n] - truth[n]) / abs(truth[n]) for it in (i0, i1))
         row[f"{n} err0 %"], row[f"{n} err1 %"] = e0, e1
+        # the loop's own standard error at the last iteration (None: not computed or at a bound)
+        se = (i1.get("standard_errors") or {}).get(n)
+        row[f"{n} SE1 %"] = 100 * se / abs(truth[n]) if se else float("nan")
+        row[f"{n} err1/SE"] = (i1["parameters"][n] - truth[n]) / se if se else float("nan")
     row["wake first"] = first == WAKE
     row["trim -50 %"] = row["pooled trim change %"] <= -50.0
     row["no val rise"] = all(row[f"val {o} change %"] <= 0.0 for o in VALIDATION_OUTPUTS)
@@ -123,6 +127,12 @@ def markdown(tab: pd.DataFrame) -> str:
     lines += ["| " + " | ".join(fmt(v) for v in r) + " |" for r in short.itertuples(index=False)]
     lines += ["", "| criterion | realisations meeting it |", "|---|---|"]
     lines += [f"| {c} | {int(tab[c].sum())} of {len(tab)} |" for c in CRITERIA]
+    lines += ["", "Last iteration against truth in the loop's own standard errors (`standard_errors` of loop.json):",
+              "", "| realisation | " + " | ".join(f"{n} err % / SE % / err/SE" for n in PARAMETERS) + " |",
+              "|---|" + "---|" * len(PARAMETERS)]
+    lines += ["| " + str(r["realisation"]) + " | "
+              + " | ".join(f"{r[f'{n} err1 %']:+.2f} / {r[f'{n} SE1 %']:.2f} / {r[f'{n} err1/SE']:+.2f}" for n in PARAMETERS)
+              + " |" for _, r in tab.iterrows()]
     rises = [f"{r['realisation']}: {o} {r[f'val {o} change %']:+.2f} % (p = {r[f'val {o} p(rise)']:.3g})"
              for _, r in tab.iterrows() for o in VALIDATION_OUTPUTS if r[f"val {o} change %"] > 0]
     lines += ["", "Validation rises (data minus model, paired test p of the rise): " + ("; ".join(rises) or "none")]

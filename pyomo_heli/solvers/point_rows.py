@@ -105,8 +105,8 @@ class PointRowsAssembly:
 
     # ---------------------------------------------------------------- pieces
     def _extended(self, X):
-        """[X; constants]: what the leaves' columns index (made once per evaluation, not per block:
-        a copy of X per block cost 7.6 ms of a 27 ms Jacobian evaluation with 80 blocks)."""
+        """[X; constants]: what the leaves' columns index (made once per evaluation, not once per
+        block: it copies X)."""
         return self.ca.vertcat(X, self.ca.DM(self._consts))
 
     def _gather(self, x_ext, b):
@@ -137,8 +137,8 @@ class PointRowsAssembly:
         Most global nonzeros have one local entry of weight 1 (every Jacobian entry of a row: a row
         belongs to one point); they are picked by one gather. The few that add several entries up
         (a parameter's Hessian entries, summed over every point) or carry a weight go through a
-        small sparse matrix over only the entries they need: one matrix over all local entries
-        cost 0.035 s per evaluation at 0.5 million entries, most of a Jacobian evaluation.
+        small sparse matrix over only the entries they need (one matrix over all local entries was
+        the costliest step of a Jacobian evaluation; docs/performance.md, "What was done" 9).
         """
         ca = self.ca
         rows, cols, weights, pos, n_local = entries

@@ -132,13 +132,14 @@ class PointRowsAssembly:
         return self._select_rows([b["F"].map(b["n_pts"])(self._gather(x_ext, b), ca.DM(b["data"])) for b in self._blocks])
 
     def _scatter(self, entries, shape):
-        """(rows, cols, weights, local positions) of all local entries -> (sparsity, gather, summing).
+        """(rows, cols, weights, local positions) of all local entries -> (sparsity, how), where
+        ``how`` = (gather indices, summed part or None) is what :meth:`_combine` needs (None: no entries).
 
         Most global nonzeros have one local entry of weight 1 (every Jacobian entry of a row: a row
         belongs to one point); they are picked by one gather. The few that add several entries up
         (a parameter's Hessian entries, summed over every point) or carry a weight go through a
-        small sparse matrix over only the entries they need (one matrix over all local entries was
-        the costliest step of a Jacobian evaluation; docs/performance.md, "What was done" 9).
+        small sparse matrix over only the entries they need, instead of one sparse product over all
+        local entries at every evaluation (docs/performance.md, "What was done" 9).
         """
         ca = self.ca
         rows, cols, weights, pos, n_local = entries

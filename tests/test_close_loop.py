@@ -94,6 +94,20 @@ def test_m0_with_noise_accepts_nothing(tmp_path):
     assert att.signature  # the residual's signature is reported instead
 
 
+@pytest.mark.parametrize("seed", [21, 31, 41])
+def test_m0_with_noise_accepts_nothing_with_input_errors(tmp_path, seed):
+    """The false-positive control with the measured inputs' errors estimated ([objectives] input_errors,
+    sigmas from the records' quiet lead-in): on M0 data with noise only, still no candidate is accepted."""
+    loop = '\n[objectives]\ninput_errors = ["col", "lon"]\n'
+    cfg = make_case(tmp_path, seed=seed, free=("theta_twist", "CL_alpha_HT"), points=2, loop=loop,
+                    maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+    assert cfg.nlp.input_errors == ("col", "lon")
+    att = identify_and_attribute(cfg, tmp_path / "out")
+    print(att)
+    assert att.decision == "none" and att.accepted is None
+    assert att.scores["LM"].max() < att.threshold
+
+
 def test_rigging_only_leads_to_rigging(tmp_path):
     cfg = make_case(tmp_path, "[truth.effects.lon_rigging]\ndelta_lon = 0.005236\n", seed=22,
                     free=("theta_twist", "CL_alpha_HT"), points=2)

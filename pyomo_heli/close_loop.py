@@ -65,6 +65,9 @@ class LoopSettings:
     point: str = "direct"
     shape: str = "time_domain"
     uncertainty: str = "chosen"
+    #: with [objectives] input_errors: the score test eliminates the input errors ("eliminated") or takes the
+    #: measured inputs as exact ("measured", the test of the loops before 2026-11-24 evening)
+    score_inputs: str = "eliminated"
 
 
 def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
@@ -110,6 +113,11 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
         if raw["uncertainty"] not in ("chosen", "none"):
             raise ConfigError(f"{where}: field 'uncertainty' must be \"chosen\" or \"none\", got {raw['uncertainty']!r}")
         s.uncertainty = raw["uncertainty"]
+    if "score_inputs" in raw:
+        if raw["score_inputs"] not in ("eliminated", "measured"):
+            raise ConfigError(f"{where}: field 'score_inputs' must be \"eliminated\" or \"measured\", got "
+                              f"{raw['score_inputs']!r}")
+        s.score_inputs = raw["score_inputs"]
     if "robust" in raw:
         if not isinstance(raw["robust"], bool):
             raise ConfigError(f"{where}: field 'robust' must be true or false, got {raw['robust']!r}")
@@ -299,6 +307,14 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=print) ->
     return {"status": status, "verdict": d.verdict, "findings": d.findings}
 
 
+def _score_inputs(cfg: IdentificationConfig, settings: LoopSettings) -> dict:
+    """The score test's errors-in-variables arguments: the NLP's input errors and sigmas, unless the loop
+    takes the measured inputs as exact (``[loop] score_inputs = "measured"``) or there are none."""
+    if settings.score_inputs == "measured" or not cfg.nlp.input_errors:
+        return {}
+    return {"input_errors": cfg.nlp.input_errors, "noise_sigma": cfg.nlp.noise_sigma}
+
+
 def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = None, progress=print) -> dict:
     """Run the loop; returns the content of ``loop.json`` (also written after every iteration)."""
     settings = settings or loop_settings(cfg)
@@ -334,7 +350,8 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
         if left:
             att = attr.attribute(model, [f.name for f in cfg.free], id_data, cfg.nlp.time_outputs,
                                  cfg.nlp.trim_outputs, candidates=left, alpha=settings.alpha, ratio=settings.ratio,
-                                 confound_corr=settings.confound_corr, robust=settings.robust)
+                                 confound_corr=settings.confound_corr, robust=settings.robust,
+                                 **_score_inputs(cfg, settings))
             progress(str(att))
         doc["iterations"].append({
             "iteration": i, "extensions": names, "results_dir": f"iter_{i}",

@@ -22,9 +22,17 @@ sign gives p = 1, otherwise p = chi2.sf(LM)/2.
 
 Decision rule (documented in docs/model.md):
 - significant: p < alpha / n_candidates (Bonferroni over the library,
-  alpha = 0.01 by default: with 10 candidates LM > 10.8);
-- accepted: the top candidate is significant and its LM is at least
+  alpha = 0.01 by default: with 10 candidates and the white test LM > 10.8);
+- accepted: the top candidate (by LM) is significant and its LM is at least
   ``ratio`` (default 2) times the runner-up's;
+- robust (default): the score's variance by batch means over segments
+  instead of F; that estimate has few degrees of freedom on short records
+  (about one per segment the candidate's signal occupies), so LM is referred
+  to F(1, df) with Satterthwaite's df = F^2 / sum_s F_s^2 - 1 (F_s: segment
+  s's share of F) instead of chi-square(1). The df decides significance only;
+  the ranking and the ratio rule stay on LM, the squared signal-to-noise of
+  the one-step estimate (far in the tail, F(1, df) would rank a strong effect
+  measured over few segments below a weaker one measured over many);
 - confounded: top and runner-up within that ratio and their projected
   sensitivity directions correlate (|rho| >= ``confound_corr``, 0.7): the
   data cannot separate them, both are reported, none is picked;
@@ -46,9 +54,11 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import pandas as pd
 from scipy import stats
+from scipy.linalg import cholesky, solve_triangular
 
 from ..physics.model import HelicopterModel
-from ..simulation.compiled import simulate_outputs
+from ..nlp.objectives import lead_in_sigma
+from ..simulation.compiled import input_sensitivities, simulate_outputs
 from ..simulation.sensitivity import sensitivities
 from ..simulation.trim import trim_float
 from .candidates import CANDIDATES, make_candidate
@@ -64,10 +74,12 @@ SEGMENT_S = 1.0
 class Attribution:
     """The outcome of one attribution: a score table and a decision.
 
-    ``scores``: one row per candidate (name, strength, LM, p_value,
-    significant, kappa_hat, kept = F_proj/F_raw, like = the identified
-    parameter its raw sensitivity correlates with most, like_corr,
-    trim_share = part of F_proj coming from the trims), sorted by LM.
+    ``scores``: one row per candidate (name, strength, LM, df = degrees of
+    freedom of the batch-means variance (inf for the white test), LM_needed =
+    the LM at which it would be significant, p_value, significant,
+    kappa_hat, kept = F_proj/F_raw, like = the identified parameter its raw
+    sensitivity correlates with most, like_corr, trim_share = part of F_proj
+    coming from the trims), sorted by LM (wrong-sign one-sided scores last).
     ``decision``: accepted | confounded | ambiguous | none.
     """
 
@@ -99,9 +111,9 @@ class Attribution:
         return self.scores.set_index("name").loc[self.accepted].to_dict()
 
     def __str__(self) -> str:
-        cols = ["name", "LM", "p_value", "significant", "kappa_hat", "kept", "like", "like_corr", "trim_share"]
-        lines = [f"score test: significant when p < {self.alpha:g}/{len(self.scores)} (LM > {self.threshold:.3g}); "
-                 f"accept when LM >= {self.ratio:g} x runner-up",
+        cols = ["name", "LM", "df", "LM_needed", "p_value", "significant", "kappa_hat", "kept", "like", "like_corr", "trim_share"]
+        lines = [f"score test: significant when p < {self.alpha:g}/{len(self.scores)} (LM > LM_needed; "
+                 f"{self.threshold:.3g} for chi-square(1)); accept when LM >= {self.ratio:g} x runner-up's",
                  self.scores[cols].to_string(index=False, float_format=lambda x: f"{x:.4g}"),
                  f"decision: {self.decision}: {self.message}"]
         return "\n".join(lines)
@@ -195,9 +207,58 @@ def segment_ids(data, time_outputs, n_trims: int, trim_outputs, segment_s: float
     return np.concatenate([time_ids] * len(time_outputs) + [trim_ids] * len(trim_outputs))
 
 
+def _input_error_whitening(model: HelicopterModel, data, time_outputs, w, seg, input_errors, noise_sigma,
+                           substeps: int):
+    """Whitening of the stacked rows when the measured inputs are noisy (errors in variables).
+
+    The NLP estimates one error per input sample with known sigmas; to first order, eliminating those
+    errors leaves the time residuals of maneuver m with covariance ``V_m = R + S_u Sigma_u S_u^T``
+    (``S_u``: exact output sensitivities to every input sample, ``R`` and ``Sigma_u`` the known sensor
+    variances, from ``noise_sigma`` or the records' lead-in as the NLP takes them). Its lower Cholesky
+    factor with the rows in time order (all outputs of sample k before sample k+1) whitens them as
+    innovations: whitened row k depends on samples up to k only, so the batch means over time segments
+    stay local. Trim rows keep their weights ``w``. Returns ``(whiten, seg)``: the function applied to
+    every stacked vector or column block, and each whitened row's segment.
+    """
+    sigma = dict(noise_sigma or {})
+    need = [c for c in (*time_outputs, *input_errors) if c not in sigma]
+    sigma.update(lead_in_sigma(data.maneuvers, need) if need else {})
+    n_out = len(time_outputs)
+    n_per = [len(mv.data) for mv in data.maneuvers]
+    n_time = sum(n_per)
+    starts = np.cumsum([0] + n_per)
+    blocks, seg = [], seg.copy()
+    for i, mv in enumerate(data.maneuvers):
+        t = mv.data["t"].to_numpy()
+        _, S_u = input_sensitivities(model, trim_float(model, mv.trim_speed), t, mv.increments(), time_outputs,
+                                     input_errors, substeps)
+        n = len(t)
+        # stacked row of (sample k, output j), time order
+        idx = (np.arange(n_out)[None, :] * n_time + starts[i] + np.arange(n)[:, None]).ravel()
+        Su = np.empty((n * n_out, len(input_errors) * n))
+        for j, o in enumerate(time_outputs):
+            Su[j::n_out] = S_u[o]
+        var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
+        V = (Su * var_u) @ Su.T
+        V[np.diag_indices_from(V)] += np.tile([float(sigma[o]) ** 2 for o in time_outputs], n)
+        blocks.append((idx, cholesky(V, lower=True)))
+        seg[idx] = seg[starts[i] + np.arange(n)].repeat(n_out)
+    time_rows = n_out * n_time
+    sw_trim = np.sqrt(w[time_rows:])
+
+    def whiten(x):
+        out = np.empty_like(x, dtype=float)
+        for idx, L in blocks:
+            out[idx] = solve_triangular(L, x[idx], lower=True)
+        out[time_rows:] = x[time_rows:] * (sw_trim[:, None] if x.ndim == 2 else sw_trim)
+        return out
+    return whiten, seg
+
+
 def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outputs, candidates=None,
               alpha: float = ALPHA, ratio: float = RATIO, confound_corr: float = CONFOUND_CORR,
-              substeps: int = 2, robust: bool = True, segment_s: float = SEGMENT_S) -> Attribution:
+              substeps: int = 2, robust: bool = True, segment_s: float = SEGMENT_S, input_errors=(),
+              noise_sigma: dict | None = None) -> Attribution:
     """Score every candidate (default: the whole library minus those already in ``model``).
 
     ``model`` carries the identified values; ``identified`` are the free
@@ -205,6 +266,10 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
     ``robust``: also project off the input-offset nuisance of every maneuver and estimate the
     score's variance by batch means over ``segment_s`` stretches (coloured residuals); False gives
     the plain white-noise score test of model_spec.md 4.8.
+    ``input_errors``, ``noise_sigma``: the NLP's errors-in-variables settings (``NLPOptions``). With input
+    errors the time residuals are weighted by the covariance the measured inputs' noise gives them,
+    ``V_m = R + S_u,m Sigma_u S_u,m^T`` per maneuver (the input errors eliminated, module docstring),
+    instead of by their mean squares.
     """
     have = {e.name for e in model.extensions}
     names = [n for n in (candidates or list(CANDIDATES)) if n not in have]
@@ -226,42 +291,57 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
             s = sensitivities(full, [c.strength], rel_step=c.score_step / scale, **common)
             cols[c.strength] = _stack(s, time_outputs, trim_outputs, 0)
     e, w, groups = residual_vector(base, data, time_outputs, trim_outputs)
-    sw = np.sqrt(w)
     n_trim = sum(sl.stop - sl.start for lbl, sl in groups if lbl.startswith("trim"))
+    seg = segment_ids(data, time_outputs, len(speeds), trim_outputs, segment_s)
     if robust:
         nuis = input_offset_columns(full, data, time_outputs, n_trim, substeps)
         S_proj = np.hstack([S, nuis])
-        seg = segment_ids(data, time_outputs, len(speeds), trim_outputs, segment_s)
     else:
         S_proj = S
-    A, ew = S_proj * sw[:, None], e * sw
+    if tuple(input_errors) and time_outputs:
+        whiten, seg = _input_error_whitening(full, data, time_outputs, w, seg, tuple(input_errors), noise_sigma,
+                                             substeps)
+    else:
+        sw = np.sqrt(w)
+
+        def whiten(x):
+            return x * (sw[:, None] if x.ndim == 2 else sw)
+    A, ew = whiten(S_proj), whiten(e)
     n_id = S.shape[1]
     trim_rows = slice(len(e) - n_trim, len(e))
 
     proj, rows = {}, []
+    n_cands = len(cands)
     for c in cands:
-        b = cols[c.strength] * sw
+        b = whiten(cols[c.strength])
         coef, *_ = np.linalg.lstsq(A, b, rcond=None) if A.shape[1] else (np.zeros(0),)
         bt = b - A @ coef
         F, F_raw = float(bt @ bt), float(b @ b)
         g = float(bt @ ew)
         kappa = g / F if F > 0 else 0.0
+        df = np.inf
         if robust and F > 0:
             # batch means: sum the score contributions per segment; residual with the candidate's fit removed
             u = bt * (ew - kappa * bt)
             var = float(np.sum(np.bincount(seg, weights=u) ** 2))
             lm = g * g / var if var > 0 else 0.0
+            # the variance estimate is a weighted sum of one chi-square(1) per segment, weights = the segments'
+            # shares of F: its effective degrees of freedom (Satterthwaite), less one for kappa_hat
+            v = np.bincount(seg, weights=bt * bt)
+            df = max(F * F / float(np.sum(v * v)) - 1.0, 1.0)
         else:
             lm = g * g / F if F > 0 else 0.0
-        if c.one_sided and kappa < 0:
-            p = 1.0
-        else:
-            p = float(stats.chi2.sf(lm, 1)) * (0.5 if c.one_sided else 1.0)
+        ref = stats.f(1, df) if np.isfinite(df) else stats.chi2(1)
+        half = 0.5 if c.one_sided else 1.0
+        p = 1.0 if c.one_sided and kappa < 0 else float(ref.sf(lm)) * half
+        # the LM this candidate needs to be significant (its own df; one-sided: the two-sided quantile of 2 x level)
+        lm_needed = float(ref.isf(alpha / n_cands / half))
         corr_id = [abs(float(b @ A[:, k]) / np.sqrt(max(F_raw * float(A[:, k] @ A[:, k]), 1e-300)))
                    for k in range(n_id)]
         k_like = int(np.argmax(corr_id)) if corr_id else None
         proj[c.name] = bt
-        rows.append({"name": c.name, "strength": c.strength, "LM": lm, "p_value": p, "kappa_hat": kappa,
+        rows.append({"name": c.name, "strength": c.strength, "LM": lm, "df": df, "LM_needed": lm_needed, "p_value": p,
+                     "kappa_hat": kappa,
                      "kept": F / F_raw if F_raw > 0 else 0.0,
                      "like": list(identified)[k_like] if k_like is not None else "",
                      "like_corr": corr_id[k_like] if k_like is not None else 0.0,
@@ -271,7 +351,8 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
     level = alpha / n
     scores = pd.DataFrame(rows)
     scores["significant"] = scores["p_value"] < level
-    # rank by evidence; a wrong-sign one-sided score has no evidence
+    # rank by evidence = LM (the squared signal-to-noise of the one-step estimate); a wrong-sign one-sided
+    # score has none. Significance comes from the p-value (its own df), the ranking and the ratio rule from LM.
     scores["evidence"] = np.where(scores["p_value"] < 1.0, scores["LM"], 0.0)
     scores = scores.sort_values("evidence", ascending=False).reset_index(drop=True)
 
@@ -288,12 +369,13 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
     if not top.significant:
         decision = "none"
         signature = _signature(e, w, groups)
-        message = (f"no candidate significant (largest LM {top.evidence:.3g} for {top['name']} < {threshold:.3g}); "
+        message = (f"top candidate not significant ({top['name']}: LM {top.evidence:.3g}, p = {top.p_value:.2g} >= "
+                   f"{level:.2g}, needs LM > {top.LM_needed:.3g} with df {top.df:.3g}); "
                    "any remaining residual is unexplained by the library, signature attached")
     elif second is None or second.evidence * ratio <= top.evidence:
         decision, accepted = "accepted", str(top["name"])
         runner = f"; runner-up {second['name']} LM {second.evidence:.3g}" if second is not None else ""
-        message = (f"{top['name']} LM {top.evidence:.3g} (p = {top.p_value:.2g}){runner}; "
+        message = (f"{top['name']} LM {top.evidence:.3g} (df {top.df:.3g}, p = {top.p_value:.2g}){runner}; "
                    f"estimated {top.strength} = {top.kappa_hat:.4g}")
         if top.kept < ABSORBED:
             message += (f"; note: {100 * (1 - top.kept):.0f} % of its signal is absorbed by the identified "

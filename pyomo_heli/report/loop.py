@@ -230,10 +230,14 @@ def write_loop_report(out, cfg) -> Path:
         if a is None:
             L += ["No candidate left to score.", ""]
             continue
-        sc = pd.DataFrame(a["scores"])[["name", "strength", "LM", "p_value", "significant", "kappa_hat", "kept",
-                                         "like", "like_corr", "trim_share"]]
-        L += [f"Score test (significant when p < {a['alpha']:g}/{len(sc)}, i.e. LM > {a['threshold']:.3g}; accepted "
-              f"when LM >= {a['ratio']:g} x runner-up; confounded when projected |rho| >= {a['confound_corr']:g}):", "",
+        sc = pd.DataFrame(a["scores"])
+        # loops written before the df column referred every LM to chi-square(1)
+        with_df = "df" in sc
+        sc = sc[[c for c in ("name", "strength", "LM", "df", "LM_needed", "p_value", "significant", "kappa_hat", "kept",
+                             "like", "like_corr", "trim_share") if c in sc]]
+        need = ("LM > LM_needed, its own F(1, df) quantile" if with_df else f"LM > {a['threshold']:.3g}")
+        L += [f"Score test (significant when p < {a['alpha']:g}/{len(sc)}, i.e. {need}; accepted "
+              f"when LM >= {a['ratio']:g} x runner-up's; confounded when projected |rho| >= {a['confound_corr']:g}):", "",
               markdown_table(sc, digits=4), "", f"**Decision: {a['decision']}** - {a['message']}", ""]
         if a.get("confounded_pairs"):
             L += ["Confounded pairs among the significant candidates (projected correlation): "

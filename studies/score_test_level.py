@@ -1,0 +1,142 @@
+"""How often does the loop's score test fire when no effect is missing? Monte Carlo on small M0 instances.
+
+    python studies/score_test_level.py --seeds 101-140 --out results/score_test_level [--identification eiv|oe]
+
+Every seed generates the small wake instance's flight test of tests/test_close_loop.py (a 20 kt lon doublet
+and an 80 kt lon 3-2-1-1 for identification, 6 s each with a 2 s lead-in, 11 level trims; 80 kt validation
+doublet unused) from **M0 with sensor noise only**, so every candidate's true strength is zero. It
+identifies twist and CL_alpha_HT (2 front points, the Eq. 11 point solved directly, as the loop diagnoses),
+with the measured col and lon errors estimated (``--identification eiv``, the default:
+``[objectives] input_errors``, sigmas from the 1.9 s lead-in) or without (``oe``), and scores the whole
+candidate library at that point (:func:`pyomo_heli.diagnosis.attribution.attribute`, robust) twice: with
+the inputs taken as exact (``measured``) and, for ``eiv``, with the input errors eliminated
+(``eliminated``). Each seed's scores go to ``OUT/<identification>/seed_<n>.json`` as it finishes (a rerun
+reuses them).
+
+Printed: per score mode, over all (seed, candidate) pairs, the fraction of p-values below 0.05, 0.01 and
+0.001 (with a correct null distribution about 5, 1 and 0.1 %; a one-sided candidate's p is half the
+two-sided one, or 1 for the wrong sign), the median degrees of freedom of the batch-means variance, the
+number of seeds with a candidate significant at the loop's level (alpha = 0.01 over the 10 candidates)
+and the number on which the loop would have accepted one (with the ratio rule); each twice: with the
+loop's reference F(1, df) and with the same LM referred to chi-square(1), the reference before the df
+correction (rows "chi2(1)"; the ratio rule is not re-evaluated there). The candidates'
+scores within one seed are correlated, so the pairs are not independent draws.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tests"))
+
+import test_close_loop as T  # noqa: E402  (the instances are defined with the tests)
+
+from pyomo_heli.config import load_identification_config  # noqa: E402
+from pyomo_heli.dataset import load_flight_test  # noqa: E402
+from pyomo_heli.diagnosis.attribution import SEGMENT_S, Attribution, attribute  # noqa: E402
+from pyomo_heli.diagnosis.candidates import make_candidate  # noqa: E402
+from pyomo_heli.identify import run_identification  # noqa: E402
+from pyomo_heli.nlp.identification import prepare_data  # noqa: E402
+
+EIV = '\n[objectives]\ninput_errors = ["col", "lon"]\n'
+
+
+def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, segment_s: float = SEGMENT_S) -> dict:
+    f = out / (f"seed_{seed}.json" if segment_s == SEGMENT_S else f"seed_{seed}_segment_{segment_s:g}.json")
+    root = out / f"work_{seed}"
+    if f.is_file() and not rescore:
+        return json.loads(f.read_text())
+    if (out / f"seed_{seed}.json").is_file():
+        f0 = out / f"seed_{seed}.json"
+        # score again at the saved identified point (the score test changed, the identification did not)
+        cfg = load_identification_config(root / "ident.toml")
+        point = {"parameters": json.loads(f0.read_text())["parameters"]}
+    else:
+        cfg = T.make_case(root, seed=seed, free=("theta_twist", "CL_alpha_HT"), points=2,
+                          loop=EIV if identification == "eiv" else "", maneuvers=T.WAKE_MANEUVERS,
+                          input_reference_s=1.9)
+        res = run_identification(cfg, root / "ident", progress=lambda s: None)
+        point = res.direct if res.direct and res.direct.get("success") else res.chosen
+    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration,
+                        cfg.input_reference_s)
+    model = cfg.model.with_parameters(**point["parameters"])
+    doc = {"seed": seed, "identification": identification, "parameters": point["parameters"], "modes": {}}
+    modes = {"measured": {}}
+    if identification == "eiv":
+        modes["eliminated"] = dict(input_errors=cfg.nlp.input_errors, noise_sigma=cfg.nlp.noise_sigma)
+    for mode, kw in modes.items():
+        att = attribute(model, [f.name for f in cfg.free], data, cfg.nlp.time_outputs, cfg.nlp.trim_outputs,
+                        segment_s=segment_s, **kw)
+        doc["modes"][mode] = att.to_dict()
+    f.write_text(json.dumps(doc, indent=1))
+    return doc
+
+
+def seeds_of(text: str) -> list[int]:
+    out = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out += list(range(int(a), int(b) + 1)) if b else [int(a)]
+    return out
+
+
+def summary(docs: list[dict]) -> pd.DataFrame:
+    rows = []
+    for mode in docs[0]["modes"]:
+        scores = pd.concat([pd.DataFrame(d["modes"][mode]["scores"]).assign(seed=d["seed"]) for d in docs])
+        atts = [Attribution.from_dict(d["modes"][mode]) for d in docs]
+        # the same LM against chi-square(1), the reference before the df correction (one-sided: half, or 1)
+        one = scores["p_value"] < 1.0
+        half = np.where(scores["name"].map(lambda n: make_candidate(n).one_sided), 0.5, 1.0)
+        p_chi2 = np.where(one, stats.chi2.sf(scores["LM"], 1) * half, 1.0)
+        level = atts[0].alpha / len(atts[0].scores)
+        sig_chi2 = pd.Series(p_chi2 < level).groupby(scores["seed"].to_numpy()).any()
+        rows.append({"scores": mode, "reference": "chi2(1)", "seeds": len(docs), "pairs": len(scores),
+                     "p < 0.05": float(np.mean(p_chi2 < 0.05)), "p < 0.01": float(np.mean(p_chi2 < 0.01)),
+                     "p < 0.001": float(np.mean(p_chi2 < 0.001)), "median df": float("inf"),
+                     "seeds with a significant candidate": int(sig_chi2.sum()), "seeds accepting": None})
+        rows.append({"scores": mode, "reference": "F(1, df)", "seeds": len(docs), "pairs": len(scores),
+                     "p < 0.05": float(np.mean(scores["p_value"] < 0.05)),
+                     "p < 0.01": float(np.mean(scores["p_value"] < 0.01)),
+                     "p < 0.001": float(np.mean(scores["p_value"] < 0.001)),
+                     "median df": float(scores["df"].median()) if "df" in scores else float("inf"),
+                     "seeds with a significant candidate": int(sum(bool(a.scores["significant"].any()) for a in atts)),
+                     "seeds accepting": int(sum(a.decision == "accepted" for a in atts))})
+    return pd.DataFrame(rows)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", required=True, help="e.g. 101-140 or 101,105,110-115")
+    ap.add_argument("--identification", choices=("eiv", "oe"), default="eiv")
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--segment-s", type=float, default=SEGMENT_S,
+                    help="batch-means segment length [s] of the score test (default: the loop's); other values "
+                         "score the finished seeds' identified points into seed_<n>_segment_<s>.json")
+    ap.add_argument("--rescore", action="store_true",
+                    help="score the finished seeds again at their saved identified points (no identification)")
+    a = ap.parse_args(argv)
+    out = a.out / a.identification
+    out.mkdir(parents=True, exist_ok=True)
+    docs = []
+    for s in seeds_of(a.seeds):
+        docs.append(one_seed(s, a.identification, out, a.rescore, a.segment_s))
+        tops = {m: d["scores"][0] for m, d in docs[-1]["modes"].items()}
+        print(f"seed {s}: " + "; ".join(f"{m} top {r['name']} LM {r['LM']:.3g} (df {r['df']:.3g}, p {r['p_value']:.2g})"
+                                        for m, r in tops.items()), flush=True)
+    table = summary(docs)
+    table.to_csv(out / ("summary.csv" if a.segment_s == SEGMENT_S else f"summary_segment_{a.segment_s:g}.csv"),
+                 index=False)
+    print(table.to_string(index=False, float_format=lambda x: f"{x:.3g}"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -8,6 +8,7 @@ three front points.
 """
 import json
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -438,3 +439,22 @@ def test_generate_data_seed_option_and_close_loop_dataset_option(tmp_path, capsy
     assert "option --seed must be an integer >= 0" in capsys.readouterr().err
     assert main(["close-loop", str(cfg.path), "--dataset", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")]) == 2
     assert "option --dataset: folder" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_score_test_keeps_its_level_on_m0_seeds(tmp_path):
+    """Monte Carlo of the false-positive control (studies/score_test_level.py) on 40 seeds the study did not
+    use: M0 + noise only, input errors estimated, the loop's score test (F(1, df) reference, input errors
+    eliminated). With a family-wise level of 1 %, 3 or more accepting seeds of 40 would have probability
+    below 1 %; over the 400 (seed, candidate) pairs the share of p < 0.01 should be near 1 %."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "studies"))
+    import score_test_level as L
+
+    docs = [L.one_seed(s, "eiv", tmp_path) for s in range(301, 341)]
+    table = L.summary(docs).set_index(["scores", "reference"])
+    print(table.to_string())
+    now = table.loc[("eliminated", "F(1, df)")]
+    assert now["seeds accepting"] <= 2
+    assert now["p < 0.01"] <= 0.025

@@ -1,6 +1,7 @@
 """How often does the loop's score test fire when no effect is missing? Monte Carlo on small M0 instances.
 
     python studies/score_test_level.py --seeds 101-140 --out results/score_test_level [--identification eiv|oe]
+                                       [--truth m0|wake]
 
 Every seed generates the small wake instance's flight test of tests/test_close_loop.py (a 20 kt lon doublet
 and an 80 kt lon 3-2-1-1 for identification, 6 s each with a 2 s lead-in, 11 level trims; 80 kt validation
@@ -21,6 +22,11 @@ and the number on which the loop would have accepted one (with the ratio rule); 
 loop's reference F(1, df) and with the same LM referred to chi-square(1), the reference before the df
 correction (rows "chi2(1)"; the ratio rule is not re-evaluated there). The candidates'
 scores within one seed are correlated, so the pairs are not independent draws.
+
+``--truth wake`` measures the power instead: the same records from M0 + the wake-on-tail truth effect of
+the small wake test (K_lamT 1.5), twist, CL_alpha_HT and Iyy identified on 3 front points as in that
+test; the column ``decisions`` counts what the loop's first round would do (the candidate accepted, or
+none / ambiguous / confounded).
 """
 from __future__ import annotations
 
@@ -48,7 +54,11 @@ from pyomo_heli.nlp.identification import prepare_data  # noqa: E402
 EIV = '\n[objectives]\ninput_errors = ["col", "lon"]\n'
 
 
-def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, segment_s: float = SEGMENT_S) -> dict:
+WAKE = "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n"
+
+
+def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, segment_s: float = SEGMENT_S,
+             truth: str = "m0") -> dict:
     f = out / (f"seed_{seed}.json" if segment_s == SEGMENT_S else f"seed_{seed}_segment_{segment_s:g}.json")
     root = out / f"work_{seed}"
     if f.is_file() and not rescore:
@@ -59,9 +69,11 @@ def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, s
         cfg = load_identification_config(root / "ident.toml")
         point = {"parameters": json.loads(f0.read_text())["parameters"]}
     else:
-        cfg = T.make_case(root, seed=seed, free=("theta_twist", "CL_alpha_HT"), points=2,
-                          loop=EIV if identification == "eiv" else "", maneuvers=T.WAKE_MANEUVERS,
-                          input_reference_s=1.9)
+        # m0: the false-positive control's set-up; wake: the small wake test's (three parameters, three points)
+        kw = (dict(free=("theta_twist", "CL_alpha_HT"), points=2) if truth == "m0"
+              else dict(effect=WAKE, free=("theta_twist", "CL_alpha_HT", "Iyy"), points=3))
+        cfg = T.make_case(root, seed=seed, loop=EIV if identification == "eiv" else "", maneuvers=T.WAKE_MANEUVERS,
+                          input_reference_s=1.9, **kw)
         res = run_identification(cfg, root / "ident", progress=lambda s: None)
         point = res.direct if res.direct and res.direct.get("success") else res.chosen
     data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration,
@@ -108,7 +120,9 @@ def summary(docs: list[dict]) -> pd.DataFrame:
                      "p < 0.001": float(np.mean(scores["p_value"] < 0.001)),
                      "median df": float(scores["df"].median()) if "df" in scores else float("inf"),
                      "seeds with a significant candidate": int(sum(bool(a.scores["significant"].any()) for a in atts)),
-                     "seeds accepting": int(sum(a.decision == "accepted" for a in atts))})
+                     "seeds accepting": int(sum(a.decision == "accepted" for a in atts)),
+                     "decisions": ", ".join(f"{k} {v}" for k, v in pd.Series(
+                         [a.accepted if a.decision == "accepted" else a.decision for a in atts]).value_counts().items())})
     return pd.DataFrame(rows)
 
 
@@ -117,17 +131,20 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", required=True, help="e.g. 101-140 or 101,105,110-115")
     ap.add_argument("--identification", choices=("eiv", "oe"), default="eiv")
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--truth", choices=("m0", "wake"), default="m0",
+                    help="m0: noise only (the level); wake: M0 + the wake-on-tail truth effect of the small wake "
+                         "test, identified like that test (the power), into OUT/<identification>_wake")
     ap.add_argument("--segment-s", type=float, default=SEGMENT_S,
                     help="batch-means segment length [s] of the score test (default: the loop's); other values "
                          "score the finished seeds' identified points into seed_<n>_segment_<s>.json")
     ap.add_argument("--rescore", action="store_true",
                     help="score the finished seeds again at their saved identified points (no identification)")
     a = ap.parse_args(argv)
-    out = a.out / a.identification
+    out = a.out / (a.identification if a.truth == "m0" else f"{a.identification}_wake")
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds_of(a.seeds):
-        docs.append(one_seed(s, a.identification, out, a.rescore, a.segment_s))
+        docs.append(one_seed(s, a.identification, out, a.rescore, a.segment_s, a.truth))
         tops = {m: d["scores"][0] for m, d in docs[-1]["modes"].items()}
         print(f"seed {s}: " + "; ".join(f"{m} top {r['name']} LM {r['LM']:.3g} (df {r['df']:.3g}, p {r['p_value']:.2g})"
                                         for m, r in tops.items()), flush=True)

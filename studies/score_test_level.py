@@ -100,7 +100,10 @@ def seeds_of(text: str) -> list[int]:
     out = []
     for part in text.split(","):
         a, _, b = part.partition("-")
-        out += list(range(int(a), int(b) + 1)) if b else [int(a)]
+        try:
+            out += list(range(int(a), int(b) + 1)) if b else [int(a)]
+        except ValueError:
+            raise SystemExit(f"--seeds: cannot read {part!r}; give integers and ranges, e.g. 101-140 or 101,105,110-115")
     return out
 
 

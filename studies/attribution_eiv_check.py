@@ -80,7 +80,10 @@ def main(argv=None) -> int:
                     help="the loops' flight tests, one per loop (default: the dataset named in each loop.json)")
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args(argv)
-    table = run(a.config, a.loops, a.out, a.datasets)
+    try:
+        table = run(a.config, a.loops, a.out, a.datasets)
+    except FileNotFoundError as e:  # a folder without loop.json, or a loop's dataset that is gone
+        raise SystemExit(f"{e} (give the flight tests with --datasets if the loops' own are gone)")
     print(table.to_string(index=False, float_format=lambda x: f"{x:.3g}"))
     return 0
 

@@ -57,7 +57,7 @@ from scipy import stats
 from scipy.linalg import cholesky, solve_triangular
 
 from ..physics.model import HelicopterModel
-from ..nlp.objectives import lead_in_sigma
+from ..nlp.objectives import noise_sigmas
 from ..simulation.compiled import input_sensitivities, simulate_outputs
 from ..simulation.sensitivity import sensitivities
 from ..simulation.trim import trim_float
@@ -220,9 +220,7 @@ def _input_error_whitening(model: HelicopterModel, data, time_outputs, w, seg, i
     stay local. Trim rows keep their weights ``w``. Returns ``(whiten, seg)``: the function applied to
     every stacked vector or column block, and each whitened row's segment.
     """
-    sigma = dict(noise_sigma or {})
-    need = [c for c in (*time_outputs, *input_errors) if c not in sigma]
-    sigma.update(lead_in_sigma(data.maneuvers, need) if need else {})
+    sigma = noise_sigmas(data.maneuvers, (*time_outputs, *input_errors), noise_sigma)
     n_out = len(time_outputs)
     n_per = [len(mv.data) for mv in data.maneuvers]
     n_time = sum(n_per)

@@ -26,7 +26,7 @@ from ..physics.model import FLAPPING, INPUTS, HelicopterModel
 from ..simulation.integrate import sampled, simulate
 from ..simulation.trim import trim_sweep
 from .maneuver_block import build_maneuver_block, initialise_from
-from .objectives import add_known_noise_time_objective, add_time_objective, add_trim_objective, lead_in_sigma
+from .objectives import add_known_noise_time_objective, add_time_objective, add_trim_objective, noise_sigmas
 from .parameters import FreeParameter, add_parameters
 from .trim_block import build_trim_block
 
@@ -174,11 +174,7 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
         raise ValueError("input_errors with mutable_data needs noise_sigma: sigmas estimated from the lead-in "
                          "of the first data set would be kept for every other one")
     if data.maneuvers and opts.time_outputs and opts.input_errors:
-        sigma = dict(opts.noise_sigma) if opts.noise_sigma is not None else {}
-        need = [c for c in (*opts.time_outputs, *opts.input_errors) if c not in sigma]
-        if need and opts.noise_sigma is not None:
-            raise ValueError(f"noise_sigma has no value for {need}")
-        sigma.update(lead_in_sigma(data.maneuvers, need) if need else {})
+        sigma = noise_sigmas(data.maneuvers, (*opts.time_outputs, *opts.input_errors), opts.noise_sigma)
         m.noise_sigma_source = "given" if opts.noise_sigma is not None else "lead-in"
         errs = {c: [m.man[n].u_err[c, tt] for n in names for tt in m.man[n].samples] for c in opts.input_errors}
         for c, vs in errs.items():

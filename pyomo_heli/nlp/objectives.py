@@ -141,6 +141,20 @@ def add_known_noise_time_objective(m: pyo.Block, residuals: dict, outputs: list[
 SIGMA_MIN = dict(R_FLOOR, col=1e-5, lon=1e-5)
 
 
+def noise_sigmas(maneuvers, channels, given: dict | None = None) -> dict:
+    """The known noise sigma [SI] of each channel of an errors-in-variables fit: from ``given`` (the
+    ``[objectives.noise_sigma]`` table, which must then cover every channel) or else from the records'
+    quiet lead-in (:func:`lead_in_sigma`). The one rule the NLP, the Cramer-Rao bounds and the score test
+    share, so that all three weigh the data alike."""
+    channels = list(channels)
+    if given is None:
+        return lead_in_sigma(maneuvers, channels)
+    missing = [c for c in channels if c not in given]
+    if missing:
+        raise ValueError(f"noise_sigma has no value for {missing}")
+    return {c: float(given[c]) for c in channels}
+
+
 def lead_in_sigma(maneuvers, channels) -> dict:
     """Noise sigma of each channel from the quiet lead-in of the records (no model involved).
 

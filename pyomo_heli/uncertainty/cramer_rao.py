@@ -56,7 +56,7 @@ import numpy as np
 import pandas as pd
 from scipy.linalg import cho_factor, cho_solve
 
-from ..nlp.objectives import R_FLOOR, lead_in_sigma
+from ..nlp.objectives import R_FLOOR, noise_sigmas
 from ..simulation.compiled import input_sensitivities
 from ..simulation.sensitivity import sensitivities
 from ..simulation.trim import trim_float
@@ -201,9 +201,7 @@ def point_information(model, free, values: dict, maneuvers, trims, time_outputs,
                             scale=np.array([f.scale for f in free]))
     input_errors = tuple(input_errors)
     if input_errors and s.time:
-        sigma = dict(noise_sigma or {})
-        need = [c for c in (*s.time, *input_errors) if c not in sigma]
-        sigma.update(lead_in_sigma(maneuvers, need) if need else {})
+        sigma = noise_sigmas(maneuvers, (*s.time, *input_errors), noise_sigma)
         info.input_sigma = {c: float(sigma[c]) for c in input_errors}
         start = 0
         for mv in maneuvers:

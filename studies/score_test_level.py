@@ -57,14 +57,14 @@ EIV = '\n[objectives]\ninput_errors = ["col", "lon"]\n'
 WAKE = "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n"
 
 
-def variant(segment_s: float = SEGMENT_S, robust: bool = True) -> str:
+def variant(segment_s: float = SEGMENT_S, variance: str = "batch") -> str:
     """File-name suffix of a score-test variant ("" for the loop's own test)."""
-    return ("" if segment_s == SEGMENT_S else f"_segment_{segment_s:g}") + ("" if robust else "_white")
+    return ("" if segment_s == SEGMENT_S else f"_segment_{segment_s:g}") + ("" if variance == "batch" else f"_{variance}")
 
 
 def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, segment_s: float = SEGMENT_S,
-             truth: str = "m0", robust: bool = True) -> dict:
-    f = out / f"seed_{seed}{variant(segment_s, robust)}.json"
+             truth: str = "m0", variance: str = "batch") -> dict:
+    f = out / f"seed_{seed}{variant(segment_s, variance)}.json"
     root = out / f"work_{seed}"
     if f.is_file() and not rescore:
         return json.loads(f.read_text())
@@ -90,7 +90,8 @@ def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, s
         modes["eliminated"] = dict(input_errors=cfg.nlp.input_errors, noise_sigma=cfg.nlp.noise_sigma)
     for mode, kw in modes.items():
         att = attribute(model, [f.name for f in cfg.free], data, cfg.nlp.time_outputs, cfg.nlp.trim_outputs,
-                        segment_s=segment_s, robust=robust, **kw)
+                        segment_s=segment_s, robust=variance != "white",
+                        variance="white" if variance == "white_offsets" else "batch", **kw)
         doc["modes"][mode] = att.to_dict()
     f.write_text(json.dumps(doc, indent=1))
     return doc
@@ -145,10 +146,12 @@ def main(argv=None) -> int:
     ap.add_argument("--segment-s", type=float, default=SEGMENT_S,
                     help="batch-means segment length [s] of the score test (default: the loop's); other values "
                          "score the finished seeds' identified points into seed_<n>_segment_<s>.json")
-    ap.add_argument("--variance", choices=("batch", "white"), default="batch",
+    ap.add_argument("--variance", choices=("batch", "white", "white_offsets"), default="batch",
                     help="batch: the loop's robust test; white: the plain test (variance F, no input-offset "
                          "nuisance; in the eliminated mode the input-noise colour is in the whitening), scored at "
-                         "the finished seeds' identified points into seed_<n>_white.json")
+                         "the finished seeds' identified points into seed_<n>_white.json; white_offsets: the "
+                         "input-offset nuisance projected off as in the loop's test, variance F, into "
+                         "seed_<n>_white_offsets.json")
     ap.add_argument("--rescore", action="store_true",
                     help="score the finished seeds again at their saved identified points (no identification)")
     a = ap.parse_args(argv)
@@ -156,12 +159,12 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds_of(a.seeds):
-        docs.append(one_seed(s, a.identification, out, a.rescore, a.segment_s, a.truth, a.variance == "batch"))
+        docs.append(one_seed(s, a.identification, out, a.rescore, a.segment_s, a.truth, a.variance))
         tops = {m: d["scores"][0] for m, d in docs[-1]["modes"].items()}
         print(f"seed {s}: " + "; ".join(f"{m} top {r['name']} LM {r['LM']:.3g} (df {r['df']:.3g}, p {r['p_value']:.2g})"
                                         for m, r in tops.items()), flush=True)
     table = summary(docs)
-    table.to_csv(out / f"summary{variant(a.segment_s, a.variance == 'batch')}.csv",
+    table.to_csv(out / f"summary{variant(a.segment_s, a.variance)}.csv",
                  index=False)
     print(table.to_string(index=False, float_format=lambda x: f"{x:.3g}"))
     return 0

@@ -14,7 +14,7 @@ import pytest
 from test_close_loop import WAKE_MANEUVERS, make_case
 
 from pyomo_heli.dataset import load_flight_test
-from pyomo_heli.diagnosis.attribution import _input_error_whitening, segment_ids
+from pyomo_heli.diagnosis.attribution import _input_error_whitening, attribute, segment_ids
 from pyomo_heli.nlp.identification import prepare_data
 from pyomo_heli.nlp.objectives import lead_in_sigma
 from pyomo_heli.simulation.compiled import input_sensitivities
@@ -89,3 +89,8 @@ def test_whitening_is_the_input_error_eliminated_metric_and_causal(instance):
     assert np.array_equal(np.sort(seg_w), np.sort(seg))
     for j in range(len(OUTPUTS)):
         assert np.array_equal(seg_w[j * n_time: (j + 1) * n_time], seg[:n_time])
+
+
+def test_unknown_variance_is_a_clear_error():
+    with pytest.raises(ValueError, match="variance = 'hac'"):
+        attribute(None, [], None, [], [], variance="hac")

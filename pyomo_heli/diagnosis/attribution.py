@@ -256,7 +256,7 @@ def _input_error_whitening(model: HelicopterModel, data, time_outputs, w, seg, i
 def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outputs, candidates=None,
               alpha: float = ALPHA, ratio: float = RATIO, confound_corr: float = CONFOUND_CORR,
               substeps: int = 2, robust: bool = True, segment_s: float = SEGMENT_S, input_errors=(),
-              noise_sigma: dict | None = None) -> Attribution:
+              noise_sigma: dict | None = None, variance: str = "batch") -> Attribution:
     """Score every candidate (default: the whole library minus those already in ``model``).
 
     ``model`` carries the identified values; ``identified`` are the free
@@ -264,11 +264,15 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
     ``robust``: also project off the input-offset nuisance of every maneuver and estimate the
     score's variance by batch means over ``segment_s`` stretches (coloured residuals); False gives
     the plain white-noise score test of model_spec.md 4.8.
+    ``variance``: with ``robust``, "batch" (the batch means above) or "white" (the input-offset nuisance
+    projected off, but the score's variance taken as F, df infinite).
     ``input_errors``, ``noise_sigma``: the NLP's errors-in-variables settings (``NLPOptions``). With input
     errors the time residuals are weighted by the covariance the measured inputs' noise gives them,
     ``V_m = R + S_u,m Sigma_u S_u,m^T`` per maneuver (the input errors eliminated, module docstring),
     instead of by their mean squares.
     """
+    if variance not in ("batch", "white"):
+        raise ValueError(f"variance = {variance!r}: choose 'batch' or 'white'")
     have = {e.name for e in model.extensions}
     names = [n for n in (candidates or list(CANDIDATES)) if n not in have]
     if not names:
@@ -318,7 +322,7 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
         g = float(bt @ ew)
         kappa = g / F if F > 0 else 0.0
         df = np.inf
-        if robust and F > 0:
+        if robust and variance == "batch" and F > 0:
             # batch means: sum the score contributions per segment; residual with the candidate's fit removed
             u = bt * (ew - kappa * bt)
             var = float(np.sum(np.bincount(seg, weights=u) ** 2))

@@ -169,7 +169,7 @@ def cmd_diagnose(args) -> int:
     label = "multi-objective (C)" if args.point == "chosen" else "time-domain (A)"
     out = Path(args.out or args.results_dir)
     print(f"diagnosing {label} of {args.results_dir} (config {cfg.path})")
-    r = compute_residuals(cfg, point["parameters"], label)
+    r = compute_residuals(cfg, point["parameters"], label, test_rate_hz=args.test_rate_hz)
     if not args.no_residuals:
         r.save(out / f"residuals_{args.point}")
     d = diagnose(r, alpha=args.alpha, test_rate_hz=args.test_rate_hz, seed=args.seed)

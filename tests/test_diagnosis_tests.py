@@ -128,3 +128,16 @@ def test_trim_nuisance_leaves_out_parameters_that_do_not_act_on_trims():
     S, names = trim_nuisance(r, "lon")
     assert names == ["theta_twist"] and S.shape == (len(V), 1)
     assert trim_nuisance(r, "theta") == (None, [])
+
+
+def test_diagnosis_records_keep_small_p_values(tmp_path):
+    """pandas' to_json writes 2.2e-11 as 0.0; the diagnosis' records must keep it (and NaN as None)."""
+    import json
+
+    from pyomo_heli.diagnosis.analysis import _records
+
+    df = pd.DataFrame({"p": [2.2359e-11, 1e-300, 0.5, float("nan")], "white": np.array([False, False, True, True]),
+                       "n": np.array([76, 76, 76, 3], dtype=np.int64)})
+    recs = json.loads(json.dumps(_records(df)))
+    assert [r["p"] for r in recs] == [2.2359e-11, 1e-300, 0.5, None]
+    assert [r["white"] for r in recs] == [False, False, True, True] and recs[0]["n"] == 76

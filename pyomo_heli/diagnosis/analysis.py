@@ -7,7 +7,10 @@ of a parameter set and runs every test:
 - per maneuver, the nuisance part of the time residuals (output biases and the
   response to constant input offsets) removed, then whiteness (Ljung-Box at the
   test rate), spectra (Welch), coherence with the excited inputs and the
-  correlation with physical regressors (:mod:`.timeseries`).
+  correlation with physical regressors (:mod:`.timeseries`); when the
+  identification estimated the input errors, whiteness is tested on the
+  residuals' innovations instead, which take out the colour the measured
+  inputs' noise gives them (:mod:`.innovations`).
 
 The result, :class:`Diagnosis`, is plain data: it saves to and loads from
 JSON, prints as readable tables and carries short findings in words. Figures
@@ -26,8 +29,8 @@ import pandas as pd
 from ..pareto.result import write_json
 from ..units import DEG, KT
 from .residuals import DISPLAY, Residuals
-from .timeseries import (DYN_BAND, HIGH_BAND, clean_time_residuals, coherence_table, correlation_table, spectra,
-                         whiteness_table)
+from .timeseries import (DYN_BAND, HIGH_BAND, TEST_RATE_HZ, clean_time_residuals, coherence_table,
+                         correlation_table, spectra, whiteness_table, with_bound)
 from .trim_shape import ShapeTest, trim_shape_test
 
 #: band ratio above which a residual spectrum counts as dominated by the dynamics band
@@ -36,8 +39,19 @@ BAND_RATIO_FLAG = 3.0
 CORRELATION_FLAG = 0.3
 
 
+def _plain(v):
+    """A JSON-ready Python value: numpy scalars unwrapped, NaN and missing as None."""
+    if isinstance(v, np.generic):
+        v = v.item()
+    if v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v)):
+        return None
+    return v
+
+
 def _records(df: pd.DataFrame) -> list[dict]:
-    return json.loads(df.to_json(orient="records")) if len(df) else []
+    # not df.to_json: pandas writes a float between about 1e-16 and 5e-11 as 0.0 (10 decimals), which
+    # turned small p-values into 0 in diagnosis.json
+    return [{k: _plain(v) for k, v in rec.items()} for rec in df.to_dict(orient="records")] if len(df) else []
 
 
 @dataclass
@@ -142,12 +156,14 @@ def _findings(d: Diagnosis, shapes: dict, white: pd.DataFrame, coh: pd.DataFrame
         if not len(w):
             continue
         bad = w[~w["white"].astype(bool)]
+        inn = d.settings.get("innovations")
+        how = (f" (innovations of {', '.join(inn['outputs'])}: the input errors eliminated)" if inn else "")
         if bad.empty:
             out.append(f"{role} maneuvers: residuals white in all {len(w)} tests (Ljung-Box at "
-                       f"{d.settings['test_rate_hz']:g} Hz, family-wise alpha {d.settings['alpha']:g})")
+                       f"{d.settings['test_rate_hz']:g} Hz, family-wise alpha {d.settings['alpha']:g}){how}")
         else:
             items = ", ".join(f"{r.output} in {r.maneuver} (p = {r.p:.1e})" for r in bad.itertuples())
-            out.append(f"{role} maneuvers: residuals NOT white in {len(bad)} of {len(w)} tests: {items}")
+            out.append(f"{role} maneuvers: residuals NOT white in {len(bad)} of {len(w)} tests{how}: {items}")
     for role, sp in d.spectra.items():
         hot = {o: v for o, v in sp.get("band_ratio", {}).items() if v > BAND_RATIO_FLAG}
         if hot:
@@ -195,7 +211,25 @@ def trim_nuisance(res: Residuals, channel: str) -> tuple[np.ndarray | None, list
     return res.trim[[f"dres_{channel}_d{p}" for p in names]].to_numpy(dtype=float), names
 
 
-def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = 5.0, n_mc: int = 4000, seed: int = 0,
+def _whiteness(res: Residuals, clean: pd.DataFrame, test_rate_hz: float, alpha: float, settings: dict) -> pd.DataFrame:
+    """Whiteness table: the innovations where the residuals have them (input errors estimated, the input
+    noise's colour taken out, :mod:`.innovations`), the nuisance-cleaned residuals for every other output."""
+    inn = res.innovations
+    inn_outs = list(res.info.get("innovations", {}).get("outputs", [])) if inn is not None and len(inn) else []
+    raw_outs = [o for o in res.outputs if o not in inn_outs]
+    parts = []
+    if raw_outs:
+        parts.append(whiteness_table(clean, raw_outs, test_rate_hz, alpha).assign(series="residual"))
+    if inn_outs:
+        rate = float(res.info["innovations"]["test_rate_hz"])
+        settings["innovations"] = {"outputs": inn_outs, "test_rate_hz": rate}
+        tab = inn.rename(columns={f"inn_{o}": f"res_{o}" for o in inn_outs})
+        parts.append(whiteness_table(tab, inn_outs, rate, alpha).assign(series="innovation"))
+    parts = [p for p in parts if len(p)]
+    return with_bound(pd.concat(parts, ignore_index=True), alpha) if parts else pd.DataFrame()
+
+
+def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RATE_HZ, n_mc: int = 4000, seed: int = 0,
              absorb_parameters: bool = True) -> Diagnosis:
     """Run every residual test on ``res`` (see the module docstring).
 
@@ -217,7 +251,7 @@ def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = 5.0, n_m
     time = res.time
     if len(time):
         clean, nuisance = clean_time_residuals(time, res.outputs)
-        white = whiteness_table(clean, res.outputs, test_rate_hz, alpha)
+        white = _whiteness(res, clean, test_rate_hz, alpha, settings)
         spec = {role: spectra(clean, res.outputs, role) for role in dict.fromkeys(clean["role"])}
         coh, curves = coherence_table(clean, res.outputs, res.info.get("inputs"), alpha)
         corr = correlation_table(clean, res.trim, res.outputs, res.trim_channels, test_rate_hz)

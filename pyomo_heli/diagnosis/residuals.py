@@ -39,6 +39,8 @@ from ..physics.model import HelicopterModel
 from ..simulation.integrate import sampled, simulate
 from ..simulation.trim import trim_sweep
 from ..units import DEG, KT
+from .innovations import innovations
+from .timeseries import TEST_RATE_HZ
 
 #: time outputs whose residuals are computed (every recorded output the model predicts)
 TIME_OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
@@ -81,6 +83,10 @@ class Residuals:
       ``dres_<c>_d<p>`` (d model_c / d parameter p) for every parameter given.
     ``info["inputs"]``: maneuver -> the input channels it excites (from the dataset).
     ``fitted_outputs`` / ``fitted_trim``: what the identification's objectives used.
+    ``innovations``: with ``[objectives] input_errors`` only (else None), the time residuals whitened by
+      the covariance the measured inputs' noise gives them, at the test-rate samples (columns
+      ``maneuver, role, t, inn_<o>``, dimensionless; :mod:`pyomo_heli.diagnosis.innovations`);
+      ``info["innovations"]`` says which outputs, sigmas and rate.
     """
 
     label: str
@@ -93,6 +99,7 @@ class Residuals:
     fitted_trim: list = field(default_factory=list)
     problems: list = field(default_factory=list)
     info: dict = field(default_factory=dict)
+    innovations: pd.DataFrame | None = None
 
     # ------------------------------------------------------------ access
     def maneuver_names(self, role: str | None = None) -> list[str]:
@@ -156,7 +163,8 @@ class Residuals:
 
     # ------------------------------------------------------------ disk
     def save(self, folder: str | Path) -> Path:
-        """Write ``time.csv.gz`` (gzip-compressed CSV), ``trim.csv`` and ``meta.json`` into ``folder``."""
+        """Write ``time.csv.gz`` (gzip-compressed CSV), ``trim.csv``, ``meta.json`` and, when there are
+        innovations, ``innovations.csv`` into ``folder``."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         if (folder / "time.csv").exists():
@@ -164,6 +172,10 @@ class Residuals:
         self.time.to_csv(folder / "time.csv.gz", index=False, float_format="%.10g",
                          compression={"method": "gzip", "mtime": 0})
         self.trim.to_csv(folder / "trim.csv", index=False, float_format="%.12g")
+        if (folder / "innovations.csv").exists():
+            (folder / "innovations.csv").unlink()
+        if self.innovations is not None:
+            self.innovations.to_csv(folder / "innovations.csv", index=False, float_format="%.10g")
         write_json(folder / "meta.json", {"label": self.label, "parameters": self.parameters, "outputs": self.outputs,
                                           "trim_channels": self.trim_channels, "fitted_outputs": self.fitted_outputs,
                                           "fitted_trim": self.fitted_trim, "problems": self.problems,
@@ -180,9 +192,12 @@ class Residuals:
         meta = json.loads((folder / "meta.json").read_text())
         time = pd.read_csv(time_file, dtype={"maneuver": str, "role": str})
         trim = pd.read_csv(folder / "trim.csv", dtype={"source": str})
+        inn = folder / "innovations.csv"
+        innovations = pd.read_csv(inn, dtype={"maneuver": str, "role": str}) if inn.is_file() else None
         return cls(label=meta["label"], parameters=meta["parameters"], time=time, trim=trim, outputs=meta["outputs"],
                    trim_channels=meta["trim_channels"], fitted_outputs=meta["fitted_outputs"],
-                   fitted_trim=meta["fitted_trim"], problems=meta["problems"], info=meta.get("info", {}))
+                   fitted_trim=meta["fitted_trim"], problems=meta["problems"], info=meta.get("info", {}),
+                   innovations=innovations)
 
 
 # ---------------------------------------------------------------- computing
@@ -252,7 +267,7 @@ def _trims(model: HelicopterModel, trims: pd.DataFrame, extra_speeds, problems: 
 
 def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = "model",
                       roles=ROLES, outputs=TIME_OUTPUTS, input_offsets: bool = True,
-                      trim_sensitivities: bool = True) -> Residuals:
+                      trim_sensitivities: bool = True, test_rate_hz: float = TEST_RATE_HZ) -> Residuals:
     """Residuals (model - data) of every maneuver of ``roles`` and every trim point at ``parameters`` (SI).
 
     ``parameters`` override the config model's values (free parameters of an
@@ -266,11 +281,13 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
     (columns ``dres_<c>_d<parameter>`` of ``trim``, central differences of the
     model trims, SI per SI unit), so that a diagnosis can ask what the
     identified parameters could still absorb. Costs two trim sweeps per parameter.
+    With ``[objectives] input_errors`` the residuals' innovations at ``test_rate_hz`` are added
+    (:mod:`pyomo_heli.diagnosis.innovations`; every maneuver at the identification's sample rate).
     """
     model = cfg.model.with_parameters(**parameters) if parameters else cfg.model
     ft = load_flight_test(cfg.dataset)
     selection = {"identification": cfg.maneuvers, "validation": cfg.validation}
-    mans = []
+    mans, inn_mans, id_mans = [], [], []
     for role in roles:
         if role not in selection:
             raise ValueError(f"unknown role '{role}'; choose from {', '.join(ROLES)}")
@@ -280,6 +297,12 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
         data = (prepare_data(ft, sel, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
                 if role == "identification" else prepare_data(ft, sel, input_reference_s=cfg.input_reference_s))
         mans += [(role, mv) for mv in data.maneuvers]
+        if role == "identification":
+            id_mans = list(data.maneuvers)
+            inn_mans = [(role, mv) for mv in data.maneuvers]
+        else:  # the innovations take every maneuver at the NLP's rate (its input-noise model)
+            inn_mans += [(role, mv) for mv in prepare_data(ft, sel, cfg.resample_hz,
+                                                           input_reference_s=cfg.input_reference_s).maneuvers]
     problems: list[str] = []
     trims = ft.trims.reset_index(drop=True)
     tps = _trims(model, trims, [mv.trim_speed for _, mv in mans], problems)
@@ -342,13 +365,22 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
     trim = pd.DataFrame(rows)
     if trim_sensitivities and parameters and len(trim):
         _add_trim_sensitivities(model, list(parameters), trim, problems)
+    inn, inn_info = None, None
+    if cfg.nlp.input_errors and inn_mans:
+        try:
+            inn, inn_info = innovations(model, inn_mans, id_mans or [mv for _, mv in inn_mans], outputs,
+                                        cfg.nlp.input_errors, cfg.nlp.noise_sigma, test_rate_hz, problems=problems)
+        except ValueError as exc:  # e.g. no input sigma: the raw residual tests stay
+            problems.append(f"innovations not computed: {exc}")
     return Residuals(label=label, parameters={k: float(v) for k, v in (parameters or {}).items()}, time=time,
                      trim=trim, outputs=list(outputs), trim_channels=list(TRIM_CHANNELS),
                      fitted_outputs=list(cfg.nlp.time_outputs), fitted_trim=list(cfg.nlp.trim_outputs),
                      problems=problems,
                      info={"config": _shown_path(cfg.path), "dataset": _shown_path(cfg.dataset),
                            "extensions": [e.name for e in cfg.model.extensions],
-                           "inputs": {mv.name: list(mv.inputs) for _, mv in mans}})
+                           "inputs": {mv.name: list(mv.inputs) for _, mv in mans},
+                           **({"innovations": inn_info} if inn_info else {})},
+                     innovations=inn)
 
 
 def _shown_path(p) -> str:

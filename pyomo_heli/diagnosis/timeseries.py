@@ -48,6 +48,8 @@ import numpy as np
 import pandas as pd
 from scipy import signal, stats
 
+#: Hz: the default rate of the whiteness test (samples 200 ms apart)
+TEST_RATE_HZ = 5.0
 DYN_BAND = (0.1, 2.0)  # Hz
 HIGH_BAND = (2.0, 5.0)  # Hz
 #: an input whose increment has a smaller std is not excited by the maneuver
@@ -256,9 +258,14 @@ def whiteness_table(time: pd.DataFrame, outputs, test_rate_hz: float = 5.0, alph
             rows.append({"maneuver": name, "role": m["role"].iloc[0], "output": o, "n": lb["n"], "lags": lb["lags"],
                          "Q": lb["Q"], "p": lb["p"], "r1_test_rate": lb["r1"], "r1_full_rate": float(r1_full),
                          "rms": float(np.sqrt(np.nanmean(e**2))), "mean": float(np.nanmean(e))})
-    tab = pd.DataFrame(rows)
+    return with_bound(pd.DataFrame(rows), alpha)
+
+
+def with_bound(tab: pd.DataFrame, alpha: float) -> pd.DataFrame:
+    """``white`` and ``bound`` columns of a whiteness table: Bonferroni over the tests of each role."""
     if tab.empty:
         return tab
+    tab = tab.reset_index(drop=True)
     tab["white"] = True
     for role, g in tab.groupby("role"):
         bound = alpha / max(int(g["p"].notna().sum()), 1)

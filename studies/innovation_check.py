@@ -1,0 +1,89 @@
+"""Does the residual analysis call the exact model "not white"? The plain whiteness test against the innovations.
+
+    python studies/innovation_check.py [--config studies/close_loop_eiv.toml] [--dataset DIR] [--loop DIR]
+                                       [--out results/innovation_check]
+
+The truth model of the dataset (``truth.json``: its parameters and effects; read only by this study) is
+diagnosed at the true parameters twice: with the config's ``[objectives] input_errors`` (whiteness tested
+on the residuals' innovations, :mod:`pyomo_heli.diagnosis.innovations`) and without them (the plain test on
+the nuisance-cleaned residuals). Nothing is missing from that model, so a "not white" is a false alarm.
+With ``--loop`` the diagnosed point of every iteration of a finished ``close-loop`` folder is diagnosed the
+same two ways (the loop's own verdict uses the config as it is). Prints the verdicts and the tests that
+fail; writes ``OUT/whiteness.csv`` (every test) and ``OUT/summary.csv``.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from pyomo_heli.config import load_identification_config
+from pyomo_heli.diagnosis.analysis import diagnose
+from pyomo_heli.diagnosis.residuals import compute_residuals
+from pyomo_heli.flighttest.truth_effects import make_effect
+from pyomo_heli.physics.model import HelicopterModel
+from pyomo_heli.report.identification import read_truth, read_truth_effects
+from pyomo_heli.report.loop import iteration_model
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def cases(cfg, loop: Path | None) -> list[tuple[str, HelicopterModel, dict, bool]]:
+    """(name, model, parameters, shift): the truth model at its parameters (no parameter shift in the trim
+    shape test: nothing was identified), and each loop iteration at its diagnosed point (the shift of its
+    free parameters allowed, as the loop's own verdict does)."""
+    truth, effects = read_truth(cfg.dataset), read_truth_effects(cfg.dataset)
+    if truth is None or effects is None:
+        raise SystemExit(f"{cfg.dataset}: no truth.json; this study needs the truth simulator's parameters")
+    tm = HelicopterModel(extensions=tuple(make_effect(n) for n in effects))
+    out = [("truth model", tm, {k: v for k, v in truth.items() if k in tm.parameters}, False)]
+    if loop is not None:
+        f = loop / "loop.json"
+        if not f.is_file():
+            raise SystemExit(f"--loop {loop}: no loop.json there")
+        for it in json.loads(f.read_text())["iterations"]:
+            out.append((f"loop iteration {it['iteration']}", iteration_model(cfg.model, it), it["parameters"], True))
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--config", type=Path, default=ROOT / "studies" / "close_loop_eiv.toml")
+    ap.add_argument("--dataset", type=Path, help="another dataset than the config's (same maneuver names)")
+    ap.add_argument("--loop", type=Path, help="a finished close-loop folder: diagnose its iterations too")
+    ap.add_argument("--out", type=Path, default=Path("results/innovation_check"))
+    a = ap.parse_args(argv)
+    cfg = load_identification_config(a.config)
+    if not cfg.nlp.input_errors:
+        raise SystemExit(f"{a.config}: [objectives] input_errors is empty; the innovations need it")
+    if a.dataset:
+        cfg = dataclasses.replace(cfg, dataset=a.dataset)
+    a.out.mkdir(parents=True, exist_ok=True)
+    rows, tests = [], []
+    for name, model, params, shift in cases(cfg, a.loop):
+        for series, nlp in (("innovations", cfg.nlp), ("plain", dataclasses.replace(cfg.nlp, input_errors=()))):
+            c = dataclasses.replace(cfg, model=model, nlp=nlp)
+            d = diagnose(compute_residuals(c, params, label=name, trim_sensitivities=shift))
+            w = pd.DataFrame(d.whiteness)
+            bad = w[~w["white"].astype(bool)]
+            rows.append({"model": name, "whiteness of": series, "noise only": d.verdict["noise_only"],
+                         "trim shapes": ", ".join(f"{k} {v}" for k, v in d.verdict["trim_shape"].items()),
+                         "not white (id)": int((bad["role"] == "identification").sum()),
+                         "not white (val)": int((bad["role"] == "validation").sum()), "tests": len(w),
+                         "failing": "; ".join(f"{r.output} in {r.maneuver} (p = {r.p:.1e})" for r in bad.itertuples())})
+            tests.append(w.assign(model=name, whiteness_of=series))
+            print(f"{name}, {series}: noise only = {d.verdict['noise_only']}; not white: {rows[-1]['failing'] or 'none'}",
+                  flush=True)
+    summary = pd.DataFrame(rows)
+    summary.to_csv(a.out / "summary.csv", index=False)
+    pd.concat(tests, ignore_index=True).to_csv(a.out / "whiteness.csv", index=False, float_format="%.6g")
+    print(summary.drop(columns="failing").to_string(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -98,6 +98,8 @@ def evaluate(name: str, loop: Path, config: Path) -> dict:
         se = (i1.get("standard_errors") or {}).get(n)
         row[f"{n} SE1 %"] = 100 * se / abs(truth[n]) if se else float("nan")
         row[f"{n} err1/SE"] = (i1["parameters"][n] - truth[n]) / se if se else float("nan")
+    # the residual analysis of the last iteration (when nothing more was accepted): noise only or not
+    row["final residual"] = (i1.get("residual_diagnosis") or {}).get("status", "-")
     row["wake first"] = first == WAKE
     row["trim -50 %"] = row["pooled trim change %"] <= -50.0
     row["no val rise"] = all(row[f"val {o} change %"] <= 0.0 for o in VALIDATION_OUTPUTS)
@@ -136,6 +138,9 @@ def markdown(tab: pd.DataFrame) -> str:
     rises = [f"{r['realisation']}: {o} {r[f'val {o} change %']:+.2f} % (p = {r[f'val {o} p(rise)']:.3g})"
              for _, r in tab.iterrows() for o in VALIDATION_OUTPUTS if r[f"val {o} change %"] > 0]
     lines += ["", "Validation rises (data minus model, paired test p of the rise): " + ("; ".join(rises) or "none")]
+    if "final residual" in tab:
+        lines += ["", "Residual analysis of the last iteration (docs/diagnosis.md): "
+                  + "; ".join(f"{r['realisation']}: {r['final residual']}" for _, r in tab.iterrows())]
     return "\n".join(lines) + "\n"
 
 

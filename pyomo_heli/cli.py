@@ -165,6 +165,10 @@ def cmd_diagnose(args) -> int:
         raise UserError(f"--test-rate-hz must be positive, got {args.test_rate_hz}")
     res = IdentificationResult.load(args.results_dir)
     cfg = load_result_config(args.results_dir, args.config)
+    if res.info.get("extensions"):  # an iteration of close-loop: the config plus the effects the loop added
+        from .close_loop import config_of_result
+
+        cfg = config_of_result(cfg, res)
     point = res.chosen if args.point == "chosen" else res.time_domain
     label = "multi-objective (C)" if args.point == "chosen" else "time-domain (A)"
     out = Path(args.out or args.results_dir)

@@ -292,6 +292,12 @@ def test_wake_loop_with_input_errors(tmp_path):
            for n in ("theta_twist", "CL_alpha_HT", "Iyy")})
     for n in ("theta_twist", "CL_alpha_HT", "Iyy"):
         assert abs(it1["parameters"][n] - truth[n]) < abs(it0["parameters"][n] - truth[n]), n
+    # a loop iteration's folder can be diagnosed from the command line (its added effect included), and
+    # with the input errors the whiteness is tested on the innovations
+    assert main(["diagnose", str(tmp_path / "loop" / "iter_1"), "--out", str(tmp_path / "diag")]) == 0
+    diag = json.loads((tmp_path / "diag" / "diagnosis.json").read_text())
+    assert diag["info"]["extensions"] == ["rotor_wake_on_tail"]
+    assert {w["series"] for w in diag["whiteness"]} == {"innovation"}
 
 
 @pytest.mark.parametrize("loop, message", [

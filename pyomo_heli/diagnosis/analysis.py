@@ -116,8 +116,10 @@ class Diagnosis:
         w = self.table("whiteness")
         if len(w):
             piv = w.pivot_table(index=["role", "maneuver"], columns="output", values="p", sort=False)
+            inn = self.settings.get("innovations")
+            how = f"; innovations of {', '.join(inn['outputs'])} (input errors eliminated)" if inn else ""
             L += [f"Whiteness: Ljung-Box p-values at {self.settings['test_rate_hz']:g} Hz after removing the nuisance "
-                  f"(white if p > alpha / tests):", piv.to_string(float_format=lambda x: f"{x:.2g}"), ""]
+                  f"(white if p > alpha / tests{how}):", piv.to_string(float_format=lambda x: f"{x:.2g}"), ""]
         for role, sp in self.spectra.items():
             br = ", ".join(f"{o} {v:.3g}" for o, v in sp.get("band_ratio", {}).items())
             L.append(f"Spectral band ratio ({role}; PSD {DYN_BAND[0]:g}-{DYN_BAND[1]:g} Hz / "

@@ -223,7 +223,11 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
     L += ["## Time-series residuals", ""]
     if len(w):
         piv = w.pivot_table(index=["role", "maneuver"], columns="output", values="p", sort=False).reset_index()
-        L += [f"Ljung-Box p-values (residuals with the per-maneuver nuisance removed, at {s['test_rate_hz']:g} Hz; "
+        inn = s.get("innovations")
+        what = (f"innovations of {', '.join(inn['outputs'])} (the input errors eliminated, nuisance projected off; "
+                "docs/diagnosis.md), residuals with the per-maneuver nuisance removed for any other output"
+                if inn else "residuals with the per-maneuver nuisance removed")
+        L += [f"Ljung-Box p-values ({what}, at {s['test_rate_hz']:g} Hz; "
               f"white when p > alpha / number of tests of the role, bound {_fmt(w['bound'].min(), 2)} for "
               "identification):", "", markdown_table(piv, digits=2), "",
               "![time residuals](diagnosis_time.png)", ""]

@@ -88,3 +88,16 @@ def test_innovations_save_and_load(exact, tmp_path):
     assert back.info["innovations"]["outputs"] == exact.info["innovations"]["outputs"]
     np.testing.assert_allclose(back.innovations["inn_theta"], exact.innovations["inn_theta"], rtol=1e-8)
     assert diagnose(back).verdict == diagnose(exact).verdict
+
+
+def test_an_output_without_a_known_sigma_keeps_the_plain_test():
+    """A [objectives.noise_sigma] table without beta_0: beta_0 is tested on its residual, and the problems
+    say why; the other outputs on their innovations."""
+    cfg = _cfg(FAST[:1])
+    sig = {"q": 0.0035, "theta": 0.0017, "n_x": 0.049, "n_z": 0.098, "TAS": 0.5, "col": 3.5e-4, "lon": 3.5e-4}
+    cfg = dataclasses.replace(cfg, nlp=dataclasses.replace(cfg.nlp, noise_sigma=sig))
+    res = compute_residuals(cfg, {}, label="M0", trim_sensitivities=False)
+    assert res.info["innovations"]["outputs"] == ["q", "theta", "n_x", "n_z", "TAS"]
+    assert any("output beta_0 left out" in p and "noise_sigma has no value" in p for p in res.problems)
+    series = {w["output"]: w["series"] for w in diagnose(res).whiteness}
+    assert series["beta_0"] == "residual" and series["theta"] == "innovation"

@@ -256,7 +256,7 @@ def run_benchmark(settings: BenchmarkSettings, out: str | Path | None = None, pr
     """Run every measurement; write ``out`` (JSON) after each finished part; return the result dict."""
     cfg = load_identification_config(settings.config, settings.overrides)
     ft = load_flight_test(cfg.dataset)
-    base = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    base = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, resample_inputs=cfg.resample_inputs)
     result = {"command": settings.command, "config": str(settings.config), "overrides": settings.overrides,
               "machine": _machine(), "solver": cfg.pareto.solver, "free_parameters": [f.name for f in cfg.free],
               "front_points": cfg.pareto.points, "sizes": [], "single_shooting": None}

@@ -218,7 +218,7 @@ def cmd_uncertainty(args) -> int:
 
     from .config import load_identification_config
     from .dataset import load_flight_test
-    from .nlp.identification import prepare_data
+    from .nlp.identification import identification_data
     from .pareto.result import IdentificationResult
     from .uncertainty.front import add_uncertainty
 
@@ -230,7 +230,7 @@ def cmd_uncertainty(args) -> int:
         cfg = config_of_result(cfg, result)
     if args.out and Path(args.out).resolve() != Path(args.results).resolve():
         shutil.copytree(args.results, args.out, dirs_exist_ok=True)
-    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
+    data = identification_data(cfg)
     add_uncertainty(result, cfg, data, args.out or args.results, points=args.points)
     print(f"standard errors in {args.out or args.results} (front.csv, chosen.json, identifiability.csv)")
     return 0

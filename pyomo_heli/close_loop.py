@@ -45,7 +45,7 @@ from .dataset import load_flight_test
 from .diagnosis import attribution as attr
 from .diagnosis.candidates import CANDIDATES, make_candidate
 from .identify import build_problem, identification_fingerprint, run_identification, shape_values
-from .nlp.identification import prepare_data
+from .nlp.identification import identification_data, prepare_data
 from .nlp.parameters import FreeParameter
 from .pareto.result import write_json
 from .physics.model import HelicopterModel
@@ -321,7 +321,7 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     ft = load_flight_test(cfg.dataset)
-    id_data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
+    id_data = identification_data(cfg, ft)
     val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
                 if cfg.validation else [])
     trims = ft.trims.reset_index(drop=True)

@@ -41,6 +41,7 @@ class IdentificationConfig:
     objectives: tuple = ("time", "trim")  # [objectives] use
     linear: object = None  # LinearSettings when "linear" is used
     input_reference_s: float = 0.0  # [data] input_reference_s (0: increments from the first sample)
+    resample_inputs: str = "sample"  # [data] resample_inputs: "sample" | "project" (nlp.identification.prepare_data)
 
 
 def _need(d, key, where, types, default=...):
@@ -93,6 +94,9 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     max_dur = data.get("max_duration_s")
     if max_dur is not None and not (isinstance(max_dur, (int, float)) and max_dur > 0):
         raise ConfigError(f"{f} [data]: field 'max_duration_s' must be a positive number")
+    res_in = data.get("resample_inputs", "sample")
+    if res_in not in ("sample", "project"):
+        raise ConfigError(f"{f} [data]: field 'resample_inputs' must be \"sample\" or \"project\", got {res_in!r}")
     in_ref = data.get("input_reference_s", 0.0)
     if isinstance(in_ref, bool) or not isinstance(in_ref, (int, float)) or not 0 <= in_ref < float("inf"):
         raise ConfigError(f"{f} [data]: field 'input_reference_s' must be a number >= 0, got {in_ref!r}")
@@ -202,7 +206,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
                                 resample_hz=float(resample) if resample else None,
                                 max_duration=float(max_dur) if max_dur else None, model=model, free=free,
                                 nlp=nlp, pareto=pareto, raw=raw, objectives=use, linear=linear,
-                                input_reference_s=float(in_ref))
+                                input_reference_s=float(in_ref), resample_inputs=res_in)
 
 
 def _input_errors(obj: dict, f, in_ref) -> tuple[tuple, dict | None]:

@@ -14,7 +14,7 @@ import pandas as pd
 
 from .config import IdentificationConfig
 from .dataset import load_flight_test
-from .nlp.identification import build_identification_nlp, prepare_data
+from .nlp.identification import build_identification_nlp, identification_data
 from .pareto.front import ParetoSolver, utopia_distance
 from .pareto.result import IdentificationResult
 from .pareto.store import PointStore, fingerprint
@@ -58,7 +58,7 @@ def _mean(series):
 def build_problem(cfg: IdentificationConfig):
     """Load the data and build the NLP of a config (no solve). Returns (nlp, data, flight_test)."""
     ft = load_flight_test(cfg.dataset)
-    data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
+    data = identification_data(cfg, ft)
     m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
     return m, data, ft
 

@@ -23,7 +23,7 @@ import pandas as pd
 
 from .dataset import load_flight_test
 from .dataset.frequency_response import frequency_responses, save_responses
-from .nlp.identification import build_identification_nlp, prepare_data
+from .nlp.identification import build_identification_nlp, identification_data
 from .pareto.result import IdentificationResult
 from .pareto.tri_front import TriParetoSolver, utopia_distance_n
 
@@ -49,7 +49,7 @@ def run_tri_identification(cfg, out, progress=print) -> IdentificationResult:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     ft = load_flight_test(cfg.dataset)
-    data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
+    data = identification_data(cfg, ft)
     responses = data_responses(cfg, ft)
     if not responses:
         raise ValueError(f"{cfg.path} [linear]: no maneuver at speeds_kt moves exactly one input of the pairs")

@@ -30,7 +30,7 @@ from pyomo_heli.close_loop import load_loop, model_with_candidates
 from pyomo_heli.config import load_identification_config as load_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.attribution import Attribution, attribute
-from pyomo_heli.nlp.identification import prepare_data
+from pyomo_heli.nlp.identification import identification_data
 
 
 def run(config: Path, loops: list[Path], out: Path, datasets: list[Path] | None = None) -> pd.DataFrame:
@@ -44,7 +44,7 @@ def run(config: Path, loops: list[Path], out: Path, datasets: list[Path] | None 
     for k, loop in enumerate(loops):
         doc = load_loop(loop)
         ft = load_flight_test(datasets[k] if datasets else doc["dataset"])
-        data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
+        data = identification_data(cfg, ft)
         for it in doc["iterations"]:
             model = model_with_candidates(cfg.model, it["extensions"], it.get("shape_parameters"))
             model = model.with_parameters(**it["parameters"])

@@ -100,13 +100,17 @@ def data_config(variant: str, out: Path) -> Path:
     return path
 
 
-def anchor_a(dataset: Path, input_errors: bool = False) -> dict:
+def anchor_a(dataset: Path, input_errors: bool = False, overrides: dict | None = None,
+             standard_errors: bool = True) -> dict:
     """Anchor A of the loop's config with the truth form on ``dataset``: its parameters and solver status.
 
     input_errors: estimate the col and lon measurement errors (errors in variables, noise sigmas from the
-    records' lead-in; ``NLPOptions.input_errors``).
+    records' lead-in; ``NLPOptions.input_errors``). overrides: config tables' fields to change, e.g.
+    ``{"data": {"resample_hz": 50}}``. standard_errors: False skips the reduced Hessian (minutes).
     """
-    cfg = load_identification_config(ROOT / "studies" / "close_loop.toml", {"data": {"dataset": str(dataset.resolve())}})
+    over = {k: dict(v) for k, v in (overrides or {}).items()}
+    over.setdefault("data", {})["dataset"] = str(dataset.resolve())
+    cfg = load_identification_config(ROOT / "studies" / "close_loop.toml", over)
     free = list(cfg.free) + [FreeParameter(*e) for e in W.VARIANTS["truth_form"][1]]
     nlp = dataclasses.replace(cfg.nlp, input_errors=("col", "lon")) if input_errors else cfg.nlp
     cfg = dataclasses.replace(cfg, model=W.model_of("truth_form", cfg, dataset), free=free, nlp=nlp)
@@ -115,7 +119,7 @@ def anchor_a(dataset: Path, input_errors: bool = False) -> dict:
     point = solver.point_a()
     out = {"status": point.status, "iterations": point.iterations, "J_time": point.J_time,
            "parameters": free_parameter_values(m)}
-    if point.success:  # standard errors from the NLP's reduced Hessian (uncertainty/reduced_hessian.py)
+    if point.success and standard_errors:  # standard errors from the NLP's reduced Hessian (uncertainty/reduced_hessian.py)
         out["se"] = reduced_hessian_covariance(m, solver.solver, 1.0 / solver.s_time)["se"]
     return out
 

@@ -40,7 +40,7 @@ from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.candidates import RotorWakeOnTail
 from pyomo_heli.flighttest.truth_effects import WakeOnTail
 from pyomo_heli.identify import run_identification
-from pyomo_heli.nlp.identification import prepare_data
+from pyomo_heli.nlp.identification import identification_data, prepare_data
 from pyomo_heli.nlp.parameters import FreeParameter
 from pyomo_heli.pareto.result import IdentificationResult
 from pyomo_heli.physics.model import HelicopterModel
@@ -160,7 +160,7 @@ def main() -> None:
         print(row(label, res, truth))
 
     ft = load_flight_test(cfg.dataset)
-    id_mans = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s).maneuvers
+    id_mans = identification_data(cfg, ft).maneuvers
     val_mans = prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers
     trims = ft.trims.reset_index(drop=True)
     errs = {label: errors_of(models[label], res.direct["parameters"], id_mans, val_mans, trims, label)

@@ -294,7 +294,8 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
         sel = selection[role]
         if sel == "validation" and not any(mv.role == "validation" for mv in ft.maneuvers.values()):
             continue
-        data = (prepare_data(ft, sel, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
+        data = (prepare_data(ft, sel, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s,
+                              cfg.resample_inputs)
                 if role == "identification" else prepare_data(ft, sel, input_reference_s=cfg.input_reference_s))
         mans += [(role, mv) for mv in data.maneuvers]
         if role == "identification":
@@ -302,7 +303,8 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
             inn_mans = [(role, mv) for mv in data.maneuvers]
         else:  # the innovations take every maneuver at the NLP's rate (its input-noise model)
             inn_mans += [(role, mv) for mv in prepare_data(ft, sel, cfg.resample_hz,
-                                                           input_reference_s=cfg.input_reference_s).maneuvers]
+                                                           input_reference_s=cfg.input_reference_s,
+                                                           resample_inputs=cfg.resample_inputs).maneuvers]
     problems: list[str] = []
     trims = ft.trims.reset_index(drop=True)
     tps = _trims(model, trims, [mv.trim_speed for _, mv in mans], problems)

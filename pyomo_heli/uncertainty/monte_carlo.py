@@ -37,7 +37,7 @@ import pandas as pd
 
 from ..config import load_identification_config
 from ..dataset import load_flight_test
-from ..nlp.identification import build_identification_nlp, prepare_data, set_measurements
+from ..nlp.identification import build_identification_nlp, identification_data, set_measurements
 from ..pareto.front import ParetoSolver
 from .cramer_rao import cramer_rao, point_information
 from .realizations import noisy_copy
@@ -76,7 +76,7 @@ def _problem(spec: ProblemSpec):
         cfg = load_identification_config(spec.config, json.loads(spec.overrides))
         cfg.nlp = dataclasses.replace(cfg.nlp, mutable_data=True)
         ft = load_flight_test(cfg.dataset)
-        data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s)
+        data = identification_data(cfg, ft)
         m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
         ps = ParetoSolver(m, cfg.pareto)
         _CACHE[spec] = (cfg, data, m, ps)

@@ -112,6 +112,15 @@ def test_m0_with_noise_accepts_nothing_with_input_errors(tmp_path, seed):
     print(att)
     assert att.decision == "none" and att.accepted is None
     assert not att.scores["significant"].any()
+    # and the residual analysis the loop ends with tests whiteness on the innovations (the input noise taken
+    # out): white on every record. (Its trim shape test is a separate matter: on seed 41 the col trim
+    # residual of this 2-point front's chosen point has a V^2-plus-bump shape.)
+    from pyomo_heli.close_loop import residual_verdict
+    from pyomo_heli.pareto.result import IdentificationResult
+
+    verdict = residual_verdict(cfg, IdentificationResult.load(tmp_path / "out").chosen["parameters"], print)
+    assert verdict["verdict"]["white_identification"] and verdict["verdict"]["white_validation"], verdict["findings"]
+    assert any("innovations of" in f for f in verdict["findings"])
 
 
 def test_rigging_only_leads_to_rigging(tmp_path):

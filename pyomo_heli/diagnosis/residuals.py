@@ -299,8 +299,8 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
                 if role == "identification" else prepare_data(ft, sel, input_reference_s=cfg.input_reference_s))
         mans += [(role, mv) for mv in data.maneuvers]
         if role == "identification":
-            id_mans = list(data.maneuvers)
-            inn_mans = [(role, mv) for mv in data.maneuvers]
+            id_mans += list(data.maneuvers)
+            inn_mans += [(role, mv) for mv in data.maneuvers]
         else:  # the innovations take every maneuver at the NLP's rate (its input-noise model)
             inn_mans += [(role, mv) for mv in prepare_data(ft, sel, cfg.resample_hz,
                                                            input_reference_s=cfg.input_reference_s,

@@ -219,6 +219,11 @@ def test_input_sensitivities_match_finite_differences():
                 col = S[o][:, c * n + k]
                 np.testing.assert_allclose(col, fd, atol=1e-6 * np.max(np.abs(fd)) + 1e-12, err_msg=f"{o} {chan} {k}")
                 assert not col[:k].any(), "an input sample moves no earlier output"
+    # keep: only the wanted rows, identical to the full matrix's
+    keep = np.arange(0, n, 5)
+    _, S_keep = input_sensitivities(cfg.model, tp, t, inc, outs, ["col", "lon"], keep=keep)
+    for o in outs:
+        np.testing.assert_array_equal(S_keep[o], S[o][keep])
 
 
 def test_cramer_rao_with_vanishing_input_noise_is_the_output_error_bound():

@@ -51,13 +51,13 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     k = decimation(t, test_rate_hz)
     keep = np.arange(0, n, k)
     y, S_u = input_sensitivities(model, trim_float(model, mv.trim_speed), t, mv.increments(), outputs,
-                                 input_errors, substeps)
+                                 input_errors, substeps, keep=keep)
     n_out, m = len(outputs), len(keep)
     # rows in time order: (test sample 0: every output), (test sample 1: ...), ...
     e = np.column_stack([y[o][keep] - mv.data[o].to_numpy(dtype=float)[keep] for o in outputs]).ravel()
     Su = np.empty((m * n_out, len(input_errors) * n))
     for j, o in enumerate(outputs):
-        Su[j::n_out] = S_u[o][keep]
+        Su[j::n_out] = S_u[o]
     var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
     V = (Su * var_u) @ Su.T
     V[np.diag_indices_from(V)] += np.tile([float(sigma[o]) ** 2 for o in outputs], m)

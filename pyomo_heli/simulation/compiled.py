@@ -142,7 +142,7 @@ def _jacobian_functions(model: HelicopterModel, substeps: int):
 
 
 def input_sensitivities(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mapping[str, np.ndarray],
-                        outputs, channels, substeps: int = 4) -> tuple[dict, dict]:
+                        outputs, channels, substeps: int = 4, keep=None) -> tuple[dict, dict]:
     """Outputs and their derivatives with respect to every sample of the input ``channels``.
 
     The errors-in-variables counterpart of the parameter sensitivities: how each output sample moves
@@ -153,7 +153,8 @@ def input_sensitivities(model: HelicopterModel, trim: TrimPoint, t_eval, increme
     G_{k+1} = A_k G_k + B0_k E_k + B1_k E_{k+1}.
 
     Returns ``(y, S)``: output -> values at ``t_eval``; output -> (N, len(channels) * N) matrix whose
-    column ``c * N + k`` is d(output)/d(input ``channels[c]`` at sample k).
+    column ``c * N + k`` is d(output)/d(input ``channels[c]`` at sample k). ``keep``: sample indices
+    whose rows of S are wanted (in that order; default all), so that a long record's S stays small.
     """
     t_eval = np.asarray(t_eval, dtype=float)
     bad = [c for c in channels if c not in INPUTS]
@@ -183,14 +184,17 @@ def input_sensitivities(model: HelicopterModel, trim: TrimPoint, t_eval, increme
     D = D.reshape(len(out_names), n, ni).transpose(1, 0, 2)
     ch = [INPUTS.index(c) for c in channels]
     rows = [out_names.index(o) for o in outputs]
-    S = {o: np.zeros((n, nc * n)) for o in outputs}
+    keep = np.arange(n) if keep is None else np.asarray(keep, dtype=int)
+    where = {int(k): i for i, k in enumerate(keep)}
+    S = {o: np.zeros((len(keep), nc * n)) for o in outputs}
     G = np.zeros((nx, nc * n))
     cols = np.arange(nc) * n
     for k in range(n):
-        out_k = C[k][rows] @ G
-        out_k[:, cols + k] += D[k][np.ix_(rows, ch)]
-        for r, o in enumerate(outputs):
-            S[o][k] = out_k[r]
+        if k in where:
+            out_k = C[k][rows] @ G
+            out_k[:, cols + k] += D[k][np.ix_(rows, ch)]
+            for r, o in enumerate(outputs):
+                S[o][where[k]] = out_k[r]
         if k < n - 1:
             G = A[k] @ G
             G[:, cols + k] += B[k][:, ch]

@@ -54,14 +54,15 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import pandas as pd
 from scipy import stats
-from scipy.linalg import cholesky, solve_triangular
+from scipy.linalg import solve_triangular
 
 from ..physics.model import HelicopterModel
 from ..nlp.objectives import noise_sigmas
-from ..simulation.compiled import input_sensitivities, simulate_outputs
+from ..simulation.compiled import simulate_outputs
 from ..simulation.sensitivity import sensitivities
 from ..simulation.trim import trim_float
 from .candidates import CANDIDATES, make_candidate
+from .innovations import input_noise_factor
 
 ALPHA = 0.01
 RATIO = 2.0
@@ -227,19 +228,10 @@ def _input_error_whitening(model: HelicopterModel, data, time_outputs, w, seg, i
     starts = np.cumsum([0] + n_per)
     blocks, seg = [], seg.copy()
     for i, mv in enumerate(data.maneuvers):
-        t = mv.data["t"].to_numpy()
-        _, S_u = input_sensitivities(model, trim_float(model, mv.trim_speed), t, mv.increments(), time_outputs,
-                                     input_errors, substeps)
-        n = len(t)
+        n = len(mv.data)
         # stacked row of (sample k, output j), time order
         idx = (np.arange(n_out)[None, :] * n_time + starts[i] + np.arange(n)[:, None]).ravel()
-        Su = np.empty((n * n_out, len(input_errors) * n))
-        for j, o in enumerate(time_outputs):
-            Su[j::n_out] = S_u[o]
-        var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
-        V = (Su * var_u) @ Su.T
-        V[np.diag_indices_from(V)] += np.tile([float(sigma[o]) ** 2 for o in time_outputs], n)
-        blocks.append((idx, cholesky(V, lower=True)))
+        blocks.append((idx, input_noise_factor(model, mv, time_outputs, input_errors, sigma, substeps)[2]))
         seg[idx] = seg[starts[i] + np.arange(n)].repeat(n_out)
     time_rows = n_out * n_time
     sw_trim = np.sqrt(w[time_rows:])

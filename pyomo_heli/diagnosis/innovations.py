@@ -39,6 +39,31 @@ from ..simulation.trim import trim_float
 from .timeseries import decimation
 
 
+def input_noise_factor(model: HelicopterModel, mv, outputs, input_errors, sigma: dict, substeps: int = 2,
+                       keep=None) -> tuple[dict, np.ndarray, np.ndarray]:
+    """The covariance the measured inputs' noise gives one maneuver's outputs, factored.
+
+    Rows in time order (every output of kept sample 0, then of kept sample 1, ...; ``keep``: sample
+    indices, default all). Returns ``(y, Su, L)``: the model outputs at every sample, the stacked
+    sensitivities of the kept rows to every input sample (:func:`input_sensitivities`), and the lower
+    Cholesky factor of ``V = R + Su Sigma_u Su^T`` (``sigma``: noise sigma [SI] of every output and
+    input channel). Shared by the innovations here and the score test's whitening (attribution).
+    """
+    t = mv.data["t"].to_numpy(dtype=float)
+    n = len(t)
+    keep = np.arange(n) if keep is None else np.asarray(keep, dtype=int)
+    y, S_u = input_sensitivities(model, trim_float(model, mv.trim_speed), t, mv.increments(), outputs,
+                                 input_errors, substeps, keep=keep)
+    n_out = len(outputs)
+    Su = np.empty((len(keep) * n_out, len(input_errors) * n))
+    for j, o in enumerate(outputs):
+        Su[j::n_out] = S_u[o]
+    var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
+    V = (Su * var_u) @ Su.T
+    V[np.diag_indices_from(V)] += np.tile([float(sigma[o]) ** 2 for o in outputs], len(keep))
+    return y, Su, cholesky(V, lower=True)
+
+
 def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigma: dict, test_rate_hz: float,
                          substeps: int = 2) -> pd.DataFrame:
     """Innovations of one prepared maneuver at its test-rate samples (columns ``t`` and ``inn_<o>``).
@@ -50,18 +75,10 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     n = len(t)
     k = decimation(t, test_rate_hz)
     keep = np.arange(0, n, k)
-    y, S_u = input_sensitivities(model, trim_float(model, mv.trim_speed), t, mv.increments(), outputs,
-                                 input_errors, substeps, keep=keep)
+    y, Su, L = input_noise_factor(model, mv, outputs, input_errors, sigma, substeps, keep)
     n_out, m = len(outputs), len(keep)
     # rows in time order: (test sample 0: every output), (test sample 1: ...), ...
     e = np.column_stack([y[o][keep] - mv.data[o].to_numpy(dtype=float)[keep] for o in outputs]).ravel()
-    Su = np.empty((m * n_out, len(input_errors) * n))
-    for j, o in enumerate(outputs):
-        Su[j::n_out] = S_u[o]
-    var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
-    V = (Su * var_u) @ Su.T
-    V[np.diag_indices_from(V)] += np.tile([float(sigma[o]) ** 2 for o in outputs], m)
-    L = cholesky(V, lower=True)
     # nuisance: one bias per output, and the response to a constant offset of each input (the sum of that
     # channel's columns: the same error on every sample)
     N = np.zeros((m * n_out, n_out + len(input_errors)))

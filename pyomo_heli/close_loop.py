@@ -341,7 +341,9 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
             result = run_identification(cfg, out / f"iter_{i}", progress=lambda s: progress("  " + s),
                                         uncertainty=settings.uncertainty if settings.uncertainty != "none" else False)
         point, which = _diagnosed_point(result, settings.point)
-        chosen = point["parameters"]
+        # in the free parameters' order, whether the point was just solved or read back from disk
+        chosen = {**{f.name: point["parameters"][f.name] for f in cfg.free if f.name in point["parameters"]},
+                  **point["parameters"]}
         errs = errors_of(cfg.model, chosen, id_data.maneuvers, val_mans, trims, f"iteration {i}")
         model = cfg.model.with_parameters(**chosen)
         pool = settings.candidates or list(CANDIDATES)

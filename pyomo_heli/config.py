@@ -42,6 +42,27 @@ class IdentificationConfig:
     linear: object = None  # LinearSettings when "linear" is used
     input_reference_s: float = 0.0  # [data] input_reference_s (0: increments from the first sample)
     resample_inputs: str = "sample"  # [data] resample_inputs: "sample" | "project" (nlp.identification.prepare_data)
+    diagnosis: "DiagnosisSettings" = None  # [diagnosis]; None: as the identification ([objectives] input_errors)
+
+    @property
+    def diagnosis_settings(self) -> "DiagnosisSettings":
+        """The residual analysis's input-noise model: ``[diagnosis]``, else the identification's own."""
+        return self.diagnosis or DiagnosisSettings(tuple(self.nlp.input_errors), self.nlp.noise_sigma)
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    """``[diagnosis]``: the input-noise model of the residual analysis (docs/diagnosis.md).
+
+    ``input_noise``: the input channels whose measurement noise the whiteness test takes out (the
+    residuals' innovations, :mod:`pyomo_heli.diagnosis.innovations`); default the identification's
+    ``[objectives] input_errors``. Giving it to an output-error identification (inputs taken as exact)
+    keeps the exact model from being called "not white" because its replay is driven by noisy inputs.
+    ``noise_sigma``: the sigmas [SI] of the input and output channels (``[diagnosis.noise_sigma]``, same
+    keys and units as ``[objectives.noise_sigma]``); None: from the records' quiet lead-in.
+    """
+    input_noise: tuple = ()
+    noise_sigma: dict | None = None
 
 
 def _need(d, key, where, types, default=...):
@@ -73,7 +94,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
         raw[k] = {**raw.get(k, {}), **v} if isinstance(v, dict) else v
     f = str(path)
     known = {"data", "model", "parameters", "objectives", "discretization", "pareto", "solver", "study", "loop",
-             "linear"}
+             "linear", "diagnosis"}
     unknown = set(raw) - known
     if unknown:
         raise ConfigError(f"{f}: unknown table(s) {sorted(unknown)}; expected {sorted(known)}")
@@ -202,37 +223,53 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     except ValueError as exc:
         raise ConfigError(f"{f} [pareto]: {exc}") from None
     use, linear = _objectives_use(raw, f)
+    diagnosis = _diagnosis(raw, f, in_ref)
     return IdentificationConfig(path=path, dataset=ds, maneuvers=mans, validation=val,
                                 resample_hz=float(resample) if resample else None,
                                 max_duration=float(max_dur) if max_dur else None, model=model, free=free,
                                 nlp=nlp, pareto=pareto, raw=raw, objectives=use, linear=linear,
-                                input_reference_s=float(in_ref), resample_inputs=res_in)
+                                input_reference_s=float(in_ref), resample_inputs=res_in, diagnosis=diagnosis)
 
 
-def _input_errors(obj: dict, f, in_ref) -> tuple[tuple, dict | None]:
-    """[objectives] input_errors (errors in variables) and the optional [objectives.noise_sigma] table."""
-    chans = tuple(_need(obj, "input_errors", f"{f} [objectives]", list, []))
+def _input_errors(obj: dict, f, in_ref, table: str = "objectives", key: str = "input_errors") -> tuple[tuple, dict | None]:
+    """[objectives] input_errors (errors in variables) and the optional [objectives.noise_sigma] table; the
+    same for [diagnosis] input_noise and [diagnosis.noise_sigma] (``table``, ``key``)."""
+    chans = tuple(_need(obj, key, f"{f} [{table}]", list, []))
     bad = [c for c in chans if c not in INPUTS]
     if bad:
-        raise ConfigError(f"{f} [objectives]: unknown input channel(s) {bad} in input_errors; choose from "
+        raise ConfigError(f"{f} [{table}]: unknown input channel(s) {bad} in {key}; choose from "
                           f"{', '.join(INPUTS)}")
-    table = _need(obj, "noise_sigma", f"{f} [objectives]", dict, None)
-    if table is not None and not chans:
-        raise ConfigError(f"{f} [objectives]: noise_sigma is only used with input_errors")
-    if chans and table is None and not (isinstance(in_ref, (int, float)) and in_ref > 0):
-        raise ConfigError(f"{f} [objectives]: input_errors estimates the noise sigmas from the records' quiet "
-                          f"lead-in; set [data] input_reference_s > 0 or give [objectives.noise_sigma]")
+    given = _need(obj, "noise_sigma", f"{f} [{table}]", dict, None)
+    if given is not None and not chans:
+        raise ConfigError(f"{f} [{table}]: noise_sigma is only used with {key}")
+    if chans and given is None and not (isinstance(in_ref, (int, float)) and in_ref > 0):
+        raise ConfigError(f"{f} [{table}]: {key} takes the noise sigmas from the records' quiet "
+                          f"lead-in; set [data] input_reference_s > 0 or give [{table}.noise_sigma]")
     sigma = None
-    if table is not None:
+    if given is not None:
         sigma = {}
-        for k, v in table.items():
+        for k, v in given.items():
             if k not in SENSOR_SIGMA_KEYS:
-                raise ConfigError(f"{f} [objectives.noise_sigma]: unknown key '{k}'; use {', '.join(SENSOR_SIGMA_KEYS)}")
+                raise ConfigError(f"{f} [{table}.noise_sigma]: unknown key '{k}'; use {', '.join(SENSOR_SIGMA_KEYS)}")
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
-                raise ConfigError(f"{f} [objectives.noise_sigma]: '{k}' must be a positive number, got {v!r}")
+                raise ConfigError(f"{f} [{table}.noise_sigma]: '{k}' must be a positive number, got {v!r}")
             ch, factor = SENSOR_SIGMA_KEYS[k]
             sigma[ch] = float(v) * factor
     return chans, sigma
+
+
+def _diagnosis(raw: dict, f, in_ref) -> DiagnosisSettings | None:
+    """The [diagnosis] table; None when absent (the residual analysis follows the identification)."""
+    if "diagnosis" not in raw:
+        return None
+    d = raw["diagnosis"]
+    if not isinstance(d, dict):
+        raise ConfigError(f"{f} [diagnosis]: must be a table")
+    unknown = sorted(set(d) - {"input_noise", "noise_sigma"})
+    if unknown:
+        raise ConfigError(f"{f} [diagnosis]: unknown key(s) {', '.join(unknown)}; use input_noise, noise_sigma")
+    chans, sigma = _input_errors(d, f, in_ref, table="diagnosis", key="input_noise")
+    return DiagnosisSettings(chans, sigma)
 
 
 #: the objective sets an identification can use ([objectives] use)

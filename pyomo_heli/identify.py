@@ -73,7 +73,9 @@ def identification_fingerprint(cfg: IdentificationConfig) -> str:
              if cfg.model.extensions else {})
     if shape_values(cfg.model):
         extra["shape"] = shape_values(cfg.model)
-    return fingerprint(cfg.raw, cfg.dataset, command="identify", **extra)
+    # [diagnosis] only sets the residual analysis's input-noise model: changing it must not discard fronts
+    raw = {k: v for k, v in cfg.raw.items() if k != "diagnosis"}
+    return fingerprint(raw, cfg.dataset, command="identify", **extra)
 
 
 def run_identification(cfg: IdentificationConfig, out: str | Path, progress=print,

@@ -47,7 +47,9 @@ def exact():
 
 def test_exact_model_raw_residuals_are_coloured_by_the_input_noise():
     model, params = _truth(_cfg(FAST))
-    res = compute_residuals(_cfg(FAST, model, input_errors=False), params, label="truth", trim_sensitivities=False)
+    cfg = dataclasses.replace(_cfg(FAST, model, input_errors=False), diagnosis=None)
+    assert cfg.diagnosis_settings.input_noise == ()
+    res = compute_residuals(cfg, params, label="truth", trim_sensitivities=False)
     assert res.innovations is None
     d = diagnose(res)
     bad = [w for w in d.whiteness if not w["white"]]
@@ -101,3 +103,48 @@ def test_an_output_without_a_known_sigma_keeps_the_plain_test():
     assert any("output beta_0 left out" in p and "noise_sigma has no value" in p for p in res.problems)
     series = {w["output"]: w["series"] for w in diagnose(res).whiteness}
     assert series["beta_0"] == "residual" and series["theta"] == "innovation"
+
+
+OE = ROOT / "studies" / "close_loop.toml"
+
+
+def test_output_error_config_asks_for_the_innovations_with_diagnosis_input_noise():
+    """An output-error identification (inputs taken as exact) with ``[diagnosis] input_noise``: the exact
+    model's residuals get their innovations, and these are white (the plain test calls theta coloured,
+    test_exact_model_raw_residuals_are_coloured_by_the_input_noise); ``input_noise = []``: none."""
+    off = load_identification_config(OE, {"diagnosis": {"input_noise": []}})
+    assert off.nlp.input_errors == () and off.diagnosis_settings.input_noise == ()
+    cfg = load_identification_config(OE)  # the loop's output-error config declares [diagnosis] input_noise
+    assert cfg.nlp.input_errors == () and cfg.diagnosis_settings.input_noise == ("col", "lon")
+    cfg = dataclasses.replace(cfg, maneuvers=list(FAST), validation=[])
+    model, params = _truth(cfg)
+    res = compute_residuals(dataclasses.replace(cfg, model=model), params, label="truth", trim_sensitivities=False)
+    assert res.info["innovations"]["input_errors"] == ["col", "lon"]
+    d = diagnose(res)
+    assert len(d.whiteness) == 12 and all(w["series"] == "innovation" and w["white"] for w in d.whiteness)
+    assert d.verdict["noise_only"]
+
+
+@pytest.mark.parametrize("table, message", [
+    ({"input_noise": ["pedal"]}, "[diagnosis]: unknown input channel(s) ['pedal'] in input_noise"),
+    ({"input_noise": ["col"], "sigma": 1}, "[diagnosis]: unknown key(s) sigma"),
+    ({"input_noise": [], "noise_sigma": {"col_deg": 0.02}}, "[diagnosis]: noise_sigma is only used with input_noise"),
+    ({"input_noise": ["col"], "noise_sigma": {"col_deg": -1}}, "[diagnosis.noise_sigma]: 'col_deg' must be a positive"),
+])
+def test_diagnosis_table_errors_name_the_field(table, message):
+    from pyomo_heli.config import ConfigError
+
+    with pytest.raises(ConfigError) as exc:
+        load_identification_config(OE, {"diagnosis": table})
+    assert message in str(exc.value) and "close_loop.toml" in str(exc.value)
+
+
+def test_diagnosis_input_noise_needs_a_lead_in_or_sigmas():
+    from pyomo_heli.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"\[diagnosis\]: input_noise takes the noise sigmas from the records' quiet "
+                                          r"lead-in; set \[data\] input_reference_s > 0"):
+        load_identification_config(OE, {"data": {"input_reference_s": 0.0}, "diagnosis": {"input_noise": ["col"]}})
+    cfg = load_identification_config(OE, {"data": {"input_reference_s": 0.0},
+                                          "diagnosis": {"input_noise": ["col"], "noise_sigma": {"col_deg": 0.02}}})
+    assert cfg.diagnosis_settings.noise_sigma["col"] == pytest.approx(np.radians(0.02))

@@ -117,7 +117,7 @@ class Diagnosis:
         if len(w):
             piv = w.pivot_table(index=["role", "maneuver"], columns="output", values="p", sort=False)
             inn = self.settings.get("innovations")
-            how = f"; innovations of {', '.join(inn['outputs'])} (input errors eliminated)" if inn else ""
+            how = f"; innovations of {', '.join(inn['outputs'])} (input noise taken out)" if inn else ""
             L += [f"Whiteness: Ljung-Box p-values at {self.settings['test_rate_hz']:g} Hz after removing the nuisance "
                   f"(white if p > alpha / tests{how}):", piv.to_string(float_format=lambda x: f"{x:.2g}"), ""]
         for role, sp in self.spectra.items():
@@ -159,7 +159,7 @@ def _findings(d: Diagnosis, shapes: dict, white: pd.DataFrame, coh: pd.DataFrame
             continue
         bad = w[~w["white"].astype(bool)]
         inn = d.settings.get("innovations")
-        how = (f" (innovations of {', '.join(inn['outputs'])}: the input errors eliminated)" if inn else "")
+        how = (f" (innovations of {', '.join(inn['outputs'])}: the measured inputs' noise taken out)" if inn else "")
         if bad.empty:
             out.append(f"{role} maneuvers: residuals white in all {len(w)} tests (Ljung-Box at "
                        f"{d.settings['test_rate_hz']:g} Hz, family-wise alpha {d.settings['alpha']:g}){how}")

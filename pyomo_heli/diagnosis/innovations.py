@@ -6,7 +6,9 @@ integrates it into a slow wander. The residual of even the exact model is then c
 whiteness test of :mod:`.timeseries` calls it "not white" (on the bundled data the truth model itself,
 at the true parameters, fails it in theta on three 80 kt maneuvers of ten). When the identification
 estimates the input errors (``[objectives] input_errors``) the residual analysis should take that
-colour out the same way, or it reports a missing effect that is only the input noise.
+colour out the same way, or it reports a missing effect that is only the input noise. An output-error
+identification (the inputs taken as exact) leaves its residuals with the same colour; ``[diagnosis]
+input_noise`` asks for the innovations there too (config.DiagnosisSettings).
 
 What: to first order the residual of a maneuver at the test-rate samples is
 

@@ -83,7 +83,8 @@ class Residuals:
       ``dres_<c>_d<p>`` (d model_c / d parameter p) for every parameter given.
     ``info["inputs"]``: maneuver -> the input channels it excites (from the dataset).
     ``fitted_outputs`` / ``fitted_trim``: what the identification's objectives used.
-    ``innovations``: with ``[objectives] input_errors`` only (else None), the time residuals whitened by
+    ``innovations``: with ``[objectives] input_errors`` or ``[diagnosis] input_noise`` only (else None),
+      the time residuals whitened by
       the covariance the measured inputs' noise gives them, at the test-rate samples (columns
       ``maneuver, role, t, inn_<o>``, dimensionless; :mod:`pyomo_heli.diagnosis.innovations`);
       ``info["innovations"]`` says which outputs, sigmas and rate.
@@ -281,8 +282,9 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
     (columns ``dres_<c>_d<parameter>`` of ``trim``, central differences of the
     model trims, SI per SI unit), so that a diagnosis can ask what the
     identified parameters could still absorb. Costs two trim sweeps per parameter.
-    With ``[objectives] input_errors`` the residuals' innovations at ``test_rate_hz`` are added
-    (:mod:`pyomo_heli.diagnosis.innovations`; every maneuver at the identification's sample rate).
+    With ``[objectives] input_errors`` or ``[diagnosis] input_noise`` the residuals' innovations at
+    ``test_rate_hz`` are added (:mod:`pyomo_heli.diagnosis.innovations`; every maneuver at the
+    identification's sample rate).
     """
     model = cfg.model.with_parameters(**parameters) if parameters else cfg.model
     ft = load_flight_test(cfg.dataset)
@@ -368,10 +370,11 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
     if trim_sensitivities and parameters and len(trim):
         _add_trim_sensitivities(model, list(parameters), trim, problems)
     inn, inn_info = None, None
-    if cfg.nlp.input_errors and inn_mans:
+    noise = cfg.diagnosis_settings  # [diagnosis], else the identification's input errors
+    if noise.input_noise and inn_mans:
         try:
             inn, inn_info = innovations(model, inn_mans, id_mans or [mv for _, mv in inn_mans], outputs,
-                                        cfg.nlp.input_errors, cfg.nlp.noise_sigma, test_rate_hz, problems=problems)
+                                        noise.input_noise, noise.noise_sigma, test_rate_hz, problems=problems)
         except ValueError as exc:  # e.g. no input sigma: the raw residual tests stay
             problems.append(f"innovations not computed: {exc}")
     return Residuals(label=label, parameters={k: float(v) for k, v in (parameters or {}).items()}, time=time,

@@ -224,7 +224,7 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
     if len(w):
         piv = w.pivot_table(index=["role", "maneuver"], columns="output", values="p", sort=False).reset_index()
         inn = s.get("innovations")
-        what = (f"innovations of {', '.join(inn['outputs'])} (the input errors eliminated, nuisance projected off; "
+        what = (f"innovations of {', '.join(inn['outputs'])} (the measured inputs' noise taken out, nuisance projected off; "
                 "docs/diagnosis.md), residuals with the per-maneuver nuisance removed for any other output"
                 if inn else "residuals with the per-maneuver nuisance removed")
         L += [f"Ljung-Box p-values ({what}, at {s['test_rate_hz']:g} Hz; "

@@ -19,11 +19,13 @@ noise seed; generated into ``OUT/data`` unless ``--data`` names a folder), and r
 
 Nothing is fitted: the models are the loop's, replayed with the float simulator from their own trims and
 driven by the measured input increments (as the loop report does). Written: ``OUT/envelope_validation.md``
-and ``OUT/envelope_validation.csv`` (one row per loop, speed group and output).
+and ``OUT/envelope_validation.csv`` (one row per loop, speed group and output); each loop's rows go to
+``OUT/loops/`` as soon as they are done, and a rerun reuses them while the loop and the data are unchanged.
 """
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 from pathlib import Path
 
@@ -84,6 +86,22 @@ def evaluate(loop: Path, data: Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def evaluate_saved(loop: Path, data: Path, folder: Path) -> pd.DataFrame:
+    """:func:`evaluate`, each loop's rows written to ``folder`` as soon as they are done and read back by a rerun
+    while the loop's ``loop.json`` and the flight test's ``manifest.json`` are the same (a SHA-256 of each in
+    the file name), so that an interrupted study resumes."""
+    key = hashlib.sha256((loop / "loop.json").read_bytes() + (data / "manifest.json").read_bytes()).hexdigest()[:16]
+    name = "_".join(p for p in Path(loop).parts if p not in ("/", ".", ".."))
+    f = folder / f"{name}_{key}.csv"
+    if f.is_file():
+        return pd.read_csv(f)
+    tab = evaluate(loop, data)
+    folder.mkdir(parents=True, exist_ok=True)
+    tab.to_csv(f.with_suffix(".tmp"), index=False)
+    f.with_suffix(".tmp").replace(f)
+    return pd.read_csv(f)  # the same types whether just computed or read back
+
+
 def markdown(tab: pd.DataFrame, data: Path) -> str:
     lines = ["# Validation across the speed range (`studies/envelope_validation.py`)", "",
              f"Flight test: `{data}`. Before = the loop's iteration 0 (M0), after = its last iteration. RMS of data "
@@ -139,7 +157,7 @@ def main() -> None:
         assert cli_main(["generate-data", "--config", str(a.data_config), "--out", str(data)]) == 0
     if not (data / "manifest.json").is_file():
         ap.error(f"--data {data}: not a flight-test folder (no manifest.json)")
-    tab = pd.concat([evaluate(p, data) for p in a.loops], ignore_index=True)
+    tab = pd.concat([evaluate_saved(p, data, a.out / "loops") for p in a.loops], ignore_index=True)
     tab.to_csv(a.out / "envelope_validation.csv", index=False)
     text = markdown(tab, data)
     (a.out / "envelope_validation.md").write_text(text)

@@ -41,7 +41,7 @@ class IdentificationConfig:
     objectives: tuple = ("time", "trim")  # [objectives] use
     linear: object = None  # LinearSettings when "linear" is used
     input_reference_s: float = 0.0  # [data] input_reference_s (0: increments from the first sample)
-    resample_inputs: str = "sample"  # [data] resample_inputs: "sample" | "project" (nlp.identification.prepare_data)
+    resample_inputs: str = "project"  # [data] resample_inputs: "sample" | "project" (nlp.identification.prepare_data)
     diagnosis: "DiagnosisSettings" = None  # [diagnosis]; None: as the identification ([objectives] input_errors)
 
     @property
@@ -115,7 +115,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     max_dur = data.get("max_duration_s")
     if max_dur is not None and not (isinstance(max_dur, (int, float)) and max_dur > 0):
         raise ConfigError(f"{f} [data]: field 'max_duration_s' must be a positive number")
-    res_in = data.get("resample_inputs", "sample")
+    res_in = data.get("resample_inputs", "project")
     if res_in not in ("sample", "project"):
         raise ConfigError(f"{f} [data]: field 'resample_inputs' must be \"sample\" or \"project\", got {res_in!r}")
     in_ref = data.get("input_reference_s", 0.0)

@@ -75,6 +75,13 @@ def identification_fingerprint(cfg: IdentificationConfig) -> str:
         extra["shape"] = shape_values(cfg.model)
     # [diagnosis] only sets the residual analysis's input-noise model: changing it must not discard fronts
     raw = {k: v for k, v in cfg.raw.items() if k != "diagnosis"}
+    # [data] resample_inputs by the value it resolves to, not by its spelling: the default changed from
+    # "sample" to "project" (2026-11-25), so a config without the key must not resume a store of picked
+    # inputs, and one that now says "sample" must still resume the stores made before the key existed
+    if "data" in raw:
+        raw["data"] = {k: v for k, v in raw["data"].items() if k != "resample_inputs"}
+    if cfg.resample_inputs != "sample" and cfg.resample_hz:
+        extra["resample_inputs"] = cfg.resample_inputs
     return fingerprint(raw, cfg.dataset, command="identify", **extra)
 
 

@@ -83,7 +83,7 @@ def main() -> None:
         t0 = time.perf_counter()
         cfg = T.make_case(a.out, WAKE, seed=a.seed, points=a.points, loop="\n[loop]\nmax_iterations = 1\n",
                           maneuvers=T.WAKE_MANEUVERS if a.instance == "wake" else T.MANEUVERS,
-                          input_reference_s=ref)
+                          input_reference_s=ref, resample_inputs="sample")  # as its documented numbers were made
         assert cli_main(["close-loop", str(cfg.path), "--out", str(a.out / "loop")]) == 0
         print(f"wall time {time.perf_counter() - t0:.0f} s")
     table(a.out)

@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 from pyomo_heli.benchmark import growth_exponent, repeat_maneuvers  # noqa: E402
 from pyomo_heli.config import load_identification_config  # noqa: E402
 from pyomo_heli.dataset import load_flight_test  # noqa: E402
-from pyomo_heli.nlp.identification import build_identification_nlp, prepare_data  # noqa: E402
+from pyomo_heli.nlp.identification import build_identification_nlp, identification_data  # noqa: E402
 from pyomo_heli.pareto.front import ParetoSolver  # noqa: E402
 
 DIAG = {"print_level": 5, "print_timing_statistics": "yes", "mumps_print_level": 2}
@@ -160,7 +160,7 @@ def main():
     overrides = {"data": {"max_duration_s": args.max_duration}}
     cfg = load_identification_config(ROOT / "studies" / "case1.toml", overrides)
     ft = load_flight_test(cfg.dataset)
-    base = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    base = identification_data(cfg, ft)
     for k in [int(s) for s in args.size.split(",")]:
         data = repeat_maneuvers(base, k)
         samples = sum(len(mv.data) for mv in data.maneuvers)

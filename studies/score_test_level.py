@@ -45,11 +45,10 @@ sys.path.insert(0, str(ROOT / "tests"))
 import test_close_loop as T  # noqa: E402  (the instances are defined with the tests)
 
 from pyomo_heli.config import load_identification_config  # noqa: E402
-from pyomo_heli.dataset import load_flight_test  # noqa: E402
 from pyomo_heli.diagnosis.attribution import SEGMENT_S, Attribution, attribute  # noqa: E402
 from pyomo_heli.diagnosis.candidates import make_candidate  # noqa: E402
 from pyomo_heli.identify import run_identification  # noqa: E402
-from pyomo_heli.nlp.identification import prepare_data  # noqa: E402
+from pyomo_heli.nlp.identification import identification_data  # noqa: E402
 
 EIV = '\n[objectives]\ninput_errors = ["col", "lon"]\n'
 
@@ -63,7 +62,7 @@ def variant(segment_s: float = SEGMENT_S, variance: str = "batch") -> str:
 
 
 def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, segment_s: float = SEGMENT_S,
-             truth: str = "m0", variance: str = "batch") -> dict:
+             truth: str = "m0", variance: str = "batch", resample_inputs: str = "sample") -> dict:
     f = out / f"seed_{seed}{variant(segment_s, variance)}.json"
     root = out / f"work_{seed}"
     if f.is_file() and not rescore:
@@ -78,11 +77,10 @@ def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, s
         kw = (dict(free=("theta_twist", "CL_alpha_HT"), points=2) if truth == "m0"
               else dict(effect=WAKE, free=("theta_twist", "CL_alpha_HT", "Iyy"), points=3))
         cfg = T.make_case(root, seed=seed, loop=EIV if identification == "eiv" else "", maneuvers=T.WAKE_MANEUVERS,
-                          input_reference_s=1.9, **kw)
+                          input_reference_s=1.9, resample_inputs=resample_inputs, **kw)
         res = run_identification(cfg, root / "ident", progress=lambda s: None)
         point = res.direct if res.direct and res.direct.get("success") else res.chosen
-    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration,
-                        cfg.input_reference_s)
+    data = identification_data(cfg)
     model = cfg.model.with_parameters(**point["parameters"])
     doc = {"seed": seed, "identification": identification, "parameters": point["parameters"], "modes": {}}
     modes = {"measured": {}}
@@ -152,6 +150,9 @@ def main(argv=None) -> int:
                          "the finished seeds' identified points into seed_<n>_white.json; white_offsets: the "
                          "input-offset nuisance projected off as in the loop's test, variance F, into "
                          "seed_<n>_white_offsets.json")
+    ap.add_argument("--resample-inputs", choices=("sample", "project"), default="sample",
+                    help="[data] resample_inputs of the instances (default sample: the committed numbers were "
+                         "made so, before project became the config default)")
     ap.add_argument("--rescore", action="store_true",
                     help="score the finished seeds again at their saved identified points (no identification)")
     a = ap.parse_args(argv)
@@ -159,7 +160,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds_of(a.seeds):
-        docs.append(one_seed(s, a.identification, out, a.rescore, a.segment_s, a.truth, a.variance))
+        docs.append(one_seed(s, a.identification, out, a.rescore, a.segment_s, a.truth, a.variance, a.resample_inputs))
         tops = {m: d["scores"][0] for m, d in docs[-1]["modes"].items()}
         print(f"seed {s}: " + "; ".join(f"{m} top {r['name']} LM {r['LM']:.3g} (df {r['df']:.3g}, p {r['p_value']:.2g})"
                                         for m, r in tops.items()), flush=True)

@@ -25,8 +25,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from pyomo_heli.config import ConfigError, load_identification_config  # noqa: E402
-from pyomo_heli.dataset import load_flight_test  # noqa: E402
-from pyomo_heli.nlp.identification import prepare_data  # noqa: E402
+from pyomo_heli.nlp.identification import identification_data  # noqa: E402
 from pyomo_heli.simulation.compiled import simulate_outputs  # noqa: E402
 from pyomo_heli.simulation.integrate import sampled, simulate  # noqa: E402
 from pyomo_heli.simulation.trim import trim_float  # noqa: E402
@@ -55,7 +54,7 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     model = cfg.model.with_parameters(**{f.name: f.initial for f in cfg.free})
-    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    data = identification_data(cfg)
     rows = []
     print("| maneuver | samples | Python RK4 [s] | casadi RK4 [s] | first casadi call [s] | ratio "
           "| max rel. difference |")

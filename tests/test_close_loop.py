@@ -19,7 +19,7 @@ from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.attribution import attribute
 from pyomo_heli.flighttest.generate import generate_from_file
 from pyomo_heli.identify import run_identification
-from pyomo_heli.nlp.identification import prepare_data
+from pyomo_heli.nlp.identification import prepare_data, identification_data
 from pyomo_heli.report.loop import write_loop_report
 
 MANEUVERS = """
@@ -65,8 +65,10 @@ FREE = {
 
 
 def make_case(root, effect: str = "", seed: int = 11, free=("theta_twist", "CL_alpha_HT", "Iyy"), points: int = 3,
-              loop: str = "", maneuvers: str = MANEUVERS, input_reference_s: float = 0.0):
-    """Generate a small dataset with ``effect`` (a [truth.effects.*] table) and write its identification config."""
+              loop: str = "", maneuvers: str = MANEUVERS, input_reference_s: float = 0.0,
+              resample_inputs: str | None = None):
+    """Generate a small dataset with ``effect`` (a [truth.effects.*] table) and write its identification config
+    (``resample_inputs``: written into [data] when given, else the config default applies)."""
     root.mkdir(parents=True, exist_ok=True)
     gen = (f'[dataset]\nname = "small"\naircraft = "Bo-105 (small test)"\nseed = {seed}\n\n[truth]\nparameters = {{}}\n'
            f"{textwrap.dedent(effect)}\n[sensors]\nnoise = true\n\n[trims]\n"
@@ -74,7 +76,8 @@ def make_case(root, effect: str = "", seed: int = 11, free=("theta_twist", "CL_a
     (root / "gen.toml").write_text(gen)
     generate_from_file(root / "gen.toml", root / "data")
     params = "".join(f"\n[parameters.{n}]\n{FREE[n]}\n" for n in free)
-    ident = (f'[data]\ndataset = "data"\nresample_hz = 25\ninput_reference_s = {input_reference_s}\n{params}\n'
+    res_in = f'resample_inputs = "{resample_inputs}"\n' if resample_inputs else ""
+    ident = (f'[data]\ndataset = "data"\nresample_hz = 25\n{res_in}input_reference_s = {input_reference_s}\n{params}\n'
              f'[pareto]\npoints = {points}\n\n[solver]\nname = "casadi-ipopt"\n{loop}')
     (root / "ident.toml").write_text(ident)
     return load_identification_config(root / "ident.toml")
@@ -84,8 +87,7 @@ def identify_and_attribute(cfg, out, **kw):
     """Identify, then score the library at the chosen point as the loop does (its input reference; with
     input errors configured, the score test eliminates them, the loop's default)."""
     res = run_identification(cfg, out, progress=lambda s: None)
-    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration,
-                        cfg.input_reference_s)
+    data = identification_data(cfg)
     model = cfg.model.with_parameters(**res.chosen["parameters"])
     if cfg.nlp.input_errors:
         kw = {"input_errors": cfg.nlp.input_errors, "noise_sigma": cfg.nlp.noise_sigma, **kw}

@@ -89,12 +89,11 @@ def test_find_config_reports_a_missing_config(tmp_path):
 def test_time_rows_align_with_simulation_sensitivities(clean_residuals):
     """The identification rows are in the order of simulation.sensitivity (maneuvers of the config,
     concatenated per output), so a score test can pair res_<o> with sensitivity rows directly."""
-    from pyomo_heli.dataset import load_flight_test
-    from pyomo_heli.nlp.identification import prepare_data
+    from pyomo_heli.nlp.identification import identification_data
     from pyomo_heli.simulation.sensitivity import sensitivities
 
     cfg, r = clean_residuals
-    mans = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration).maneuvers
+    mans = identification_data(cfg).maneuvers
     s = sensitivities(cfg.model, ["theta_twist"], maneuvers=mans, time_outputs=["q", "n_z"],
                       trim_speeds=r.trim["V"], trim_out=["lon"])
     ident = r.time[r.time["role"] == "identification"]

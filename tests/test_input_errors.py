@@ -18,7 +18,7 @@ from pyomo_heli.config import ConfigError, load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.flighttest.sensors import DEFAULT_SIGMA
 from pyomo_heli.identify import build_problem
-from pyomo_heli.nlp.identification import NLPOptions, prepare_data
+from pyomo_heli.nlp.identification import NLPOptions, prepare_data, identification_data
 from pyomo_heli.nlp.objectives import lead_in_sigma
 from pyomo_heli.nlp.parameters import free_parameter_values
 from pyomo_heli.pareto.front import ParetoSolver
@@ -63,14 +63,19 @@ def fits():
 
 def test_input_errors_recover_the_truth_where_output_error_does_not(fits):
     """With 0.02 deg noise on the measured col and lon, the output-error fit of this record puts twist at
-    its bound (docs/close_loop.md: the input noise, not the output noise, moves twist); estimating the input
-    errors brings twist and the tail lift slope to within 1 % of the truth."""
+    (or next to) its bound (docs/close_loop.md: the input noise, not the output noise, moves twist);
+    estimating the input errors brings twist back near the truth and the tail lift slope within 1 %.
+
+    How near is a property of this one noisy record, not a guarantee: the twist's standard error with the
+    input errors estimated is about 70 % of the truth here (test_reduced_hessian_standard_errors...), and
+    the realised errors are +0.03 % (inputs picked, the default until 2026-11-25) and +5.3 % (inputs
+    projected, the default since), against -100 and -95 % for output error. Hence 10 % for twist."""
     eiv, oe = fits["input_errors"][2], fits["output_error"][2]
     print({n: (f"output error {100 * (oe[n] / TRUTH[n] - 1):+.2f} %", f"input errors {100 * (eiv[n] / TRUTH[n] - 1):+.2f} %")
            for n in ("theta_twist", "CL_alpha_HT")})
     assert abs(oe["theta_twist"] / TRUTH["theta_twist"] - 1) > 0.5
-    for name in ("theta_twist", "CL_alpha_HT"):
-        assert eiv[name] == pytest.approx(TRUTH[name], rel=0.01), name
+    assert eiv["theta_twist"] == pytest.approx(TRUTH["theta_twist"], rel=0.10)
+    assert eiv["CL_alpha_HT"] == pytest.approx(TRUTH["CL_alpha_HT"], rel=0.01)
 
 
 def test_j_time_equals_the_numpy_likelihood(fits):
@@ -200,8 +205,7 @@ def test_input_sensitivities_match_finite_differences():
     from pyomo_heli.simulation.trim import trim_float
 
     cfg = load_identification_config(CONFIG)
-    mv = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration,
-                      cfg.input_reference_s).maneuvers[0]
+    mv = identification_data(cfg).maneuvers[0]
     t, inc, outs = mv.data["t"].to_numpy(), mv.increments(), ["q", "theta", "n_x", "n_z", "TAS"]
     tp = trim_float(cfg.model, mv.trim_speed)
     y, S = input_sensitivities(cfg.model, tp, t, inc, outs, ["col", "lon"])
@@ -232,8 +236,7 @@ def test_cramer_rao_with_vanishing_input_noise_is_the_output_error_bound():
     from pyomo_heli.uncertainty.cramer_rao import point_information
 
     cfg = load_identification_config(CONFIG)
-    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration,
-                        cfg.input_reference_s)
+    data = identification_data(cfg)
     values = {f.name: TRUTH[f.name] for f in cfg.free}
     args = (cfg.model, cfg.free, values, data.maneuvers, data.trims, cfg.nlp.time_outputs, cfg.nlp.trim_outputs)
     sigma = lead_in_sigma(data.maneuvers, list(cfg.nlp.time_outputs))

@@ -17,7 +17,7 @@ import pytest
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.flighttest.sensors import DEFAULT_SIGMA
-from pyomo_heli.nlp.identification import NLPOptions, build_identification_nlp, prepare_data, set_measurements
+from pyomo_heli.nlp.identification import NLPOptions, build_identification_nlp, prepare_data, identification_data, set_measurements
 from pyomo_heli.nlp.parameters import FreeParameter
 from pyomo_heli.physics.parameters import bo105
 from pyomo_heli.uncertainty.cramer_rao import PointInformation, cramer_rao, point_information
@@ -169,7 +169,7 @@ def test_swapping_measured_data_equals_building_from_it():
     """An NLP with mutable data, re-pinned to a noise realization, has the objectives of an NLP
     built from that realization directly."""
     cfg = load_identification_config(CONFIGS / "mc_time_small.toml")
-    data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, cfg.resample_hz, cfg.max_duration)
+    data = identification_data(cfg)
     data.trims = data.trims.iloc[:5].reset_index(drop=True)
     noisy = noisy_copy(data, SIGMA, {"col": 0.1 * DEG}, seed=1, k=2)
     fixed = build_identification_nlp(noisy, cfg.model, cfg.free, cfg.nlp)

@@ -280,14 +280,15 @@ def project_inputs(t_fine: np.ndarray, u_fine: np.ndarray, t_coarse: np.ndarray)
 
 def prepare_data(ft, maneuvers="identification", resample_hz: float | None = None,
                  max_duration: float | None = None, input_reference_s: float = 0.0,
-                 resample_inputs: str = "sample") -> IdentificationData:
+                 resample_inputs: str = "project") -> IdentificationData:
     """Select maneuvers of a loaded FlightTest, keep every k-th sample and crop the record.
 
     Keeping every k-th sample (k = rate / resample_hz, an integer) leaves the
     measurement times on the element boundaries: nothing is snapped.
     ``resample_inputs``: how the measured inputs (col, lon) reach the coarse samples: ``sample``
-    keeps every k-th sample like the outputs; ``project`` takes the coarse values whose linear
-    interpolant is closest to the whole record (:func:`project_inputs`).
+    keeps every k-th sample like the outputs; ``project`` (the default since 2026-11-25; it removes the
+    picked inputs' bias, docs/model.md) takes the coarse values whose linear interpolant is closest to
+    the whole record (:func:`project_inputs`).
     ``input_reference_s``: the input increments are referred to the mean over the first
     ``input_reference_s`` seconds of each record (0: its first sample), see ``Maneuver.increments``.
     """

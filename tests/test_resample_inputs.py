@@ -66,3 +66,26 @@ def test_noise_free_time_domain_fit_at_25_hz(mode, tol):
         assert max(err.values()) > 2e-3
     else:
         assert max(err.values()) < tol
+
+
+def test_default_is_project_and_the_fingerprint_keys_on_the_resolved_value():
+    """The default is ``project``; a store is resumed by the value ``resample_inputs`` resolves to: a config
+    that says ``sample`` resumes the stores made before the key existed (when picking was the default), one
+    without the key does not; ``[diagnosis]`` does not enter."""
+    from pyomo_heli.identify import identification_fingerprint
+    from pyomo_heli.pareto.store import fingerprint
+
+    case1 = Path(__file__).resolve().parent.parent / "studies" / "case1.toml"
+    pinned = load_identification_config(case1)
+    assert pinned.resample_inputs == "sample"
+    default = load_identification_config(case1, {"data": {"resample_inputs": "project"}})
+    raw = {k: v for k, v in pinned.raw.items()}
+    raw["data"] = {k: v for k, v in raw["data"].items() if k != "resample_inputs"}
+    # the fingerprint of the same config before the key existed (the old rule: the raw tables as written)
+    before = fingerprint(raw, pinned.dataset, command="identify")
+    assert identification_fingerprint(pinned) == before
+    assert identification_fingerprint(default) != before
+    unkeyed = load_identification_config(CONFIGS / "mc_time_small.toml")
+    assert "resample_inputs" not in unkeyed.raw["data"] and unkeyed.resample_inputs == "project"
+    noisy = load_identification_config(case1, {"diagnosis": {"input_noise": ["col"], "noise_sigma": {"col_deg": 0.02}}})
+    assert identification_fingerprint(noisy) == before

@@ -272,6 +272,12 @@ def _finished(cfg: IdentificationConfig, folder: Path):
 
     if not (folder / "chosen.json").is_file():
         return None
+    meta = folder / "checkpoint.json"  # written by every identification run (copies in docs/ may lack it)
+    if meta.is_file():
+        from .identify import identification_fingerprint
+
+        if json.loads(meta.read_text()).get("fingerprint") != identification_fingerprint(cfg):
+            return None  # another config, data or setting (e.g. resample_inputs): not the same identification
     try:
         res = IdentificationResult.load(folder)
     except (FileNotFoundError, ValueError, KeyError):

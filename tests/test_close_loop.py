@@ -475,3 +475,29 @@ def test_score_test_keeps_its_level_on_m0_seeds(tmp_path):
     now = table.loc[("eliminated", "F(1, df)")]
     assert now["seeds accepting"] <= 2
     assert now["p < 0.01"] <= 0.025
+
+
+def test_a_finished_iteration_is_reused_only_under_the_same_fingerprint(tmp_path):
+    """close_loop._finished: a results folder whose checkpoint fingerprint differs from the config's (here the
+    inputs resampled another way) is not taken for the finished identification; without a checkpoint (copies)
+    the other checks decide."""
+    import json
+    import shutil
+    from pathlib import Path
+
+    from pyomo_heli.close_loop import _finished
+    from pyomo_heli.identify import identification_fingerprint
+
+    root = Path(__file__).resolve().parent
+    cfg = load_identification_config(root / "configs" / "m0_noise_small.toml")
+    folder = tmp_path / "iter_0"
+    shutil.copytree(root / "results" / "m0_noise_small", folder)
+    chosen = json.loads((folder / "chosen.json").read_text())
+    chosen["info"]["config"] = str(cfg.path.resolve())
+    chosen["info"]["dataset"] = str(cfg.dataset.resolve())
+    (folder / "chosen.json").write_text(json.dumps(chosen))
+    assert _finished(cfg, folder) is not None  # no checkpoint: the other checks pass
+    (folder / "checkpoint.json").write_text(json.dumps({"fingerprint": identification_fingerprint(cfg)}))
+    assert _finished(cfg, folder) is not None
+    other = load_identification_config(cfg.path, {"data": {"resample_inputs": "project"}})
+    assert _finished(other, folder) is None

@@ -144,7 +144,7 @@ def cmd_close_loop(args) -> int:
         if args.max_iterations < 0:
             raise UserError("option --max-iterations must be >= 0")
         settings.max_iterations = args.max_iterations
-    doc = close_loop(cfg, args.out, settings)
+    doc = close_loop(cfg, args.out, settings, restart=args.restart)
     path = write_loop_report(args.out, cfg)
     print(f"{len(doc['iterations'])} identification(s); stopped: {doc['stopped']}")
     print(f"loop.json and {path} written")
@@ -349,6 +349,9 @@ def build_parser() -> argparse.ArgumentParser:
     cl.add_argument("--max-iterations", type=int, help="override [loop] max_iterations")
     cl.add_argument("--dataset", help="flight-test folder replacing the config's [data] dataset (e.g. another noise "
                                       "realisation from generate-data --seed)")
+    cl.add_argument("--restart", action="store_true",
+                    help="identify every iteration afresh (finished points and shape decisions in --out are "
+                         "discarded) instead of resuming")
     cl.set_defaults(func=cmd_close_loop)
 
     u = sub.add_parser("uncertainty", help="standard errors and identifiability of an existing results folder")

@@ -321,8 +321,12 @@ def _score_inputs(cfg: IdentificationConfig, settings: LoopSettings) -> dict:
     return {"input_errors": cfg.nlp.input_errors, "noise_sigma": cfg.nlp.noise_sigma}
 
 
-def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = None, progress=print) -> dict:
-    """Run the loop; returns the content of ``loop.json`` (also written after every iteration)."""
+def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = None, progress=print,
+               restart: bool = False) -> dict:
+    """Run the loop; returns the content of ``loop.json`` (also written after every iteration).
+
+    A rerun on the same ``out`` reuses the finished iterations and shape decisions of the same fingerprint
+    (:func:`_finished`); ``restart`` discards them and identifies every iteration afresh."""
     settings = settings or loop_settings(cfg)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -340,11 +344,12 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
         names = [e.name for e in cfg.model.extensions]
         progress(f"iteration {i}: model M0{''.join(' + ' + n for n in names)}; free "
                  f"{', '.join(f.name for f in cfg.free)}")
-        result = _finished(cfg, out / f"iter_{i}")
+        result = None if restart else _finished(cfg, out / f"iter_{i}")
         if result is not None:
             progress(f"  iteration {i}: reusing the finished identification in {out / f'iter_{i}'}")
         else:
             result = run_identification(cfg, out / f"iter_{i}", progress=lambda s: progress("  " + s),
+                                        restart=restart,
                                         uncertainty=settings.uncertainty if settings.uncertainty != "none" else False)
         point, which = _diagnosed_point(result, settings.point)
         # in the free parameters' order, whether the point was just solved or read back from disk
@@ -389,7 +394,10 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
         cand = cfg.model.extensions[-1]
         added_shape = None
         if cand.shape_parameters and settings.shape == "time_domain":
-            cfg, added_shape = select_shape(cfg, cand, out / f"shape_{i + 1}.json", settings.alpha, progress)
+            shape_file = out / f"shape_{i + 1}.json"
+            if restart and shape_file.is_file():
+                shape_file.unlink()
+            cfg, added_shape = select_shape(cfg, cand, shape_file, settings.alpha, progress)
         i += 1
 
 

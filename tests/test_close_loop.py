@@ -260,6 +260,21 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
     assert "Diebold-Mariano" in report and "Shape of rotor_wake_on_tail" in report
     assert (tmp_path / "loop" / "loop_trim_vs_speed.png").is_file()
     assert (tmp_path / "loop" / "loop_validation.png").is_file()
+    # a rerun on the same folder reuses both finished identifications and the shape decision, same numbers
+    capsys.readouterr()
+    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
+    out = capsys.readouterr().out
+    assert out.count("reusing the finished identification") == 2 and "shape of rotor_wake_on_tail: reusing" in out
+    again = json.loads((tmp_path / "loop" / "loop.json").read_text())
+    assert again["iterations"][-1]["parameters"] == it1["parameters"]
+    # another setting (the inputs resampled the other way) is not taken for the finished front: refused, named
+    text = cfg.path.read_text()
+    other = "sample" if cfg.resample_inputs == "project" else "project"
+    cfg.path.write_text(text.replace("resample_hz = 25\n", f'resample_hz = 25\nresample_inputs = "{other}"\n'))
+    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 2
+    err = capsys.readouterr().err
+    assert "iter_0" in err and "fingerprint" in err
+    cfg.path.write_text(text)  # back to the config the loop ran with
     # an iteration's folder is usable with its config alone: the rebuilt model (candidate, shape held) replays to the
     # same trim errors as the loop recorded, and `pyomo-heli uncertainty` gives the added strength a standard error
     from pyomo_heli.close_loop import config_of_result, errors_of
@@ -279,6 +294,15 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
     # ... the same standard errors as the loop computed itself at the diagnosed point (its own model, not rebuilt)
     assert it1["standard_errors"] == pytest.approx(se, rel=1e-9)
     assert "iter 1 error / SE" in report
+    # --restart identifies afresh what the changed setting refused above
+    cfg.path.write_text(text.replace("resample_hz = 25\n", f'resample_hz = 25\nresample_inputs = "{other}"\n'))
+    capsys.readouterr()
+    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop"), "--restart"]) == 0
+    out = capsys.readouterr().out
+    assert "reusing" not in out
+    fresh = json.loads((tmp_path / "loop" / "loop.json").read_text())
+    assert fresh["iterations"][0]["attribution"]["accepted"] == "rotor_wake_on_tail"
+    assert fresh["iterations"][0]["parameters"] != it0["parameters"]  # the other inputs, another fit
 
 
 def test_wake_loop_with_input_errors(tmp_path):

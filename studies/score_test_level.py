@@ -70,7 +70,8 @@ def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, s
     if (out / f"seed_{seed}.json").is_file():
         f0 = out / f"seed_{seed}.json"
         # score again at the saved identified point (the score test changed, the identification did not)
-        cfg = load_identification_config(root / "ident.toml")
+        # the resampling the point was identified with: work folders written before the key existed lack it
+        cfg = load_identification_config(root / "ident.toml", {"data": {"resample_inputs": resample_inputs}})
         point = {"parameters": json.loads(f0.read_text())["parameters"]}
     else:
         # m0: the false-positive control's set-up; wake: the small wake test's (three parameters, three points)

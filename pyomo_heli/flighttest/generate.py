@@ -1,9 +1,11 @@
 """Generate a synthetic flight test from a config: truth simulation + sensors.
 
 Deterministic: one ``numpy.random.SeedSequence(seed)`` is split into one
-child stream per maneuver and one for the trim points, so the same config
-gives byte-identical files, and adding a maneuver at the end does not change
-the noise of the others.
+child stream per maneuver (in config order) and a last one for the trim
+points, so the same config gives byte-identical files. Appending a maneuver
+leaves the other maneuvers' noise unchanged but moves the trim stream (it is
+the child after the last maneuver), so the trim rows change
+(docs/flight_test.md section 5).
 """
 from __future__ import annotations
 

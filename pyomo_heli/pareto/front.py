@@ -234,6 +234,16 @@ def solve_with_fallback(solve, mode: str, start: _Snapshot):
     return retry
 
 
+def pin_objective_settings(m, **values) -> None:
+    """Pin every objective setting of ``m.objective_settings`` (unnamed ones to 0) by equal bounds."""
+    w = m.objective_settings
+    for k in w:
+        v = float(values.get(k, 0.0))
+        w[k].setlb(v)
+        w[k].setub(v)
+        w[k].set_value(v)
+
+
 class ParetoSolver:
     """Anchors, front and choice on one identification NLP built by nlp.identification."""
 
@@ -260,13 +270,7 @@ class ParetoSolver:
         self.points: list[FrontPoint] = []
 
     def _pin(self, **values):
-        """Pin every objective setting (unnamed ones to 0) by equal bounds."""
-        w = self.m.objective_settings
-        for k in w:
-            v = float(values.get(k, 0.0))
-            w[k].setlb(v)
-            w[k].setub(v)
-            w[k].set_value(v)
+        pin_objective_settings(self.m, **values)
 
     def _set_objective(self, kind: str, scale: float | None = None, utopia=None, nadir=None):
         if kind == "time":

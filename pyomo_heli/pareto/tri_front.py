@@ -27,7 +27,8 @@ import pyomo.environ as pyo
 
 from ..nlp.parameters import free_parameter_values
 from ..solvers import make_solver, scale_multipliers
-from .front import LEAVE_ANCHOR_OPTIONS, FrontPoint, ParetoSettings, _Snapshot, epsilon_grid, solve_with_fallback
+from .front import (LEAVE_ANCHOR_OPTIONS, FrontPoint, ParetoSettings, _Snapshot, epsilon_grid,
+                    pin_objective_settings, solve_with_fallback)
 
 OBJECTIVES = ("time", "trim", "linear")
 #: fraction of the anchor range kept above each objective's minimum at the tight end of the grid
@@ -86,12 +87,7 @@ class TriParetoSolver:
         return {"time": self.m.J_time, "trim": self.m.J_trim, "linear": self.m.J_linear}
 
     def _pin(self, **values):
-        w = self.m.objective_settings
-        for k in w:
-            v = float(values.get(k, 0.0))
-            w[k].setlb(v)
-            w[k].setub(v)
-            w[k].set_value(v)
+        pin_objective_settings(self.m, **values)
 
     def _solve(self, objective: str, index: int, kind: str, eps_trim=math.inf, eps_linear=math.inf,
                warm_start="primal", scale=None, utopia=None, nadir=None, grid=(-1, -1),

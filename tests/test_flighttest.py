@@ -448,10 +448,13 @@ def test_bundled_noisy_dataset_noise_level():
     q 1.14, theta 0.99, n_z 0.99, n_x 1.00, TAS 1.01, beta_0 1.08, col 0.98, lon 1.03.
     """
     ft = load_flight_test(DATA / "bo105_synthetic")
+    ratios = {}
     for channel, sigma in DEFAULT_SIGMA.items():
         std, dof = _pre_input_noise(ft, channel)
+        ratios[channel] = round(float(std / sigma), 3)
         assert dof == 6 * 95
         assert sigma / 1.5 < std < sigma * 1.5, f"{channel}: std {std:g} vs sigma {sigma:g}"
+    print("pooled std / sigma before the input:", ratios)  # quoted in docs/flight_test.md section 5
     clean = load_flight_test(DATA / "bo105_clean")
     for channel, sigma in DEFAULT_SIGMA.items():
         std, _ = _pre_input_noise(clean, channel)

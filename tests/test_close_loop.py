@@ -219,7 +219,10 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
     assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
     doc = json.loads((tmp_path / "loop" / "loop.json").read_text())
     it0, it1 = doc["iterations"][0], doc["iterations"][-1]
-    print(json.dumps({k: (it0[k], it1[k]) for k in ("trim_rms", "validation_rms", "parameters")}, indent=1))
+    with capsys.disabled():  # `pytest -s` shows what docs/close_loop.md quotes ("What the tests show")
+        print("\n" + it0["attribution"]["message"] + "\n" + it1["attribution"]["message"])
+        print("shape:", it1["shape_selection"]["decision"], it1["shape_parameters"])
+        print(json.dumps({k: (it0[k], it1[k]) for k in ("trim_rms", "validation_rms", "parameters")}, indent=1))
     # the wake is picked first, and after it nothing else is significant (no false positive on the second round)
     assert it0["attribution"]["decision"] == "accepted"
     assert it0["attribution"]["accepted"] == "rotor_wake_on_tail"

@@ -12,21 +12,27 @@ import io
 import json
 import math
 import re
+from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
 
 import numpy as np
 import pandas as pd
 
 from .schema import (
+    DECIMAL_PATTERN,
     FORMAT_NAME,
     FORMAT_VERSION,
+    G_RANGE_M_S2,
     INPUT_CHANNELS,
     KT,
     MANEUVER_QUANTITIES,
     MANIFEST_NAME,
+    MASS_RANGE_KG,
     MIN_SAMPLES,
+    MODEL_MATCH_RTOL,
     NAME_PATTERN,
     PITOT_MIN_KT,
+    RHO_RANGE_KG_M3,
     ROLES,
     SPACING_TOL,
     SPEED_RANGE_KT,
@@ -49,6 +55,7 @@ MANEUVER_KEYS = {"name": True, "file": True, "role": True, "trim_speed_kt": True
 MISSING_TOKENS = {"", "nan", "-nan", "na", "n/a", "nat", "null", "none"}
 MAX_LISTED = 5
 _NAME_RE = re.compile(NAME_PATTERN)
+_DECIMAL_RE = re.compile(DECIMAL_PATTERN)
 #: airspeed below this [m/s] is not sensor noise around hover
 _TAS_MIN = -10.0
 
@@ -144,6 +151,17 @@ class _Reader:
             self.add(MANIFEST_NAME, field, f"must be a positive number [{unit}], got {got}")
             return None
         return float(v)
+
+    def plausible_constant(self, value, field: str, limits: tuple[float, float], unit: str, what: str):
+        """``value`` if within ``limits`` (schema.py gives their sources), else a problem and None."""
+        if value is None:
+            return None
+        lo, hi = limits
+        if not lo <= value <= hi:
+            self.add(MANIFEST_NAME, field, f"{value:g} {unit} is outside the plausible range {lo:g}..{hi:g} {unit} "
+                                           f"for the {what}: wrong unit or typo?")
+            return None
+        return value
 
     def text(self, obj: dict, key: str, field: str, required: bool = True):
         if key not in obj:
@@ -309,10 +327,27 @@ class _Reader:
                 continue
             if math.isnan(values[i]):
                 nan.append(i)
+        # float() also reads '1_0' as 10 and non-ASCII digits ('٥' as 5): the format allows only plain
+        # ASCII decimals (DECIMAL_PATTERN).  Fast path: on ASCII text without '_', float()'s grammar
+        # is exactly DECIMAL_PATTERN plus inf/nan (reported below), so the cell-by-cell regex match
+        # runs only for columns holding a non-ASCII character or '_'.
+        odd = []
+        joined = "".join(raw)
+        if not joined.isascii() or "_" in joined:
+            skip = set(bad) | set(empty) | set(nan)
+            odd = [i for i, s in enumerate(raw)
+                   if i not in skip and not _DECIMAL_RE.fullmatch(s) and not math.isinf(values[i])]
+            values[odd] = np.nan
         inf = np.flatnonzero(np.isinf(values))
         ok = True
         if bad:
             self.add(rel, name, f"{_plural(len(bad), 'non-numeric value')} ({_rows_values(bad, raw)})")
+            ok = False
+        if odd:
+            self.add(rel, name, f"{_plural(len(odd), 'value')} not written as a plain decimal number "
+                                f"({_rows_values(odd, raw)}): use ASCII digits 0-9 with an optional sign, "
+                                "decimal point and exponent, e.g. -1.25e-3 (no '_' separators, no non-ASCII "
+                                "digits)")
             ok = False
         if nan:
             self.add(rel, name, f"{_plural(len(nan), 'NaN value')} ({_rows(nan)})")
@@ -401,12 +436,15 @@ class _Reader:
             atm = man["atmosphere"]
             if isinstance(atm, dict):
                 self.check_keys(atm, dict.fromkeys(ATMOSPHERE_KEYS, True), "atmosphere.")
-                rho = self.positive(atm, "rho_kg_m3", "atmosphere.rho_kg_m3", "kg/m^3")
-                g = self.positive(atm, "g_m_s2", "atmosphere.g_m_s2", "m/s^2")
+                rho = self.plausible_constant(self.positive(atm, "rho_kg_m3", "atmosphere.rho_kg_m3", "kg/m^3"),
+                                              "atmosphere.rho_kg_m3", RHO_RANGE_KG_M3, "kg/m^3", "air density")
+                g = self.plausible_constant(self.positive(atm, "g_m_s2", "atmosphere.g_m_s2", "m/s^2"),
+                                            "atmosphere.g_m_s2", G_RANGE_M_S2, "m/s^2", "surface gravity")
             else:
                 self.add(MANIFEST_NAME, "atmosphere", f"must be an object with keys {', '.join(ATMOSPHERE_KEYS)}, "
                                                       f"got {_type_name(atm)}")
-        mass = self.positive(man, "mass_kg", "mass_kg", "kg")
+        mass = self.plausible_constant(self.positive(man, "mass_kg", "mass_kg", "kg"), "mass_kg", MASS_RANGE_KG,
+                                       "kg", "helicopter mass")
 
         entries = self.check_maneuver_entries(man)
         # None: the maneuver list itself is unusable, so trim 'source' names cannot be checked
@@ -563,6 +601,44 @@ class _Reader:
         if "source" in df:
             df["source"] = df["source"].astype(str)
         return df
+
+
+#: manifest constant -> (manifest field, model parameter name, unit)
+_MODEL_CONSTANTS = (("mass", "mass_kg", "m", "kg"), ("rho", "atmosphere.rho_kg_m3", "rho", "kg/m^3"),
+                    ("g", "atmosphere.g_m_s2", "g", "m/s^2"))
+
+
+def check_model_matches_manifest(flight_test: FlightTest, parameters: Mapping[str, float], where: str,
+                                 skip=()) -> None:
+    """Raise ValueError unless the model's ``m``, ``rho`` and ``g`` match the manifest.
+
+    ``flight_test`` is the loaded dataset; its manifest fields ``mass_kg``, ``atmosphere.rho_kg_m3``
+    and ``atmosphere.g_m_s2`` are compared with ``parameters["m"]``, ``["rho"]`` and ``["g"]`` (the
+    model's full parameter values in SI, e.g. ``HelicopterModel.parameters``).  A relative difference
+    above ``MODEL_MATCH_RTOL`` (0.5 %) raises one ValueError, a single line naming the manifest
+    file, every differing field and model parameter, and ``where`` (the config being used, e.g.
+    ``"case1.toml [model]"``), and telling the user to set ``[model] parameters`` accordingly.
+    A parameter missing from ``parameters`` raises ValueError too. ``skip``: names not compared (free
+    parameters of an identification, whose model value is only the initial guess).
+    """
+    manifest = (Path(flight_test.path) / MANIFEST_NAME).as_posix() if flight_test.path is not None \
+        else MANIFEST_NAME
+    missing = [name for _, _, name, _ in _MODEL_CONSTANTS if name not in parameters and name not in skip]
+    if missing:
+        raise ValueError(f"{where}: model parameter{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
+                         f"missing, cannot compare with {manifest}")
+    diffs, fix = [], []
+    for attr, field, name, unit in _MODEL_CONSTANTS:
+        if name in skip:
+            continue
+        data, model = float(getattr(flight_test, attr)), float(parameters[name])
+        if not abs(model - data) <= MODEL_MATCH_RTOL * abs(data):
+            diffs.append(f"field '{field}' = {data:g} {unit} but model parameter {name} = {model:g} {unit}")
+            fix.append(f"{name} = {data:g}")
+    if diffs:
+        raise ValueError(f"{manifest}: {'; '.join(diffs)} (more than {MODEL_MATCH_RTOL:.1%} apart, model from "
+                         f"{where}): set [model] parameters = {{ {', '.join(fix)} }} to fly the flight test's "
+                         "aircraft and atmosphere")
 
 
 def validate_flight_test(path) -> list[Problem]:

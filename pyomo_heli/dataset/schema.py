@@ -33,6 +33,24 @@ TRIM_WINDOW_S = 1.0
 #: allowed relative spread of the sample spacing around its median
 SPACING_TOL = 0.01
 MIN_SAMPLES = 3
+#: a numeric CSV cell: plain ASCII decimal number with optional sign, point and exponent (no '_' digit
+#: separators, no non-ASCII digits such as '٥', which Python's float() would accept)
+DECIMAL_PATTERN = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+
+# Plausible ranges of the manifest's physical constants (check-data rejects values outside; they catch
+# unit slips and typos, they are not model limits):
+#: mass_kg [kg]: the lightest manned helicopters have a take-off mass of a few hundred kg, the heaviest
+#: in service (Mi-26) 56 000 kg (Jane's All the World's Aircraft); the range leaves margin both ways
+MASS_RANGE_KG = (100.0, 100_000.0)
+#: atmosphere.rho_kg_m3 [kg/m^3]: ISA (ISO 2533:1975) density is 0.312 at 12 km, above any helicopter
+#: ceiling, and 1.225 at sea level; 1013 hPa at -50 degC gives 1.58 (cold-weather trials)
+RHO_RANGE_KG_M3 = (0.3, 1.6)
+#: atmosphere.g_m_s2 [m/s^2]: surface gravity on Earth lies within 9.76 (equatorial mountains) .. 9.834
+#: (poles) (WGS 84 normal gravity; standard gravity 9.80665)
+G_RANGE_M_S2 = (9.7, 9.9)
+#: relative difference allowed between a manifest constant and the model parameter it stands for
+#: (mass_kg / m, rho_kg_m3 / rho, g_m_s2 / g), see ``check_model_matches_manifest``
+MODEL_MATCH_RTOL = 0.005
 
 
 @dataclass(frozen=True)

@@ -94,6 +94,9 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
             if n not in CANDIDATES:
                 raise ConfigError(f"{where}: field 'candidates': unknown candidate {n!r}; choose from "
                                   f"{', '.join(CANDIDATES)}")
+        dup = sorted({n for n in v if v.count(n) > 1})
+        if dup:
+            raise ConfigError(f"{where}: field 'candidates' names {dup} more than once")
         s.candidates = list(v)
     for key, lo, hi in (("alpha", 0.0, 1.0), ("ratio", 1.0, float("inf")), ("confound_corr", 0.0, 1.0)):
         if key in raw:

@@ -77,6 +77,35 @@ def _need(d, key, where, types, default=...):
     return v
 
 
+def _only(d: dict, allowed, where: str) -> None:
+    """A misspelt key is an error, not a silently ignored setting."""
+    unknown = sorted(set(d) - set(allowed))
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; use {', '.join(sorted(allowed))}")
+
+
+def _names(v, where: str, key: str, allow_empty: bool = False) -> list:
+    """A list of distinct strings (maneuver, output or channel names)."""
+    if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+        raise ConfigError(f"{where}: field '{key}' must be a list of names, got {v!r}")
+    if not v and not allow_empty:
+        raise ConfigError(f"{where}: field '{key}' is empty")
+    dup = sorted({x for x in v if v.count(x) > 1})
+    if dup:
+        raise ConfigError(f"{where}: field '{key}' names {dup} more than once")
+    return v
+
+
+def _finite(d: dict, key: str, where: str, default=None):
+    """An optional finite number (not a bool)."""
+    v = d.get(key, default)
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ConfigError(f"{where}: field '{key}' must be a finite number, got {v!r}")
+    return float(v)
+
+
 def _unit_factor(spec, unit: str, where: str) -> float:
     if unit in (spec.unit, "SI", ""):
         return 1.0
@@ -98,22 +127,33 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     unknown = set(raw) - known
     if unknown:
         raise ConfigError(f"{f}: unknown table(s) {sorted(unknown)}; expected {sorted(known)}")
+    for k, v in raw.items():
+        if not isinstance(v, dict):
+            raise ConfigError(f"{f}: '{k}' must be a table [{k}], got {v!r}")
 
     data = _need(raw, "data", f, dict)
+    _only(data, ("dataset", "maneuvers", "validation", "resample_hz", "resample_inputs", "max_duration_s",
+                 "input_reference_s"), f"{f} [data]")
     ds = Path(_need(data, "dataset", f"{f} [data]", str))
     if not ds.is_absolute():
         ds = (path.parent / ds).resolve()
     if not ds.is_dir():
         raise ConfigError(f"{f} [data]: field 'dataset': folder {ds} not found")
     mans = data.get("maneuvers", "identification")
-    if not (mans == "identification" or (isinstance(mans, list) and all(isinstance(x, str) for x in mans))):
-        raise ConfigError(f"{f} [data]: field 'maneuvers' must be \"identification\" or a list of names")
+    if mans != "identification":
+        if not isinstance(mans, list):
+            raise ConfigError(f"{f} [data]: field 'maneuvers' must be \"identification\" or a list of names")
+        _names(mans, f"{f} [data]", "maneuvers")
     val = data.get("validation", "validation")
-    resample = data.get("resample_hz")
-    if resample is not None and not (isinstance(resample, (int, float)) and resample > 0):
+    if val != "validation":
+        if not isinstance(val, list):
+            raise ConfigError(f"{f} [data]: field 'validation' must be \"validation\" or a list of names")
+        _names(val, f"{f} [data]", "validation", allow_empty=True)
+    resample = _finite(data, "resample_hz", f"{f} [data]")
+    if resample is not None and not resample > 0:
         raise ConfigError(f"{f} [data]: field 'resample_hz' must be a positive number")
-    max_dur = data.get("max_duration_s")
-    if max_dur is not None and not (isinstance(max_dur, (int, float)) and max_dur > 0):
+    max_dur = _finite(data, "max_duration_s", f"{f} [data]")
+    if max_dur is not None and not max_dur > 0:
         raise ConfigError(f"{f} [data]: field 'max_duration_s' must be a positive number")
     res_in = data.get("resample_inputs", "project")
     if res_in not in ("sample", "project"):
@@ -123,8 +163,10 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
         raise ConfigError(f"{f} [data]: field 'input_reference_s' must be a number >= 0, got {in_ref!r}")
 
     mdl = raw.get("model", {})
+    _only(mdl, ("extensions", "parameters"), f"{f} [model]")
     extensions = []
-    ext_names = _need(mdl, "extensions", f"{f} [model]", list, [])
+    ext_names = _names(_need(mdl, "extensions", f"{f} [model]", list, []), f"{f} [model]", "extensions",
+                       allow_empty=True)
     if ext_names:
         from .diagnosis.candidates import make_candidate
 
@@ -139,7 +181,10 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
         if k not in model.parameters:
             raise ConfigError(f"{f} [model.parameters]: unknown parameter name '{k}'")
     if fixed:
-        model = model.with_parameters(**{k: float(v) for k, v in fixed.items()})
+        try:
+            model = model.with_parameters(**fixed)
+        except ValueError as exc:
+            raise ConfigError(f"{f} [model.parameters]: {exc}") from None
 
     params = _need(raw, "parameters", f, dict)
     if not params:
@@ -152,11 +197,12 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
             raise ConfigError(f"{where}: {msg}")
         if not isinstance(spec_raw, dict):
             raise ConfigError(f"{where}: must be a table with initial, lower, upper, scale, unit")
+        _only(spec_raw, ("initial", "lower", "upper", "scale", "unit"), where)
         spec = model.parameters.spec(name)
         fac = _unit_factor(spec, _need(spec_raw, "unit", where, str, spec.unit), where)
         def num(key, default):
-            v = _need(spec_raw, key, where, (int, float), default)
-            return None if v is None else float(v) * fac
+            v = _finite(spec_raw, key, where, default)
+            return None if v is None else v * fac
         lo_d, hi_d = spec.bounds or (None, None)
         initial = num("initial", None)
         lower = num("lower", None) if "lower" in spec_raw else lo_d
@@ -166,14 +212,23 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
             initial = spec.value
         if lower is None or upper is None:
             raise ConfigError(f"{where}: give 'lower' and 'upper' (no default range for {name})")
+        if "scale" in spec_raw and not scale > 0:
+            raise ConfigError(f"{where}: field 'scale' must be a number > 0, got {spec_raw['scale']!r}")
         try:
-            free.append(FreeParameter(name, initial, lower, upper, abs(scale) if scale else max(abs(initial), 1.0)))
+            # both bounds must be values the physics can take (a negative mass, a zero air density, ...)
+            spec.check(lower)
+            spec.check(upper)
+            free.append(FreeParameter(name, initial, lower, upper, scale if scale else max(abs(initial), 1.0)))
         except ValueError as exc:
-            raise ConfigError(f"{where}: {exc}") from None
+            raise ConfigError(f"{where}: {exc} (bounds in SI: [{lower:g}, {upper:g}])") from None
 
     obj = raw.get("objectives", {})
-    t_out = tuple(_need(obj, "time_outputs", f"{f} [objectives]", list, ["q", "theta", "n_x", "n_z", "TAS"]))
-    r_out = tuple(_need(obj, "trim_outputs", f"{f} [objectives]", list, ["col", "lon", "theta"]))
+    _only(obj, ("use", "time_outputs", "trim_outputs", "covariance", "input_errors", "noise_sigma"),
+          f"{f} [objectives]")
+    t_out = tuple(_names(_need(obj, "time_outputs", f"{f} [objectives]", list, ["q", "theta", "n_x", "n_z", "TAS"]),
+                         f"{f} [objectives]", "time_outputs"))
+    r_out = tuple(_names(_need(obj, "trim_outputs", f"{f} [objectives]", list, ["col", "lon", "theta"]),
+                         f"{f} [objectives]", "trim_outputs"))
     for o in t_out:
         if o not in TIME_OUTPUTS:
             raise ConfigError(f"{f} [objectives]: unknown output '{o}' in time_outputs; choose from "
@@ -186,7 +241,13 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     if cov not in ("diagonal", "full"):
         raise ConfigError(f"{f} [objectives]: field 'covariance' must be diagonal or full")
     in_err, noise_sigma = _input_errors(obj, f, in_ref=raw.get("data", {}).get("input_reference_s", 0.0))
+    if noise_sigma is not None:
+        lacking = [c for c in t_out + in_err if c not in noise_sigma]
+        if lacking:
+            raise ConfigError(f"{f} [objectives.noise_sigma]: no sigma for {lacking} (every time output and every "
+                              f"channel of input_errors needs one); keys: {', '.join(SENSOR_SIGMA_KEYS)}")
     disc = raw.get("discretization", {})
+    _only(disc, ("ncp",), f"{f} [discretization]")
     ncp = _need(disc, "ncp", f"{f} [discretization]", int, 2)
     if not 1 <= ncp <= 5:
         raise ConfigError(f"{f} [discretization]: field 'ncp' must be 1..5")
@@ -194,6 +255,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
                      noise_sigma=noise_sigma)
 
     par = raw.get("pareto", {})
+    _only(par, ("points", "spacing", "warm_start", "cold_check", "predictor"), f"{f} [pareto]")
     sol = raw.get("solver", {})
     unknown = sorted(set(sol) - {"name", "options", "point_rows"})
     if unknown:
@@ -220,6 +282,8 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
                                 cold_check=bool(_need(par, "cold_check", f"{f} [pareto]", bool, False)),
                                 predictor=_need(par, "predictor", f"{f} [pareto]", str, "secant"),
                                 solver=solver, solver_options=solver_options)
+    except ConfigError:
+        raise
     except ValueError as exc:
         raise ConfigError(f"{f} [pareto]: {exc}") from None
     use, linear = _objectives_use(raw, f)
@@ -234,7 +298,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
 def _input_errors(obj: dict, f, in_ref, table: str = "objectives", key: str = "input_errors") -> tuple[tuple, dict | None]:
     """[objectives] input_errors (errors in variables) and the optional [objectives.noise_sigma] table; the
     same for [diagnosis] input_noise and [diagnosis.noise_sigma] (``table``, ``key``)."""
-    chans = tuple(_need(obj, key, f"{f} [{table}]", list, []))
+    chans = tuple(_names(_need(obj, key, f"{f} [{table}]", list, []), f"{f} [{table}]", key, allow_empty=True))
     bad = [c for c in chans if c not in INPUTS]
     if bad:
         raise ConfigError(f"{f} [{table}]: unknown input channel(s) {bad} in {key}; choose from "

@@ -8,9 +8,13 @@ from pathlib import Path
 def read_toml(path: str | Path, error: type[Exception]) -> dict:
     """Parse ``path``; a missing file or bad TOML raises ``error`` naming the file."""
     path = Path(path)
+    if path.is_dir():
+        raise error(f"{path}: is a directory, expected a file (the config .toml)")
     if not path.is_file():
         raise error(f"{path}: config file not found")
     try:
-        return tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{path}: not valid TOML ({exc})") from None

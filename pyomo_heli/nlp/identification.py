@@ -322,6 +322,13 @@ def prepare_data(ft, maneuvers="identification", resample_hz: float | None = Non
                         df[ch] = project_inputs(t_f[inside], full[ch].to_numpy(dtype=float)[inside], t_c)
         if max_duration is not None:
             df = df[df["t"] <= df["t"].iloc[0] + max_duration + 1e-9]
+            if len(df) < 2:
+                raise ValueError(f"max_duration_s = {max_duration:g} leaves fewer than 2 samples of maneuver "
+                                 f"{mv.name}")
+        span = float(df["t"].iloc[-1] - df["t"].iloc[0])
+        if input_reference_s and input_reference_s >= span:
+            raise ValueError(f"input_reference_s = {input_reference_s:g} s is not shorter than maneuver {mv.name} "
+                             f"({span:g} s): the input reference is the mean over its quiet lead-in")
         out.append(dataclasses.replace(mv, data=df.reset_index(drop=True), input_reference_s=float(input_reference_s)))
     return IdentificationData(maneuvers=out, trims=ft.trims)
 
@@ -330,12 +337,29 @@ def identification_data(cfg, ft=None) -> IdentificationData:
     """The identification maneuvers of a config as the NLP fits them (its maneuvers, ``resample_hz``,
     ``resample_inputs``, ``max_duration_s``, ``input_reference_s``); ``ft`` a loaded FlightTest, else the
     config's dataset is loaded."""
+    from ..dataset.reader import check_model_matches_manifest
+
     if ft is None:
         from ..dataset import load_flight_test
 
         ft = load_flight_test(cfg.dataset)
-    return prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s,
-                        cfg.resample_inputs)
+    # the flight test's mass and air density are the aircraft the model must fly
+    check_model_matches_manifest(ft, cfg.model.parameters, f"{cfg.path} [model]", skip=[f.name for f in cfg.free])
+    try:
+        data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s,
+                            cfg.resample_inputs)
+        if not data.maneuvers:
+            raise ValueError(f"no identification maneuver in {cfg.dataset} (field 'maneuvers')")
+        # the validation maneuvers are replayed only after the solve: a wrong name must fail now
+        if isinstance(cfg.validation, list):
+            missing = [n for n in cfg.validation if n not in ft.maneuvers]
+            if missing:
+                raise ValueError(f"field 'validation': maneuver(s) {missing} not in the dataset; it has "
+                                 f"{', '.join(ft.maneuvers)}")
+    except (KeyError, ValueError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        raise ValueError(f"{cfg.path} [data]: {msg}") from None
+    return data
 
 
 def maneuver_outputs(m: pyo.ConcreteModel, name: str, outputs) -> dict[str, np.ndarray]:

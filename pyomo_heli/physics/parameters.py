@@ -19,6 +19,7 @@ parameter in rad/m (the paper prints deg/m; convert at the edges only).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field, replace
 from typing import Iterable, Mapping
 
@@ -29,7 +30,9 @@ class ParameterSpec:
 
     ``bounds`` and ``scale`` are the defaults used when the parameter is
     declared free in an identification; ``display`` gives (unit, factor) used
-    to print the value at the edges (value * factor).
+    to print the value at the edges (value * factor). ``domain`` is what the
+    physics needs of any value: "positive" (> 0), "nonnegative" (>= 0),
+    "fraction" (0 <= x <= 1) or None (any finite number).
     """
 
     name: str
@@ -40,6 +43,17 @@ class ParameterSpec:
     bounds: tuple[float, float] | None = None
     scale: float | None = None
     display: tuple[str, float] | None = None
+    domain: str | None = None
+
+    def check(self, value) -> float:
+        """``value`` as a float, or a ValueError naming the parameter when the physics cannot take it."""
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise ValueError(f"parameter {self.name}: value must be a number [{self.unit}], got {value!r}")
+        v = float(value)
+        need = DOMAINS[self.domain]
+        if not math.isfinite(v) or not need[0](v):
+            raise ValueError(f"parameter {self.name}: value must be {need[1]} [{self.unit}], got {value!r}")
+        return v
 
     def shown(self) -> tuple[float, str]:
         """Value and unit as printed at the edges (e.g. deg/m for twist)."""
@@ -51,50 +65,62 @@ class ParameterSpec:
 
 DEG = math.pi / 180.0
 
+#: domain name -> (test, wording) for ParameterSpec.domain
+DOMAINS = {
+    None: (lambda v: True, "a finite number"),
+    "positive": (lambda v: v > 0, "a finite number > 0"),
+    "nonnegative": (lambda v: v >= 0, "a finite number >= 0"),
+    "fraction": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
+}
+
 _BO105: tuple[ParameterSpec, ...] = (
     # --- mass and inertia
-    ParameterSpec("m", 2200.0, "kg", "helicopter mass", "Padfield; TUD", (1500.0, 2600.0), 2200.0),
+    ParameterSpec("m", 2200.0, "kg", "helicopter mass", "Padfield; TUD", (1500.0, 2600.0), 2200.0,
+                  domain="positive"),
     ParameterSpec("Iyy", 4973.0, "kg m^2", "pitch moment of inertia", "Padfield; paper Table 3",
-                  (2000.0, 8000.0), 5000.0),
+                  (2000.0, 8000.0), 5000.0, domain="positive"),
     # --- atmosphere
-    ParameterSpec("g", 9.81, "m/s^2", "gravity", "ISA"),
-    ParameterSpec("rho", 1.225, "kg/m^3", "air density", "ISA sea level"),
+    ParameterSpec("g", 9.81, "m/s^2", "gravity", "ISA", domain="positive"),
+    ParameterSpec("rho", 1.225, "kg/m^3", "air density", "ISA sea level", domain="positive"),
     # --- main rotor
-    ParameterSpec("R", 4.912, "m", "rotor radius", "TUD (Padfield 4.91)"),
-    ParameterSpec("Omega", 44.4, "rad/s", "rotor speed (424 rpm)", "Padfield; TUD"),
-    ParameterSpec("Nb", 4.0, "-", "number of blades", "Padfield"),
-    ParameterSpec("c", 0.27, "m", "blade chord", "Padfield; TUD"),
-    ParameterSpec("a", 6.113, "1/rad", "blade lift-curve slope", "Padfield (NACA 23012)", (4.0, 7.0), 6.0),
-    ParameterSpec("I_beta", 231.7, "kg m^2", "blade flap inertia", "Padfield; TUD"),
+    ParameterSpec("R", 4.912, "m", "rotor radius", "TUD (Padfield 4.91)", domain="positive"),
+    ParameterSpec("Omega", 44.4, "rad/s", "rotor speed (424 rpm)", "Padfield; TUD", domain="positive"),
+    ParameterSpec("Nb", 4.0, "-", "number of blades", "Padfield", domain="positive"),
+    ParameterSpec("c", 0.27, "m", "blade chord", "Padfield; TUD", domain="positive"),
+    ParameterSpec("a", 6.113, "1/rad", "blade lift-curve slope", "Padfield (NACA 23012)", (4.0, 7.0), 6.0,
+                  domain="positive"),
+    ParameterSpec("I_beta", 231.7, "kg m^2", "blade flap inertia", "Padfield; TUD", domain="positive"),
     ParameterSpec("K_beta", 113330.0, "N m/rad", "centre-spring equivalent hub stiffness",
-                  "Padfield; TUD", (0.0, 2.0e5), 1.0e5),
+                  "Padfield; TUD", (0.0, 2.0e5), 1.0e5, domain="nonnegative"),
     ParameterSpec("beta_p", 2.5 * DEG, "rad", "precone", "Bo-105 descriptions [L]",
                   display=("deg", 1 / DEG)),
     ParameterSpec("theta_twist", -1.6329 * DEG, "rad/m", "linear blade twist per metre of span",
                   "paper Table 2 (-0.14 rad over R, Padfield)", (-10.0 * DEG, 0.0), 1.0 * DEG,
                   display=("deg/m", 1 / DEG)),
     ParameterSpec("r_ref", 0.7, "-", "radial station where collective is measured",
-                  "GARTEUR AG-06 control ranges via TUD [M]"),
+                  "GARTEUR AG-06 control ranges via TUD [M]", domain="fraction"),
     ParameterSpec("gamma_s", 3.0 * DEG, "rad", "forward shaft tilt", "Padfield; TUD",
                   display=("deg", 1 / DEG)),
     ParameterSpec("x_h", 0.08, "m", "hub position forward of the CG", "Padfield; TUD", (-0.3, 0.3), 0.1),
     ParameterSpec("h", 1.48, "m", "hub height above the CG", "Padfield; TUD"),
-    ParameterSpec("tau_lambda", 0.1, "s", "inflow time constant", "TUD lecture code", (0.005, 0.5), 0.1),
+    ParameterSpec("tau_lambda", 0.1, "s", "inflow time constant", "TUD lecture code", (0.005, 0.5), 0.1,
+                  domain="positive"),
     # --- fuselage
     ParameterSpec("f_e", 0.95, "m^2", "equivalent flat-plate drag area", "TUD code (1.3*0.73) [L]",
-                  (0.3, 3.0), 1.0),
+                  (0.3, 3.0), 1.0, domain="nonnegative"),
     ParameterSpec("KfVf", 5.08, "m^3", "Munk moment factor times fuselage volume",
                   "TUD code (0.83*pi/4*6*1.3) [L]", (0.0, 15.0), 5.0),
     ParameterSpec("eps_v", 0.1, "m/s", "airspeed regulariser keeping derivatives finite in hover",
-                  "choice"),
+                  "choice", domain="positive"),
     # --- horizontal tail
-    ParameterSpec("S_t", 0.803, "m^2", "horizontal tail area", "Padfield; TUD"),
+    ParameterSpec("S_t", 0.803, "m^2", "horizontal tail area", "Padfield; TUD", domain="nonnegative"),
     ParameterSpec("l_t", 4.64, "m", "tail aerodynamic centre aft of the CG", "TUD (Padfield ~4.56)"),
     ParameterSpec("alpha_t0", 4.0 * DEG, "rad", "tail incidence (leading edge up)", "TUD code [L]",
                   (-5 * DEG, 10 * DEG), 1 * DEG, display=("deg", 1 / DEG)),
     ParameterSpec("CL_alpha_HT", 6.2166, "1/rad", "horizontal tail lift-curve slope",
                   "paper Table 2 'actual Bo-105'", (0.1, 10.0), 5.0),
-    ParameterSpec("eta_t", 1.0, "-", "tail dynamic-pressure ratio", "choice (not separable from CL_alpha_HT)"),
+    ParameterSpec("eta_t", 1.0, "-", "tail dynamic-pressure ratio", "choice (not separable from CL_alpha_HT)",
+                  domain="nonnegative"),
 )
 
 
@@ -148,9 +174,11 @@ class ParameterSet(Mapping[str, float]):
                 raise KeyError(self._unknown(n))
 
     def with_values(self, **values: float) -> "ParameterSet":
+        """A copy with some values changed; unknown names and values outside a parameter's domain
+        (a negative mass, a NaN, ...) raise KeyError and ValueError naming the parameter."""
         self.check_names(values)
         return ParameterSet(
-            replace(s, value=float(values[s.name])) if s.name in values else s for s in self.specs()
+            replace(s, value=s.check(values[s.name])) if s.name in values else s for s in self.specs()
         )
 
     def extended(self, specs: Iterable[ParameterSpec]) -> "ParameterSet":

@@ -1,0 +1,159 @@
+"""Bad identification configs and model parameter values: one error naming the file, table and field.
+
+Found by an adversarial audit (2026-11-25): before, these gave tracebacks, vague messages, or were
+accepted silently (a misspelt key ignored, a negative mass reaching the trim solver, an empty output list
+reaching the Pareto front's normalisation).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from pyomo_heli.cli import main
+from pyomo_heli.config import ConfigError, load_identification_config
+from pyomo_heli.nlp.identification import identification_data
+from pyomo_heli.physics.model import HelicopterModel
+
+DATA = Path(__file__).resolve().parent.parent / "data" / "bo105_synthetic"
+BASE = f'''[data]
+dataset = "{DATA}"
+maneuvers = ["lon3211_80kt_a"]
+max_duration_s = 2.0
+resample_hz = 25
+{{data}}
+[parameters.theta_twist]
+unit = "deg/m"
+initial = -2.1228
+lower = -10.0
+upper = 0.0
+scale = 1.0
+{{twist}}
+[parameters.CL_alpha_HT]
+initial = 4.3516
+lower = 0.1
+upper = 10.0
+scale = 5.0
+
+[pareto]
+points = 4
+{{pareto}}
+{{extra}}
+'''
+
+
+def write(tmp_path, data="", twist="", pareto="", extra="", top="") -> Path:
+    p = tmp_path / "cfg.toml"
+    p.write_text(top + BASE.format(data=data, twist=twist, pareto=pareto, extra=extra))
+    return p
+
+
+def test_the_base_config_loads(tmp_path):
+    cfg = load_identification_config(write(tmp_path))
+    assert [f.name for f in cfg.free] == ["theta_twist", "CL_alpha_HT"]
+
+
+@pytest.mark.parametrize("edit, message", [
+    (dict(top="model = 3\n"), "'model' must be a table"),
+    (dict(data="resample_hzz = 25"), r"\[data\]: unknown key\(s\) resample_hzz"),
+    (dict(pareto="pointz = 3"), r"\[pareto\]: unknown key\(s\) pointz"),
+    (dict(twist="initail = 1"), r"\[parameters.theta_twist\]: unknown key\(s\) initail"),
+    (dict(extra="[discretization]\nnpc = 3"), r"\[discretization\]: unknown key\(s\) npc"),
+    (dict(extra='[objectives]\ntime_output = ["q"]'), r"\[objectives\]: unknown key\(s\) time_output"),
+    (dict(extra='[model]\nextension = ["rotor_wake_on_tail"]'), r"\[model\]: unknown key\(s\) extension"),
+    (dict(extra='[objectives]\ntime_outputs = []'), "field 'time_outputs' is empty"),
+    (dict(extra='[objectives]\ntrim_outputs = []'), "field 'trim_outputs' is empty"),
+    (dict(extra='[objectives]\ntime_outputs = ["q", "q"]'), r"field 'time_outputs' names \['q'\] more than once"),
+    (dict(extra='[objectives]\ninput_errors = ["col", "col"]\nnoise_sigma = { col_deg = 0.02 }'),
+     "field 'input_errors' names"),
+    (dict(extra='[objectives]\ninput_errors = ["col"]\nnoise_sigma = { col_deg = 0.02 }'),
+     r"\[objectives.noise_sigma\]: no sigma for \['q', 'theta', 'n_x', 'n_z', 'TAS'\]"),
+    (dict(data='validation = 5'), "field 'validation' must be"),
+    (dict(twist="") | dict(extra="[parameters.Iyy]\ninitial = 4973\nlower = 2000\nupper = 8000\nscale = inf"),
+     "field 'scale' must be a finite number"),
+    (dict(extra="[parameters.Iyy]\ninitial = 4973\nlower = 2000\nupper = 8000\nscale = 0"),
+     "field 'scale' must be a number > 0"),
+    (dict(extra="[parameters.rho]\ninitial = 1.2\nlower = -1\nupper = 2\nscale = 1"),
+     r"\[parameters.rho\]: parameter rho: value must be a finite number > 0"),
+    (dict(pareto='cold_check = "yes"'), r"^\S+cfg.toml \[pareto\]: field 'cold_check' must be bool"),
+])
+def test_bad_config_is_one_clear_error(tmp_path, edit, message):
+    with pytest.raises(ConfigError, match=message) as err:
+        load_identification_config(write(tmp_path, **edit))
+    text = str(err.value)
+    assert "\n" not in text and str(tmp_path / "cfg.toml") in text
+    assert text.count("[pareto]") <= 1  # the table is named once, not wrapped twice
+
+
+@pytest.mark.parametrize("value, message", [
+    ("[1, 2]", "must be a number"), ('"heavy"', "must be a number"), ("-2000", "must be a finite number > 0"),
+    ("nan", "must be a finite number > 0"), ("true", "must be a number"),
+])
+def test_model_parameter_values_are_checked(tmp_path, value, message):
+    path = write(tmp_path, extra=f"[model]\nparameters = {{ m = {value} }}")
+    with pytest.raises(ConfigError, match=rf"\[model.parameters\]: parameter m: value {message}"):
+        load_identification_config(path)
+
+
+@pytest.mark.parametrize("data, message", [
+    ('validation = ["nope"]', r"\[data\]: field 'validation': maneuver\(s\) \['nope'\] not in the dataset"),
+    ("max_duration_s = 0.01", r"\[data\]: max_duration_s = 0.01 leaves fewer than 2 samples"),
+    ("input_reference_s = 100", r"\[data\]: input_reference_s = 100 s is not shorter than maneuver"),
+])
+def test_data_selection_errors_name_the_config_before_any_solve(tmp_path, data, message):
+    text = write(tmp_path, data=data).read_text()
+    if "max_duration_s = 0.01" in data:  # the key replaces the base's 2.0
+        text = text.replace("max_duration_s = 2.0\n", "")
+    (tmp_path / "cfg.toml").write_text(text)
+    cfg = load_identification_config(tmp_path / "cfg.toml")
+    with pytest.raises(ValueError, match=message):
+        identification_data(cfg)
+
+
+def test_config_that_is_a_folder_or_not_text(tmp_path):
+    with pytest.raises(ConfigError, match="is a directory, expected a file"):
+        load_identification_config(tmp_path)
+    bad = tmp_path / "bin.toml"
+    bad.write_bytes(b"\xff\xfe\x00\x01")
+    with pytest.raises(ConfigError, match=r"bin.toml: not a UTF-8 text file"):
+        load_identification_config(bad)
+
+
+def test_physics_refuses_values_it_cannot_take():
+    """The parameter table's domains (docs/model.md section 12): the same check serves configs and --param."""
+    m = HelicopterModel()
+    for name, value in (("m", -1.0), ("rho", 0.0), ("Omega", math.inf), ("theta_twist", math.nan),
+                        ("r_ref", 1.5), ("Iyy", -5.0)):
+        with pytest.raises(ValueError, match=rf"parameter {name}: value must be"):
+            m.with_parameters(**{name: value})
+    assert m.with_parameters(K_beta=0.0, theta_twist=0.0).parameters["K_beta"] == 0.0
+
+
+@pytest.mark.parametrize("param", ["rho=0", "R=0", "m=-2200", "Iyy=-5", "theta_twist=nan"])
+def test_cli_param_outside_its_domain_is_exit_2(param, capsys):
+    assert main(["trim", "--speeds-kt", "80", "--param", param]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and f"parameter {param.split('=')[0]}: value must be" in err
+
+
+def test_close_loop_candidates_named_twice(tmp_path):
+    from pyomo_heli.close_loop import loop_settings
+
+    cfg = load_identification_config(write(tmp_path, extra='[loop]\ncandidates = ["cg_offset", "cg_offset"]'))
+    with pytest.raises(ConfigError, match=r"\[loop\]: field 'candidates' names \['cg_offset'\] more than once"):
+        loop_settings(cfg)
+
+
+def test_model_mass_must_match_the_flight_tests(tmp_path):
+    """The manifest's mass and air density are the aircraft and day the model must fly; a config whose model
+    differs by more than 0.5 % is refused before any solve, unless the parameter is free."""
+    cfg = load_identification_config(write(tmp_path, extra="[model]\nparameters = { m = 2400 }"))
+    with pytest.raises(ValueError, match=r"manifest.json: field 'mass_kg' = 2200 kg but model parameter m = 2400 kg"
+                                         r".*cfg.toml \[model\]\): set \[model\] parameters = \{ m = 2200 \}"):
+        identification_data(cfg)
+    ok = load_identification_config(write(tmp_path, extra="[model]\nparameters = { m = 2205 }"))
+    assert len(identification_data(ok).maneuvers) == 1
+    freed = load_identification_config(write(tmp_path, extra="[model]\nparameters = { m = 2400 }\n"
+                                             "[parameters.m]\ninitial = 2400\nlower = 1500\nupper = 2600"))
+    assert len(identification_data(freed).maneuvers) == 1

@@ -9,11 +9,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
+from pathlib import Path
 
 from .units import DEG, KT
 
 MAX_SPEED_KT = 150.0  # upper end of the speed range the model is meant for
+MAX_INPUT_DEG = 20.0  # largest input increment simulate accepts (control travel is about +-10..15 deg from trim)
+MAX_SIM_SAMPLES = 1_000_000  # simulate output samples: more is a typo in --rate or --duration, not a record
 
 
 class UserError(Exception):
@@ -23,6 +27,124 @@ class UserError(Exception):
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, no usage dump
         raise UserError(message)
+
+
+# ---------------------------------------------------------------- argparse types
+# argparse reports a failing ``type=`` as "argument --OPTION: MESSAGE", so these name the option themselves.
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def finite_float(text: str) -> float:
+    v = _number(text)
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return v
+
+
+def positive_float(text: str) -> float:
+    v = finite_float(text)
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return v
+
+
+def nonneg_float(text: str) -> float:
+    v = finite_float(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return v
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+
+
+def nonneg_int(text: str) -> int:
+    v = _integer(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text}")
+    return v
+
+
+def positive_int(text: str) -> int:
+    v = _integer(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text}")
+    return v
+
+
+def _epsilon(text: str) -> float:
+    v = finite_float(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"{text} is negative; J_trim is a sum of squares (>= 0), so "
+                                         f"J_trim <= {text} is infeasible")
+    return v
+
+
+def _check_out_dir(path, option: str = "--out") -> None:
+    """A results folder that can be created: nothing on its path may be a file."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise UserError(f"option {option}: {path} is a file, expected a folder")
+    for parent in p.absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise UserError(f"option {option}: cannot create folder {path}: {parent} is a file, not a folder")
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise UserError(f"option {option}: cannot create folder {path}: {parent} is not writable")
+            return
+
+
+def _check_out_file(path, option: str = "--out") -> None:
+    """An output file that can be written: its folder exists and it is not itself a folder."""
+    p = Path(path)
+    if p.is_dir():
+        raise UserError(f"option {option}: {path} is a folder, expected a file name")
+    parent = p.absolute().parent
+    if not parent.exists():
+        raise UserError(f"option {option}: cannot write {path}: folder {parent} does not exist")
+    if not parent.is_dir():
+        raise UserError(f"option {option}: cannot write {path}: {parent} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK) or (p.exists() and not os.access(p, os.W_OK)):
+        raise UserError(f"option {option}: cannot write {path}: permission denied")
+
+
+def _check_free_match(cfg, result, results_dir) -> None:
+    """The config's free parameters are those of the results folder (else their values would be mixed up)."""
+    have, want = list(result.parameters), [f.name for f in cfg.free]
+    missing = [n for n in want if n not in have]
+    extra = [n for n in have if n not in want]
+    if missing or extra:
+        parts = []
+        if missing:
+            parts.append(f"config {cfg.path} frees {', '.join(missing)}, which results folder {results_dir} lacks")
+        if extra:
+            parts.append(f"results folder {results_dir} holds {', '.join(extra)}, "
+                         f"which config {cfg.path} does not free")
+        raise UserError("; ".join(parts) + f" (results: {', '.join(have) or 'none'}; "
+                        f"config: {', '.join(want) or 'none'}); give the config the results came from")
+
+
+def _point_parameters(result, which: str, results_dir) -> dict:
+    """The parameters of the chosen point or of A, every value finite (named with file and key otherwise)."""
+    point = result.chosen if which == "chosen" else result.time_domain
+    file = Path(results_dir) / ("chosen.json" if which == "chosen" else "time_domain.json")
+    key = "chosen.parameters" if which == "chosen" else "parameters"
+    if point is None:
+        raise UserError(f"{file}: no chosen point (no front point converged); nothing to diagnose")
+    params = point["parameters"]
+    for n in result.parameters:
+        v = params.get(n)
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+            raise UserError(f"{file}: key {key}.{n} = {v!r} is not a finite number")
+    return params
 
 
 def _parse_params(items, model):
@@ -56,6 +178,8 @@ def cmd_trim(args) -> int:
 
     for v in args.speeds_kt:
         _check_speed_kt(v, "--speeds-kt")
+    if args.json:
+        _check_out_file(args.json, "--json")
     model = _parse_params(args.param, HelicopterModel())
     table = trim_table(model, [v * KT for v in args.speeds_kt], solver=args.solver)
     records = []
@@ -79,22 +203,41 @@ def cmd_simulate(args) -> int:
     import numpy as np
 
     from .physics.model import HelicopterModel
-    from .simulation.inputs import parse_input
+    from .simulation.inputs import InputSpecError, parse_input
     from .simulation.integrate import simulate
     from .simulation.trim import trim_float
 
     _check_speed_kt(args.speed_kt, "--speed-kt")
-    if not (args.duration > 0 and math.isfinite(args.duration)):
-        raise UserError(f"--duration must be positive, got {args.duration}")
-    if not args.rate > 0:
-        raise UserError(f"--rate must be positive, got {args.rate}")
-    signals = [parse_input(s, t_start=args.t_start) for s in args.input or []]
+    # --duration, --rate, --t-start are finite and in range by their argparse types; here what ties them together
+    n_samples = math.floor(args.duration * args.rate + 1e-6) + 1
+    if n_samples < 2:
+        raise UserError(f"--rate {args.rate:g} Hz gives fewer than 2 samples over --duration {args.duration:g} s "
+                        f"(need --rate >= {1.0 / args.duration:g} Hz)")
+    if n_samples > MAX_SIM_SAMPLES:
+        raise UserError(f"--rate {args.rate:g} Hz over --duration {args.duration:g} s gives {n_samples:.3g} samples, "
+                        f"more than {MAX_SIM_SAMPLES:,}; lower --rate or --duration")
+    if args.input and args.t_start >= args.duration:
+        raise UserError(f"--t-start {args.t_start:g} s: the input would start at or after the end of the record "
+                        f"(--duration {args.duration:g} s) and never be applied")
+    signals = []
+    for text in args.input or []:
+        try:
+            sig = parse_input(text, t_start=args.t_start)
+        except InputSpecError as exc:
+            raise UserError(f"--input {text!r}: {exc}") from None
+        if abs(sig.amplitude) > MAX_INPUT_DEG * DEG:
+            raise UserError(f"--input {text!r}: amplitude {sig.amplitude / DEG:g} deg is outside "
+                            f"+-{MAX_INPUT_DEG:g} deg (an increment on trim; larger ones leave the control travel and the model's "
+                            f"small-angle, attached-flow range)")
+        signals.append(sig)
     channels = [s.channel for s in signals]
     if len(set(channels)) != len(channels):
         raise UserError(f"--input: channel given twice ({', '.join(channels)})")
+    if args.out:
+        _check_out_file(args.out, "--out")
     model = _parse_params(args.param, HelicopterModel())
     trim = trim_float(model, args.speed_kt * KT)
-    t = np.arange(0.0, args.duration + 1e-9, 1.0 / args.rate)
+    t = np.arange(n_samples) / args.rate
     df = simulate(model, trim, t, {s.channel: s for s in signals}, max_step=0.05)
     out = df.assign(t_s=df.t, col_deg=df.col / DEG, lon_deg=df.lon / DEG, q_deg_s=df.q / DEG,
                     theta_deg=df.theta / DEG, nx_g=df.n_x, nz_g=df.n_z, tas_m_s=df.TAS,
@@ -115,6 +258,7 @@ def cmd_generate_data(args) -> int:
 
     if args.seed is not None and args.seed < 0:
         raise UserError(f"option --seed must be an integer >= 0, got {args.seed}")
+    _check_out_dir(args.out)
     out = generate_from_file(args.config, args.out, seed=args.seed)
     print(f"wrote synthetic flight test to {out}")
     return 0
@@ -123,6 +267,11 @@ def cmd_generate_data(args) -> int:
 def cmd_check_data(args) -> int:
     from .dataset.cli import check_data
 
+    d = Path(args.directory)
+    if d.exists() and not d.is_dir():
+        raise UserError(f"{args.directory} is a file, expected a dataset folder")
+    if (d / "manifest.json").is_dir():
+        raise UserError(f"{d / 'manifest.json'} is a directory, expected a file")
     return check_data(args.directory)
 
 
@@ -138,6 +287,7 @@ def cmd_close_loop(args) -> int:
         if not Path(args.dataset).is_dir():
             raise UserError(f"option --dataset: folder {args.dataset} not found")
         overrides = {"data": {"dataset": str(Path(args.dataset).resolve())}}
+    _check_out_dir(args.out)
     cfg = load_identification_config(args.config, overrides)
     settings = loop_settings(cfg)
     if args.max_iterations is not None:
@@ -151,6 +301,22 @@ def cmd_close_loop(args) -> int:
     return 0
 
 
+def _data_rate_hz(cfg) -> tuple[float, str]:
+    """Sample rate [Hz] of the residuals a diagnosis of ``cfg`` tests: [data] resample_hz, else the slowest maneuver."""
+    if cfg.resample_hz:
+        return float(cfg.resample_hz), f"[data] resample_hz of config {cfg.path}"
+    from .dataset import load_flight_test
+
+    ft = load_flight_test(cfg.dataset)
+    sel = cfg.maneuvers
+    names = set(sel) if not isinstance(sel, str) else {n for n, mv in ft.maneuvers.items() if mv.role == sel}
+    if not isinstance(cfg.validation, str) and cfg.validation:
+        names |= set(cfg.validation)
+    rates = [ft.maneuvers[n].sample_rate for n in names if n in ft.maneuvers]
+    rates = [r for r in rates if math.isfinite(r)]
+    return (min(rates) if rates else math.inf), f"dataset {cfg.dataset} of config {cfg.path}"
+
+
 def cmd_diagnose(args) -> int:
     from pathlib import Path
 
@@ -161,19 +327,24 @@ def cmd_diagnose(args) -> int:
 
     if not 0 < args.alpha < 1:
         raise UserError(f"--alpha must lie in (0, 1), got {args.alpha}")
-    if not args.test_rate_hz > 0:
-        raise UserError(f"--test-rate-hz must be positive, got {args.test_rate_hz}")
+    if args.out is not None:
+        _check_out_dir(args.out)
     res = IdentificationResult.load(args.results_dir)
     cfg = load_result_config(args.results_dir, args.config)
     if res.info.get("extensions"):  # an iteration of close-loop: the config plus the effects the loop added
         from .close_loop import config_of_result
 
         cfg = config_of_result(cfg, res)
-    point = res.chosen if args.point == "chosen" else res.time_domain
+    _check_free_match(cfg, res, args.results_dir)
+    parameters = _point_parameters(res, args.point, args.results_dir)
+    rate, source = _data_rate_hz(cfg)
+    if args.test_rate_hz > rate * (1 + 1e-9):
+        raise UserError(f"option --test-rate-hz: {args.test_rate_hz:g} Hz is above the sample rate of the data "
+                        f"({rate:g} Hz, {source}); the whiteness test cannot sample faster than the data")
     label = "multi-objective (C)" if args.point == "chosen" else "time-domain (A)"
     out = Path(args.out or args.results_dir)
     print(f"diagnosing {label} of {args.results_dir} (config {cfg.path})")
-    r = compute_residuals(cfg, point["parameters"], label, test_rate_hz=args.test_rate_hz)
+    r = compute_residuals(cfg, parameters, label, test_rate_hz=args.test_rate_hz)
     if not args.no_residuals:
         r.save(out / f"residuals_{args.point}")
     d = diagnose(r, alpha=args.alpha, test_rate_hz=args.test_rate_hz, seed=args.seed)
@@ -190,6 +361,7 @@ def cmd_identify(args) -> int:
     from .identify import run_identification
 
     overrides = {"pareto": {"cold_check": True}} if getattr(args, "cold_check", False) else None
+    _check_out_dir(args.out)
     cfg = load_identification_config(args.config, overrides)
     print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
           f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
@@ -222,12 +394,18 @@ def cmd_uncertainty(args) -> int:
     from .pareto.result import IdentificationResult
     from .uncertainty.front import add_uncertainty
 
+    if args.out:
+        _check_out_dir(args.out)
     cfg = load_identification_config(args.config)
     result = IdentificationResult.load(args.results)
     if result.info.get("extensions"):  # an iteration of close-loop: the config plus the effects the loop added
         from .close_loop import config_of_result
 
         cfg = config_of_result(cfg, result)
+    _check_free_match(cfg, result, args.results)
+    if result.chosen is None:
+        raise UserError(f"{Path(args.results) / 'chosen.json'}: no chosen point (no front point converged); "
+                        f"no standard errors to compute")
     if args.out and Path(args.out).resolve() != Path(args.results).resolve():
         shutil.copytree(args.results, args.out, dirs_exist_ok=True)
     data = identification_data(cfg)
@@ -240,6 +418,7 @@ def cmd_multistart(args) -> int:
     from .config import load_identification_config
     from .multistart import run_multistart
 
+    _check_out_dir(args.out)
     cfg = load_identification_config(args.config)
     problem = "time" if args.epsilon is None else "epsilon"
     print(f"multi-start of {', '.join(f.name for f in cfg.free)} from {args.starts} random initial guesses "
@@ -248,6 +427,9 @@ def cmd_multistart(args) -> int:
                             rtol=args.rtol, restart=args.restart)
     print(result)
     print(f"results in {args.out}")
+    if result.best is None and args.epsilon is not None:
+        print(f"no start converged: the bound J_trim <= {args.epsilon:g} (--epsilon) may be infeasible; "
+              f"try an epsilon between the front's J_trim values (front.csv of identify)", file=sys.stderr)
     return 0 if result.best is not None else 1
 
 
@@ -258,6 +440,7 @@ def cmd_demo(args) -> int:
     if not config.is_file():
         raise UserError(f"demo config {config} not found (the demo runs from a source checkout)")
     args.config, args.no_report = str(config), False
+    _check_out_dir(args.out)
     args.uncertainty = "chosen"  # standard errors of A, C and the direct solve: keeps the demo's duration
     return cmd_identify(args)
 
@@ -308,19 +491,19 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
 
     t = sub.add_parser("trim", help="trim table of the model over speed (Pyomo trim block)")
-    t.add_argument("--speeds-kt", type=float, nargs="+", default=[0, 20, 40, 60, 80, 100, 120])
+    t.add_argument("--speeds-kt", type=finite_float, nargs="+", default=[0, 20, 40, 60, 80, 100, 120])
     t.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter (SI)")
     t.add_argument("--solver", default="casadi-ipopt", help="casadi-ipopt (default), pounce or ipopt")
     t.add_argument("--json", metavar="FILE", help="also write the table as JSON records")
     t.set_defaults(func=cmd_trim)
 
     s = sub.add_parser("simulate", help="simulate a maneuver from trim (scipy)")
-    s.add_argument("--speed-kt", type=float, required=True)
+    s.add_argument("--speed-kt", type=finite_float, required=True)
     s.add_argument("--input", action="append", metavar="CH:SHAPE:AMP_DEG:STEP_S",
                    help="input increment, e.g. lon:3211:0.5:0.5 (shapes 3211, doublet, step, pulse)")
-    s.add_argument("--duration", type=float, default=15.0, help="record length [s]")
-    s.add_argument("--rate", type=float, default=50.0, help="output sample rate [Hz]")
-    s.add_argument("--t-start", type=float, default=1.0, help="time the input starts [s]")
+    s.add_argument("--duration", type=positive_float, default=15.0, help="record length [s]")
+    s.add_argument("--rate", type=positive_float, default=50.0, help="output sample rate [Hz]")
+    s.add_argument("--t-start", type=nonneg_float, default=1.0, help="time the input starts [s], before --duration")
     s.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter (SI)")
     s.add_argument("--out", metavar="FILE.csv", help="write CSV (units in column names)")
     s.set_defaults(func=cmd_simulate)
@@ -346,7 +529,7 @@ def build_parser() -> argparse.ArgumentParser:
                                            "re-identify, repeat ([loop] table of the config)")
     cl.add_argument("config")
     cl.add_argument("--out", required=True, help="results folder (loop.json, loop_report.md, iter_*/)")
-    cl.add_argument("--max-iterations", type=int, help="override [loop] max_iterations")
+    cl.add_argument("--max-iterations", type=nonneg_int, help="override [loop] max_iterations")
     cl.add_argument("--dataset", help="flight-test folder replacing the config's [data] dataset (e.g. another noise "
                                       "realisation from generate-data --seed)")
     cl.add_argument("--restart", action="store_true",
@@ -369,11 +552,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     ms = sub.add_parser("multistart", help="solve from seeded random initial guesses within the bounds")
     ms.add_argument("config")
-    ms.add_argument("--starts", type=int, default=20, help="number of starts (default 20)")
-    ms.add_argument("--seed", type=int, default=0, help="seed of the initial guesses (default 0)")
-    ms.add_argument("--epsilon", type=float, default=None,
+    ms.add_argument("--starts", type=positive_int, default=20, help="number of starts (default 20)")
+    ms.add_argument("--seed", type=nonneg_int, default=0, help="seed of the initial guesses (default 0)")
+    ms.add_argument("--epsilon", type=_epsilon, default=None,
                     help="solve min J_time s.t. J_trim <= EPSILON (one front point) instead of min J_time")
-    ms.add_argument("--rtol", type=float, default=1e-6,
+    ms.add_argument("--rtol", type=positive_float, default=1e-6,
                     help="relative objective tolerance for 'reached the best optimum' (default 1e-6)")
     ms.add_argument("--out", required=True, help="results folder (resumed if it holds finished starts)")
     ms.add_argument("--restart", action="store_true", help="discard finished starts in --out")
@@ -395,7 +578,7 @@ def build_parser() -> argparse.ArgumentParser:
     rl.set_defaults(func=cmd_report_linear)
 
     lz = sub.add_parser("linearize", help="A, B and poles of the float model at trim (central differences)")
-    lz.add_argument("--speeds-kt", type=float, nargs="+", default=[0, 80])
+    lz.add_argument("--speeds-kt", type=finite_float, nargs="+", default=[0, 80])
     lz.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter (SI)")
     lz.set_defaults(func=cmd_linearize)
 
@@ -409,9 +592,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--out", help="folder for diagnosis.json, diagnosis.md and figures (default: RESULTS_DIR)")
     g.add_argument("--point", choices=("chosen", "time_domain"), default="chosen",
                    help="diagnose the chosen point C (default) or the time-domain point A")
-    g.add_argument("--alpha", type=float, default=0.01, help="significance level of the tests (default 0.01)")
-    g.add_argument("--test-rate-hz", type=float, default=5.0, help="sample rate of the whiteness test (default 5)")
-    g.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo p-values (default 0)")
+    g.add_argument("--alpha", type=finite_float, default=0.01, help="significance level of the tests (default 0.01)")
+    g.add_argument("--test-rate-hz", type=positive_float, default=5.0,
+                   help="sample rate of the whiteness test, at most the data's (default 5)")
+    g.add_argument("--seed", type=nonneg_int, default=0, help="seed of the Monte Carlo p-values (default 0)")
     g.add_argument("--no-residuals", action="store_true",
                    help="do not save the residuals folder (residuals_<point>/, about 1 MB per 10 maneuvers)")
     g.set_defaults(func=cmd_diagnose)
@@ -437,7 +621,7 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (UserError, InputSpecError, ConfigError, IdentificationConfigError, DatasetError, TrimError, SolverError,
-            StoreMismatchError, FileNotFoundError, KeyError, ValueError, RuntimeError) as exc:
+            StoreMismatchError, OSError, KeyError, ValueError, RuntimeError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
         print(f"pyomo-heli {cmd}: error: {msg}", file=sys.stderr)
         return 2

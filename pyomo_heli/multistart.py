@@ -123,6 +123,12 @@ def run_multistart(cfg: IdentificationConfig, out: str | Path, starts: int = 20,
         raise ValueError("an epsilon (J_trim bound) is needed for problem 'epsilon', and only there")
     if starts < 1:
         raise ValueError(f"--starts must be at least 1, got {starts}")
+    if int(seed) != seed or seed < 0:
+        raise ValueError(f"--seed must be an integer >= 0, got {seed}")
+    if not (math.isfinite(rtol) and rtol > 0):
+        raise ValueError(f"--rtol must be a finite number > 0, got {rtol}")
+    if epsilon is not None and not (math.isfinite(epsilon) and epsilon >= 0):
+        raise ValueError(f"--epsilon must be a finite number >= 0 (J_trim >= 0), got {epsilon}")
     out = Path(out)
     store = PointStore(out, fingerprint(cfg.raw, cfg.dataset, command="multistart", seed=seed, problem=problem,
                                         epsilon=epsilon), restart=restart, what="multi-start")

@@ -11,6 +11,7 @@ Files (written as each point finishes, so nothing finished is lost):
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,6 +25,64 @@ def _json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     raise TypeError(type(o))
+
+
+class ResultFileError(ValueError):
+    """A malformed file of a results folder (the message names the file and the key)."""
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _read_json_object(path: Path) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except UnicodeDecodeError as exc:
+        raise ResultFileError(f"{path}: not a text file ({exc.reason})") from None
+    except json.JSONDecodeError as exc:
+        raise ResultFileError(f"{path}: invalid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
+    if not isinstance(data, dict):
+        raise ResultFileError(f"{path}: expected a JSON object at the top level, got {type(data).__name__}")
+    return data
+
+
+def _check_point(point, params: list, path: Path, key: str | None, may_be_null: bool = False,
+                 finite: bool = False) -> None:
+    """A point record: an object whose 'parameters' hold a number for every free parameter.
+
+    ``finite``: every value finite; otherwise only a point that does not say it failed (``success``) must be.
+    """
+    where = f"key '{key}'" if key else "the top level"
+    if point is None and may_be_null:
+        return
+    if not isinstance(point, dict):
+        raise ResultFileError(f"{path}: {where} must be an object{' or null' if may_be_null else ''}, "
+                              f"got {type(point).__name__}")
+    pk = f"{key}.parameters" if key else "parameters"
+    values = point.get("parameters")
+    if not isinstance(values, dict):
+        raise ResultFileError(f"{path}: key '{pk}' must be an object (name -> value), got {values!r}")
+    must_be_finite = finite or point.get("success", True) is not False
+    for n in params:
+        if n not in values:
+            raise ResultFileError(f"{path}: key '{pk}' has no value for the free parameter {n!r}")
+        v = values[n]
+        if not _is_number(v) or (must_be_finite and not math.isfinite(v)):
+            raise ResultFileError(f"{path}: key '{pk}.{n}' = {v!r} is not a finite number")
+
+
+def _read_front(path: Path, params: list) -> pd.DataFrame:
+    try:
+        front = pd.read_csv(path)
+    except pd.errors.EmptyDataError:
+        raise ResultFileError(f"{path}: empty file, expected a CSV table of front points") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise ResultFileError(f"{path}: not a readable CSV table: {str(exc).strip().splitlines()[0]}") from None
+    missing = [c for c in ["index", "kind", *params] if c not in front.columns]
+    if missing:
+        raise ResultFileError(f"{path}: column(s) {', '.join(missing)} missing")
+    return front
 
 
 def write_json(path: Path, data: dict) -> None:
@@ -55,14 +114,39 @@ class IdentificationResult:
 
     @classmethod
     def load(cls, out: str | Path) -> "IdentificationResult":
+        """Load a results folder; ResultFileError (a ValueError naming the file and key) if a file is malformed."""
         out = Path(out)
+        if out.exists() and not out.is_dir():
+            raise ResultFileError(f"{out} is a file, expected an identification results folder")
         for name in ("front.csv", "chosen.json", "time_domain.json"):
+            if (out / name).is_dir():
+                raise ResultFileError(f"{out / name} is a directory, expected a file")
             if not (out / name).is_file():
                 raise FileNotFoundError(f"{out}: no {name}; is this an identification results folder?")
-        ch = json.loads((out / "chosen.json").read_text())
-        return cls(front=pd.read_csv(out / "front.csv"), parameters=ch["parameters"], units=ch["units"],
+        ch_path, td_path = out / "chosen.json", out / "time_domain.json"
+        ch = _read_json_object(ch_path)
+        for key in ("parameters", "units", "utopia", "nadir", "chosen", "direct"):
+            if key not in ch:
+                raise ResultFileError(f"{ch_path}: key '{key}' is missing")
+        params = ch["parameters"]
+        if not isinstance(params, list) or not all(isinstance(n, str) for n in params):
+            raise ResultFileError(f"{ch_path}: key 'parameters' must be a list of parameter names, got {params!r}")
+        if not isinstance(ch["units"], dict):
+            raise ResultFileError(f"{ch_path}: key 'units' must be an object (name -> unit), got {ch['units']!r}")
+        for key in ("utopia", "nadir"):
+            v = ch[key]
+            if not isinstance(v, list) or not all(_is_number(x) for x in v):
+                raise ResultFileError(f"{ch_path}: key '{key}' must be a list of numbers, got {v!r}")
+        info = ch.get("info", {})
+        if not isinstance(info, dict):
+            raise ResultFileError(f"{ch_path}: key 'info' must be an object, got {info!r}")
+        _check_point(ch["chosen"], params, ch_path, "chosen", may_be_null=True, finite=True)
+        _check_point(ch["direct"], params, ch_path, "direct", may_be_null=True)
+        time_domain = _read_json_object(td_path)
+        _check_point(time_domain, params, td_path, None)
+        return cls(front=_read_front(out / "front.csv", params), parameters=params, units=ch["units"],
                    utopia=tuple(ch["utopia"]), nadir=tuple(ch["nadir"]), chosen=ch["chosen"], direct=ch["direct"],
-                   time_domain=json.loads((out / "time_domain.json").read_text()), info=ch.get("info", {}))
+                   time_domain=time_domain, info=info)
 
     def __str__(self) -> str:
         cols = ["index", "kind", "epsilon", "J_time", "J_trim"] + self.parameters + ["status", "iterations",

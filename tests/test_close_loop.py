@@ -212,14 +212,18 @@ def _truth_replay_errors(cfg, doc):
     return truth_replay_errors(cfg, doc, val)
 
 
-def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys):
+def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, request):
     """The acceptance of issue 5 on a small instance of the synthetic flight test (truth: M0 + wake on tail)."""
     cfg = make_case(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
                     loop="\n[loop]\nmax_iterations = 1\n", maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
     assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
     doc = json.loads((tmp_path / "loop" / "loop.json").read_text())
     it0, it1 = doc["iterations"][0], doc["iterations"][-1]
-    with capsys.disabled():  # `pytest -s` shows what docs/close_loop.md quotes ("What the tests show")
+    import contextlib
+
+    # under `pytest -s`, show what docs/close_loop.md quotes ("What the tests show"); capsys holds it otherwise
+    shown = capsys.disabled() if request.config.getoption("capture") == "no" else contextlib.nullcontext()
+    with shown:
         print("\n" + it0["attribution"]["message"] + "\n" + it1["attribution"]["message"])
         print("shape:", it1["shape_selection"]["decision"], it1["shape_parameters"])
         print(json.dumps({k: (it0[k], it1[k]) for k in ("trim_rms", "validation_rms", "parameters")}, indent=1))

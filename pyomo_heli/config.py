@@ -21,6 +21,10 @@ from .units import SENSOR_SIGMA_KEYS
 from .solvers import SOLVER_NAMES
 
 
+#: largest noise sigma [SI: rad, rad/s, g, m/s] a config may give: no sensor is that poor; larger is a unit slip
+SIGMA_MAX_SI = 10.0
+
+
 class ConfigError(ValueError):
     """A bad identification config; the message names the file and field."""
 
@@ -139,6 +143,9 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
         ds = (path.parent / ds).resolve()
     if not ds.is_dir():
         raise ConfigError(f"{f} [data]: field 'dataset': folder {ds} not found")
+    if not (ds / "manifest.json").is_file():
+        raise ConfigError(f"{f} [data]: field 'dataset': {ds} is not a flight-test folder (no manifest.json; "
+                          f"docs/data_format.md)")
     mans = data.get("maneuvers", "identification")
     if mans != "identification":
         if not isinstance(mans, list):
@@ -273,8 +280,8 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
                               f"read every row from the NL file anyway)")
         solver_options["point_rows"] = False
     points = _need(par, "points", f"{f} [pareto]", int, 11)
-    if points < 2:
-        raise ConfigError(f"{f} [pareto]: field 'points': the epsilon grid needs at least 2 points (the anchors), "
+    if not 2 <= points <= 1000:
+        raise ConfigError(f"{f} [pareto]: field 'points': the epsilon grid needs 2 (the anchors) to 1000 points, "
                           f"got {points}")
     try:
         pareto = ParetoSettings(points=points, spacing=_need(par, "spacing", f"{f} [pareto]", str, "geometric"),
@@ -315,9 +322,15 @@ def _input_errors(obj: dict, f, in_ref, table: str = "objectives", key: str = "i
         for k, v in given.items():
             if k not in SENSOR_SIGMA_KEYS:
                 raise ConfigError(f"{f} [{table}.noise_sigma]: unknown key '{k}'; use {', '.join(SENSOR_SIGMA_KEYS)}")
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < math.inf:
                 raise ConfigError(f"{f} [{table}.noise_sigma]: '{k}' must be a positive number, got {v!r}")
             ch, factor = SENSOR_SIGMA_KEYS[k]
+            if float(v) * factor > SIGMA_MAX_SI:
+                raise ConfigError(f"{f} [{table}.noise_sigma]: '{k}' = {v!r} is not a sensor noise sigma (above "
+                                  f"{SIGMA_MAX_SI:g} in SI: rad, rad/s, g or m/s); a unit slip?")
+            if ch in INPUTS and ch not in chans:
+                raise ConfigError(f"{f} [{table}.noise_sigma]: '{k}' is the sigma of input {ch}, which {key} "
+                                  f"does not list ({list(chans)})")
             sigma[ch] = float(v) * factor
     return chans, sigma
 
@@ -345,7 +358,7 @@ def _objectives_use(raw: dict, f: str):
     from .linear_settings import LinearSettings
 
     obj = raw.get("objectives", {})
-    use = _need(obj, "use", f"{f} [objectives]", list, ["time", "trim"])
+    use = _names(_need(obj, "use", f"{f} [objectives]", list, ["time", "trim"]), f"{f} [objectives]", "use")
     bad = [u for u in use if u not in ("time", "trim", "linear")]
     if bad:
         raise ConfigError(f"{f} [objectives]: field 'use': unknown objective(s) {bad}; choose from time, trim, linear")

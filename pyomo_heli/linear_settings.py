@@ -20,10 +20,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .dataset.frequency_response import DEFAULT_PAIRS, SpectralSettings
+import math
+
 from .units import KT
 
 _OUTPUTS = ("q", "theta", "n_x", "n_z")
 _INPUTS = ("col", "lon")
+#: most epsilon grid points on J_linear: the front is [pareto] points x this many solves
+MAX_POINTS = 50
 
 
 @dataclass
@@ -48,21 +52,26 @@ class LinearSettings:
                 raise ValueError(f"field 'pairs': unknown output '{o}'; choose from {', '.join(_OUTPUTS)}")
             if i not in _INPUTS:
                 raise ValueError(f"field 'pairs': unknown input '{i}'; choose from {', '.join(_INPUTS)}")
+        dup = sorted({tuple(p) for p in pairs if pairs.count(p) > 1})
+        if dup:
+            raise ValueError(f"field 'pairs' names {[list(p) for p in dup]} more than once")
         speeds = t.get("speeds_kt", [0, 80])
-        if not isinstance(speeds, list) or not speeds or not all(isinstance(v, (int, float)) and 0 <= v <= 150
-                                                                 for v in speeds):
-            raise ValueError("field 'speeds_kt' must be a non-empty list of speeds in 0..150 kt")
+        if not isinstance(speeds, list) or not speeds or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 150 for v in speeds):
+            raise ValueError(f"field 'speeds_kt' must be a non-empty list of speeds in 0..150 kt, got {speeds!r}")
+        if len(set(speeds)) != len(speeds):
+            raise ValueError(f"field 'speeds_kt' names a speed more than once: {speeds}")
         points = t.get("points", 3)
-        if not isinstance(points, int) or isinstance(points, bool) or points < 2:
-            raise ValueError(f"field 'points' must be an integer of at least 2, got {points!r}")
+        if not isinstance(points, int) or isinstance(points, bool) or not 2 <= points <= MAX_POINTS:
+            raise ValueError(f"field 'points' must be an integer in 2..{MAX_POINTS}, got {points!r}")
         kw = {}
         for key, name in (("coherence_min", "coherence_min"), ("input_power_min", "input_power_min"),
                           ("window_s", "window_s"), ("overlap", "overlap"), ("omega_min_rad_s", "omega_min"),
                           ("omega_max_rad_s", "omega_max")):
             if key in t:
                 v = t[key]
-                if isinstance(v, bool) or not isinstance(v, (int, float)):
-                    raise ValueError(f"field '{key}' must be a number, got {v!r}")
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                    raise ValueError(f"field '{key}' must be a finite number, got {v!r}")
                 kw[name] = float(v)
         return cls(pairs=tuple((o, i) for o, i in pairs), speeds=tuple(float(v) * KT for v in speeds),
                    spectral=SpectralSettings(**kw), points=points)

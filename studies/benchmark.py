@@ -71,6 +71,9 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="tiny instance in seconds (ignores --config/--size)")
     ap.add_argument("--out", type=Path, default=Path("results") / "benchmark.json", help="JSON output")
     args = ap.parse_args(argv)
+    from _study_args import out_file
+
+    out_file(ap, args.out)  # before the benchmark runs, not after
     overrides: dict = {}
     if args.points is not None:
         if args.points < 2:

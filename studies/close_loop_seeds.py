@@ -53,11 +53,14 @@ def run_seed(seed: int, out: Path, config: Path, data_config: Path) -> Path:
     data, loop = out / f"data_{seed}", out / f"loop_{seed}"
     if not (data / "truth.json").is_file():
         t0 = time.perf_counter()
-        assert cli_main(["generate-data", "--config", str(data_config), "--seed", str(seed), "--out", str(data)]) == 0
+        if cli_main(["generate-data", "--config", str(data_config), "--seed", str(seed), "--out", str(data)]) != 0:
+            raise SystemExit(2)  # generate-data has printed why
         print(f"seed {seed}: data generated in {time.perf_counter() - t0:.0f} s", flush=True)
     if not (loop / "loop.json").is_file() or "stopped" not in json.loads((loop / "loop.json").read_text()):
         t0 = time.perf_counter()
-        assert cli_main(["close-loop", str(config), "--dataset", str(data), "--out", str(loop)]) == 0
+        code = cli_main(["close-loop", str(config), "--dataset", str(data), "--out", str(loop)])
+        if code != 0:
+            raise SystemExit(code)  # close-loop has printed why
         print(f"seed {seed}: loop done in {time.perf_counter() - t0:.0f} s", flush=True)
     return loop
 
@@ -145,8 +148,10 @@ def markdown(tab: pd.DataFrame) -> str:
 
 
 def main() -> None:
+    from _study_args import in_file, nonneg_int, out_folder
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, nargs="*", default=[])
+    ap.add_argument("--seeds", type=nonneg_int, nargs="*", default=[])
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--config", type=Path, default=ROOT / "studies" / "close_loop.toml")
     ap.add_argument("--data-config", type=Path, default=ROOT / "data" / "bo105_synthetic.toml")
@@ -155,7 +160,12 @@ def main() -> None:
     for p in a.existing:
         if not (p / "loop.json").is_file():
             ap.error(f"--existing {p}: no loop.json there (a close-loop results folder is needed)")
-    a.out.mkdir(parents=True, exist_ok=True)
+    if not a.seeds and not a.existing:
+        ap.error("nothing to do: give --seeds and/or --existing")
+    if a.seeds:
+        in_file(ap, a.config, "--config")
+        in_file(ap, a.data_config, "--data-config")
+    out_folder(ap, a.out).mkdir(parents=True, exist_ok=True)
     loops = [(str(p), p) for p in a.existing]
     for seed in a.seeds:
         loops.append((f"seed {seed}", run_seed(seed, a.out, a.config, a.data_config)))

@@ -142,6 +142,8 @@ def _table(df: pd.DataFrame) -> list[str]:
 
 
 def main() -> None:
+    from _study_args import in_file, out_folder
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loops", type=Path, nargs="+", required=True, help="close-loop results folders")
     ap.add_argument("--out", type=Path, required=True)
@@ -151,10 +153,13 @@ def main() -> None:
     for p in a.loops:
         if not (p / "loop.json").is_file():
             ap.error(f"--loops {p}: no loop.json there (a close-loop results folder is needed)")
-    a.out.mkdir(parents=True, exist_ok=True)
     data = a.data or a.out / "data"
     if a.data is None and not (data / "manifest.json").is_file():
-        assert cli_main(["generate-data", "--config", str(a.data_config), "--out", str(data)]) == 0
+        in_file(ap, a.data_config, "--data-config")
+    out_folder(ap, a.out).mkdir(parents=True, exist_ok=True)
+    if a.data is None and not (data / "manifest.json").is_file():
+        if cli_main(["generate-data", "--config", str(a.data_config), "--out", str(data)]) != 0:
+            raise SystemExit(2)  # generate-data has printed why
     if not (data / "manifest.json").is_file():
         ap.error(f"--data {data}: not a flight-test folder (no manifest.json)")
     tab = pd.concat([evaluate_saved(p, data, a.out / "loops") for p in a.loops], ignore_index=True)

@@ -33,17 +33,20 @@ def main(argv=None) -> int:
     from pyomo_heli.uncertainty.monte_carlo import ProblemSpec, run_monte_carlo
     from pyomo_heli.uncertainty.realizations import flight_test_noise
 
+    from _study_args import nonneg_int, out_folder
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", default=str(HERE / "monte_carlo.toml"), help="identification config (clean data)")
     ap.add_argument("--noise-from", default=str(HERE.parent / "data" / "bo105_synthetic.toml"),
                     help="flight-test generator config whose sensor and trim noise levels are used")
     ap.add_argument("--realizations", type=int, default=20)
-    ap.add_argument("--seed", type=int, default=2026)
-    ap.add_argument("--workers", type=int, default=2, help="worker processes (0: run in this process)")
+    ap.add_argument("--seed", type=nonneg_int, default=2026)
+    ap.add_argument("--workers", type=nonneg_int, default=2, help="worker processes (0: run in this process)")
     ap.add_argument("--time-only", action="store_true", help="time-domain estimates only (no front)")
     ap.add_argument("--dask", metavar="ADDRESS", help="run on a Dask cluster: scheduler address or 'local'")
     ap.add_argument("--out", default="results/monte_carlo")
     a = ap.parse_args(argv)
+    out_folder(ap, a.out)
     if a.realizations < 2:
         print(f"monte_carlo: --realizations must be at least 2, got {a.realizations}", file=sys.stderr)
         return 2

@@ -43,6 +43,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
 import test_close_loop as T  # noqa: E402  (the instances are defined with the tests)
+from _study_args import out_folder, positive_float  # noqa: E402  (beside this script)
 
 from pyomo_heli.config import load_identification_config  # noqa: E402
 from pyomo_heli.diagnosis.attribution import SEGMENT_S, Attribution, attribute  # noqa: E402
@@ -97,13 +98,18 @@ def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, s
 
 
 def seeds_of(text: str) -> list[int]:
+    """'101-140' or '101,105,110-115' as a list of seeds (integers >= 0); ValueError naming the part."""
     out = []
     for part in text.split(","):
         a, _, b = part.partition("-")
         try:
-            out += list(range(int(a), int(b) + 1)) if b else [int(a)]
+            seeds = list(range(int(a), int(b) + 1)) if b else [int(a)]
         except ValueError:
-            raise SystemExit(f"--seeds: cannot read {part!r}; give integers and ranges, e.g. 101-140 or 101,105,110-115")
+            raise ValueError(f"cannot read {part!r}; give integers >= 0 and ranges, e.g. 101-140 or "
+                             f"101,105,110-115") from None
+        if not seeds:
+            raise ValueError(f"{part!r} is an empty range (write the lower seed first)")
+        out += seeds
     return out
 
 
@@ -142,7 +148,7 @@ def main(argv=None) -> int:
     ap.add_argument("--truth", choices=("m0", "wake"), default="m0",
                     help="m0: noise only (the level); wake: M0 + the wake-on-tail truth effect of the small wake "
                          "test, identified like that test (the power), into OUT/<identification>_wake")
-    ap.add_argument("--segment-s", type=float, default=SEGMENT_S,
+    ap.add_argument("--segment-s", type=positive_float, default=SEGMENT_S,
                     help="batch-means segment length [s] of the score test (default: the loop's); other values "
                          "score the finished seeds' identified points into seed_<n>_segment_<s>.json")
     ap.add_argument("--variance", choices=("batch", "white", "white_offsets"), default="batch",
@@ -157,10 +163,14 @@ def main(argv=None) -> int:
     ap.add_argument("--rescore", action="store_true",
                     help="score the finished seeds again at their saved identified points (no identification)")
     a = ap.parse_args(argv)
-    out = a.out / (a.identification if a.truth == "m0" else f"{a.identification}_wake")
+    try:
+        seeds = seeds_of(a.seeds)
+    except ValueError as exc:
+        ap.error(f"--seeds: {exc}")
+    out = out_folder(ap, a.out) / (a.identification if a.truth == "m0" else f"{a.identification}_wake")
     out.mkdir(parents=True, exist_ok=True)
     docs = []
-    for s in seeds_of(a.seeds):
+    for s in seeds:
         docs.append(one_seed(s, a.identification, out, a.rescore, a.segment_s, a.truth, a.variance, a.resample_inputs))
         tops = {m: d["scores"][0] for m, d in docs[-1]["modes"].items()}
         print(f"seed {s}: " + "; ".join(f"{m} top {r['name']} LM {r['LM']:.3g} (df {r['df']:.3g}, p {r['p_value']:.2g})"

@@ -157,3 +157,49 @@ def test_model_mass_must_match_the_flight_tests(tmp_path):
     freed = load_identification_config(write(tmp_path, extra="[model]\nparameters = { m = 2400 }\n"
                                              "[parameters.m]\ninitial = 2400\nlower = 1500\nupper = 2600"))
     assert len(identification_data(freed).maneuvers) == 1
+
+
+@pytest.mark.parametrize("edit, message", [
+    (dict(extra='[objectives]\ninput_errors = ["col"]\nnoise_sigma = { q_deg_s = 0.2, theta_deg = 0.1, nx_g = 0.005, '
+                'nz_g = 0.01, tas_m_s = 0.5, col_deg = inf }'), r"'col_deg' must be a positive number, got inf"),
+    (dict(extra='[objectives]\ninput_errors = ["col"]\nnoise_sigma = { q_deg_s = 0.2, theta_deg = 0.1, nx_g = 0.005, '
+                'nz_g = 0.01, tas_m_s = 0.5, col_deg = 1e300 }'), r"'col_deg' = 1e\+300 is not a sensor noise sigma"),
+    (dict(extra='[diagnosis]\ninput_noise = ["col"]\nnoise_sigma = { col_deg = 0.02, lon_deg = 0.02 }'),
+     r"\[diagnosis.noise_sigma\]: 'lon_deg' is the sigma of input lon, which input_noise does not list"),
+    (dict(extra='[objectives]\nuse = ["time", "trim", "linear", "linear"]'), r"field 'use' names \['linear'\]"),
+    (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\nwindow_s = inf'),
+     r"\[linear\]: field 'window_s' must be a finite number"),
+    (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\npairs = [["q", "lon"], ["q", "lon"]]'),
+     r"\[linear\]: field 'pairs' names \[\['q', 'lon'\]\] more than once"),
+    (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\nspeeds_kt = [true]'),
+     r"\[linear\]: field 'speeds_kt' must be a non-empty list of speeds"),
+    (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\npoints = 100000'),
+     r"\[linear\]: field 'points' must be an integer in 2..50"),
+])
+def test_bad_config_second_audit(tmp_path, edit, message):
+    with pytest.raises(ConfigError, match=message) as err:
+        load_identification_config(write(tmp_path, **edit))
+    assert "\n" not in str(err.value) and str(tmp_path / "cfg.toml") in str(err.value)
+
+
+def test_dataset_folder_without_manifest(tmp_path):
+    text = write(tmp_path).read_text().replace(str(DATA), str(tmp_path))
+    (tmp_path / "cfg.toml").write_text(text)
+    with pytest.raises(ConfigError, match=r"\[data\]: field 'dataset': .* is not a flight-test folder \(no manifest"):
+        load_identification_config(tmp_path / "cfg.toml")
+
+
+def test_spectral_window_of_too_few_samples_is_named():
+    from pyomo_heli.dataset import load_flight_test
+    from pyomo_heli.dataset.frequency_response import SpectralSettings, estimate
+
+    mv = load_flight_test(DATA).maneuvers["lon3211_80kt_a"]
+    with pytest.raises(ValueError, match=r"lon3211_80kt_a: linear.window_s = 1e-09 s is 0 samples at 50 Hz"):
+        estimate([mv], "q", "lon", SpectralSettings(window_s=1e-9))
+
+
+def test_pareto_points_have_an_upper_limit(tmp_path):
+    path = write(tmp_path)
+    path.write_text(path.read_text().replace("points = 4", "points = 100000"))
+    with pytest.raises(ConfigError, match=r"field 'points': the epsilon grid needs 2 \(the anchors\) to 1000 points"):
+        load_identification_config(path)

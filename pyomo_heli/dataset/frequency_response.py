@@ -28,6 +28,10 @@ from scipy import signal
 DEFAULT_PAIRS = (("q", "lon"), ("n_z", "col"))
 
 
+#: fewest samples of a Welch segment: below this a spectrum has no frequency resolution to speak of
+MIN_WINDOW_SAMPLES = 16
+
+
 @dataclass
 class SpectralSettings:
     """How spectra are estimated and which bins count as coherent."""
@@ -104,6 +108,9 @@ def estimate(maneuvers, output: str, input: str, settings: SpectralSettings | No
     for mv in maneuvers:
         fs = mv.sample_rate
         n = int(round(s.window_s * fs))
+        if n < MIN_WINDOW_SAMPLES:
+            raise ValueError(f"maneuver {mv.name}: linear.window_s = {s.window_s:g} s is {n} samples at {fs:g} Hz; "
+                             f"a spectral window needs at least {MIN_WINDOW_SAMPLES}")
         if n > mv.n_samples:
             raise ValueError(f"maneuver {mv.name}: {mv.n_samples} samples, shorter than the spectral window "
                              f"linear.window_s = {s.window_s} s")

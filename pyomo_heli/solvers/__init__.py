@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from .errors import ModelChangedError, SolverError, SolverFailedError, SolverUnavailableError
 from .casadi_ipopt import MULTIPLIER_MODES, scale_multipliers
+from .options import validate_solver_options
 from .result import SUCCESS_STATUSES, SolveResult
 
 #: Valid names for make_solver, the default first.
@@ -35,6 +36,7 @@ __all__ = [
     "available_solvers",
     "make_solver",
     "scale_multipliers",
+    "validate_solver_options",
 ]
 
 

@@ -31,6 +31,12 @@ directly, default; ``chosen``: the closest sampled front point) (see :mod:`pyomo
 iteration, default; ``none``). A finished
 iteration found in ``out/iter_i`` (same config and dataset, model - including the source of its effects - free
 parameters and input reference) is reused, not redone.
+
+``out`` is marked as a close-loop folder (``checkpoint.json`` with ``"what": "close-loop"``): another
+command's results folder (identify's ``front.csv``, ``chosen.json``, ``points/``; multistart's ``starts.csv``)
+is refused before anything is loaded or written, and ``identify`` or ``multistart`` refuse this one
+(:func:`pyomo_heli.pareto.store.claim_folder`). A damaged ``iter_i/checkpoint.json`` is refused with one line
+naming it (rerun with ``--restart``); an unreadable shape decision ``shape_i.json`` is decided again.
 """
 from __future__ import annotations
 
@@ -48,6 +54,7 @@ from .identify import build_problem, identification_fingerprint, run_identificat
 from .nlp.identification import identification_data, prepare_data
 from .nlp.parameters import FreeParameter
 from .pareto.result import write_json
+from .pareto.store import claim_folder, read_checkpoint, write_checkpoint
 from .physics.model import HelicopterModel
 from .report.identification import CURVE_SPEEDS, predict, trim_rms, validation_rms
 
@@ -186,9 +193,17 @@ def select_shape(cfg: IdentificationConfig, cand, file: Path, alpha: float,
     free = list(cfg.free) + [FreeParameter(n, specs[n].value, *specs[n].bounds, specs[n].scale or 1.0) for n in names]
     cfg_s = dataclasses.replace(cfg, free=free)
     key = {"fingerprint": identification_fingerprint(cfg_s), "initial": {f.name: f.initial for f in free}}
+    doc = None
     if file.is_file():
-        doc = json.loads(file.read_text())
-        if doc.get("key") == key:
+        try:
+            doc = json.loads(file.read_text())
+        except ValueError as exc:  # damaged (not by a kill: written whole or not at all): decide again
+            progress(f"  warning: {file}: unreadable shape decision ({exc}); deciding it again")
+        if not isinstance(doc, dict) or not isinstance(doc.get("values"), dict) or "decision" not in doc:
+            if doc is not None:
+                progress(f"  warning: {file}: not a shape decision of this loop; deciding it again")
+            doc = None
+        if doc is not None and doc.get("key") == key:
             progress(f"  shape of {cand.name}: reusing {file} ({doc['decision']})")
             return dataclasses.replace(cfg, model=cfg.model.with_parameters(**doc["values"])), doc
     t0 = time.perf_counter()
@@ -279,7 +294,7 @@ def _finished(cfg: IdentificationConfig, folder: Path):
     if meta.is_file():
         from .identify import identification_fingerprint
 
-        if json.loads(meta.read_text()).get("fingerprint") != identification_fingerprint(cfg):
+        if read_checkpoint(meta).get("fingerprint") != identification_fingerprint(cfg):
             return None  # another config, data or setting (e.g. resample_inputs): not the same identification
     try:
         res = IdentificationResult.load(folder)
@@ -332,11 +347,13 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
     (:func:`_finished`); ``restart`` discards them and identifies every iteration afresh."""
     settings = settings or loop_settings(cfg)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    claim_folder(out, "close-loop", restart)  # another command's results folder: refused before anything is done
     ft = load_flight_test(cfg.dataset)
     id_data = identification_data(cfg, ft)
     val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
                 if cfg.validation else [])
+    out.mkdir(parents=True, exist_ok=True)  # only once the data loaded: a bad dataset leaves no folder behind
+    write_checkpoint(out, "close-loop")
     trims = ft.trims.reset_index(drop=True)
     doc = {"config": str(cfg.path), "dataset": str(cfg.dataset), "settings": dataclasses.asdict(settings),
            "units": "SI (rad, rad/s, m/s, g)", "iterations": [], "stopped": None}

@@ -17,7 +17,7 @@ from .dataset import load_flight_test
 from .nlp.identification import build_identification_nlp, identification_data
 from .pareto.front import ParetoSolver, utopia_distance
 from .pareto.result import IdentificationResult
-from .pareto.store import PointStore, fingerprint
+from .pareto.store import PointStore, claim_folder, fingerprint
 
 
 def extension_forms(extensions) -> dict:
@@ -100,7 +100,12 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
     front point and the identifiability at the chosen point
     (pyomo_heli.uncertainty.front); "chosen": only for A, the chosen point and
     the direct solve; False or "none": skip. The command line's default is "all".
+
+    A folder holding another command's results (close-loop's ``loop.json`` and ``iter_*/``, multistart's
+    ``starts.csv``) is refused (StoreMismatchError, one line naming the folder), ``restart`` or not. A stored
+    point that cannot be read is solved again with a warning (:mod:`pyomo_heli.pareto.store`).
     """
+    claim_folder(out, "identification", restart)
     if "linear" in getattr(cfg, "objectives", ()):
         from .identify_linear import run_tri_identification
 

@@ -15,6 +15,25 @@ asked to restart, which deletes the stored points.
 
 Files are written to a temporary name and renamed, so a kill during a write
 leaves either the whole file or none.
+
+State on disk that is damaged or foreign (never the result of a kill):
+
+- a stored point that cannot be read (truncated, empty, not an ``.npz`` of
+  this store) is treated as unfinished: a warning on stderr names the file,
+  it is renamed to ``<key>.npz.corrupt`` and the point is solved again. Its
+  solution was lost with the file, so nothing more is lost, and the rerun
+  still resumes from every other finished point (a re-solved point starts
+  from the same warm start as before, so the results are those of an
+  uninterrupted run);
+- a ``checkpoint.json`` that is not a JSON object, or finished points without
+  one, cannot tell which run the points belong to: refused with one line
+  naming the file (StoreMismatchError) unless the caller restarts;
+- a folder that holds the results of another command (``checkpoint.json``'s
+  ``what``; for folders without one, their marker files: ``loop.json`` or
+  ``iter_*/`` of close-loop, ``front.csv`` or ``chosen.json`` of identify,
+  ``starts.csv`` of multistart) is refused with one line naming the folder
+  and what it holds, even with restart: restart discards one's own finished
+  points, never another command's results (:func:`claim_folder`).
 """
 from __future__ import annotations
 
@@ -23,6 +42,9 @@ import json
 import math
 import os
 import shutil
+import sys
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +53,93 @@ import pyomo.environ as pyo
 
 class StoreMismatchError(ValueError):
     """The results folder holds points of a different run; the message says how to proceed."""
+
+
+#: what a results folder holds (``checkpoint.json``'s ``what``) -> the command that writes it and the files that
+#: mark such a folder (globs; the first ones identify a folder written before checkpoint.json named its kind)
+KINDS = {
+    "identification": ("identify", ("front.csv", "chosen.json", "points/")),
+    "multi-start": ("multistart", ("starts.csv", "multistart.json", "points/")),
+    "close-loop": ("close-loop", ("loop.json", "iter_*/")),
+}
+_MARKERS = {"close-loop": ("loop.json", "iter_*/"), "identification": ("front.csv", "chosen.json"),
+            "multi-start": ("starts.csv", "multistart.json")}
+#: what reading a damaged .npz raises (truncated: BadZipFile; empty: EOFError; not an archive: ValueError, ...)
+_UNREADABLE = (zipfile.BadZipFile, EOFError, ValueError, KeyError, TypeError, zlib.error, OSError)
+
+
+def read_checkpoint(meta: str | Path) -> dict:
+    """The content of a ``checkpoint.json``; StoreMismatchError naming the file if it is not a JSON object."""
+    meta = Path(meta)
+    try:
+        doc = json.loads(meta.read_text())
+    except UnicodeDecodeError:
+        doc = None
+    except ValueError as exc:
+        raise StoreMismatchError(f"{meta}: not valid JSON ({exc}); cannot tell which run the finished points in "
+                                 f"{meta.parent} belong to: rerun with --restart to discard them, or choose "
+                                 f"another --out") from None
+    if not isinstance(doc, dict):
+        raise StoreMismatchError(f"{meta}: expected a JSON object with the run's fingerprint, got "
+                                 f"{type(doc).__name__ if doc is not None else 'non-UTF-8 bytes'}; cannot tell "
+                                 f"which run the finished points in {meta.parent} belong to: rerun with --restart "
+                                 f"to discard them, or choose another --out")
+    return doc
+
+
+def _present(root: Path, patterns) -> list[str]:
+    found = []
+    for pat in patterns:
+        is_dir = pat.endswith("/")
+        hits = sorted(p for p in root.glob(pat.rstrip("/")) if (p.is_dir() if is_dir else p.is_file()))
+        found += [p.name + ("/" if is_dir else "") for p in hits]
+    return found
+
+
+def folder_kind(root: str | Path, strict: bool = True) -> str | None:
+    """What the results folder ``root`` holds: ``checkpoint.json``'s ``what``, else guessed from its marker files
+    (folders written before checkpoint.json named the kind, or close-loop folders of older versions); None for a
+    new or empty folder. A damaged ``checkpoint.json`` raises StoreMismatchError naming it (``strict``) or is
+    ignored (a restart, which rewrites it)."""
+    root = Path(root)
+    meta = root / "checkpoint.json"
+    if meta.is_file():
+        try:
+            what = read_checkpoint(meta).get("what")
+        except StoreMismatchError:
+            if strict:
+                raise
+            what = None
+        if what in KINDS:
+            return what
+    for kind, markers in _MARKERS.items():
+        if _present(root, markers):
+            return kind
+    return None
+
+
+def claim_folder(root: str | Path, what: str, restart: bool = False) -> None:
+    """Refuse (StoreMismatchError, one line naming the folder and what it holds) a results folder of another
+    command, whether or not the caller restarts. ``what`` is a key of KINDS. Writes nothing: the caller creates
+    the folder and its checkpoint."""
+    root = Path(root)
+    if not root.is_dir():
+        return
+    kind = folder_kind(root, strict=not restart)
+    if kind is None or kind == what:
+        return
+    command, files = KINDS[kind]
+    held = ", ".join(_present(root, files)[:6]) or "its checkpoint.json"
+    mine = KINDS.get(what, (what,))[0]
+    raise StoreMismatchError(f"{root}: holds the results of `pyomo-heli {command}` ({held}), not of `{mine}`; "
+                             f"choose another --out" + (" (--restart discards a run's own finished points, never "
+                                                        "another command's results)" if restart else ""))
+
+
+def write_checkpoint(root: str | Path, what: str, fingerprint: str | None = None) -> None:
+    """Write ``root/checkpoint.json``: what the folder holds (see KINDS) and, for a point store, its fingerprint."""
+    doc = {"fingerprint": fingerprint, "what": what} if fingerprint is not None else {"what": what}
+    (Path(root) / "checkpoint.json").write_text(json.dumps(doc, indent=2) + "\n")
 
 
 def _canonical(obj) -> str:
@@ -80,24 +189,42 @@ class PointStore:
         self.dir = self.root / "points"
         self.fingerprint = fingerprint
         meta = self.root / "checkpoint.json"
+        if what in KINDS:
+            claim_folder(self.root, what, restart)
         self.root.mkdir(parents=True, exist_ok=True)
         if restart and self.dir.exists():
             shutil.rmtree(self.dir)
-        if meta.is_file() and self.dir.exists() and any(self.dir.glob("*.npz")):
-            old = json.loads(meta.read_text()).get("fingerprint")
+        if self.dir.exists() and any(self.dir.glob("*.npz")):
+            if not meta.is_file():
+                raise StoreMismatchError(
+                    f"{self.dir}: holds finished points but {meta} is missing, so nothing tells which {what} "
+                    f"they belong to; rerun with --restart to discard them, or choose another --out")
+            old = read_checkpoint(meta).get("fingerprint")
             if old != fingerprint:
                 raise StoreMismatchError(
                     f"{self.root}: holds finished points of a different {what} (config, data or settings changed: "
                     f"fingerprint {str(old)[:12]} here, {fingerprint[:12]} now); rerun with --restart to "
                     f"discard them, or choose another --out")
         self.dir.mkdir(exist_ok=True)
-        meta.write_text(json.dumps({"fingerprint": fingerprint, "what": what}, indent=2) + "\n")
+        write_checkpoint(self.root, what, fingerprint)
 
     def _path(self, key: str) -> Path:
         return self.dir / f"{key}.npz"
 
     def has(self, key: str) -> bool:
-        return self._path(key).is_file()
+        """Whether ``key`` is finished on disk. A stored point that cannot be read is not finished: it is
+        renamed to ``<key>.npz.corrupt``, a warning names it, and the caller solves the point again."""
+        path = self._path(key)
+        if not path.is_file():
+            return False
+        problem = _unreadable(path)
+        if problem is None:
+            return True
+        aside = path.with_name(path.name + ".corrupt")
+        os.replace(path, aside)
+        print(f"warning: {path}: unreadable stored point ({problem}); solving it again (the file is kept as "
+              f"{aside.name})", file=sys.stderr, flush=True)
+        return False
 
     def keys(self) -> list[str]:
         return sorted(p.stem for p in self.dir.glob("*.npz"))
@@ -128,6 +255,27 @@ class PointStore:
                     v.set_value(None if math.isnan(val) else float(val), skip_validation=True)
             if "dual" in z:
                 _restore_duals(m, z)
+
+
+def _unreadable(path: Path) -> str | None:
+    """Why the stored point ``path`` cannot be read (None if it can): every array is read (CRC-checked) and the
+    record must be a JSON object."""
+    try:
+        z = np.load(path)
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            return "not an .npz archive"
+        with z:
+            if "record" not in z.files:
+                return "no record in the archive"
+            for name in z.files:
+                z[name]
+            if not isinstance(json.loads(str(z["record"])), dict):
+                return "its record is not a JSON object"
+    except PermissionError:
+        raise
+    except _UNREADABLE as exc:
+        return f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    return None
 
 
 def _json_default(o):

@@ -20,10 +20,14 @@ import pandas as pd
 
 from .schema import (
     DECIMAL_PATTERN,
+    DEG,
     FORMAT_NAME,
     FORMAT_VERSION,
     G_RANGE_M_S2,
     INPUT_CHANNELS,
+    INPUT_DOMINANCE,
+    INPUT_NOISE_FACTOR,
+    INPUT_STD_FLOOR_DEG,
     KT,
     MANEUVER_QUANTITIES,
     MANIFEST_NAME,
@@ -37,6 +41,8 @@ from .schema import (
     SPACING_TOL,
     SPEED_RANGE_KT,
     TRIM_QUANTITIES,
+    TRIM_SPEED_TOL_KT,
+    TRIM_SPEED_TOL_REL,
     TRIM_WINDOW_S,
     TRUTH_NAME,
     DatasetError,
@@ -71,6 +77,11 @@ def _rows_values(idx, values) -> str:
     """'row 8 ('1,5')' / 'rows 3 ('a'), 9 ('b'), ...' from 0-based indices and the offending cells."""
     shown = ", ".join(f"{i + 1} ({values[i]!r})" for i in idx[:MAX_LISTED])
     return f"row{'s' if len(idx) > 1 else ''} {shown}{', ...' if len(idx) > MAX_LISTED else ''}"
+
+
+def _speed_tol_kt(trim_kt: float) -> float:
+    """Allowed difference [kt] between a manifest trim speed and a measured airspeed of that trim."""
+    return max(TRIM_SPEED_TOL_KT, TRIM_SPEED_TOL_REL * trim_kt)
 
 
 def _plural(n: int, word: str) -> str:
@@ -370,7 +381,12 @@ class _Reader:
                 peak = float(np.max(np.abs(values)))
                 msg = (f"{_plural(over.size, 'value')} beyond the plausible limit {qty.limit_text} for "
                        f"{qty.label} (max |value| {peak:.6g} {unit.replace('_', '/')}, {_rows(over)}): ")
-                if unit in ("rad", "rad_s"):
+                if qty.si == "gamma_fp":
+                    msg += ("steady climbs, approaches and autorotative descents stay within it (schema.py): a "
+                            "trim row is steady forward flight, not a vertical climb or descent"
+                            + (" (or the values are degrees: the column would be 'gamma_fp_deg')"
+                               if unit == "rad" else ""))
+                elif unit in ("rad", "rad_s"):
                     msg += f"the values look like degrees, wrong unit? (the column would be '{qty.name}_deg" \
                            f"{'_s' if unit == 'rad_s' else ''}')"
                 elif unit == "g":
@@ -447,8 +463,10 @@ class _Reader:
                                        "kg", "helicopter mass")
 
         entries = self.check_maneuver_entries(man)
-        # None: the maneuver list itself is unusable, so trim 'source' names cannot be checked
-        names = {e["name"] for e in entries if e.get("name")} if entries else None
+        # None: the maneuver list is unusable or an entry's name is (missing, invalid, duplicated, or the entry
+        # is no object), so the names are incomplete and trim 'source' names cannot be checked against them
+        # (the row naming the entry meant would be reported as a second, spurious problem)
+        names = {e["name"] for e in entries} if entries and self._names_complete else None
 
         maneuvers = {}
         for e in entries:
@@ -458,12 +476,15 @@ class _Reader:
             if m is not None and e["name"] is not None:
                 maneuvers[e["name"]] = m
 
+        # manifest trim speeds to compare the maneuvers' start trims with (not those already disputed by the record)
+        trim_speeds = {e["name"]: e["trim_kt"] for e in entries
+                       if e["name"] is not None and e["trim_kt"] is not None and not e.get("speed_disputed")}
         trims = None
         trim_file = None
         if "trim_file" in man:
             trim_file = self.rel_path(man["trim_file"], "trim_file", "trim table")
             if trim_file is not None:
-                trims = self.load_trims(trim_file, names)
+                trims = self.load_trims(trim_file, names, trim_speeds)
 
         if self.problems:
             return None
@@ -471,6 +492,7 @@ class _Reader:
                           path=self.root, description=description, trim_file=trim_file)
 
     def check_maneuver_entries(self, man) -> list[dict]:
+        self._names_complete = True  # every entry is an object with a valid, unique name
         if "maneuvers" not in man:
             return []
         lst = man["maneuvers"]
@@ -486,6 +508,7 @@ class _Reader:
             p = f"maneuvers[{i}]."
             if not isinstance(item, dict):
                 self.add(MANIFEST_NAME, f"maneuvers[{i}]", f"must be an object, got {_type_name(item)}")
+                self._names_complete = False
                 continue
             self.check_keys(item, MANEUVER_KEYS, p)
             e = {"index": i, "name": None, "file": None, "role": None, "trim_kt": None, "inputs": None,
@@ -536,6 +559,8 @@ class _Reader:
                     else:
                         seen_files[f] = i
                         e["file"] = f
+            if e["name"] is None:
+                self._names_complete = False
             entries.append(e)
         roles = [e["role"] for e in entries]
         if "identification" not in roles:
@@ -555,12 +580,15 @@ class _Reader:
             t, tas = cols["t"], cols["TAS"]
             start_kt = float(np.mean(tas[t - t[0] <= TRIM_WINDOW_S])) / KT
             trim_kt = e["trim_kt"]
-            tol = max(5.0, 0.2 * trim_kt)
+            tol = _speed_tol_kt(trim_kt)
             if abs(start_kt - trim_kt) > tol:
+                e["speed_disputed"] = True  # reported here; not again against its start trim in trims.csv
                 self.add(MANIFEST_NAME, f"maneuvers[{e['index']}].trim_speed_kt",
                          f"{trim_kt:g} kt disagrees with the start of column '{names['TAS']}' in {rel}: "
                          f"{start_kt:.1f} kt (mean over the first {TRIM_WINDOW_S:g} s; tolerance "
                          f"{tol:.1f} kt)")
+        if e["inputs"] is not None and all(c in cols for c in INPUT_CHANNELS):
+            self.check_inputs_move(e, rel, cols, names)
         if len(self.problems) > n0 or None in (e["name"], e["role"], e["trim_kt"], e["inputs"]):
             return None
         order = [q.si for q in MANEUVER_QUANTITIES if q.si in cols]
@@ -568,7 +596,38 @@ class _Reader:
         return Maneuver(name=e["name"], role=e["role"], trim_speed=e["trim_kt"] * KT, inputs=e["inputs"],
                         data=data, file=rel, description=e["description"])
 
-    def load_trims(self, rel, maneuver_names):
+    def check_inputs_move(self, e, rel, cols, names) -> None:
+        """The manifest's ``inputs`` against the record: no undeclared input channel may clearly move more.
+
+        Problem when an undeclared channel's std over the record exceeds INPUT_DOMINANCE x that of the least
+        moving declared channel, INPUT_NOISE_FACTOR x its own noise estimate and INPUT_STD_FLOOR_DEG (schema.py
+        explains the rule and the numbers).
+        """
+        std, noise = {}, {}
+        for ch in INPUT_CHANNELS:
+            x = cols[ch]
+            std[ch] = float(np.std(x))
+            noise[ch] = float(np.median(np.abs(np.diff(x)))) / (0.6745 * math.sqrt(2.0)) if x.size > 1 else 0.0
+        declared = e["inputs"]
+        weakest = min(declared, key=lambda c: std[c])
+        for ch in INPUT_CHANNELS:
+            if ch in declared:
+                continue
+            moves = std[ch] > max(INPUT_NOISE_FACTOR * noise[ch], INPUT_STD_FLOOR_DEG * DEG)
+            if moves and std[ch] > INPUT_DOMINANCE * std[weakest]:
+                if std[weakest] > 0:
+                    how = (f"moves {std[ch] / std[weakest]:.3g} times as much as the declared '{names[weakest]}' "
+                           f"(std over the record {std[ch] / DEG:.3g} vs {std[weakest] / DEG:.3g} deg, above "
+                           f"{INPUT_DOMINANCE:g}x; sensor noise about {noise[ch] / DEG:.2g} deg)")
+                else:
+                    how = (f"moves (std over the record {std[ch] / DEG:.3g} deg) while the declared "
+                           f"'{names[weakest]}' is constant")
+                self.add(MANIFEST_NAME, f"maneuvers[{e['index']}].inputs",
+                         f"{declared!r}, but in {rel} the undeclared input column '{names[ch]}' {how}: list the "
+                         "input(s) the record excites (frequency responses take a maneuver as single-input on "
+                         "this field)")
+
+    def load_trims(self, rel, maneuver_names, maneuver_speeds_kt=None):
         n0 = len(self.problems)
         table = self.read_table(rel, TRIM_QUANTITIES)
         if table is None:
@@ -593,6 +652,18 @@ class _Reader:
             if bad:
                 self.add(rel, "source", f"{_plural(len(bad), 'value')} neither 'level' nor a maneuver name "
                                         f"({_rows_values(bad, cols['source'])})")
+            if "V" in cols and maneuver_speeds_kt:
+                kt, src = cols["V"] / KT, cols["source"]
+                off = [i for i, s in enumerate(src) if s in maneuver_speeds_kt
+                       and max(kt[i], maneuver_speeds_kt[s]) >= PITOT_MIN_KT
+                       and abs(kt[i] - maneuver_speeds_kt[s]) > _speed_tol_kt(maneuver_speeds_kt[s])]
+                if off:
+                    shown = ", ".join(f"{i + 1} ({kt[i]:.6g} kt; source {src[i]!r} has {maneuver_speeds_kt[src[i]]:g} "
+                                      f"kt, tolerance {_speed_tol_kt(maneuver_speeds_kt[src[i]]):.3g} kt)"
+                                      for i in off[:MAX_LISTED])
+                    self.add(rel, names["V"], f"{_plural(len(off), 'start trim')} of a maneuver not at the maneuver's "
+                                              f"trim_speed_kt in {MANIFEST_NAME}: row{'s' if len(off) > 1 else ''} "
+                                              f"{shown}{', ...' if len(off) > MAX_LISTED else ''}")
         if len(self.problems) > n0:
             return None
         cols.setdefault("gamma_fp", np.zeros(n))

@@ -48,6 +48,38 @@ RHO_RANGE_KG_M3 = (0.3, 1.6)
 #: atmosphere.g_m_s2 [m/s^2]: surface gravity on Earth lies within 9.76 (equatorial mountains) .. 9.834
 #: (poles) (WGS 84 normal gravity; standard gravity 9.80665)
 G_RANGE_M_S2 = (9.7, 9.9)
+#: a manifest trim_speed_kt and a measured airspeed of the same trim (the record's start, see TRIM_WINDOW_S, or
+#: the trims.csv row whose ``source`` is the maneuver) agree within max(TRIM_SPEED_TOL_KT, TRIM_SPEED_TOL_REL x
+#: trim_speed_kt); below PITOT_MIN_KT (both speeds, for a trims.csv row) airspeeds are not compared.  The
+#: bundled datasets agree exactly (the generator writes both from one number); a start trim tagged with the
+#: wrong maneuver (e.g. 20 kt for an 80 kt maneuver) is far outside.
+TRIM_SPEED_TOL_KT = 5.0
+TRIM_SPEED_TOL_REL = 0.2
+#: trims.csv flight-path angle limit |gamma_fp| [deg] (a plausible range, not a model limit).  Steady
+#: helicopter climbs stay near 10-15 deg (a Bo-105 climbs at about 8 m/s at its best-climb speed of about
+#: 30-35 m/s); steep approaches are flown at under 15 deg and autorotative descents at about 15-25 deg
+#: (8-10 m/s sink at 50-70 kt, steeper only at low speed).  30 deg leaves margin; beyond it the row is
+#: near-vertical flight, which the speed-indexed trim table does not describe, or a slip such as 90 for a
+#: vertical climb.
+GAMMA_FP_LIMIT_DEG = 30.0
+# The manifest's "inputs" of a maneuver must match its record: the frequency responses of J_linear take a
+# maneuver as single-input for "col" or "lon" on the manifest's word (frequency_response.single_input_maneuvers).
+# A record contradicts it when an undeclared input channel clearly moves more than a declared one: its standard
+# deviation over the record is more than INPUT_DOMINANCE times the declared channel's, and it is movement, not
+# sensor noise: above INPUT_NOISE_FACTOR x the channel's noise and above INPUT_STD_FLOOR_DEG.  The noise is
+# estimated from the sample-to-sample differences, median|diff| / (0.6745 sqrt 2), which steps and doublets
+# leave unchanged except at their few edges; for anti-alias-filtered noise it underestimates (the bundled
+# records: 0.01 deg for a recorded 0.02 deg), hence the factor 3 and the ratio test, which two channels holding
+# only noise of similar level never pass.  The bundled records have 0.02 deg input noise (std 0.02 deg on the
+# quiet channel) and 0.5-1 deg excitations (std 0.18-0.36 deg, 8.5x the quiet channel or more); a swapped
+# declaration gives a ratio near 10.  Ratios 1-2 are let through: off-axis pilot corrections or sensors of
+# different noise can give them without the record being a two-input maneuver.
+#: an undeclared input channel whose std exceeds this many times a declared channel's contradicts "inputs"
+INPUT_DOMINANCE = 2.0
+#: ... provided it moves: its std exceeds this many times its noise estimate
+INPUT_NOISE_FACTOR = 3.0
+#: ... and this [deg] (a noise-free record's round-off is far below)
+INPUT_STD_FLOOR_DEG = 0.01
 #: relative difference allowed between a manifest constant and the model parameter it stands for
 #: (mass_kg / m, rho_kg_m3 / rho, g_m_s2 / g), see ``check_model_matches_manifest``
 MODEL_MATCH_RTOL = 0.005
@@ -87,7 +119,7 @@ MANEUVER_QUANTITIES: tuple[Quantity, ...] = (
 TRIM_QUANTITIES: tuple[Quantity, ...] = (
     Quantity("speed", "V", "trim airspeed", {"kt": KT, "m_s": 1.0}),
     Quantity("gamma_fp", "gamma_fp", "flight-path angle (default 0)", _ANGLE, required=False,
-             limit=90 * DEG, limit_text="90 deg"),
+             limit=GAMMA_FP_LIMIT_DEG * DEG, limit_text=f"{GAMMA_FP_LIMIT_DEG:g} deg"),
     Quantity("col", "col", "collective pitch at 0.7 R", _ANGLE, limit=45 * DEG, limit_text="45 deg"),
     Quantity("lon", "lon", "longitudinal cyclic theta_1s, positive aft", _ANGLE,
              limit=45 * DEG, limit_text="45 deg"),

@@ -31,7 +31,7 @@ class ResultFileError(ValueError):
     """A malformed file of a results folder (the message names the file and the key)."""
 
 
-def _is_number(x) -> bool:
+def is_number(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
@@ -47,7 +47,7 @@ def _read_json_object(path: Path) -> dict:
     return data
 
 
-def _check_point(point, params: list, path: Path, key: str | None, may_be_null: bool = False,
+def check_point_record(point, params: list, path: Path, key: str | None, may_be_null: bool = False,
                  finite: bool = False) -> None:
     """A point record: an object whose 'parameters' hold a number for every free parameter.
 
@@ -68,7 +68,7 @@ def _check_point(point, params: list, path: Path, key: str | None, may_be_null: 
         if n not in values:
             raise ResultFileError(f"{path}: key '{pk}' has no value for the free parameter {n!r}")
         v = values[n]
-        if not _is_number(v) or (must_be_finite and not math.isfinite(v)):
+        if not is_number(v) or (must_be_finite and not math.isfinite(v)):
             raise ResultFileError(f"{path}: key '{pk}.{n}' = {v!r} is not a finite number")
 
 
@@ -135,15 +135,15 @@ class IdentificationResult:
             raise ResultFileError(f"{ch_path}: key 'units' must be an object (name -> unit), got {ch['units']!r}")
         for key in ("utopia", "nadir"):
             v = ch[key]
-            if not isinstance(v, list) or not all(_is_number(x) for x in v):
+            if not isinstance(v, list) or not all(is_number(x) for x in v):
                 raise ResultFileError(f"{ch_path}: key '{key}' must be a list of numbers, got {v!r}")
         info = ch.get("info", {})
         if not isinstance(info, dict):
             raise ResultFileError(f"{ch_path}: key 'info' must be an object, got {info!r}")
-        _check_point(ch["chosen"], params, ch_path, "chosen", may_be_null=True, finite=True)
-        _check_point(ch["direct"], params, ch_path, "direct", may_be_null=True)
+        check_point_record(ch["chosen"], params, ch_path, "chosen", may_be_null=True, finite=True)
+        check_point_record(ch["direct"], params, ch_path, "direct", may_be_null=True)
         time_domain = _read_json_object(td_path)
-        _check_point(time_domain, params, td_path, None)
+        check_point_record(time_domain, params, td_path, None)
         return cls(front=_read_front(out / "front.csv", params), parameters=params, units=ch["units"],
                    utopia=tuple(ch["utopia"]), nadir=tuple(ch["nadir"]), chosen=ch["chosen"], direct=ch["direct"],
                    time_domain=time_domain, info=info)

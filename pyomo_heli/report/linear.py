@@ -14,11 +14,166 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from ..dataset.frequency_response import load_responses
-from ..pareto.result import IdentificationResult
+from ..pareto.result import IdentificationResult, ResultFileError, check_point_record, is_number
+from ..physics.model import INPUTS, OUTPUTS
 from ..simulation.linearize import linearize_float
 from .identification import _display, markdown_table, read_truth
 
 ESTIMATES = (("time-domain (A)", "C0", "--"), ("bi-objective", "C2", "-."), ("tri-objective", "C3", "-"))
+
+
+# ---------------------------------------------------------------- checks of the results folder and config
+#: columns of frequency_responses.csv (written by dataset.frequency_response.save_responses); 'maneuvers' optional
+RESPONSE_COLUMNS = ("speed", "output", "input", "omega", "T_re", "T_im", "coherence", "input_power", "coherent")
+#: columns of front.csv the report plots
+FRONT_COLUMNS = ("kind", "success", "J_time", "J_trim", "J_linear")
+_OBJECTIVE_KEYS = ("index", "kind", "J_time", "J_trim", "J_linear")
+_TRUE, _FALSE = {"true", "1"}, {"false", "0"}
+MAX_LISTED = 5
+
+
+def _rows_values(idx, values) -> str:
+    """'row 3 ('x')' / 'rows 3 ('x'), 9 ('y'), ...' from 0-based data-row indices (reported 1-based)."""
+    shown = ", ".join(f"{i + 1} ({values[i]!r})" for i in idx[:MAX_LISTED])
+    return f"row{'s' if len(idx) > 1 else ''} {shown}{', ...' if len(idx) > MAX_LISTED else ''}"
+
+
+def _read_table(path: Path, what: str) -> pd.DataFrame:
+    """A CSV table of the results folder as text cells; ResultFileError naming the file if unreadable or empty."""
+    if path.is_dir():
+        raise ResultFileError(f"{path} is a directory, expected a CSV file ({what})")
+    if not path.is_file():
+        raise ResultFileError(f"{path}: file not found ({what}); is this a tri-objective results folder?")
+    try:
+        df = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except pd.errors.EmptyDataError:
+        raise ResultFileError(f"{path}: empty file, expected a CSV table of {what}") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise ResultFileError(f"{path}: not a readable CSV table: {str(exc).strip().splitlines()[0]}") from None
+    if df.empty:
+        raise ResultFileError(f"{path}: no data rows (header only), expected {what}")
+    return df
+
+
+def _missing_columns(df: pd.DataFrame, path: Path, required) -> None:
+    missing = [c for c in required if c not in df.columns]
+    if missing:
+        raise ResultFileError(f"{path}: column{'s' if len(missing) > 1 else ''} "
+                              f"{', '.join(repr(c) for c in missing)} missing "
+                              f"(columns: {', '.join(map(str, df.columns))})")
+
+
+def _numbers(df: pd.DataFrame, path: Path, col: str, finite=None) -> np.ndarray:
+    """Column ``col`` as floats; ResultFileError naming file, column and rows for text or (where ``finite``,
+    a row mask, or everywhere when None) empty/non-finite cells."""
+    raw = df[col].astype(str).str.strip().to_numpy()
+    values = pd.to_numeric(pd.Series(raw), errors="coerce").to_numpy(dtype=float)
+    text = [i for i, (r, v) in enumerate(zip(raw, values)) if np.isnan(v) and r.lower() not in ("", "nan")]
+    if text:
+        raise ResultFileError(f"{path}: column '{col}': non-numeric value{'s' if len(text) > 1 else ''} "
+                              f"({_rows_values(text, raw)})")
+    need = np.ones(len(raw), bool) if finite is None else np.asarray(finite, bool)
+    bad = [int(i) for i in np.flatnonzero(need & ~np.isfinite(values))]
+    if bad:
+        raise ResultFileError(f"{path}: column '{col}': empty or non-finite value{'s' if len(bad) > 1 else ''} "
+                              f"({_rows_values(bad, raw)})")
+    return values
+
+
+def _booleans(df: pd.DataFrame, path: Path, col: str) -> np.ndarray:
+    raw = df[col].astype(str).str.strip().to_numpy()
+    low = [r.lower() for r in raw]
+    bad = [i for i, r in enumerate(low) if r not in _TRUE | _FALSE]
+    if bad:
+        raise ResultFileError(f"{path}: column '{col}': value{'s' if len(bad) > 1 else ''} neither True nor False "
+                              f"({_rows_values(bad, raw)})")
+    return np.array([r in _TRUE for r in low])
+
+
+def read_front(out: Path) -> pd.DataFrame:
+    """front.csv of a tri-objective folder with the plotted columns checked (success as bool, J_* as floats)."""
+    path = out / "front.csv"
+    df = _read_table(path, "front points")
+    _missing_columns(df, path, FRONT_COLUMNS)
+    front = pd.read_csv(path)
+    front["success"] = _booleans(df, path, "success")
+    for col in ("J_time", "J_trim", "J_linear"):
+        front[col] = _numbers(df, path, col, finite=front["success"].to_numpy())
+    return front
+
+
+def read_responses(out: Path) -> list:
+    """frequency_responses.csv checked cell by cell, then loaded (``load_responses``)."""
+    path = out / "frequency_responses.csv"
+    df = _read_table(path, "frequency responses")
+    _missing_columns(df, path, RESPONSE_COLUMNS)
+    coherent = _booleans(df, path, "coherent")
+    for col in ("speed", "omega", "coherence", "input_power"):
+        _numbers(df, path, col)
+    for col in ("T_re", "T_im"):  # outside the coherent band an estimate may be undefined
+        _numbers(df, path, col, finite=coherent)
+    for col, names in (("output", OUTPUTS), ("input", INPUTS)):
+        raw = df[col].astype(str).str.strip().to_numpy()
+        bad = [i for i, v in enumerate(raw) if v not in names]
+        if bad:
+            raise ResultFileError(f"{path}: column '{col}': not a model {col} ({_rows_values(bad, raw)}); "
+                                  f"use one of {', '.join(names)}")
+    speed = _numbers(df, path, "speed")
+    neg = [int(i) for i in np.flatnonzero(speed < 0)]
+    if neg:
+        raise ResultFileError(f"{path}: column 'speed': negative trim speed [m/s] "
+                              f"({_rows_values(neg, df['speed'].to_numpy())})")
+    return load_responses(path)
+
+
+def check_tri_objective(out: Path, cfg, result: IdentificationResult) -> None:
+    """The folder is a complete tri-objective run and ``cfg`` is a tri-objective config freeing its parameters.
+
+    ResultFileError (a ValueError) naming chosen.json and the key; ValueError naming the config and the folder
+    when they do not belong together.
+    """
+    ch = out / "chosen.json"
+    objectives = result.info.get("objectives")
+    if not (isinstance(objectives, list) and "linear" in objectives):
+        got = "missing" if objectives is None else f"{objectives!r}"
+        raise ResultFileError(f"{out}: not a tri-objective results folder ({ch} key 'info.objectives' is "
+                              f"{got}, expected ['time', 'trim', 'linear']); report-linear needs the "
+                              "output of identify with [objectives] use = ['time', 'trim', 'linear'] (identify "
+                              "writes the report of a bi-objective run itself)")
+    if "linear" not in cfg.objectives:
+        raise ValueError(f"config {cfg.path} is not tri-objective ([objectives] use = "
+                              f"{list(cfg.objectives)}) but results folder {out} is ({objectives}): give the "
+                              "config the results came from")
+    have, want = list(result.parameters), [f.name for f in cfg.free]
+    if sorted(have) != sorted(want):
+        raise ValueError(f"config {cfg.path} frees {', '.join(want) or 'nothing'} but results folder {out} "
+                              f"holds {', '.join(have) or 'nothing'}: give the config the results came from")
+    bi = result.info.get("bi_objective")
+    if not isinstance(bi, dict) or "chosen" not in bi:
+        raise ResultFileError(f"{ch}: key 'info.bi_objective.chosen' is missing (the bi-objective choice of a "
+                              "tri-objective run)")
+    check_point_record(bi["chosen"], have, ch, "info.bi_objective.chosen", finite=True)
+    if result.chosen is None:
+        raise ResultFileError(f"{ch}: key 'chosen' is null (no front point converged): nothing to report")
+    points = (("chosen", ch, result.chosen), ("info.bi_objective.chosen", ch, bi["chosen"]),
+              (None, out / "time_domain.json", result.time_domain), ("direct", ch, result.direct))
+    for key, file, point in points:
+        if point is None:
+            continue
+        for k in _OBJECTIVE_KEYS:
+            v = point.get(k)
+            if v is None or (k != "kind" and not is_number(v)):
+                where = f"{key}.{k}" if key else k
+                raise ResultFileError(f"{file}: key '{where}' must be {'a string' if k == 'kind' else 'a number'}, "
+                                      f"got {v!r}")
+    for key, ok in (("grid", lambda v: isinstance(v, list) and len(v) == 2 and all(is_number(x) for x in v)),
+                    ("total_time", is_number), ("failed_points", is_number)):
+        if not ok(result.info.get(key)):
+            raise ResultFileError(f"{ch}: key 'info.{key}' is missing or malformed, got {result.info.get(key)!r}")
+    for key in ("utopia", "nadir"):
+        if len(getattr(result, key)) != 3:
+            raise ResultFileError(f"{ch}: key '{key}' must hold the 3 objectives (J_time, J_trim, J_linear), "
+                                  f"got {list(getattr(result, key))}")
 
 
 def estimates(result: IdentificationResult) -> dict[str, dict]:
@@ -126,8 +281,9 @@ def write_linear_report(out_dir, cfg) -> Path:
     """Figures and ``report_linear.md`` of a tri-objective results folder."""
     out = Path(out_dir)
     result = IdentificationResult.load(out)
-    front = pd.read_csv(out / "front.csv")
-    responses = load_responses(out / "frequency_responses.csv")
+    check_tri_objective(out, cfg, result)
+    front = read_front(out)
+    responses = read_responses(out)
     truth = read_truth(cfg.dataset)
     est = estimates(result)
     sets = dict(est)
@@ -160,7 +316,8 @@ def write_linear_report(out_dir, cfg) -> Path:
     objs = pd.DataFrame([{"point": label, **{k: d[k] for k in ("index", "kind", "J_time", "J_trim", "J_linear")}}
                          for label, d in (("time-domain (A)", result.time_domain),
                                           ("bi-objective", result.info["bi_objective"]["chosen"]),
-                                          ("tri-objective", result.chosen), ("Eq. 11 direct (3 obj.)", result.direct))])
+                                          ("tri-objective", result.chosen), ("Eq. 11 direct (3 obj.)", result.direct))
+                         if d is not None])
     shown = front.drop(columns=[c for c in front.columns if c.startswith("cold_") or c in ("warm_start",)], errors="ignore")
     text = [f"# Tri-objective identification: {cfg.path.name}", "",
             f"Objectives {', '.join(result.info['objectives'])}; grid {result.info['grid'][0]} (J_trim) x "

@@ -88,8 +88,19 @@ def trim_float(model: HelicopterModel, V: float, gamma_fp: float = 0.0, guess: d
 
     sol = root(residual, np.array(z0, dtype=float), method="hybr", tol=tol)
     # hybr may report 'no good progress' once it sits at machine precision: judge by the residual.
-    if not np.all(np.isfinite(sol.x)) or np.max(np.abs(residual(sol.x))) > 1e-9:
-        raise TrimError(f"trim at V = {V:.3f} m/s did not converge: {sol.message}")
+    # Its own message judges only its step size ('The solution converged.' can come with equations far from
+    # balanced), so the error states what failed: non-finite unknowns or the largest equation residual.
+    if not np.all(np.isfinite(sol.x)):
+        raise TrimError(f"trim at V = {V:.3f} m/s failed: the root finder (scipy hybr) returned non-finite "
+                        f"col/lon/theta/lambda_i (its status: {sol.message.strip()})")
+    res = residual(sol.x)
+    if not np.all(np.isfinite(res)) or np.max(np.abs(res)) > 1e-9:
+        eqs = ["du/dt", "dw/dt", "10 dq/dt", "0.1 dlambda_i/dt"] + [f"d{n}/dt" for n in names[5:]]
+        k = int(np.argmax(np.where(np.isfinite(res), np.abs(res), np.inf)))
+        raise TrimError(f"trim at V = {V:.3f} m/s failed: the trim equations are not satisfied at the root "
+                        f"finder's end point (largest residual {eqs[k]} = {res[k]:.3g}, tolerance 1e-09; scipy "
+                        f"hybr stopped with status {sol.status}: {sol.message.strip()!r}); check the model "
+                        f"parameters (e.g. an implausible mass, inertia or rotor constant)")
     x, u = _unpack(model, V, gamma_fp, sol.x)
     ctx = model.evaluate(x, u)
     b0, b1c, b1s = (float(b) for b in ctx.beta)

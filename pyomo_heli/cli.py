@@ -284,8 +284,14 @@ def cmd_close_loop(args) -> int:
 
     overrides = None
     if args.dataset is not None:
-        if not Path(args.dataset).is_dir():
+        d = Path(args.dataset)
+        if not d.is_dir():
             raise UserError(f"option --dataset: folder {args.dataset} not found")
+        if not (d / "manifest.json").is_file():  # checked before --out is created
+            held = [n for n in ("loop.json", "front.csv", "chosen.json", "starts.csv") if (d / n).is_file()]
+            what = f"it holds results ({', '.join(held)}) and" if held else "it"
+            raise UserError(f"option --dataset: {args.dataset} is not a flight-test folder: {what} has no "
+                            f"manifest.json (a flight test as written by generate-data)")
         overrides = {"data": {"dataset": str(Path(args.dataset).resolve())}}
     _check_out_dir(args.out)
     cfg = load_identification_config(args.config, overrides)

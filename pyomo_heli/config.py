@@ -18,7 +18,7 @@ from .nlp.parameters import FreeParameter
 from .pareto.front import ParetoSettings
 from .physics.model import INPUTS, HelicopterModel
 from .units import SENSOR_SIGMA_KEYS
-from .solvers import SOLVER_NAMES
+from .solvers import SOLVER_NAMES, validate_solver_options
 
 
 #: largest noise sigma [SI: rad, rad/s, g, m/s] a config may give: no sensor is that poor; larger is a unit slip
@@ -273,6 +273,10 @@ def load_identification_config(path: str | Path, overrides: dict | None = None) 
     solver_options = dict(_need(sol, "options", f"{f} [solver]", dict, {}))
     if "point_rows" in solver_options:
         raise ConfigError(f"{f} [solver]: point_rows is a [solver] field, not an Ipopt option")
+    try:  # a bad option must not reach the solver: a NaN tol hung Ipopt, an absent linear solver crashed it
+        validate_solver_options(solver, solver_options)
+    except ValueError as exc:
+        raise ConfigError(f"{f} [solver] options: {exc}") from None
     if not _need(sol, "point_rows", f"{f} [solver]", bool, True):
         # every row through the NL file (docs/performance.md, "What was done" 8)
         if solver != "casadi-ipopt":
@@ -328,9 +332,6 @@ def _input_errors(obj: dict, f, in_ref, table: str = "objectives", key: str = "i
             if float(v) * factor > SIGMA_MAX_SI:
                 raise ConfigError(f"{f} [{table}.noise_sigma]: '{k}' = {v!r} is not a sensor noise sigma (above "
                                   f"{SIGMA_MAX_SI:g} in SI: rad, rad/s, g or m/s); a unit slip?")
-            if ch in INPUTS and ch not in chans:
-                raise ConfigError(f"{f} [{table}.noise_sigma]: '{k}' is the sigma of input {ch}, which {key} "
-                                  f"does not list ({list(chans)})")
             sigma[ch] = float(v) * factor
     return chans, sigma
 

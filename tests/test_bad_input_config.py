@@ -164,8 +164,6 @@ def test_model_mass_must_match_the_flight_tests(tmp_path):
                 'nz_g = 0.01, tas_m_s = 0.5, col_deg = inf }'), r"'col_deg' must be a positive number, got inf"),
     (dict(extra='[objectives]\ninput_errors = ["col"]\nnoise_sigma = { q_deg_s = 0.2, theta_deg = 0.1, nx_g = 0.005, '
                 'nz_g = 0.01, tas_m_s = 0.5, col_deg = 1e300 }'), r"'col_deg' = 1e\+300 is not a sensor noise sigma"),
-    (dict(extra='[diagnosis]\ninput_noise = ["col"]\nnoise_sigma = { col_deg = 0.02, lon_deg = 0.02 }'),
-     r"\[diagnosis.noise_sigma\]: 'lon_deg' is the sigma of input lon, which input_noise does not list"),
     (dict(extra='[objectives]\nuse = ["time", "trim", "linear", "linear"]'), r"field 'use' names \['linear'\]"),
     (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\nwindow_s = inf'),
      r"\[linear\]: field 'window_s' must be a finite number"),
@@ -203,3 +201,32 @@ def test_pareto_points_have_an_upper_limit(tmp_path):
     path.write_text(path.read_text().replace("points = 4", "points = 100000"))
     with pytest.raises(ConfigError, match=r"field 'points': the epsilon grid needs 2 \(the anchors\) to 1000 points"):
         load_identification_config(path)
+
+
+@pytest.mark.parametrize("options, message", [
+    ("{ tol = nan }", "option 'tol' must be a finite number"),
+    ('{ linear_solver = "ma97" }', "option 'linear_solver' = 'ma97' is not available"),
+    ("{ bogus_option = 3 }", "unknown Ipopt option 'bogus_option'"),
+    ("{ max_iter = 2.5 }", "option 'max_iter' must be an integer"),
+])
+def test_solver_options_are_checked_at_load(tmp_path, options, message):
+    path = write(tmp_path, extra=f'[solver]\nname = "casadi-ipopt"\noptions = {options}')
+    with pytest.raises(ConfigError, match=rf"cfg.toml \[solver\] options: {message}"):
+        load_identification_config(path)
+
+
+def test_climbing_trim_points_are_refused_by_the_identification(tmp_path):
+    """The NLP's trim blocks are level: a trim row with gamma_fp != 0 is named, not compared with a level trim."""
+    import shutil
+
+    ds = tmp_path / "ds"
+    shutil.copytree(DATA, ds)
+    trims = (ds / "trims.csv").read_text().splitlines()
+    col = trims[0].split(",").index(next(c for c in trims[0].split(",") if c.startswith("gamma_fp")))
+    cells = trims[3].split(",")
+    cells[col] = "5"
+    trims[3] = ",".join(cells)
+    (ds / "trims.csv").write_text("\n".join(trims) + "\n")
+    cfg = load_identification_config(write(tmp_path).rename(tmp_path / "c.toml"), {"data": {"dataset": str(ds)}})
+    with pytest.raises(ValueError, match=r"trims.csv: rows \[3\] have a flight-path angle gamma_fp != 0"):
+        identification_data(cfg)

@@ -354,9 +354,9 @@ def test_wake_loop_with_input_errors(tmp_path):
     ('score_inputs = "exact"', "[loop]: field 'score_inputs' must be \"eliminated\" or \"measured\""),
 ])
 def test_bad_loop_table_is_one_line_exit_2(tmp_path, capsys, loop, message):
-    (tmp_path / "data").mkdir()
     cfgf = tmp_path / "c.toml"
-    cfgf.write_text(f'[data]\ndataset = "data"\n\n[parameters.Iyy]\ninitial = 5000.0\n\n[loop]\n{loop}\n')
+    data = Path(__file__).resolve().parent.parent / "data" / "bo105_synthetic"
+    cfgf.write_text(f'[data]\ndataset = "{data}"\n\n[parameters.Iyy]\ninitial = 5000.0\n\n[loop]\n{loop}\n')
     assert main(["close-loop", str(cfgf), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1

@@ -350,6 +350,13 @@ def identification_data(cfg, ft=None) -> IdentificationData:
                             cfg.resample_inputs)
         if not data.maneuvers:
             raise ValueError(f"no identification maneuver in {cfg.dataset} (field 'maneuvers')")
+        # the NLP's trim blocks are level (one per speed, build_trim_block's gamma_fp = 0): a climbing or
+        # descending trim point would be compared with a level trim, so it is refused, not silently misread
+        if "gamma_fp" in data.trims:
+            climb = data.trims.index[abs(data.trims["gamma_fp"].to_numpy(dtype=float)) > 1e-9].tolist()
+            if climb:
+                raise ValueError(f"{cfg.dataset}/trims.csv: rows {[int(i) + 1 for i in climb][:5]} have a flight-path "
+                                 f"angle gamma_fp != 0; the identification trims in level flight only")
         # the validation maneuvers are replayed only after the solve: a wrong name must fail now
         if isinstance(cfg.validation, list):
             missing = [n for n in cfg.validation if n not in ft.maneuvers]

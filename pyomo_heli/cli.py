@@ -300,7 +300,13 @@ def cmd_close_loop(args) -> int:
         if args.max_iterations < 0:
             raise UserError("option --max-iterations must be >= 0")
         settings.max_iterations = args.max_iterations
-    doc = close_loop(cfg, args.out, settings, restart=args.restart)
+    from .close_loop import IdentificationFailed
+
+    try:
+        doc = close_loop(cfg, args.out, settings, restart=args.restart)
+    except IdentificationFailed as exc:  # a failed solve, not bad input: exit 1 as identify
+        print(f"pyomo-heli close-loop: {exc}", file=sys.stderr)
+        return 1
     path = write_loop_report(args.out, cfg)
     print(f"{len(doc['iterations'])} identification(s); stopped: {doc['stopped']}")
     print(f"loop.json and {path} written")

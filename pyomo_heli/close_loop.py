@@ -267,6 +267,10 @@ def config_of_result(cfg: IdentificationConfig, result) -> IdentificationConfig:
     return dataclasses.replace(cfg, model=model, free=free)
 
 
+class IdentificationFailed(RuntimeError):
+    """An iteration's identification converged at no front point: the loop cannot go on (the input was fine)."""
+
+
 def _diagnosed_point(result, which: str) -> tuple[dict, str]:
     """The point of the front the loop diagnoses and reports.
 
@@ -371,6 +375,9 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
             result = run_identification(cfg, out / f"iter_{i}", progress=lambda s: progress("  " + s),
                                         restart=restart,
                                         uncertainty=settings.uncertainty if settings.uncertainty != "none" else False)
+        if result.chosen is None:
+            raise IdentificationFailed(f"iteration {i}: no front point converged, nothing to diagnose; every status "
+                                       f"is in {out / f'iter_{i}' / 'front.csv'}")
         point, which = _diagnosed_point(result, settings.point)
         # in the free parameters' order, whether the point was just solved or read back from disk
         chosen = {**{f.name: point["parameters"][f.name] for f in cfg.free if f.name in point["parameters"]},

@@ -230,3 +230,34 @@ def test_climbing_trim_points_are_refused_by_the_identification(tmp_path):
     cfg = load_identification_config(write(tmp_path).rename(tmp_path / "c.toml"), {"data": {"dataset": str(ds)}})
     with pytest.raises(ValueError, match=r"trims.csv: rows \[3\] have a flight-path angle gamma_fp != 0"):
         identification_data(cfg)
+
+
+def test_third_audit_tau_lambda_too_small_for_the_simulator(capsys):
+    """A 1e-12 s inflow time constant made simulate run for hours; the domain asks >= 1 ms."""
+    assert main(["simulate", "--speed-kt", "80", "--duration", "2", "--param", "tau_lambda=1e-12"]) == 2
+    assert "parameter tau_lambda: value must be a finite number >= 0.001 (1 ms)" in capsys.readouterr().err
+
+
+def test_third_audit_close_loop_with_no_converged_point_is_exit_1(tmp_path, capsys):
+    """The first identification converges nowhere (max_iter = 1): the loop stops with the statuses' file named
+    (exit 1, as identify: a failed solve, not bad input) instead of a traceback."""
+    path = write(tmp_path, extra='[solver]\nname = "casadi-ipopt"\noptions = { max_iter = 1 }')
+    path.write_text(path.read_text().replace("points = 4", "points = 2"))
+    assert main(["close-loop", str(path), "--out", str(tmp_path / "loop")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "iteration 0: no front point converged" in err and "iter_0/front.csv" in err
+
+
+@pytest.mark.parametrize("key, value", [("extensions", 5), ("extensions", [1]), ("shape_parameters", "x"),
+                                        ("config", 5)])
+def test_third_audit_close_loop_info_of_the_wrong_type_is_named(tmp_path, key, value, capsys):
+    import json
+    import shutil
+
+    res = tmp_path / "res"
+    shutil.copytree(Path(__file__).resolve().parent.parent / "docs" / "results" / "close_loop" / "iter_1", res)
+    doc = json.loads((res / "chosen.json").read_text())
+    doc["info"][key] = value
+    (res / "chosen.json").write_text(json.dumps(doc))
+    assert main(["diagnose", str(res), "--out", str(tmp_path / "d"), "--no-residuals"]) == 2
+    assert f"chosen.json: key 'info.{key}' must be" in capsys.readouterr().err

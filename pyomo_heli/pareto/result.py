@@ -140,6 +140,15 @@ class IdentificationResult:
         info = ch.get("info", {})
         if not isinstance(info, dict):
             raise ResultFileError(f"{ch_path}: key 'info' must be an object, got {info!r}")
+        # what a close-loop iteration records about its model (read back by config_of_result)
+        for key, ok, what in (("extensions", lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v),
+                               "a list of candidate names"),
+                              ("shape_parameters", lambda v: isinstance(v, dict) and all(is_number(x) for x in
+                                                                                         v.values()),
+                               "an object name -> number"),
+                              ("config", lambda v: isinstance(v, str), "a path (string)")):
+            if key in info and info[key] is not None and not ok(info[key]):
+                raise ResultFileError(f"{ch_path}: key 'info.{key}' must be {what}, got {info[key]!r}")
         check_point_record(ch["chosen"], params, ch_path, "chosen", may_be_null=True, finite=True)
         check_point_record(ch["direct"], params, ch_path, "direct", may_be_null=True)
         time_domain = _read_json_object(td_path)

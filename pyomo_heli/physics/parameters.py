@@ -32,7 +32,7 @@ class ParameterSpec:
     declared free in an identification; ``display`` gives (unit, factor) used
     to print the value at the edges (value * factor). ``domain`` is what the
     physics needs of any value: "positive" (> 0), "nonnegative" (>= 0),
-    "fraction" (0 <= x <= 1) or None (any finite number).
+    "fraction" (0 <= x <= 1), "time_constant" (>= 1 ms) or None (any finite number).
     """
 
     name: str
@@ -71,6 +71,9 @@ DOMAINS = {
     "positive": (lambda v: v > 0, "a finite number > 0"),
     "nonnegative": (lambda v: v >= 0, "a finite number >= 0"),
     "fraction": (lambda v: 0 <= v <= 1, "a number in [0, 1]"),
+    # a time constant of a state the explicit simulator integrates: below 1 ms (a hundredth of a rotor
+    # revolution) the equation is so stiff that a record takes hours (1e-6 s did not finish in 30 s)
+    "time_constant": (lambda v: v >= 1e-3, "a finite number >= 0.001 (1 ms)"),
 }
 
 _BO105: tuple[ParameterSpec, ...] = (
@@ -104,7 +107,7 @@ _BO105: tuple[ParameterSpec, ...] = (
     ParameterSpec("x_h", 0.08, "m", "hub position forward of the CG", "Padfield; TUD", (-0.3, 0.3), 0.1),
     ParameterSpec("h", 1.48, "m", "hub height above the CG", "Padfield; TUD"),
     ParameterSpec("tau_lambda", 0.1, "s", "inflow time constant", "TUD lecture code", (0.005, 0.5), 0.1,
-                  domain="positive"),
+                  domain="time_constant"),
     # --- fuselage
     ParameterSpec("f_e", 0.95, "m^2", "equivalent flat-plate drag area", "TUD code (1.3*0.73) [L]",
                   (0.3, 3.0), 1.0, domain="nonnegative"),

@@ -5,18 +5,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from pyomo_heli.cli import UserError, _check_out_dir
 from pyomo_heli.cli import finite_float, nonneg_int, positive_float, positive_int  # noqa: F401 (re-exported)
 
 
 def out_folder(ap: argparse.ArgumentParser, path, option: str = "--out") -> Path:
-    """``path`` as a results folder that can be created: nothing on its way may be a file."""
-    p = Path(path)
-    for q in (p, *p.absolute().parents):
-        if q.exists():
-            if not q.is_dir():
-                ap.error(f"{option} {path}: {q} is a file, expected a folder")
-            break
-    return p
+    """``path`` as a results folder that can be created (the command line's own check)."""
+    try:
+        _check_out_dir(path, option)
+    except UserError as exc:
+        ap.error(str(exc))
+    return Path(path)
 
 
 def out_file(ap: argparse.ArgumentParser, path, option: str = "--out") -> Path:

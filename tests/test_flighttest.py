@@ -1,7 +1,7 @@
 """Acceptance tests of the synthetic flight-test generator (``pyomo_heli.flighttest``).
 
 1. the bundled datasets regenerate byte for byte from their committed configs;
-2. ``check-data`` accepts the bundled dataset (10 + 2 maneuvers, 14 + 10 trims);
+2. ``check-data`` accepts the bundled datasets (synthetic 10 + 12 maneuvers, clean 10 + 2; 14 + 10 trims);
 3. every truth effect gives M0 exactly at zero strength, and the signatures of
    model_spec.md section 4 at its spec strength (trim and time series);
 4. the sensor noise has the configured statistics, vibration is filtered;
@@ -135,7 +135,7 @@ def test_check_data_passes_on_bundled_synthetic_dataset():
                           cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""
-    assert "12 maneuvers (10 identification, 2 validation)" in proc.stdout
+    assert "22 maneuvers (10 identification, 12 validation)" in proc.stdout
     assert "24 trim points" in proc.stdout and "(14 level, 10 maneuver start trims)" in proc.stdout
 
 
@@ -148,7 +148,11 @@ def test_check_data_passes_on_bundled_clean_dataset(capsys):
 def test_bundled_dataset_has_the_papers_test_points(name):
     ft = load_flight_test(DATA / name)
     ident, val = ft.identification(), ft.validation()
-    assert len(ident) == 10 and len(val) == 2
+    # the paper's Fig. 6 validation: lon and col doublets at 80 kt; the synthetic flight test adds them at
+    # hover, 20, 40, 60 and 100 kt
+    val_speeds = [0, 0, 20, 20, 40, 40, 60, 60, 80, 80, 100, 100] if name == "bo105_synthetic" else [80, 80]
+    assert len(ident) == 10 and sorted(round(m.trim_speed / KT) for m in val) == val_speeds
+    assert {"londoublet_80kt_val", "coldoublet_80kt_val"} <= {m.name for m in val}
     assert len(ft.trims) == 24
     src = ft.trims["source"]
     level = ft.trims[src == "level"]
@@ -160,10 +164,9 @@ def test_bundled_dataset_has_the_papers_test_points(name):
     for _, row in starts.iterrows():
         assert row["V"] == pytest.approx(ft.maneuvers[row["source"]].trim_speed, abs=1e-6)
     assert sorted(round(m.trim_speed / KT) for m in ident) == [0, 0, 0, 20, 20, 20, 80, 80, 80, 80]
-    assert all(round(m.trim_speed / KT) == 80 for m in val)
     for m in ft.maneuvers.values():
         assert m.sample_rate == pytest.approx(50.0)
-        assert m.duration == pytest.approx(15.0 if round(m.trim_speed / KT) == 80 else 12.0)
+        assert m.duration == pytest.approx(15.0 if round(m.trim_speed / KT) >= 60 else 12.0)
 
 
 # ============================================================== 3. truth effects
@@ -486,6 +489,29 @@ def test_same_seed_same_files_other_seed_other_noise(tmp_path):
     assert len(da.trims) == len(dc.trims) == 3  # 2 level + 1 maneuver start
     assert not np.array_equal(da.trims["lon"], dc.trims["lon"])
     assert np.allclose(da.trims["lon"], dc.trims["lon"], atol=6 * np.hypot(0.05, 0.05) * DEG)
+
+
+def test_appended_maneuvers_keep_the_trims_with_trim_stream(tmp_path):
+    """Without [dataset] trim_stream the trim noise is the child after the last maneuver, so appending a
+    maneuver moves it; with trim_stream = the old number of maneuvers the trims and the old maneuver stay
+    byte-identical and the new maneuver gets noise of its own (how data/bo105_synthetic gained its
+    validation doublets)."""
+    extra = TINY[TINY.index("[[maneuvers]]"):].replace('"lon3211_80kt"', '"col3211_80kt_val"').replace(
+        'role = "identification"', 'role = "validation"').replace('channel = "lon"', 'channel = "col"')
+    one, two, kept = tmp_path / "one", tmp_path / "two", tmp_path / "kept"
+    generate(load_config(_write(tmp_path, TINY.format(seed=7), "one.toml")), one)
+    generate(load_config(_write(tmp_path, TINY.format(seed=7) + "\n" + extra, "two.toml")), two)
+    pinned = TINY.format(seed=7).replace("seed = 7", "seed = 7\ntrim_stream = 1") + "\n" + extra
+    generate(load_config(_write(tmp_path, pinned, "kept.toml")), kept)
+    f1, f2, fk = _files(one), _files(two), _files(kept)
+    assert f2["maneuvers/lon3211_80kt.csv"] == f1["maneuvers/lon3211_80kt.csv"]
+    assert f2["trims.csv"] != f1["trims.csv"]  # the trim stream moved
+    assert fk["trims.csv"] == f1["trims.csv"] and fk["maneuvers/lon3211_80kt.csv"] == f1["maneuvers/lon3211_80kt.csv"]
+    # the appended maneuver's noise is not the trims' old stream reused: it differs from the unpinned draw
+    assert fk["maneuvers/col3211_80kt_val.csv"] != f2["maneuvers/col3211_80kt_val.csv"]
+    with pytest.raises(ConfigError, match=r"\[dataset\]: key 'trim_stream' must be an integer from 0 to the "
+                                          r"number of maneuvers \(2\), got 3"):
+        load_config(_write(tmp_path, pinned.replace("trim_stream = 1", "trim_stream = 3"), "bad.toml"))
 
 
 def test_zero_input_sigma_keeps_every_other_channels_noise(tmp_path):

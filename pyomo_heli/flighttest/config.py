@@ -54,6 +54,9 @@ class GeneratorConfig:
     trim_sigma: dict
     trim_offset: dict
     maneuvers: list = field(default_factory=list)
+    #: SeedSequence child that draws the trim noise; None = the child after the last maneuver
+    #: (generate.py, docs/flight_test.md section 5)
+    trim_stream: int | None = None
 
 
 def _get(d: dict, key: str, where: str, typ=None, default=...):
@@ -72,7 +75,7 @@ def _get(d: dict, key: str, where: str, typ=None, default=...):
 #: recognised keys of each generator table (the tables with free names, [truth.parameters],
 #: [truth.effects.*], [sensors.sigma] and [sensors.vibration], are checked against their vocabularies)
 TOP_KEYS = ("dataset", "truth", "sensors", "trims", "maneuvers")
-DATASET_KEYS = ("name", "aircraft", "description", "seed")
+DATASET_KEYS = ("name", "aircraft", "description", "seed", "trim_stream")
 TRUTH_KEYS = ("parameters", "effects")
 SENSOR_KEYS = ("noise", "sim_rate_hz", "record_rate_hz", "antialias_hz", "sigma", "vibration",
                "tas_sigma_low_speed_m_s")
@@ -247,7 +250,11 @@ def load_config(path: str | Path) -> GeneratorConfig:
     seed = _get(ds, "seed", wd, int)
     if isinstance(seed, bool) or seed < 0:
         raise ConfigError(f"{wd}: key 'seed' must be an integer >= 0, got {seed!r}")
+    trim_stream = _get(ds, "trim_stream", wd, int, None)
+    if trim_stream is not None and (isinstance(trim_stream, bool) or not 0 <= trim_stream <= len(plans)):
+        raise ConfigError(f"{wd}: key 'trim_stream' must be an integer from 0 to the number of maneuvers "
+                          f"({len(plans)}), got {trim_stream!r}")
     return GeneratorConfig(name=_get(ds, "name", wd, str), aircraft=_get(ds, "aircraft", wd, str),
                            description=_get(ds, "description", wd, str, ""), seed=int(seed),
                            parameters=params, effects=effects, sensors=sensors, noise=noise, trim_speeds=speeds,
-                           trim_sigma=ts, trim_offset=to, maneuvers=plans)
+                           trim_sigma=ts, trim_offset=to, maneuvers=plans, trim_stream=trim_stream)

@@ -1,11 +1,13 @@
 """Generate a synthetic flight test from a config: truth simulation + sensors.
 
 Deterministic: one ``numpy.random.SeedSequence(seed)`` is split into one
-child stream per maneuver (in config order) and a last one for the trim
-points, so the same config gives byte-identical files. Appending a maneuver
-leaves the other maneuvers' noise unchanged but moves the trim stream (it is
-the child after the last maneuver), so the trim rows change
-(docs/flight_test.md section 5).
+child stream per maneuver (in config order) and one for the trim points, so
+the same config gives byte-identical files. The trim stream is the child after
+the last maneuver unless ``[dataset] trim_stream`` names its index; the
+maneuvers then take the other children in order. Appending a maneuver leaves
+the other maneuvers' noise unchanged; with ``trim_stream`` set to the old
+number of maneuvers it leaves the trim rows unchanged too (docs/flight_test.md
+section 5).
 """
 from __future__ import annotations
 
@@ -54,6 +56,15 @@ def simulate_maneuvers(cfg: GeneratorConfig, model: HelicopterModel):
     return trims, runs
 
 
+def noise_streams(cfg: GeneratorConfig):
+    """One random generator per maneuver (config order) and one for the trims, children of SeedSequence(seed)."""
+    n = len(cfg.maneuvers)
+    trim = n if cfg.trim_stream is None else cfg.trim_stream
+    children = np.random.SeedSequence(cfg.seed).spawn(n + 1)
+    maneuvers = [np.random.default_rng(children[k if k < trim else k + 1]) for k in range(n)]
+    return maneuvers, np.random.default_rng(children[trim])
+
+
 def generate(cfg: GeneratorConfig, out: str | Path) -> Path:
     """Write the dataset (manifest, maneuver tables, trims) and truth.json to ``out``."""
     from ..dataset import write_flight_test
@@ -61,9 +72,9 @@ def generate(cfg: GeneratorConfig, out: str | Path) -> Path:
     out = Path(out)
     model = truth_model(cfg)
     trims, runs = simulate_maneuvers(cfg, model)
-    streams = [np.random.default_rng(s) for s in np.random.SeedSequence(cfg.seed).spawn(len(cfg.maneuvers) + 1)]
+    maneuver_streams, trim_rng = noise_streams(cfg)
     maneuvers = {}
-    for plan, rng in zip(cfg.maneuvers, streams):
+    for plan, rng in zip(cfg.maneuvers, maneuver_streams):
         run = runs[plan.name]
         channels = {k: run[k].to_numpy() for k in RECORDED + ("col", "lon")}
         rec = record(run["t"].to_numpy(), channels, cfg.sensors, rng, plan.speed)
@@ -72,7 +83,6 @@ def generate(cfg: GeneratorConfig, out: str | Path) -> Path:
         frame = frame[keep].reset_index(drop=True)
         frame["t"] = np.round(frame["t"] - PAD, 9)
         maneuvers[plan.name] = frame
-    trim_rng = streams[-1]
     rows = []
     # level trims plus the start trim of every identification maneuver (the paper's 14 + 10)
     level = [(v, "level") for v in cfg.trim_speeds] + [(p.speed, p.name) for p in cfg.maneuvers

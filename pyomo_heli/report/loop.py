@@ -155,6 +155,10 @@ def truth_replay_errors(cfg, doc: dict, val_mans) -> tuple[list[dict], dict] | N
     return out, validation_rms(tpred, val_mans)["all"]
 
 
+#: validation records up to which the loop's validation figure has the identification report's size
+WIDE = 4
+
+
 def write_loop_report(out, cfg) -> Path:
     """Figures and ``loop_report.md`` of the loop in ``out`` (``cfg``: the loop's identification config)."""
     from ..close_loop import load_loop
@@ -175,8 +179,14 @@ def write_loop_report(out, cfg) -> Path:
         fig = plots.plot_validation({mv.name: mv.data for mv in val_mans},
                                     {lab: p.shown_runs() for lab, p in preds.items()}, VALIDATION_OUTPUTS,
                                     inputs={mv.name: mv.inputs for mv in val_mans},
-                                    titles={mv.name: f"{mv.name} ({mv.trim_speed / KT:.0f} kt)" for mv in val_mans})
-        _save(fig, out / "loop_validation.png")
+                                    titles={mv.name: f"{mv.name} ({mv.trim_speed / KT:.0f} kt)" for mv in val_mans},
+                                    column_width=4.8 if len(val_mans) <= WIDE else 3.4)
+        # noisy time histories hardly compress: many records (the bundled flight test has twelve) at a lower
+        # resolution keep the figure near 1 MB
+        if len(val_mans) <= WIDE:
+            _save(fig, out / "loop_validation.png")
+        else:
+            fig.savefig(out / "loop_validation.png", dpi=72)
 
     L = ["# Closed-loop report", "", f"- config: `{doc['config']}`", f"- dataset: `{doc['dataset']}`",
          f"- settings: {doc['settings']}", f"- stopped: {doc['stopped']}", ""]

@@ -197,7 +197,7 @@ def plot_validation(maneuvers: Mapping[str, pd.DataFrame], predictions: Mapping[
                     outputs: Sequence[str] = ("q", "theta", "n_x", "n_z", "TAS", "beta_0"),
                     inputs: Mapping[str, Sequence[str]] | None = None, styles: Mapping[str, dict] | None = None,
                     titles: Mapping[str, str] | None = None,
-                    notes: Mapping[str, Sequence[str]] | None = None) -> Figure:
+                    notes: Mapping[str, Sequence[str]] | None = None, column_width: float = 4.8) -> Figure:
     """Measured and predicted time histories of validation maneuvers (paper Fig. 6).
 
     ``maneuvers``: name -> measured DataFrame (SI, column ``t`` and the
@@ -205,13 +205,13 @@ def plot_validation(maneuvers: Mapping[str, pd.DataFrame], predictions: Mapping[
     or None when the simulation failed}. ``inputs``: name -> input channels
     to show in a top row (the measured inputs, which every model replays).
     ``notes``: name -> remarks added to the column title (e.g. a model that
-    diverged). One column per maneuver, one row per output.
+    diverged). One column per maneuver (``column_width`` inches wide), one row per output.
     """
     names = list(maneuvers)
     show_inputs = bool(inputs) and any(inputs.get(n) for n in names)
     rows = (["input"] if show_inputs else []) + list(outputs)
     ncol = max(len(names), 1)
-    fig = Figure(figsize=(4.8 * ncol + 0.8, 1.75 * len(rows) + 1.2), layout="constrained")
+    fig = Figure(figsize=(column_width * ncol + 0.8, 1.75 * len(rows) + 1.2), layout="constrained")
     axes = np.array(fig.subplots(len(rows), ncol, sharex="col", squeeze=False))
     st = _styles(list(predictions), styles)
     if not names:

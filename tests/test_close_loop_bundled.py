@@ -12,14 +12,11 @@ from pathlib import Path
 import pytest
 
 from pyomo_heli.cli import main
+from test_close_loop import _pooled_trim
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMITTED = ROOT / "docs" / "results" / "close_loop_eiv" / "loop.json"
 TIME_OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
-
-
-def _pooled_trim(trim_rms):
-    return sum(trim_rms[c] ** 2 for c in ("col", "lon", "theta")) ** 0.5
 
 
 @pytest.mark.slow

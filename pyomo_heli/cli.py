@@ -446,11 +446,9 @@ def cmd_multistart(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from pathlib import Path
+    from .resources import demo_config
 
-    config = Path(__file__).resolve().parent.parent / "studies" / "case1.toml"
-    if not config.is_file():
-        raise UserError(f"demo config {config} not found (the demo runs from a source checkout)")
+    config = demo_config()  # package data: works from an installed wheel in any directory
     args.config, args.no_report = str(config), False
     _check_out_dir(args.out)
     args.uncertainty = "chosen"  # standard errors of A, C and the direct solve: keeps the demo's duration
@@ -498,7 +496,10 @@ def cmd_linearize(args) -> int:
 
 # ---------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
+    from ._version import __version__
+
     p = _Parser(prog="pyomo-heli", description="Multi-objective parameter identification of helicopter models")
+    p.add_argument("--version", action="version", version=f"pyomo-heli {__version__}")
     sub = p.add_subparsers(dest="command", parser_class=_Parser, metavar="COMMAND")
     sub.required = True
 

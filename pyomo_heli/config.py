@@ -119,10 +119,22 @@ def _unit_factor(spec, unit: str, where: str) -> float:
     raise ConfigError(f"{where}: unit '{unit}' not recognised for {spec.name}; use {' or '.join(allowed)}")
 
 
-def load_identification_config(path: str | Path, overrides: dict | None = None) -> IdentificationConfig:
-    """Read and check an identification config. ``overrides`` replace top-level tables (tests, CLI)."""
+def load_identification_config(path: str | Path, overrides: dict | None = None,
+                               raw: dict | None = None) -> IdentificationConfig:
+    """Read and check an identification config. ``overrides`` replace top-level tables (tests, CLI).
+
+    ``raw``: the config's tables as a dict (the parsed TOML) instead of reading ``path``; ``path`` then
+    only names the config in messages and is the base of relative paths (its folder).
+    """
     path = Path(path)
-    raw = read_toml(path, ConfigError)
+    if raw is None:
+        raw = read_toml(path, ConfigError)
+    else:
+        import copy
+
+        if not isinstance(raw, dict):
+            raise ConfigError(f"{path}: a config must be a dict of tables, got {type(raw).__name__}")
+        raw = copy.deepcopy(raw)
     for k, v in (overrides or {}).items():
         raw[k] = {**raw.get(k, {}), **v} if isinstance(v, dict) else v
     f = str(path)

@@ -264,6 +264,30 @@ class FlightTest:
     description: str | None = None
     trim_file: str = "trims.csv"
 
+    @classmethod
+    def from_frames(cls, manifest, maneuvers, trims) -> "FlightTest":
+        """A flight test from in-memory data, checked exactly as a dataset folder is.
+
+        Arguments as the second form of :func:`~pyomo_heli.dataset.write_flight_test`: a manifest dict in
+        file form, a mapping maneuver name -> SI DataFrame (or :class:`Maneuver`) and an SI trim DataFrame.
+        The data go through the folder format's writer and reader in a temporary folder, which is deleted,
+        so every check of ``check-data`` applies; :class:`DatasetError` lists the problems. ``path`` of the
+        result is None.
+        """
+        import tempfile
+
+        from .reader import load_flight_test
+        from .writer import write_flight_test
+
+        with tempfile.TemporaryDirectory(prefix="pyomo_heli_ft_") as tmp:
+            try:
+                folder = write_flight_test(Path(tmp) / "flight_test", manifest, maneuvers, trims, check=False)
+                ft = load_flight_test(folder)
+            except DatasetError as exc:  # name the in-memory data, not the temporary folder
+                raise DatasetError(exc.problems, "<FlightTest.from_frames>") from None
+        ft.path = None
+        return ft
+
     def identification(self) -> list[Maneuver]:
         return [m for m in self.maneuvers.values() if m.role == "identification"]
 

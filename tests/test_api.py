@@ -1,0 +1,130 @@
+"""The Python API (docs/api.md): the documented example runs, and its pieces agree with the modules they wrap."""
+import json
+import math
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pyomo_heli as ph
+from pyomo_heli.config import load_identification_config
+from pyomo_heli.dataset import DatasetError
+from pyomo_heli.resources import bundled_flight_test
+
+HERE = Path(__file__).parent
+DOC = HERE.parent / "docs" / "api.md"
+
+
+def _example() -> str:
+    blocks = re.findall(r"```python\n(.*?)```", DOC.read_text(), flags=re.S)
+    assert len(blocks) == 1, "docs/api.md has one example block"
+    return blocks[0]
+
+
+@pytest.fixture(scope="module")
+def example(tmp_path_factory):
+    """Run the docs/api.md example in an empty folder; return its namespace and folder."""
+    cwd = tmp_path_factory.mktemp("api_example")
+    old = os.getcwd()
+    os.chdir(cwd)
+    try:
+        ns = {}
+        exec(compile(_example(), str(DOC), "exec"), ns)
+    finally:
+        os.chdir(old)
+    return ns, cwd
+
+
+def test_example_estimates_are_the_folders_in_display_units_with_standard_errors(example):
+    ns, cwd = example
+    est = ns["est"]
+    assert est["point"].tolist() == ["A", "A", "C", "C", "direct", "direct"]
+    chosen = json.loads((cwd / "api_example" / "chosen.json").read_text())
+    td = json.loads((cwd / "api_example" / "time_domain.json").read_text())
+    n_se = 0
+    for point, rec in (("A", td), ("C", chosen["chosen"]), ("direct", chosen["direct"])):
+        for name, unit, factor in (("theta_twist", "deg/m", 180 / math.pi), ("CL_alpha_HT", "1/rad", 1.0)):
+            row = est[(est.point == point) & (est.parameter == name)].iloc[0]
+            assert row["unit"] == unit
+            assert row["estimate"] == pytest.approx(rec["parameters"][name] * factor, rel=1e-12)
+            se = rec["uncertainty"]["se"][name]  # uncertainty="chosen": A, C and the direct solve have them
+            bound = rec["uncertainty"]["at_bound"][name]
+            assert row["at_bound"] == bound
+            if bound:  # projected out: no standard error
+                assert se is None and math.isnan(row["standard_error"])
+                continue
+            assert se > 0
+            assert row["standard_error"] == pytest.approx(se * factor, rel=1e-12)
+            assert row["relative_se_percent"] == pytest.approx(100 * se / abs(rec["parameters"][name]), rel=1e-12)
+            n_se += 1
+    assert n_se >= 4
+    # the estimates are those of the run: A is the time-domain optimum on the front
+    front = ns["res"].front
+    a = front[front.kind == "A"].iloc[0]
+    assert est[(est.point == "A") & (est.parameter == "CL_alpha_HT")]["estimate"].iloc[0] == pytest.approx(
+        a["CL_alpha_HT"], rel=1e-12)
+
+
+def test_example_flight_test_round_trip(example):
+    ns, cwd = example
+    ft, mine = ns["ft"], ns["mine"]
+    assert mine.path is None and list(mine.maneuvers) == ns["names"]
+    back = ph.load_flight_test(cwd / "my_flight_test")
+    for n in ns["names"]:
+        np.testing.assert_allclose(back.maneuvers[n].data[["t", "q", "theta", "col", "lon"]].to_numpy(),
+                                   ft.maneuvers[n].data[["t", "q", "theta", "col", "lon"]].to_numpy(),
+                                   rtol=1e-8, atol=1e-12)
+    assert len(back.trims) == int((ft.trims["source"] == "level").sum())
+
+
+def test_dict_config_equals_toml_config():
+    toml = load_identification_config(HERE / "configs" / "small_case1_noisy.toml")
+    raw = dict(toml.raw)
+    raw["data"] = {**raw["data"], "dataset": str(bundled_flight_test())}
+    d = ph.load_config(raw)
+    assert d.dataset == toml.dataset
+    assert [(f.name, f.initial, f.lower, f.upper, f.scale) for f in d.free] == \
+           [(f.name, f.initial, f.lower, f.upper, f.scale) for f in toml.free]
+    assert d.pareto == toml.pareto and d.nlp == toml.nlp and d.maneuvers == toml.maneuvers
+
+
+def test_dict_config_errors_name_the_field(tmp_path):
+    with pytest.raises(ph.ConfigError, match=r"<dict config> \[data\]: field 'dataset': folder .*nowhere not found"):
+        ph.load_config({"data": {"dataset": "nowhere"}, "parameters": {}}, base_dir=tmp_path)
+    with pytest.raises(ph.ConfigError, match=r"<dict config>: unknown table\(s\) \['paretto'\]"):
+        ph.load_config({"data": {"dataset": str(bundled_flight_test())}, "paretto": {}})
+    with pytest.raises(TypeError, match="path or a dict"):
+        ph.load_config(3)
+
+
+def test_from_frames_rejects_bad_data_naming_the_column():
+    ft = ph.load_flight_test(bundled_flight_test())
+    name = "lon3211_80kt_a"
+    data = ft.maneuvers[name].data.copy()
+    manifest = {"aircraft": "x", "mass_kg": ft.mass, "atmosphere": {"rho_kg_m3": ft.rho, "g_m_s2": ft.g},
+                "maneuvers": [{"name": name, "role": "identification", "trim_speed_kt": 80.0, "inputs": ["lon"]}]}
+    level = ft.trims[ft.trims["source"] == "level"]
+    bad = data.copy()
+    bad.loc[10, "q"] = float("nan")
+    with pytest.raises(DatasetError) as exc:
+        ph.FlightTest.from_frames(manifest, {name: bad}, level)
+    text = str(exc.value)
+    assert "<FlightTest.from_frames>" in text and "q_deg_s" in text, text
+    with pytest.raises(DatasetError, match="theta"):
+        ph.FlightTest.from_frames(manifest, {name: data.drop(columns=["theta"])}, level)
+    ok = ph.FlightTest.from_frames(manifest, {name: data}, level)
+    np.testing.assert_allclose(ok.maneuvers[name].data["q"].to_numpy(), data["q"].to_numpy(), rtol=1e-8, atol=1e-12)
+
+
+def test_load_results_of_the_committed_case1():
+    """The committed Case 1 results (docs/results/case1) read through the API: C of docs/results.md."""
+    res = ph.load_results(HERE.parent / "docs" / "results" / "case1")
+    est = res.estimates().set_index(["point", "parameter"])
+    chosen = json.loads((HERE.parent / "docs" / "results" / "case1" / "chosen.json").read_text())["chosen"]
+    assert est.loc[("C", "theta_twist"), "estimate"] == pytest.approx(
+        chosen["parameters"]["theta_twist"] * 180 / math.pi, rel=1e-12)
+    assert est.loc[("C", "theta_twist"), "unit"] == "deg/m"
+    assert est.loc[("C", "CL_alpha_HT"), "standard_error"] == pytest.approx(
+        chosen["uncertainty"]["se"]["CL_alpha_HT"], rel=1e-12)

@@ -123,3 +123,37 @@ def test_parmest_through_the_labelled_model_reaches_point_a():
     for f in cfg.free:
         assert theta[f"theta_s[{f.name}]"] * f.scale == pytest.approx(a.parameters[f.name], rel=1e-6), f.name
     assert obj * pe.value(labelled.J_time_scale) == pytest.approx(a.J_time, rel=1e-8)
+
+
+@pytest.mark.slow
+def test_idaes_scaled_point_a_reaches_the_same_estimate():
+    """The IDAES Scaler's scaled copy of the NLP solves to the unscaled estimate (studies/scaling_check.py)."""
+    from idaes.core.scaling import get_scaling_factor
+
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.nlp.identification import build_identification_nlp, identification_data, set_objective
+    from pyomo_heli.nlp.parameters import free_parameter_values
+    from pyomo_heli.nlp.scaling import IdentificationScaler
+    from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver
+
+    cfg = load_identification_config(ROOT / "tests" / "configs" / "small_case1_noisy.toml",
+                                     overrides={"data": {"maneuvers": ["lon3211_80kt_a"], "max_duration_s": 3.0}})
+    data = identification_data(cfg)
+
+    def fresh():
+        m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
+        set_objective(m, m.J_time / max(abs(pe.value(m.J_time)), 1.0))
+        return m
+
+    m = fresh()
+    r = CasadiIpoptSolver(m, {"point_rows": False}).solve("none")
+    m2 = fresh()
+    IdentificationScaler().scale_model(m2)
+    big = max(m2.component_data_objects(pe.Var, descend_into=True), key=lambda v: abs(v.value or 0))
+    assert get_scaling_factor(big) == pytest.approx(1 / abs(big.value))  # IDAES's suffix holds the factors
+    scaled = pe.TransformationFactory("core.scale_model").create_using(m2, rename=False)
+    r2 = CasadiIpoptSolver(scaled, {"point_rows": False}).solve("none")
+    pe.TransformationFactory("core.scale_model").propagate_solution(scaled, m2)
+    assert r.success and r2.success
+    for n, v in free_parameter_values(m).items():
+        assert free_parameter_values(m2)[n] == pytest.approx(v, rel=1e-8), n

@@ -40,7 +40,12 @@ from .schema import (
     ROLES,
     SPACING_TOL,
     SPEED_RANGE_KT,
+    ESTIMATE,
+    LON_SIGNS,
+    THETA_DATUM_LIMIT_DEG,
+    TRIM_CHANNELS,
     TRIM_QUANTITIES,
+    TrimConventions,
     TRIM_SPEED_TOL_KT,
     TRIM_SPEED_TOL_REL,
     TRIM_WINDOW_S,
@@ -54,7 +59,10 @@ from .schema import (
 )
 
 MANIFEST_KEYS = {"format": True, "format_version": True, "aircraft": True, "description": False,
-                 "atmosphere": True, "mass_kg": True, "trim_file": True, "maneuvers": True}
+                 "atmosphere": True, "mass_kg": True, "trim_file": True, "maneuvers": True,
+                 "conventions": False, "source": False, "accuracy": False, "assumptions": False}
+CONVENTION_KEYS = {"collective_station": False, "lon_sign": False, "theta_datum_deg": False}
+ACCURACY_KEYS = {"angle_deg": False, "speed_kt": False, "description": False}
 ATMOSPHERE_KEYS = ("rho_kg_m3", "g_m_s2")
 MANEUVER_KEYS = {"name": True, "file": True, "role": True, "trim_speed_kt": True, "inputs": True,
                  "description": False}
@@ -290,7 +298,7 @@ class _Reader:
             if qty.kind == "text":
                 columns[qty.si] = np.array(raw, dtype=object)
                 continue
-            values = self.parse_numbers(rel, name, raw)
+            values = self.parse_numbers(rel, name, raw, qty.may_be_empty)
             if values is not None and self.plausible(rel, name, qty, values):
                 columns[qty.si] = values * qty.units[name[len(qty.name) + 1:]]
         return columns, names, n
@@ -322,12 +330,16 @@ class _Reader:
         self.add(rel, name, f"unknown column{extra}; recognised columns: {', '.join(recognised)}")
         return None, None
 
-    def parse_numbers(self, rel, name, raw):
+    def parse_numbers(self, rel, name, raw, may_be_empty: bool = False):
+        """Cells as floats; problems for non-numbers, NaN, infinities and (unless ``may_be_empty``: an empty
+        cell is a measurement not taken, NaN) empty cells."""
         values = np.empty(len(raw))
         bad, empty, nan = [], [], []
         for i, s in enumerate(raw):
             if s.lower() in MISSING_TOKENS:
                 values[i] = np.nan
+                if s == "" and may_be_empty:
+                    continue
                 (empty if s == "" else nan).append(i)
                 continue
             try:
@@ -467,6 +479,19 @@ class _Reader:
         # is no object), so the names are incomplete and trim 'source' names cannot be checked against them
         # (the row naming the entry meant would be reported as a second, spurious problem)
         names = {e["name"] for e in entries} if entries and self._names_complete else None
+        if man.get("maneuvers") == []:
+            names = set()  # trim-only: every trim row is a level-flight point
+        conventions = self.check_conventions(man)
+        source = self.text(man, "source", "source")
+        accuracy = self.check_accuracy(man)
+        assumptions = None
+        if "assumptions" in man:
+            a = man["assumptions"]
+            if not isinstance(a, list) or not all(isinstance(x, str) and x.strip() for x in a):
+                self.add(MANIFEST_NAME, "assumptions", f"must be a list of non-empty strings (one assumption "
+                                                       f"each), got {_type_name(a)} {a!r}")
+            else:
+                assumptions = list(a)
 
         maneuvers = {}
         for e in entries:
@@ -489,7 +514,66 @@ class _Reader:
         if self.problems:
             return None
         return FlightTest(aircraft=aircraft, mass=mass, rho=rho, g=g, maneuvers=maneuvers, trims=trims,
-                          path=self.root, description=description, trim_file=trim_file)
+                          path=self.root, description=description, trim_file=trim_file,
+                          conventions=conventions or TrimConventions(), source=source, accuracy=accuracy,
+                          assumptions=assumptions)
+
+    def check_conventions(self, man):
+        """The manifest's ``conventions`` object as TrimConventions (None after a problem or when absent)."""
+        if "conventions" not in man:
+            return None
+        c = man["conventions"]
+        if not isinstance(c, dict):
+            self.add(MANIFEST_NAME, "conventions", f"must be an object with keys {', '.join(CONVENTION_KEYS)}, "
+                                                   f"got {_type_name(c)}")
+            return None
+        n0 = len(self.problems)
+        self.check_keys(c, CONVENTION_KEYS, "conventions.")
+        station, sign, datum = None, 1, 0.0
+        if "collective_station" in c:
+            v = c["collective_station"]
+            if not _is_number(v) or not 0.0 <= v <= 1.0:
+                self.add(MANIFEST_NAME, "conventions.collective_station",
+                         f"must be a number in 0..1 (r/R of the blade station the recorded collective is the pitch "
+                         f"of; 0 = blade root), got {v!r}")
+            else:
+                station = float(v)
+        if "lon_sign" in c:
+            v = c["lon_sign"]
+            if isinstance(v, bool) or v not in LON_SIGNS:
+                self.add(MANIFEST_NAME, "conventions.lon_sign",
+                         f"must be 1 (recorded lon positive aft) or -1 (positive forward), got {v!r}")
+            else:
+                sign = int(v)
+        if "theta_datum_deg" in c:
+            v = c["theta_datum_deg"]
+            if v == ESTIMATE:
+                datum = None
+            elif not _is_number(v) or abs(v) > THETA_DATUM_LIMIT_DEG:
+                self.add(MANIFEST_NAME, "conventions.theta_datum_deg",
+                         f"must be a number within +-{THETA_DATUM_LIMIT_DEG:g} deg (recorded pitch attitude minus "
+                         f"body-axis attitude) or {ESTIMATE!r} when unknown, got {v!r}")
+            else:
+                datum = float(v) * DEG
+        if len(self.problems) > n0:
+            return None
+        return TrimConventions(collective_station=station, lon_sign=sign, theta_datum=datum)
+
+    def check_accuracy(self, man):
+        if "accuracy" not in man:
+            return None
+        a = man["accuracy"]
+        if not isinstance(a, dict):
+            self.add(MANIFEST_NAME, "accuracy", f"must be an object with keys {', '.join(ACCURACY_KEYS)}, "
+                                                f"got {_type_name(a)}")
+            return None
+        n0 = len(self.problems)
+        self.check_keys(a, ACCURACY_KEYS, "accuracy.")
+        for key, unit in (("angle_deg", "deg"), ("speed_kt", "kt")):
+            if key in a and (not _is_number(a[key]) or a[key] < 0):
+                self.add(MANIFEST_NAME, f"accuracy.{key}", f"must be a number >= 0 [{unit}], got {a[key]!r}")
+        self.text(a, "description", "accuracy.description", required=False)
+        return dict(a) if len(self.problems) == n0 else None
 
     def check_maneuver_entries(self, man) -> list[dict]:
         self._names_complete = True  # every entry is an object with a valid, unique name
@@ -499,9 +583,7 @@ class _Reader:
         if not isinstance(lst, list):
             self.add(MANIFEST_NAME, "maneuvers", f"must be a list of maneuver objects, got {_type_name(lst)}")
             return []
-        if not lst:
-            self.add(MANIFEST_NAME, "maneuvers", "the maneuver list is empty; at least one identification "
-                                                 "maneuver is needed")
+        if not lst:  # a trim-only flight test (its trim table must then hold the data)
             return []
         entries, seen_names, seen_files = [], {}, {}
         for i, item in enumerate(lst):
@@ -664,6 +746,13 @@ class _Reader:
                     self.add(rel, names["V"], f"{_plural(len(off), 'start trim')} of a maneuver not at the maneuver's "
                                               f"trim_speed_kt in {MANIFEST_NAME}: row{'s' if len(off) > 1 else ''} "
                                               f"{shown}{', ...' if len(off) > MAX_LISTED else ''}")
+        present = [c for c in TRIM_CHANNELS if c in cols]
+        if len(present) == len(TRIM_CHANNELS):
+            none = np.flatnonzero(np.all([np.isnan(cols[c]) for c in present], axis=0))
+            if none.size:
+                self.add(rel, None, f"{_plural(none.size, 'trim row')} with no measured channel ({_rows(none)}): "
+                                    f"columns {', '.join(names[c] for c in present)} are all empty there; a trim row "
+                                    "needs at least one of them")
         if len(self.problems) > n0:
             return None
         cols.setdefault("gamma_fp", np.zeros(n))

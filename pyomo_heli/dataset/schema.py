@@ -83,6 +83,53 @@ INPUT_STD_FLOOR_DEG = 0.01
 #: relative difference allowed between a manifest constant and the model parameter it stands for
 #: (mass_kg / m, rho_kg_m3 / rho, g_m_s2 / g), see ``check_model_matches_manifest``
 MODEL_MATCH_RTOL = 0.005
+#: trim channels that may be left empty in a row of trims.csv (each quantity measured at its own speeds);
+#: every row must carry at least one of them
+TRIM_CHANNELS = ("col", "lon", "theta")
+#: conventions.lon_sign values: +1 the format's own (positive aft), -1 the recorded lon is positive forward
+LON_SIGNS = (1, -1)
+#: conventions.theta_datum_deg given as this word: the datum is unknown and estimated by the identification
+ESTIMATE = "estimate"
+#: plausible |conventions.theta_datum_deg| [deg]: fuselage reference lines differ from body axes by a few degrees
+THETA_DATUM_LIMIT_DEG = 15.0
+
+
+@dataclass(frozen=True)
+class TrimConventions:
+    """How a flight test's recorded trim channels relate to the model's (manifest ``conventions``).
+
+    ``collective_station``: r/R of the blade station the recorded collective is the pitch of (0: root,
+    theta_0); None: the model's own reference station ``r_ref`` (the format's default, section 4).
+    ``lon_sign``: +1 when the recorded longitudinal cyclic is positive aft (the format's convention), -1
+    when it is positive forward. ``theta_datum``: recorded pitch attitude minus the model's body-axis
+    attitude [rad] (a fuselage reference line at an angle to the body x axis); None when it is not known
+    (``"estimate"`` in the manifest): the identification estimates it. The model's output side applies
+    them (:mod:`pyomo_heli.physics.conventions`).
+    """
+
+    collective_station: float | None = None
+    lon_sign: int = 1
+    theta_datum: float | None = 0.0
+
+    @property
+    def default(self) -> bool:
+        return self == TrimConventions()
+
+    @property
+    def estimate_theta_datum(self) -> bool:
+        return self.theta_datum is None
+
+    def to_manifest(self) -> dict:
+        out = {}
+        if self.collective_station is not None:
+            out["collective_station"] = float(self.collective_station)
+        if self.lon_sign != 1:
+            out["lon_sign"] = int(self.lon_sign)
+        if self.theta_datum is None:
+            out["theta_datum_deg"] = ESTIMATE
+        elif self.theta_datum != 0.0:
+            out["theta_datum_deg"] = float("%.10g" % (self.theta_datum / DEG))
+        return out
 
 
 @dataclass(frozen=True)
@@ -97,6 +144,8 @@ class Quantity:
     limit: float | None = None  # plausible |value| in SI (None: no check)
     limit_text: str = ""  # the limit in file units for messages, e.g. "90 deg"
     kind: str = "number"  # "number" or "text"
+    #: an empty cell is a measurement not taken (NaN when loaded), not an error (trim channels)
+    may_be_empty: bool = False
 
 
 _ANGLE = {"deg": DEG, "rad": 1.0}
@@ -120,12 +169,13 @@ TRIM_QUANTITIES: tuple[Quantity, ...] = (
     Quantity("speed", "V", "trim airspeed", {"kt": KT, "m_s": 1.0}),
     Quantity("gamma_fp", "gamma_fp", "flight-path angle (default 0)", _ANGLE, required=False,
              limit=GAMMA_FP_LIMIT_DEG * DEG, limit_text=f"{GAMMA_FP_LIMIT_DEG:g} deg"),
-    Quantity("col", "col", "collective pitch at 0.7 R", _ANGLE, limit=45 * DEG, limit_text="45 deg"),
+    Quantity("col", "col", "collective pitch at 0.7 R", _ANGLE, limit=45 * DEG, limit_text="45 deg",
+             may_be_empty=True),
     Quantity("lon", "lon", "longitudinal cyclic theta_1s, positive aft", _ANGLE,
-             limit=45 * DEG, limit_text="45 deg"),
-    Quantity("theta", "theta", "pitch attitude", _ANGLE, limit=90 * DEG, limit_text="90 deg"),
+             limit=45 * DEG, limit_text="45 deg", may_be_empty=True),
+    Quantity("theta", "theta", "pitch attitude", _ANGLE, limit=90 * DEG, limit_text="90 deg", may_be_empty=True),
     Quantity("beta0", "beta_0", "rotor coning angle", _ANGLE, required=False, limit=30 * DEG,
-             limit_text="30 deg"),
+             limit_text="30 deg", may_be_empty=True),
     Quantity("source", "source", "'level' or the name of the maneuver whose start trim this is", {},
              required=False, kind="text"),
 )
@@ -263,6 +313,25 @@ class FlightTest:
     path: Path | None = None
     description: str | None = None
     trim_file: str = "trims.csv"
+    #: how the recorded trim channels relate to the model's (manifest ``conventions``)
+    conventions: TrimConventions = field(default_factory=TrimConventions)
+    #: where the data come from (manifest ``source``), free text
+    source: str | None = None
+    #: measurement or digitising accuracy (manifest ``accuracy``): ``angle_deg``, ``speed_kt``[, ``description``]
+    accuracy: dict | None = None
+    #: assumptions about the test conditions (manifest ``assumptions``), one sentence each
+    assumptions: list | None = None
+
+    @property
+    def trim_only(self) -> bool:
+        """True for a flight test of trim points without maneuvers."""
+        return not self.maneuvers
+
+    def trim_counts(self) -> dict:
+        """Trim channel -> number of rows that measured it (a row may leave a channel empty)."""
+        if self.trims is None:
+            return {}
+        return {c: int(self.trims[c].notna().sum()) for c in TRIM_CHANNELS if c in self.trims}
 
     @classmethod
     def from_frames(cls, manifest, maneuvers, trims) -> "FlightTest":
@@ -302,7 +371,10 @@ class FlightTest:
         if self.description:
             lines.append(f"  {self.description}")
         lines.append(f"  mass {self.mass:g} kg, rho {self.rho:g} kg/m^3, g {self.g:g} m/s^2")
-        lines.append(f"  {len(self.maneuvers)} maneuvers ({n_id} identification, {n_val} validation):")
+        if self.trim_only:
+            lines.append("  trim-only flight test: no maneuvers")
+        else:
+            lines.append(f"  {len(self.maneuvers)} maneuvers ({n_id} identification, {n_val} validation):")
         header = ["name", "role", "trim kt", "duration s", "rate Hz", "samples", "inputs", "channels"]
         rows = []
         for m in self.maneuvers.values():
@@ -315,8 +387,9 @@ class FlightTest:
             cells = [c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(r, widths))]
             return ("    " + "  ".join(cells)).rstrip()
 
-        lines.append(fmt(header))
-        lines.extend(fmt(r) for r in rows)
+        if rows:
+            lines.append(fmt(header))
+            lines.extend(fmt(r) for r in rows)
         n = len(self.trims)
         if n:
             v = self.trims["V"].to_numpy(dtype=float) / KT
@@ -327,4 +400,22 @@ class FlightTest:
             lines.append(text)
         else:
             lines.append("  0 trim points")
+        counts = self.trim_counts()
+        if n and any(k < n for k in counts.values()):
+            lines.append("  measured per channel: " + ", ".join(f"{c} {k}" for c, k in counts.items()))
+        if not self.conventions.default:
+            c = self.conventions
+            parts = []
+            if c.collective_station is not None:
+                parts.append(f"collective at r/R = {c.collective_station:g}" + (" (root)" if c.collective_station == 0
+                                                                                 else ""))
+            if c.lon_sign != 1:
+                parts.append("lon positive forward")
+            if c.theta_datum is None:
+                parts.append("pitch-attitude datum unknown (estimated)")
+            elif c.theta_datum != 0:
+                parts.append(f"pitch-attitude datum {c.theta_datum / DEG:+g} deg")
+            lines.append("  conventions: " + "; ".join(parts))
+        if self.source:
+            lines.append(f"  source: {self.source}")
         return "\n".join(lines)

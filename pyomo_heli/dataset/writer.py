@@ -84,7 +84,21 @@ def _from_manifest(manifest: Mapping, maneuvers, trims) -> FlightTest:
     atm = manifest.get("atmosphere", {})
     return FlightTest(aircraft=manifest.get("aircraft"), mass=manifest.get("mass_kg"), rho=atm.get("rho_kg_m3"),
                       g=atm.get("g_m_s2"), maneuvers=out, trims=trims, description=manifest.get("description"),
-                      trim_file=manifest.get("trim_file", "trims.csv"))
+                      trim_file=manifest.get("trim_file", "trims.csv"), **_extra_fields(manifest))
+
+
+def _extra_fields(manifest: Mapping) -> dict:
+    """FlightTest fields from a manifest's optional conventions, source, accuracy and assumptions."""
+    from .schema import ESTIMATE, TrimConventions
+
+    out = {k: manifest[k] for k in ("source", "accuracy", "assumptions") if k in manifest}
+    c = manifest.get("conventions")
+    if isinstance(c, Mapping):
+        datum = c.get("theta_datum_deg", 0.0)
+        out["conventions"] = TrimConventions(collective_station=c.get("collective_station"),
+                                             lon_sign=c.get("lon_sign", 1),
+                                             theta_datum=None if datum == ESTIMATE else datum * DEG)
+    return out
 
 
 def _csv_text(df: pd.DataFrame, columns: dict[str, str], rel: str, required, problems) -> str | None:
@@ -177,6 +191,11 @@ def write_flight_test(path, flight_test_or_manifest, maneuvers=None, trims=None,
                 "trim_file": trim_rel, "maneuvers": entries}
     if ft.description:
         manifest["description"] = ft.description
+    if not ft.conventions.default:
+        manifest["conventions"] = ft.conventions.to_manifest()
+    for key in ("source", "accuracy", "assumptions"):
+        if getattr(ft, key):
+            manifest[key] = getattr(ft, key)
     files[MANIFEST_NAME] = json.dumps(manifest, indent=2, sort_keys=True, ensure_ascii=False) + "\n"
 
     root.mkdir(parents=True, exist_ok=True)

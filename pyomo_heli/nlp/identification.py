@@ -349,7 +349,21 @@ def identification_data(cfg, ft=None) -> IdentificationData:
         data = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, cfg.input_reference_s,
                             cfg.resample_inputs)
         if not data.maneuvers:
+            if ft.trim_only:
+                raise ValueError(f"{cfg.dataset} is a trim-only flight test (no maneuvers): identify its trims "
+                                 f"with `pyomo-heli trim-loop` (docs/real_data.md)")
             raise ValueError(f"no identification maneuver in {cfg.dataset} (field 'maneuvers')")
+        # the output-error route compares every trim channel of every row; rows that measured only some
+        # channels (each quantity at its own speeds) are for the trim identification (pyomo-heli trim-loop)
+        gaps = [i for i in range(len(data.trims))
+                if data.trims[[c for c in TRIM_OUTPUTS if c in data.trims]].iloc[i].isna().any()]
+        if gaps:
+            raise ValueError(f"{cfg.dataset}/{ft.trim_file}: rows {[i + 1 for i in gaps][:5]} leave a trim channel "
+                             f"empty; the maneuver identification needs col, lon and theta in every trim row "
+                             f"(trim-only data: `pyomo-heli trim-loop`)")
+        if not ft.conventions.default:
+            raise ValueError(f"{cfg.dataset}/manifest.json: field 'conventions' declares recorded trim conventions "
+                             f"that only `pyomo-heli trim-loop` applies so far")
         # the NLP's trim blocks are level (one per speed, build_trim_block's gamma_fp = 0): a climbing or
         # descending trim point would be compared with a level trim, so it is refused, not silently misread
         if "gamma_fp" in data.trims:

@@ -313,6 +313,19 @@ def cmd_close_loop(args) -> int:
     return 0
 
 
+def cmd_trim_loop(args) -> int:
+    """Trim-only closed loop (pyomo_heli.trim_loop): report, figures and trim_loop.json in --out."""
+    from .trim_loop import load_trim_loop_config, run_trim_loop, write_trim_report
+
+    _check_out_dir(args.out)
+    cfg = load_trim_loop_config(args.config)
+    doc = run_trim_loop(cfg, args.out)
+    path = write_trim_report(cfg, doc, args.out)
+    print(f"{len(doc['iterations'])} identification(s); stopped: {doc['stopped']}")
+    print(f"{path}, trim_curves.png, trim_residuals.png and trim_loop.json written")
+    return 0
+
+
 def _data_rate_hz(cfg) -> tuple[float, str]:
     """Sample rate [Hz] of the residuals a diagnosis of ``cfg`` tests: [data] resample_hz, else the slowest maneuver."""
     if cfg.resample_hz:
@@ -549,6 +562,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="identify every iteration afresh (finished points and shape decisions in --out are "
                          "discarded) instead of resuming")
     cl.set_defaults(func=cmd_close_loop)
+
+    tl = sub.add_parser("trim-loop", help="identify a trim-only flight test (J_trim), test the candidate effects on "
+                                          "the trim residuals, add the accepted one, repeat (docs/real_data.md)")
+    tl.add_argument("config")
+    tl.add_argument("--out", required=True, help="results folder (report.md, trim_loop.json, figures)")
+    tl.set_defaults(func=cmd_trim_loop)
 
     u = sub.add_parser("uncertainty", help="standard errors and identifiability of an existing results folder")
     u.add_argument("config", help="the identification config the results came from")

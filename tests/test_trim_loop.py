@@ -1,0 +1,192 @@
+"""Trim-only flight tests: format (missing channels, conventions), identification and the trim loop."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pyomo_heli.dataset import load_flight_test, validate_flight_test, write_flight_test
+from pyomo_heli.dataset.schema import KT, TrimConventions
+from pyomo_heli.physics.conventions import THETA_DATUM, TrimOutputDatum, recorded_trim
+from pyomo_heli.physics.model import HelicopterModel
+from pyomo_heli.simulation.trim import trim_sweep
+from pyomo_heli.trim_loop import (TrimLoopConfig, TrimLoopError, load_trim_loop_config, predict, run_trim_loop,
+                                  trim_points)
+from pyomo_heli.nlp.parameters import FreeParameter
+
+ROOT = Path(__file__).resolve().parents[1]
+BUNDLED = ROOT / "data" / "bo105_flight_trims_padfield1996"
+DEG = math.pi / 180.0
+SPEEDS = {"col": [0, 15, 30, 45, 60, 75, 90, 105], "lon": [5, 20, 35, 50, 65, 80, 95],
+          "theta": [10, 25, 40, 55, 70, 85, 100]}
+TRUTH = {"f_e": 1.4, "x_h": 0.02, "a": 6.4, THETA_DATUM: 0.8 * DEG}
+
+
+def _generated(folder: Path, conventions=TrimConventions(collective_station=0.0, theta_datum=None)) -> Path:
+    """A trim-only flight test from a known truth: each channel at its own speeds, recorded with ``conventions``
+    (root collective; the datum TRUTH[theta_datum] that the manifest leaves to estimate)."""
+    truth = HelicopterModel(extensions=(TrimOutputDatum(),)).with_parameters(**TRUTH)
+    rows = []
+    for ch, kts in SPEEDS.items():
+        y = predict(truth, conventions, [v * KT for v in kts], [ch] * len(kts))
+        for v, val in zip(kts, y):
+            rows.append({"V": v * KT, "gamma_fp": 0.0, "col": np.nan, "lon": np.nan, "theta": np.nan, ch: val})
+    manifest = {"aircraft": "Bo-105 (synthetic trims)", "atmosphere": {"rho_kg_m3": 1.225, "g_m_s2": 9.81},
+                "mass_kg": 2200.0, "maneuvers": [], "conventions": conventions.to_manifest()}
+    write_flight_test(folder, manifest, {}, pd.DataFrame(rows))
+    return folder
+
+
+def test_recorded_collective_is_the_root_pitch():
+    """col at r_ref = 0.7 plus the twist to the root: theta_0 = col - 0.7 theta_tw (docs/model.md 3.2: +5.615 deg)."""
+    m = HelicopterModel()
+    (tp,) = trim_sweep(m, [30.0])
+    rec = recorded_trim(tp.col, tp.lon, tp.theta, m.parameters, TrimConventions(collective_station=0.0, lon_sign=-1,
+                                                                                 theta_datum=2 * DEG))
+    assert (rec["col"] - tp.col) / DEG == pytest.approx(5.615, abs=5e-4)
+    assert rec["lon"] == -tp.lon
+    assert rec["theta"] == pytest.approx(tp.theta + 2 * DEG, abs=1e-15)
+
+
+def test_missing_channels_load_and_count(tmp_path):
+    ft = load_flight_test(BUNDLED)
+    assert ft.trim_only and not ft.maneuvers
+    assert ft.trim_counts() == {"col": 11, "lon": 12, "theta": 12}
+    assert len(ft.trims) == 35 and int(ft.trims[["col", "lon", "theta"]].notna().sum(axis=1).max()) == 1
+    assert ft.conventions == TrimConventions(collective_station=0.0, lon_sign=1, theta_datum=None)
+    pts = trim_points(ft, 3)
+    counts = pts.groupby(["channel", "role"]).size().to_dict()
+    assert counts == {("col", "identification"): 8, ("col", "validation"): 3, ("lon", "identification"): 8,
+                      ("lon", "validation"): 4, ("theta", "identification"): 8, ("theta", "validation"): 4}
+    # every third point of each channel in speed order is held out
+    lon = pts[pts.channel == "lon"].sort_values("V")
+    assert list(lon.role == "validation") == [k % 3 == 2 for k in range(12)]
+    out = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "check-data", str(BUNDLED)], capture_output=True,
+                         text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert "trim-only flight test" in out.stdout and "measured per channel: col 11, lon 12, theta 12" in out.stdout
+    # written and read back: same values, same empty cells, same conventions
+    copy = write_flight_test(tmp_path / "copy", ft)
+    ft2 = load_flight_test(copy)
+    pd.testing.assert_frame_equal(ft.trims, ft2.trims, rtol=1e-9)
+    assert ft2.conventions == ft.conventions and ft2.assumptions == ft.assumptions
+
+
+BAD = [
+    ("all-empty-row", lambda f: _cell(f, 3, {"col_deg": "", "lon_deg": "", "theta_deg": ""}),
+     "trims.csv: 1 trim row with no measured channel (row 3)"),
+    ("non-numeric", lambda f: _cell(f, 2, {"lon_deg": "abc"}), "trims.csv: column 'lon_deg': 1 non-numeric value (row 2"),
+    ("nan-token", lambda f: _cell(f, 4, {"theta_deg": "nan"}), "trims.csv: column 'theta_deg': 1 NaN value (row 4)"),
+    ("source-names-a-maneuver", lambda f: _cell(f, 5, {"source": "lon3211"}),
+     "trims.csv: column 'source': 1 value neither 'level' nor a maneuver name (row 5 ('lon3211'))"),
+    ("speed-negative", lambda f: _cell(f, 6, {"speed_kt": "-5"}), "trims.csv: column 'speed_kt': 1 negative speed (row 6)"),
+    ("lon-sign", lambda f: _manifest(f, lambda m: m["conventions"].update(lon_sign=2)),
+     "manifest.json: field 'conventions.lon_sign': must be 1"),
+    ("datum-word", lambda f: _manifest(f, lambda m: m["conventions"].update(theta_datum_deg="unknown")),
+     "manifest.json: field 'conventions.theta_datum_deg'"),
+    ("station", lambda f: _manifest(f, lambda m: m["conventions"].update(collective_station=70)),
+     "manifest.json: field 'conventions.collective_station': must be a number in 0..1"),
+]
+
+
+def _cell(folder, row, values):
+    p = folder / "trims.csv"
+    df = pd.read_csv(p, dtype=str, keep_default_na=False)
+    if "source" in values and "source" not in df:
+        df["source"] = "level"
+    for k, v in values.items():
+        df.loc[row - 1, k] = v
+    df.to_csv(p, index=False)
+
+
+def _manifest(folder, edit):
+    p = folder / "manifest.json"
+    m = json.loads(p.read_text())
+    edit(m)
+    p.write_text(json.dumps(m))
+
+
+@pytest.mark.parametrize("mutate, expected", [pytest.param(f, e, id=i) for i, f, e in BAD])
+def test_malformed_trim_only_dataset_one_line_error(tmp_path, mutate, expected):
+    folder = _generated(tmp_path / "ds")
+    assert validate_flight_test(folder) == []
+    mutate(folder)
+    out = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "check-data", str(folder)], capture_output=True,
+                         text=True, cwd=ROOT)
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1, out.stderr
+    assert lines[0].startswith("error: ") and expected in lines[0], lines[0]
+    assert "Traceback" not in out.stderr
+
+
+def _config(tmp_path, dataset, **kw) -> TrimLoopConfig:
+    p = HelicopterModel().parameters
+    free = [FreeParameter("f_e", p["f_e"], 0.3, 3.0, 1.0), FreeParameter("x_h", p["x_h"], -0.3, 0.3, 0.1),
+            FreeParameter("a", p["a"], 4.0, 7.0, 6.0)]
+    return TrimLoopConfig(path=tmp_path / "cfg.toml", dataset=dataset, free=free, **kw)
+
+
+def test_generated_trim_only_flight_test_identified_exactly(tmp_path):
+    """Clean trims from a known truth, each channel at its own speeds, root collective and an unknown datum:
+    the trim-only identification (Pyomo NLP) recovers the truth, the datum included."""
+    folder = _generated(tmp_path / "ds")
+    cfg = _config(tmp_path, folder, holdout_every=3, max_iterations=0)
+    doc = run_trim_loop(cfg, tmp_path / "out", progress=lambda *_: None)
+    it = doc["iterations"][0]
+    assert it["solve"]["status"] == "Solve_Succeeded"
+    for name, value in TRUTH.items():
+        assert it["parameters"][name]["value"] == pytest.approx(value, rel=1e-5, abs=1e-8), name
+    for role in ("identification", "validation"):  # held-out points predicted exactly too
+        assert max(it["rms_deg"][role].values()) < 1e-4
+    assert doc["initial"]["rms_deg"]["identification"]["col"] > 0.1  # the start was off
+    assert "degenerate" in doc["front"] and doc["trim_only"]
+    assert doc["conventions"]["theta_datum_estimated"]
+
+
+def test_bundled_real_data_study_writes_report(tmp_path):
+    """The real-data study runs from the repository and writes report, figures and JSON; the NLP's J_trim
+    equals the float model's at the estimate (two routes)."""
+    out = tmp_path / "bo105"
+    run = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "trim-loop", "studies/bo105_flight_trims.toml",
+                          "--out", str(out)], capture_output=True, text=True, cwd=ROOT)
+    assert run.returncode == 0, run.stderr
+    for f in ("report.md", "trim_loop.json", "trim_curves.png", "trim_residuals.png"):
+        assert (out / f).is_file(), f
+    doc = json.loads((out / "trim_loop.json").read_text())
+    last = doc["iterations"][-1]
+    assert last["J_trim_float"] == pytest.approx(last["solve"]["J_trim"], rel=1e-6)
+    assert THETA_DATUM in last["parameters"] and last["parameters"][THETA_DATUM]["se"] > 0
+    for ch in ("col", "lon", "theta"):
+        assert last["rms_deg"]["identification"][ch] < doc["initial"]["rms_deg"]["identification"][ch]
+    text = (out / "report.md").read_text()
+    assert "degenerate" in text and "theta_datum (convention offset)" in text
+
+
+def test_trim_loop_config_errors(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[data]\ndataset = "{BUNDLED}"\n[parameters.theta_datum]\nunit = "rad"\n')
+    with pytest.raises(TrimLoopError, match=r"\[parameters.theta_datum\]: the pitch-attitude datum is freed by"):
+        load_trim_loop_config(cfg)
+    cfg.write_text(f'[data]\ndataset = "{BUNDLED}"\nholdout_every = 1\n[parameters.f_e]\n')
+    out = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "trim-loop", str(cfg), "--out", str(tmp_path / "o")],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 2 and "field 'holdout_every'" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_maneuver_identification_refuses_trim_only_data(tmp_path):
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.nlp.identification import identification_data
+
+    src = (ROOT / "studies" / "case1.toml").read_text()
+    cfg_path = tmp_path / "c.toml"
+    cfg_path.write_text(src.replace('dataset = "../data/bo105_synthetic"', f'dataset = "{BUNDLED}"'))
+    cfg = load_identification_config(cfg_path)
+    with pytest.raises(ValueError, match="trim-only flight test .*pyomo-heli trim-loop"):
+        identification_data(cfg)

@@ -39,7 +39,7 @@ import numpy as np
 import pandas as pd
 
 from .dataset import load_flight_test
-from .dataset.schema import KT, TRIM_CHANNELS
+from .dataset.schema import KT, TRIM_CHANNELS, TrimConventions
 from .nlp.parameters import FreeParameter
 from .physics.conventions import THETA_DATUM, TrimOutputDatum, recorded_trim
 from .physics.model import HelicopterModel
@@ -277,13 +277,18 @@ def standard_errors(model: HelicopterModel, conventions, pts: pd.DataFrame, name
     dof = max(n - p, 1)
     s2 = float(e @ e) / dof
     if p == 0:
-        return {"se": {}, "corr": [], "s_deg": math.sqrt(s2), "dof": dof, "cond": 0.0}
+        return {"se": {}, "se_robust": {}, "corr": [], "s_deg": math.sqrt(s2), "dof": dof, "cond": 0.0}
     JtJ = J.T @ J
-    cov = s2 * np.linalg.pinv(JtJ)
+    inv = np.linalg.pinv(JtJ)
+    cov = s2 * inv
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    # sandwich (heteroscedasticity-robust, HC1) covariance: does not assume one variance for every point
+    meat = (J * (e**2)[:, None]).T @ J * n / dof
+    se_rob = np.sqrt(np.maximum(np.diag(inv @ meat @ inv), 0.0))
     d = np.where(se > 0, se, 1.0)
     corr = cov / np.outer(d, d)
-    return {"se": dict(zip(names, se.tolist())), "corr": corr.tolist(), "s_deg": math.sqrt(s2), "dof": dof,
+    return {"se": dict(zip(names, se.tolist())), "se_robust": dict(zip(names, se_rob.tolist())),
+            "corr": corr.tolist(), "s_deg": math.sqrt(s2), "dof": dof,
             "cond": float(np.linalg.cond(JtJ / np.outer(np.sqrt(np.diag(JtJ)), np.sqrt(np.diag(JtJ)))))}
 
 
@@ -449,7 +454,14 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
     start = model.with_parameters(**{f.name: f.initial for f in free})
     y0 = predict(start, conv, pts["V"], pts["channel"])
     e0 = (data - y0) / DEG
-    doc = {"config": str(cfg.path), "dataset": str(cfg.dataset), "aircraft": ft.aircraft,
+    # the same start read as if the data followed the model's own conventions (col at r_ref, no datum): what
+    # the declared conventions change
+    e_raw = (data - predict(start, TrimConventions(), pts["V"], pts["channel"])) / DEG
+    import os
+
+    # the dataset as the config names it (relative to the config's folder), not this machine's absolute path
+    doc = {"config": str(cfg.path), "dataset": os.path.relpath(cfg.dataset, Path(cfg.path).parent),
+           "aircraft": ft.aircraft,
            "trim_only": ft.trim_only,
            "front": ("degenerate: a trim-only flight test has no maneuvers, so J_time does not exist and the "
                      "(J_time, J_trim) Pareto front is the single point minimising J_trim"
@@ -466,7 +478,7 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
            "counts": {role: {c: int(((pts.role == role) & (pts.channel == c)).sum()) for c in TRIM_CHANNELS}
                       for role in ("identification", "validation")},
            "initial": {"parameters": {f.name: f.initial for f in free}, "model_deg": (y0 / DEG).tolist(),
-                       "rms_deg": rms_by(pts, e0)},
+                       "rms_deg": rms_by(pts, e0), "rms_deg_without_conventions": rms_by(pts, e_raw)},
            "iterations": []}
     extensions: list = []
     for it in range(cfg.max_iterations + 1):
@@ -483,8 +495,9 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
                             cfg.confound_corr)
         rec = {"iteration": it, "extensions": [x.name for x in extensions], "free": [f.name for f in free],
                "solve": info, "J_trim_float": J_float,
-               "parameters": {n: {"value": v, "se": se["se"][n],
-                                  "shown": _shown(est, n, v), "se_shown": _shown(est, n, se["se"][n])}
+               "parameters": {n: {"value": v, "se": se["se"][n], "se_robust": se["se_robust"][n],
+                                  "shown": _shown(est, n, v), "se_shown": _shown(est, n, se["se"][n]),
+                                  "se_robust_shown": _shown(est, n, se["se_robust"][n])}
                               for n, v in values.items()},
                "correlation": se["corr"], "residual_sigma_deg": se["s_deg"], "dof": se["dof"],
                "information_condition": se["cond"],
@@ -617,7 +630,7 @@ def write_trim_report(cfg: TrimLoopConfig, doc: dict, out) -> Path:
     last = doc["iterations"][-1]
     c = doc["conventions"]
     L = [f"# Trim-only closed loop: {doc['aircraft']}", "",
-         f"Config `{cfg.path}`, dataset `{doc['dataset']}`.", ""]
+         f"Config `{cfg.path}`, dataset `{doc['dataset']}` (relative to the config).", ""]
     if doc.get("source"):
         L += [f"Source: {doc['source']}", ""]
     L += [f"Front: {doc['front']}.", "",
@@ -640,10 +653,14 @@ def write_trim_report(cfg: TrimLoopConfig, doc: dict, out) -> Path:
               "", f"J_trim = {it['solve']['J_trim']:.4g} deg^2 (Ipopt {it['solve']['status']}, {it['solve']['iterations']} "
               f"iterations; float-model check {it['J_trim_float']:.4g}); residual sigma {it['residual_sigma_deg']:.3f} deg, "
               f"{it['dof']} degrees of freedom", "",
-              "| parameter | estimate | standard error | unit |", "|---|---|---|---|"]
+              "| parameter | estimate | standard error | robust SE | unit |", "|---|---|---|---|---|"]
         for n, p in it["parameters"].items():
             tag = " (convention offset)" if n == THETA_DATUM else ""
-            L.append(f"| {n}{tag} | {p['shown'][0]:.5g} | {p['se_shown'][0]:.3g} | {p['shown'][1]} |")
+            L.append(f"| {n}{tag} | {p['shown'][0]:.5g} | {p['se_shown'][0]:.3g} | {p['se_robust_shown'][0]:.3g} | "
+                     f"{p['shown'][1]} |")
+        L += ["", "Standard errors: s^2 (J^T J)^-1 with one residual variance s^2 for every point; robust: the "
+                  "sandwich (HC1) estimate. Both take the residuals as independent, which a structured residual "
+                  "(below) is not: read them as lower bounds."]
         st = it["score_test"]
         L += ["", f"Score test ({st['n_testable']} candidates with a trim signature, level {st['level']:.2g}): "
                   f"**{st['decision']}**: {st['message']}", "",
@@ -660,6 +677,10 @@ def write_trim_report(cfg: TrimLoopConfig, doc: dict, out) -> Path:
         for ch in TRIM_CHANNELS:
             if ch in last["rms_deg"][role]:
                 L.append(f"| {role} | {ch} | {doc['initial']['rms_deg'][role][ch]:.3f} | {last['rms_deg'][role][ch]:.3f} |")
+    raw = doc["initial"]["rms_deg_without_conventions"]
+    L += ["", "Before = the initial model with the declared conventions applied; without them (collective read as "
+              "if at r_ref, no datum) the initial RMS on all identification points would be "
+              + ", ".join(f"{ch} {v:.3f}" for ch, v in raw["identification"].items()) + " deg."]
     L += ["", "## Remaining residual (final model, all points)", "",
           "| channel | RMS | largest step | between [kt] | mean below / above | trend [deg/10 kt] |",
           "|---|---|---|---|---|---|"]
@@ -668,6 +689,14 @@ def write_trim_report(cfg: TrimLoopConfig, doc: dict, out) -> Path:
                  f"{s.get('step_between_kt', ['-', '-'])[0]:.1f}-{s.get('step_between_kt', ['-', '-'])[1]:.1f} | "
                  f"{s.get('mean_below_step_deg', 0):+.2f} / {s.get('mean_above_step_deg', 0):+.2f} | "
                  f"{s.get('trend_deg_per_10kt', 0):+.3f} |")
+    if last["score_test"]["decision"] != "accepted":
+        L += ["", "No candidate of the library explains the remaining residual (score test above). Its shape per "
+                  "channel is in the table and in `trim_residuals.png`; a generic speed-dependent correction "
+                  "(structure determination) is not part of this loop. docs/real_data.md discusses the missing "
+                  "physics the shape points to."]
+    L += ["", "Not represented by the 3-DoF longitudinal model (not fitted, whatever the data hold): lateral cyclic "
+              "and roll attitude (no lateral degrees of freedom), tail-rotor collective (no tail rotor), main-rotor "
+              "power (no torque equation)."]
     L += ["", f"Stopped: {doc['stopped']}.", "",
           "Figures: `trim_curves.png` (data and model before/after), `trim_residuals.png` (data minus model).",
           "Every number above is in `trim_loop.json`.", ""]

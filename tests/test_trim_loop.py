@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -112,18 +113,25 @@ def _manifest(folder, edit):
     p.write_text(json.dumps(m))
 
 
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory):
+    return _generated(tmp_path_factory.mktemp("trim_only") / "ds")
+
+
 @pytest.mark.parametrize("mutate, expected", [pytest.param(f, e, id=i) for i, f, e in BAD])
-def test_malformed_trim_only_dataset_one_line_error(tmp_path, mutate, expected):
-    folder = _generated(tmp_path / "ds")
+def test_malformed_trim_only_dataset_one_line_error(generated, tmp_path, capsys, mutate, expected):
+    from pyomo_heli.cli import main
+
+    folder = tmp_path / "ds"
+    shutil.copytree(generated, folder)
     assert validate_flight_test(folder) == []
     mutate(folder)
-    out = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "check-data", str(folder)], capture_output=True,
-                         text=True, cwd=ROOT)
-    assert out.returncode == 2
-    lines = out.stderr.strip().splitlines()
-    assert len(lines) == 1, out.stderr
+    assert main(["check-data", str(folder)]) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
     assert lines[0].startswith("error: ") and expected in lines[0], lines[0]
-    assert "Traceback" not in out.stderr
+    assert "Traceback" not in err
 
 
 def _config(tmp_path, dataset, **kw) -> TrimLoopConfig:

@@ -326,7 +326,8 @@ def score_trims(model: HelicopterModel, conventions, pts: pd.DataFrame, identifi
         else:
             dn = predict(full.with_parameters(**{cand.strength: -h}), conventions, pts["V"], pts["channel"])
             s = (up - dn) / (2 * h) / DEG
-        row = {"name": n, "strength": cand.strength, "signature": cand.signature}
+        # the raw sensitivity per point [deg per unit strength], points as in the returned "points"
+        row = {"name": n, "strength": cand.strength, "signature": cand.signature, "sensitivity_deg": s.tolist()}
         raw = float(s @ s)
         coef = np.linalg.lstsq(S, s, rcond=None)[0] if S.shape[1] else np.zeros(0)
         st = s - S @ coef if S.shape[1] else s
@@ -376,7 +377,8 @@ def score_trims(model: HelicopterModel, conventions, pts: pd.DataFrame, identifi
     for r in rows:
         r.pop("evidence")
     return {"decision": decision, "accepted": accepted, "message": message, "level": level, "alpha": alpha,
-            "n_testable": len(testable), "scores": rows}
+            "n_testable": len(testable), "scores": rows,
+            "points": {"speed_kt": (pts["V"] / KT).tolist(), "channel": pts["channel"].tolist()}}
 
 
 # ---------------------------------------------------------------- residual shape

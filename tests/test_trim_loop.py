@@ -198,3 +198,34 @@ def test_maneuver_identification_refuses_trim_only_data(tmp_path):
     cfg = load_identification_config(cfg_path)
     with pytest.raises(ValueError, match="trim-only flight test .*pyomo-heli trim-loop"):
         identification_data(cfg)
+
+
+def test_trim_loop_names_an_independent_wake_effect(tmp_path):
+    """Trims from M0 + the truth simulator's wake-on-tail effect E1 (flighttest.truth_effects, written
+    independently of the candidate library), 0.1 deg seeded noise, root collective and unknown datum: the
+    score test on the trim residuals accepts rotor_wake_on_tail, the second identification fits to the noise
+    level and accepts nothing more, and the datum is recovered within its standard errors."""
+    from pyomo_heli.flighttest.truth_effects import make_effect
+
+    conv = TrimConventions(collective_station=0.0, theta_datum=None)
+    truth = HelicopterModel(extensions=(TrimOutputDatum(), make_effect("wake_on_tail"))).with_parameters(
+        K_lamT=1.5, f_e=1.4, x_h=0.02, theta_datum=0.8 * DEG)
+    speeds = {"col": range(0, 106, 10), "lon": range(3, 106, 10), "theta": range(6, 106, 10)}
+    rng = np.random.default_rng(1)
+    rows = []
+    for ch, kts in speeds.items():
+        y = predict(truth, conv, [v * KT for v in kts], [ch] * len(kts))
+        for v, val in zip(kts, y):
+            rows.append({"V": v * KT, "gamma_fp": 0.0, "col": np.nan, "lon": np.nan, "theta": np.nan,
+                         ch: val + rng.normal(0.0, 0.1 * DEG)})
+    manifest = {"aircraft": "Bo-105 (synthetic trims, E1)", "atmosphere": {"rho_kg_m3": 1.225, "g_m_s2": 9.81},
+                "mass_kg": 2200.0, "maneuvers": [], "conventions": conv.to_manifest()}
+    folder = write_flight_test(tmp_path / "ds", manifest, {}, pd.DataFrame(rows))
+    doc = run_trim_loop(_config(tmp_path, folder, max_iterations=2), tmp_path / "out", progress=lambda *_: None)
+    first, second = doc["iterations"][0], doc["iterations"][-1]
+    assert first["score_test"]["decision"] == "accepted"
+    assert first["score_test"]["accepted"] == "rotor_wake_on_tail"
+    assert len(doc["iterations"]) == 2 and second["score_test"]["decision"] == "none"
+    assert second["residual_sigma_deg"] < 0.15 < first["residual_sigma_deg"]  # noise 0.1 deg
+    datum = second["parameters"][THETA_DATUM]
+    assert abs(datum["value"] - 0.8 * DEG) < 3 * datum["se"]

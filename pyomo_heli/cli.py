@@ -315,11 +315,15 @@ def cmd_close_loop(args) -> int:
 
 def cmd_trim_loop(args) -> int:
     """Trim-only closed loop (pyomo_heli.trim_loop): report, figures and trim_loop.json in --out."""
-    from .trim_loop import load_trim_loop_config, run_trim_loop, write_trim_report
+    from .trim_loop import TrimIdentificationFailed, load_trim_loop_config, run_trim_loop, write_trim_report
 
     _check_out_dir(args.out)
     cfg = load_trim_loop_config(args.config)
-    doc = run_trim_loop(cfg, args.out)
+    try:
+        doc = run_trim_loop(cfg, args.out)
+    except TrimIdentificationFailed as exc:  # a failed solve, not bad input: exit 1 as identify
+        print(f"pyomo-heli trim-loop: {exc}", file=sys.stderr)
+        return 1
     path = write_trim_report(cfg, doc, args.out)
     print(f"{len(doc['iterations'])} identification(s); stopped: {doc['stopped']}")
     print(f"{path}, trim_curves.png, trim_residuals.png and trim_loop.json written")

@@ -56,6 +56,10 @@ class TrimLoopError(ValueError):
     """Bad trim-loop config or data (one line naming the file and field)."""
 
 
+class TrimIdentificationFailed(RuntimeError):
+    """The J_trim minimisation did not converge (a failed solve, not bad input)."""
+
+
 # ---------------------------------------------------------------- config
 @dataclass
 class TrimLoopConfig:
@@ -261,7 +265,7 @@ def identify_trims(model: HelicopterModel, free, pts: pd.DataFrame, conventions,
     info = {"status": res.status, "iterations": res.iterations, "J_trim": float(pyo.value(m.J_trim)),
             "wall_time_s": res.wall_time, "solver": res.solver}
     if not res.success:
-        raise RuntimeError(f"trim identification failed: Ipopt status {res.status} ({res.message})")
+        raise TrimIdentificationFailed(f"trim identification failed: Ipopt status {res.status} ({res.message})")
     return free_parameter_values(m), info
 
 
@@ -444,6 +448,9 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
     if conv.estimate_theta_datum:
         spec = TrimOutputDatum().parameters()[0]
         free.append(FreeParameter(THETA_DATUM, 0.0, spec.bounds[0], spec.bounds[1], spec.scale))
+    if not free:
+        raise TrimLoopError(f"{cfg.path} [parameters]: no free parameter (and the manifest of {cfg.dataset} states the "
+                            f"pitch-attitude datum): nothing to identify")
     model = _model_of(cfg, ft)
     check_model_matches_manifest(ft, model.parameters, f"{cfg.path} [model]", skip=[f.name for f in free])
     pts = trim_points(ft, cfg.holdout_every)

@@ -229,3 +229,18 @@ def test_trim_loop_names_an_independent_wake_effect(tmp_path):
     assert second["residual_sigma_deg"] < 0.15 < first["residual_sigma_deg"]  # noise 0.1 deg
     datum = second["parameters"][THETA_DATUM]
     assert abs(datum["value"] - 0.8 * DEG) < 3 * datum["se"]
+
+
+def test_maneuver_identification_refuses_trim_rows_with_empty_channels(tmp_path):
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.nlp.identification import identification_data
+
+    ds = tmp_path / "ds"
+    shutil.copytree(ROOT / "data" / "bo105_clean", ds)
+    _cell(ds, 2, {"lon_deg": ""})
+    assert load_flight_test(ds).trim_counts()["lon"] == len(load_flight_test(ds).trims) - 1
+    cfg_path = tmp_path / "c.toml"
+    cfg_path.write_text((ROOT / "studies" / "case1.toml").read_text().replace('dataset = "../data/bo105_synthetic"',
+                                                                              f'dataset = "{ds}"'))
+    with pytest.raises(ValueError, match=r"trims.csv: rows \[2\] leave a trim channel empty"):
+        identification_data(load_identification_config(cfg_path))

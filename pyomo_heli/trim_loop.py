@@ -255,10 +255,10 @@ def build_trim_nlp(model: HelicopterModel, free, pts: pd.DataFrame, conventions)
 def identify_trims(model: HelicopterModel, free, pts: pd.DataFrame, conventions, solver: str = "casadi-ipopt",
                    options: dict | None = None) -> tuple[dict, dict]:
     """Minimise J_trim over the free parameters; returns (values SI, solve info). RuntimeError on failure."""
+    import pyomo.environ as pyo
+
     from .nlp.parameters import free_parameter_values
     from .solvers import make_solver
-
-    import pyomo.environ as pyo
 
     m = build_trim_nlp(model, free, pts, conventions)
     res = make_solver(m, solver, options).solve(warm_start="none")

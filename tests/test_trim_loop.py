@@ -14,12 +14,18 @@ import pytest
 
 from pyomo_heli.dataset import load_flight_test, validate_flight_test, write_flight_test
 from pyomo_heli.dataset.schema import KT, TrimConventions
+from pyomo_heli.nlp.parameters import FreeParameter
 from pyomo_heli.physics.conventions import THETA_DATUM, TrimOutputDatum, recorded_trim
 from pyomo_heli.physics.model import HelicopterModel
 from pyomo_heli.simulation.trim import trim_sweep
-from pyomo_heli.trim_loop import (TrimLoopConfig, TrimLoopError, load_trim_loop_config, predict, run_trim_loop,
-                                  trim_points)
-from pyomo_heli.nlp.parameters import FreeParameter
+from pyomo_heli.trim_loop import (
+    TrimLoopConfig,
+    TrimLoopError,
+    load_trim_loop_config,
+    predict,
+    run_trim_loop,
+    trim_points,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "data" / "bo105_flight_trims_padfield1996"

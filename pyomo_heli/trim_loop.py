@@ -533,6 +533,13 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
     return doc
 
 
+def _held_text(every: int) -> str:
+    if not every:
+        return "nothing held out"
+    nth = {2: "second", 3: "third", 4: "fourth", 5: "fifth"}.get(every, f"{every}th")
+    return f"every {nth} point of each channel in speed order held out"
+
+
 def _shown(model, name, value):
     spec = model.parameters.spec(name)
     if spec.display is None:
@@ -654,8 +661,7 @@ def write_trim_report(cfg: TrimLoopConfig, doc: dict, out) -> Path:
         L.append(f"- assumption: {a}")
     n_id, n_val = doc["counts"]["identification"], doc["counts"]["validation"]
     L += ["", "## Data", "",
-          f"Trim points per channel, identification / held out (every {doc['holdout_every']}rd point of each channel in "
-          "speed order): " + ", ".join(f"{ch} {n_id[ch]}/{n_val[ch]}" for ch in TRIM_CHANNELS), ""]
+          f"Trim points per channel, identification / held out ({_held_text(doc['holdout_every'])}): " + ", ".join(f"{ch} {n_id[ch]}/{n_val[ch]}" for ch in TRIM_CHANNELS), ""]
     L += ["## Iterations", ""]
     for it in doc["iterations"]:
         L += [f"### Iteration {it['iteration']}" + (f" (with {', '.join(it['extensions'])})" if it["extensions"] else ""),

@@ -422,6 +422,17 @@ def rms_by(pts: pd.DataFrame, e_deg: np.ndarray) -> dict:
 
 
 # ---------------------------------------------------------------- the loop
+def _load(cfg: TrimLoopConfig):
+    """The config's dataset; its problems as one line naming each file and row or field."""
+    from .dataset import DatasetError
+
+    try:
+        return load_flight_test(cfg.dataset)
+    except DatasetError as exc:
+        raise TrimLoopError(f"{cfg.path} [data] dataset {cfg.dataset}: " + "; ".join(str(p) for p in exc.problems)) \
+            from None
+
+
 def _model_of(cfg: TrimLoopConfig, ft, extensions=(), values: dict | None = None) -> HelicopterModel:
     model = HelicopterModel(extensions=(TrimOutputDatum(), *extensions))
     fixed = dict(cfg.fixed)
@@ -435,7 +446,7 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
     from .dataset.reader import check_model_matches_manifest
     from .diagnosis.candidates import make_candidate
 
-    ft = load_flight_test(cfg.dataset)
+    ft = _load(cfg)
     out = Path(out)
     if ft.trims is None or len(ft.trims) == 0:
         raise TrimLoopError(f"{cfg.dataset}: no trim points")
@@ -561,7 +572,7 @@ def dense_curves(cfg: TrimLoopConfig, doc: dict, which: int | None) -> dict:
     """Model trim curves [deg] on a speed grid: initial guess (which None) or iteration ``which``'s estimate."""
     from .diagnosis.candidates import make_candidate
 
-    ft = load_flight_test(cfg.dataset)
+    ft = _load(cfg)
     kt = np.linspace(0.0, max(doc["points"]["speed_kt"]) + 5.0, 45)
     if which is None:
         model = _model_of(cfg, ft, (), doc["initial"]["parameters"])

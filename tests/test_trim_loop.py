@@ -138,6 +138,11 @@ def test_malformed_trim_only_dataset_one_line_error(generated, tmp_path, capsys,
     assert len(lines) == 1, err
     assert lines[0].startswith("error: ") and expected in lines[0], lines[0]
     assert "Traceback" not in err
+    cfg = tmp_path / "c.toml"  # the trim loop names the same problem in one line
+    cfg.write_text(f'[data]\ndataset = "{folder}"\n[parameters.f_e]\n')
+    assert main(["trim-loop", str(cfg), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and expected in err, err
 
 
 def _config(tmp_path, dataset, **kw) -> TrimLoopConfig:

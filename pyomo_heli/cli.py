@@ -80,6 +80,15 @@ def positive_int(text: str) -> int:
     return v
 
 
+def _starts(text: str) -> int:
+    from .multistart import MAX_STARTS
+
+    v = _integer(text)
+    if not 1 <= v <= MAX_STARTS:
+        raise argparse.ArgumentTypeError(f"must be an integer between 1 and {MAX_STARTS:,}, got {text}")
+    return v
+
+
 def _epsilon(text: str) -> float:
     v = finite_float(text)
     if v < 0:
@@ -145,6 +154,23 @@ def _point_parameters(result, which: str, results_dir) -> dict:
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
             raise UserError(f"{file}: key {key}.{n} = {v!r} is not a finite number")
     return params
+
+
+def _solver_status_line(result, which: str) -> str:
+    """How the solve of the analysed point ended (``which``: chosen or time_domain), and whether the results
+    folder marks the anchors' derived quantities unreliable."""
+    point = result.chosen if which == "chosen" else result.time_domain
+    label = "chosen point C" if which == "chosen" else "time-domain point A"
+    status = point.get("status", "unknown")
+    iterations = point.get("iterations")
+    line = f"solver status of the {label}: {status}" + (f" ({iterations} iterations)" if iterations is not None
+                                                          else "")
+    if point.get("success") is False:
+        line += " -- WARNING: this solve did not converge; its numbers are an unconverged iterate"
+    unreliable = result.info.get("unreliable")
+    if unreliable and which == "chosen":
+        line += f" -- WARNING: {unreliable.get('reason')}; the Eq. 11 choice of this point is unreliable"
+    return line
 
 
 def _parse_params(items, model):
@@ -373,6 +399,7 @@ def cmd_diagnose(args) -> int:
     label = "multi-objective (C)" if args.point == "chosen" else "time-domain (A)"
     out = Path(args.out or args.results_dir)
     print(f"diagnosing {label} of {args.results_dir} (config {cfg.path})")
+    print(_solver_status_line(res, args.point))
     r = compute_residuals(cfg, parameters, label, test_rate_hz=args.test_rate_hz)
     if not args.no_residuals:
         r.save(out / f"residuals_{args.point}")
@@ -410,6 +437,11 @@ def cmd_identify(args) -> int:
         write_report(args.out, cfg)
     print(result)
     print(f"results in {args.out}")
+    unreliable = result.info.get("unreliable")
+    if unreliable:  # the files are written, marked (chosen.json info.unreliable, report.md); the status says so
+        print(f"pyomo-heli identify: {unreliable['reason']}: the utopia point, nadir, epsilon grid and Eq. 11 "
+              f"choice are unreliable (marked in {args.out}/chosen.json and the report)", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -437,6 +469,8 @@ def cmd_uncertainty(args) -> int:
                         f"no standard errors to compute")
     if args.out and Path(args.out).resolve() != Path(args.results).resolve():
         shutil.copytree(args.results, args.out, dirs_exist_ok=True)
+    for which in ("time_domain", "chosen"):
+        print(_solver_status_line(result, which))
     data = identification_data(cfg)
     add_uncertainty(result, cfg, data, args.out or args.results, points=args.points)
     print(f"standard errors in {args.out or args.results} (front.csv, chosen.json, identifiability.csv)")
@@ -588,7 +622,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     ms = sub.add_parser("multistart", help="solve from seeded random initial guesses within the bounds")
     ms.add_argument("config")
-    ms.add_argument("--starts", type=positive_int, default=20, help="number of starts (default 20)")
+    ms.add_argument("--starts", type=_starts, default=20, help="number of starts (default 20, at most 10,000)")
     ms.add_argument("--seed", type=nonneg_int, default=0, help="seed of the initial guesses (default 0)")
     ms.add_argument("--epsilon", type=_epsilon, default=None,
                     help="solve min J_time s.t. J_trim <= EPSILON (one front point) instead of min J_time")
@@ -635,32 +669,117 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-residuals", action="store_true",
                    help="do not save the residuals folder (residuals_<point>/, about 1 MB per 10 maneuvers)")
     g.set_defaults(func=cmd_diagnose)
+    trace = "on an error, also print the Python traceback (or set PYOMO_HELI_TRACEBACK=1)"
+    p.add_argument("--traceback", action="store_true", help=trace)
+    for command in sub.choices.values():
+        command.add_argument("--traceback", action="store_true", default=argparse.SUPPRESS, help=trace)
     return p
 
 
+class _Stdout:
+    """sys.stdout for a command: a closed pipe (``| head -1``) silences the rest of the output instead of
+    aborting the run; any other failed write (``> /dev/full``) raises OutputError naming standard output."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _failed(self, exc: OSError):
+        try:  # the unwritten buffer goes to /dev/null, so that no later flush (at exit) fails again
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._stream.fileno())
+            os.close(devnull)
+        except (OSError, ValueError, AttributeError):
+            self._stream = open(os.devnull, "w")
+        if not isinstance(exc, BrokenPipeError):
+            from .ioerrors import OutputError
+
+            raise OutputError(exc.errno, exc.strerror or str(exc), "<standard output>") from None
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except OSError as exc:
+            self._failed(exc)
+            return len(text)
+
+    def flush(self):
+        try:
+            self._stream.flush()
+        except OSError as exc:
+            self._failed(exc)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+TRACEBACK_HINT = "rerun with --traceback (or PYOMO_HELI_TRACEBACK=1) to see where"
+
+
 def main(argv=None) -> int:
+    """Run one command. Exit status: 0 done; 2 bad input (one line naming the culprit); 1 an internal error or
+    a failed output (one line with the path and a hint to use --traceback), or a run whose result is not to be
+    trusted (no point converged, an anchor failed); 130 interrupted by SIGINT or SIGTERM (finished points stay
+    on disk; the same command resumes)."""
+    from . import interrupts
     from .config import ConfigError as IdentificationConfigError
     from .dataset import DatasetError
     from .flighttest.config import ConfigError
+    from .ioerrors import OUTPUT_ERRNOS
     from .simulation.inputs import InputSpecError
     from .simulation.trim import TrimError
-    from .solvers.errors import SolverError
+    from .solvers.errors import SolverError, SolverUnavailableError
     from .pareto.store import StoreMismatchError
 
     argv = sys.argv[1:] if argv is None else argv
+    show_traceback = os.environ.get("PYOMO_HELI_TRACEBACK", "").strip() not in ("", "0")
     try:
         args = build_parser().parse_args(argv)
         cmd = args.command
     except UserError as exc:
         print(f"pyomo-heli: error: {exc}", file=sys.stderr)
         return 2
+    show_traceback = show_traceback or getattr(args, "traceback", False)
+    bad_input = (UserError, InputSpecError, ConfigError, IdentificationConfigError, DatasetError, TrimError,
+                 SolverUnavailableError, StoreMismatchError, KeyError, ValueError)
+    stdout = sys.stdout
+    sys.stdout = _Stdout(stdout)
     try:
-        return args.func(args)
-    except (UserError, InputSpecError, ConfigError, IdentificationConfigError, DatasetError, TrimError, SolverError,
-            StoreMismatchError, OSError, KeyError, ValueError, RuntimeError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
-        print(f"pyomo-heli {cmd}: error: {msg}", file=sys.stderr)
-        return 2
+        with interrupts.guard():
+            code = args.func(args)
+            sys.stdout.flush()
+        return code
+    except KeyboardInterrupt as exc:  # interrupts.Interrupted, or a Ctrl-C before the guard was up
+        name = exc.signame if isinstance(exc, interrupts.Interrupted) else "SIGINT"
+        point = getattr(exc, "point", None)
+        where = f" while solving point {point} (not stored)" if point else ""
+        out = getattr(args, "out", None)
+        kept = (f"; finished points stay in {out}: run the same command again to resume"
+                if out and cmd in ("identify", "multistart", "close-loop", "demo") else "")
+        print(f"pyomo-heli {cmd}: interrupted by {name}{where}{kept}", file=sys.stderr)
+        return interrupts.EXIT_INTERRUPTED
+    except BaseException as exc:  # noqa: BLE001 - every error ends as one line (and a traceback if asked)
+        if isinstance(exc, SystemExit):
+            raise
+        if show_traceback:
+            import traceback
+
+            traceback.print_exc()
+        if isinstance(exc, OSError) and (exc.errno in OUTPUT_ERRNOS or not isinstance(
+                exc, (FileNotFoundError, NotADirectoryError, IsADirectoryError, PermissionError, FileExistsError))):
+            path = exc.filename or getattr(args, "out", None) or "?"
+            print(f"pyomo-heli {cmd}: I/O error: {path}: {exc.strerror or exc}"
+                  + ("" if show_traceback else f"; {TRACEBACK_HINT}"), file=sys.stderr)
+            return 1
+        internal = isinstance(exc, SolverError) and not isinstance(exc, SolverUnavailableError)
+        if not internal and (isinstance(exc, bad_input) or isinstance(exc, OSError)):
+            msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+            print(f"pyomo-heli {cmd}: error: {msg}", file=sys.stderr)
+            return 2
+        print(f"pyomo-heli {cmd}: internal error: {type(exc).__name__}: {exc}"
+              + ("" if show_traceback else f"; {TRACEBACK_HINT}"), file=sys.stderr)
+        return 1
+    finally:
+        sys.stdout = stdout
 
 
 if __name__ == "__main__":

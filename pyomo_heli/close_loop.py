@@ -46,6 +46,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import interrupts
 from .config import ConfigError, IdentificationConfig
 from .dataset import load_flight_test
 from .diagnosis import attribution as attr
@@ -54,7 +55,7 @@ from .identify import build_problem, identification_fingerprint, run_identificat
 from .nlp.identification import identification_data, prepare_data
 from .nlp.parameters import FreeParameter
 from .pareto.result import write_json
-from .pareto.store import claim_folder, read_checkpoint, write_checkpoint
+from .pareto.store import FolderLock, claim_folder, read_checkpoint, write_checkpoint
 from .physics.model import HelicopterModel
 from .report.identification import CURVE_SPEEDS, predict, trim_rms, validation_rms
 
@@ -356,7 +357,13 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
     id_data = identification_data(cfg, ft)
     val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
                 if cfg.validation else [])
-    out.mkdir(parents=True, exist_ok=True)  # only once the data loaded: a bad dataset leaves no folder behind
+    # the folder only once the data loaded (a bad dataset leaves no folder behind), locked for the loop's life;
+    # SIGINT/SIGTERM stop it with Interrupted (finished iterations and points stay on disk, a rerun resumes)
+    with interrupts.guard(), FolderLock(out, "close-loop"):
+        return _close_loop(cfg, out, settings, progress, restart, ft, id_data, val_mans)
+
+
+def _close_loop(cfg, out: Path, settings, progress, restart, ft, id_data, val_mans) -> dict:
     write_checkpoint(out, "close-loop")
     trims = ft.trims.reset_index(drop=True)
     doc = {"config": str(cfg.path), "dataset": str(cfg.dataset), "settings": dataclasses.asdict(settings),
@@ -378,6 +385,10 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
         if result.chosen is None:
             raise IdentificationFailed(f"iteration {i}: no front point converged, nothing to diagnose; every status "
                                        f"is in {out / f'iter_{i}' / 'front.csv'}")
+        if result.info.get("unreliable"):
+            raise IdentificationFailed(f"iteration {i}: {result.info['unreliable']['reason']}; the utopia point and "
+                                       f"the Eq. 11 choice are unreliable, nothing to diagnose (statuses in "
+                                       f"{out / f'iter_{i}' / 'front.csv'})")
         point, which = _diagnosed_point(result, settings.point)
         # in the free parameters' order, whether the point was just solved or read back from disk
         chosen = {**{f.name: point["parameters"][f.name] for f in cfg.free if f.name in point["parameters"]},

@@ -16,8 +16,13 @@ from .config import IdentificationConfig
 from .dataset import load_flight_test
 from .nlp.identification import build_identification_nlp, identification_data
 from .pareto.front import ParetoSolver, utopia_distance
-from .pareto.result import IdentificationResult
-from .pareto.store import PointStore, claim_folder, fingerprint
+from .pareto.result import IdentificationResult, write_csv
+from . import interrupts
+from .pareto.store import FolderLock, PointStore, claim_folder, fingerprint
+
+
+#: what the anchors define: unreliable when one of them did not converge (chosen.json info.unreliable)
+UNRELIABLE_WITHOUT_ANCHORS = ("utopia", "nadir", "epsilon grid", "utopia_distance", "chosen", "direct")
 
 
 def extension_forms(extensions) -> dict:
@@ -101,6 +106,10 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
     (pyomo_heli.uncertainty.front); "chosen": only for A, the chosen point and
     the direct solve; False or "none": skip. The command line's default is "all".
 
+    The folder is locked for the run (a second run on it is refused, FolderBusyError naming the holder).
+    SIGINT or SIGTERM stops the run with :class:`~pyomo_heli.interrupts.Interrupted`: the point being solved
+    is not stored, finished points stay on disk, and a rerun resumes to the uninterrupted run's results.
+
     A folder holding another command's results (close-loop's ``loop.json`` and ``iter_*/``, multistart's
     ``starts.csv``) is refused (StoreMismatchError, one line naming the folder), ``restart`` or not. A stored
     point that cannot be read is solved again with a warning (:mod:`pyomo_heli.pareto.store`).
@@ -110,8 +119,11 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
         from .identify_linear import run_tri_identification
 
         return run_tri_identification(cfg, out, progress)  # uncertainty, resume: two-objective runs only
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    with interrupts.guard(), FolderLock(out, "identification"):
+        return _run_identification(cfg, Path(out), progress, restart, uncertainty)
+
+
+def _run_identification(cfg, out: Path, progress, restart, uncertainty) -> IdentificationResult:
     store = PointStore(out, identification_fingerprint(cfg), restart=restart, what="identification")
     if store.keys():
         progress(f"resuming: {len(store.keys())} finished point(s) in {store.dir}")
@@ -127,7 +139,7 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
 
     def on_point(p):
         rows.append(p.row())
-        pd.DataFrame(rows).to_csv(front_csv, index=False, float_format="%.12g")
+        write_csv(pd.DataFrame(rows), front_csv)
         params = " ".join(f"{k}={v:.6g}" for k, v in p.parameters.items())
         where = " (from disk)" if getattr(p, "from_disk", False) else ""
         progress(f"  point {p.index:>2} {p.kind:<3} J_time={p.J_time:.6g} J_trim={p.J_trim:.6g} {params} "
@@ -153,6 +165,9 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
                                                            utopia, nadir)
     params = [f.name for f in cfg.free]
     failed = front.loc[~ok, ["index", "kind", "status"]].to_dict("records")
+    anchor_failures = ps.anchor_failures()
+    for line in anchor_failures:
+        progress(f"  warning: {line}: utopia, nadir, epsilon grid and the Eq. 11 choice are unreliable")
     result = IdentificationResult(
         front=front, parameters=params, units={n: cfg.model.parameters.spec(n).unit for n in params},
         utopia=utopia, nadir=nadir, chosen=_point_dict(chosen) if chosen is not None else None,
@@ -166,6 +181,9 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
               "input_reference_s": cfg.input_reference_s,
               "solver": cfg.pareto.solver,
               "failed_points": failed,
+              # an anchor that did not converge (after its retries) spoils everything derived from the anchors
+              "unreliable": ({"reason": "; ".join(anchor_failures),
+                              "quantities": list(UNRELIABLE_WITHOUT_ANCHORS)} if anchor_failures else None),
               "resumed_points": sum(bool(getattr(p, "from_disk", False)) for p in points),
               "mean_iterations_front": _mean(front.loc[front.kind == "eps", "iterations"]),
               "mean_iterations_front_cold": _mean(front.loc[front.kind == "eps", "cold_iterations"])})

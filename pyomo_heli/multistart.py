@@ -35,19 +35,26 @@ from .config import IdentificationConfig
 from .identify import build_problem
 from .nlp.identification import initialise_at
 from .pareto.front import FrontPoint, ParetoSolver, _Snapshot
-from .pareto.result import write_json
-from .pareto.store import PointStore, fingerprint
+from .pareto.result import write_csv, write_json
+from . import interrupts
+from .pareto.store import FolderLock, PointStore, fingerprint
 
 PROBLEMS = ("time", "epsilon")
 
 
+#: most starts one command runs: more is a typo (each start is a full NLP solve, seconds to minutes)
+MAX_STARTS = 10_000
+
+
+def draw_start(free, k: int, seed: int) -> dict:
+    """Initial guess k (SI), uniform within each parameter's bounds, from its own generator seeded by (seed, k)."""
+    u = np.random.default_rng([seed, k]).random(len(free))
+    return {f.name: float(f.lower + uk * (f.upper - f.lower)) for f, uk in zip(free, u)}
+
+
 def draw_starts(free, n: int, seed: int) -> list[dict]:
     """``n`` initial guesses (SI), uniform within each parameter's bounds; start k from rng (seed, k)."""
-    starts = []
-    for k in range(n):
-        u = np.random.default_rng([seed, k]).random(len(free))
-        starts.append({f.name: float(f.lower + uk * (f.upper - f.lower)) for f, uk in zip(free, u)})
-    return starts
+    return [draw_start(free, k, seed) for k in range(n)]
 
 
 @dataclass
@@ -73,7 +80,7 @@ class MultistartResult:
 
     def save(self, out: str | Path) -> None:
         out = Path(out)
-        self.starts.to_csv(out / "starts.csv", index=False, float_format="%.12g")
+        write_csv(self.starts, out / "starts.csv")
         write_json(out / "multistart.json", {"parameters": self.parameters, "problem": self.problem,
                                              "epsilon": self.epsilon, "seed": self.seed, "rtol": self.rtol,
                                              "best": self.best, "n_starts": len(self.starts),
@@ -121,15 +128,19 @@ def run_multistart(cfg: IdentificationConfig, out: str | Path, starts: int = 20,
         raise ValueError(f"problem must be one of {', '.join(PROBLEMS)}, got {problem!r}")
     if (problem == "epsilon") != (epsilon is not None):
         raise ValueError("an epsilon (J_trim bound) is needed for problem 'epsilon', and only there")
-    if starts < 1:
-        raise ValueError(f"--starts must be at least 1, got {starts}")
+    if not 1 <= starts <= MAX_STARTS:
+        raise ValueError(f"--starts must be between 1 and {MAX_STARTS:,}, got {starts}")
     if int(seed) != seed or seed < 0:
         raise ValueError(f"--seed must be an integer >= 0, got {seed}")
     if not (math.isfinite(rtol) and rtol > 0):
         raise ValueError(f"--rtol must be a finite number > 0, got {rtol}")
     if epsilon is not None and not (math.isfinite(epsilon) and epsilon >= 0):
         raise ValueError(f"--epsilon must be a finite number >= 0 (J_trim >= 0), got {epsilon}")
-    out = Path(out)
+    with interrupts.guard(), FolderLock(out, "multi-start"):
+        return _run_multistart(cfg, Path(out), starts, seed, problem, epsilon, rtol, restart, progress)
+
+
+def _run_multistart(cfg, out: Path, starts, seed, problem, epsilon, rtol, restart, progress) -> MultistartResult:
     store = PointStore(out, fingerprint(cfg.raw, cfg.dataset, command="multistart", seed=seed, problem=problem,
                                         epsilon=epsilon), restart=restart, what="multi-start")
     if store.keys():
@@ -139,10 +150,10 @@ def run_multistart(cfg: IdentificationConfig, out: str | Path, starts: int = 20,
     ps = ParetoSolver(m, cfg.pareto)  # its one solver and the switchable objective; no front is traced
     progress(f"built NLP and solver in {time.perf_counter() - t0:.1f} s")
     initial = _Snapshot(m)
-    guesses = draw_starts(cfg.free, starts, seed)
     eps = math.inf if epsilon is None else float(epsilon)
     rows, resumed = [], 0
-    for k, guess in enumerate(guesses):
+    for k in range(starts):
+        guess = draw_start(cfg.free, k, seed)  # one at a time: memory does not grow with --starts
         key = f"start{k:03d}"
         if store.has(key):
             row = store.record(key)
@@ -163,7 +174,7 @@ def run_multistart(cfg: IdentificationConfig, out: str | Path, starts: int = 20,
             store.save(key, row, m if p.iterations > 0 else None)
             where = ""
         rows.append(row)
-        pd.DataFrame(rows).to_csv(out / "starts.csv", index=False, float_format="%.12g")
+        write_csv(pd.DataFrame(rows), out / "starts.csv")
         params = " ".join(f"{n}={guess[n]:.6g}->{row[n]:.6g}" for n in guess)
         progress(f"  start {k:>3}: {params} objective={row['objective']:.10g} "
                  f"[{row['status']}, {row['iterations']} it, {row['wall_time']:.1f} s]{where}")

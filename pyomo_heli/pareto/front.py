@@ -56,6 +56,7 @@ import numpy as np
 import pyomo.environ as pyo
 from pyomo.common.gc_manager import PauseGC
 
+from .. import interrupts
 from ..nlp.parameters import free_parameter_values
 from ..solvers import MULTIPLIER_MODES, SolverError, make_solver, scale_multipliers
 
@@ -329,10 +330,17 @@ class ParetoSolver:
             self.store.restore(key, self.m)
             p.from_disk = True
             return p
-        p = solve()
+        try:
+            p = solve()
+        except interrupts.Interrupted as exc:  # not stored: a rerun solves it again from the same start
+            exc.point = exc.point or key
+            raise
+        self._save(key, p)
+        return p
+
+    def _save(self, key: str, p: FrontPoint) -> None:
         if self.store is not None:
             self.store.save(key, asdict(p), self.m, duals=self.settings.warm_start in MULTIPLIER_MODES)
-        return p
 
     def point_a(self) -> FrontPoint:
         """Anchor A alone (min J_time, the classic time-domain estimate) from the model's current values."""
@@ -341,18 +349,29 @@ class ParetoSolver:
     def anchors(self) -> tuple[FrontPoint, FrontPoint]:
         """A: min J_time. B: min J_trim, then min J_time keeping J_trim at its minimum (lexicographic).
 
-        A failed anchor is recorded with its status (``success`` False) and
-        the next solve starts from its last iterate.
-        """
-        a = self.solve_point("A", self.point_a)
-        self._snap_a = _Snapshot(self.m)
+        An anchor that does not converge is retried: B (first from A's solution) once cold, from the
+        initial guess; A (first cold) once from B's solution. The attempts are summed into the point
+        (iterations, wall time) and named in its ``warm_start``. An anchor still failing is recorded
+        with its status (``success`` False); :meth:`anchor_failures` names it, and everything derived
+        from the anchors (utopia, nadir, epsilon grid, the Eq. 11 choice) is then unreliable.
 
-        def solve_b():
-            # both stages start from a feasible solution (A's, then the first stage's)
-            b1 = self._solve("trim", -1, "B1", math.inf, "primal", self._near_start_options())
+        A is written to the store once its outcome is final (after B, when A needs the retry), so a
+        resumed run repeats exactly the attempts of an uninterrupted one.
+        """
+        a_final = self.store is not None and self.store.has("A")
+        if a_final:
+            a = self.solve_point("A", self.point_a)
+        else:
+            a = self._unstored("A", self.point_a)
+            if a.success:
+                self._save("A", a)
+                a_final = True
+        snap_a = _Snapshot(self.m)
+
+        def two_stages(options, scale):
+            b1 = self._solve("trim", -1, "B1", math.inf, "primal", options)
             eps_b = b1.J_trim * (1 + self.settings.lexicographic_tol) + 1e-12
-            b = self._solve("time", self.settings.points - 1, "B", eps_b, "primal", self._near_start_options(),
-                            scale=self._front_scale(a))
+            b = self._solve("time", self.settings.points - 1, "B", eps_b, "primal", options, scale=scale)
             b.iterations += b1.iterations
             b.wall_time += b1.wall_time
             b.setup_time += b1.setup_time
@@ -360,9 +379,45 @@ class ParetoSolver:
                 b.success, b.status = False, f"first stage (min J_trim): {b1.status}; second stage: {b.status}"
             return b
 
+        def solve_b():
+            scale = self._front_scale(a)
+            if not a.success:  # A's last iterate is no start: B cold, from the initial guess
+                self._snap_initial.restore()
+                b = two_stages(None, scale)
+                b.warm_start = "none"
+                return b
+            # both stages start from a feasible solution (A's, then the first stage's)
+            b = two_stages(self._near_start_options(), scale)
+            if b.success:
+                return b
+            self._snap_initial.restore()  # retry cold
+            return _retried(b, two_stages(None, scale), "none")
+
         b = self.solve_point("B", solve_b)
-        self._snap_b = _Snapshot(self.m)
+        snap_b = _Snapshot(self.m)
+        if not a_final:
+            if b.success:  # retry A from B's solution (in the model now, solved or loaded)
+                a = self._unstored("A", lambda: _retried(a, self._solve("time", 0, "A", math.inf, "primal"),
+                                                          "primal from anchor B"))
+            else:
+                snap_a.restore()  # the stored values of a failed A are its last iterate
+            self._save("A", a)
+            snap_a = _Snapshot(self.m)
+        self._snap_a, self._snap_b = snap_a, snap_b
         return a, b
+
+    def _unstored(self, key: str, solve) -> FrontPoint:
+        """``solve()`` without storing; an interrupt names ``key`` as the point being solved."""
+        try:
+            return solve()
+        except interrupts.Interrupted as exc:
+            exc.point = exc.point or key
+            raise
+
+    def anchor_failures(self) -> list[str]:
+        """One line per anchor that did not converge after its retries (empty when both did)."""
+        return [f"anchor {p.kind} did not converge ({p.status}; attempts: {p.warm_start})"
+                for p in self.points if p.kind in ("A", "B") and not p.success]
 
     def _front_scale(self, a: FrontPoint) -> float:
         """Objective scale of the multi-objective solves: J_time at its utopia value (anchor A)."""
@@ -460,6 +515,15 @@ class ParetoSolver:
         self.snapshots[start.index].restore()
         return self.solve_point("direct", lambda: self._solve("utopia", -1, "direct", math.inf, "primal",
                                                              utopia=utopia, nadir=nadir))
+
+
+def _retried(first: FrontPoint, retry: FrontPoint, how: str) -> FrontPoint:
+    """The retry of a failed anchor, with both attempts' iterations and times; ``warm_start`` names them."""
+    retry.iterations += max(first.iterations, 0)
+    retry.wall_time += first.wall_time
+    retry.setup_time += first.setup_time
+    retry.warm_start = f"{first.warm_start} ({first.status}), then {how}"
+    return retry
 
 
 def _value(expr) -> float:

@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..ioerrors import writing
+
 
 def _json_default(o):
     if isinstance(o, (np.floating, np.integer)):
@@ -86,7 +88,15 @@ def _read_front(path: Path, params: list) -> pd.DataFrame:
 
 
 def write_json(path: Path, data: dict) -> None:
-    path.write_text(json.dumps(data, indent=2, sort_keys=True, default=_json_default) + "\n")
+    text = json.dumps(data, indent=2, sort_keys=True, default=_json_default) + "\n"
+    with writing(path):
+        Path(path).write_text(text)
+
+
+def write_csv(table: pd.DataFrame, path: Path) -> None:
+    """A table as CSV, 12 significant digits (a failed write names ``path``)."""
+    with writing(path):
+        table.to_csv(path, index=False, float_format="%.12g")
 
 
 @dataclass
@@ -106,7 +116,7 @@ class IdentificationResult:
     def save(self, out: str | Path) -> None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        self.front.to_csv(out / "front.csv", index=False, float_format="%.12g")
+        write_csv(self.front, out / "front.csv")
         write_json(out / "time_domain.json", self.time_domain)
         write_json(out / "chosen.json", {"chosen": self.chosen, "direct": self.direct, "utopia": list(self.utopia),
                                          "nadir": list(self.nadir), "parameters": self.parameters,
@@ -164,6 +174,10 @@ class IdentificationResult:
                  self.front[cols].to_string(index=False, float_format=lambda x: f"{x:.6g}"), "",
                  f"utopia (J_time, J_trim) = ({self.utopia[0]:.6g}, {self.utopia[1]:.6g}); "
                  f"nadir = ({self.nadir[0]:.6g}, {self.nadir[1]:.6g})"]
+        unreliable = self.info.get("unreliable")
+        if unreliable:
+            lines.append(f"UNRELIABLE: {unreliable.get('reason')}: {', '.join(unreliable.get('quantities', []))} "
+                         f"depend on the anchors and are not to be trusted")
         if self.chosen is None:  # a sweep in which no point converged still ends with its statuses on disk
             lines.append("no front point converged: nothing chosen")
             return "\n".join(lines)

@@ -50,6 +50,9 @@ from pathlib import Path
 import numpy as np
 import pyomo.environ as pyo
 
+from .. import interrupts
+from ..ioerrors import writing
+
 
 class StoreMismatchError(ValueError):
     """The results folder holds points of a different run; the message says how to proceed."""
@@ -66,6 +69,91 @@ _MARKERS = {"close-loop": ("loop.json", "iter_*/"), "identification": ("front.cs
             "multi-start": ("starts.csv", "multistart.json")}
 #: what reading a damaged .npz raises (truncated: BadZipFile; empty: EOFError; not an archive: ValueError, ...)
 _UNREADABLE = (zipfile.BadZipFile, EOFError, ValueError, KeyError, TypeError, zlib.error, OSError)
+
+
+class FolderBusyError(StoreMismatchError):
+    """The results folder is locked by another run; the message names the holder (pid, command)."""
+
+
+LOCK_FILE = ".pyomo-heli.lock"
+
+
+def _command_line() -> str:
+    argv = list(sys.argv)
+    if argv and ("pyomo_heli" in argv[0] or Path(argv[0]).name == "pyomo-heli"):
+        argv[0] = "pyomo-heli"
+    return " ".join(argv)
+
+
+class FolderLock:
+    """An exclusive lock on a results folder for the life of a run (``fcntl.flock`` on ``DIR/.pyomo-heli.lock``).
+
+    A second run on the folder is refused at once with :class:`FolderBusyError`, one line naming the holder's
+    pid and command (written into the lock file). The kernel releases the lock when the holder exits, however
+    it ends (a SIGKILL included), so a stale lock file never blocks a later run. Use as a context manager;
+    ``root`` is created if needed. Re-entrant within one process for the same folder.
+    """
+
+    _held: dict = {}  # resolved folder -> [FolderLock, depth] held by this process
+
+    def __init__(self, root: str | Path, what: str = "run"):
+        self.root = Path(root)
+        self.what = what
+        self.fd = None
+
+    def __enter__(self) -> "FolderLock":
+        import fcntl
+
+        self.root.mkdir(parents=True, exist_ok=True)
+        key = str(self.root.resolve())
+        if key in FolderLock._held:
+            FolderLock._held[key][1] += 1
+            self._key = key
+            return self
+        path = self.root / LOCK_FILE
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _read_holder(fd)
+            os.close(fd)
+            raise FolderBusyError(f"{self.root}: in use by another run ({holder}); wait for it to end or "
+                                  f"choose another --out") from None
+        except BaseException:
+            os.close(fd)
+            raise
+        doc = json.dumps({"pid": os.getpid(), "command": _command_line(), "what": self.what}) + "\n"
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, doc.encode(), 0)
+        self.fd, self._key = fd, key
+        FolderLock._held[key] = [self, 1]
+        return self
+
+    def __exit__(self, *exc) -> None:
+        entry = FolderLock._held.get(self._key)
+        if entry is None:
+            return
+        entry[1] -= 1
+        if entry[1] == 0:
+            del FolderLock._held[self._key]
+            lock = entry[0]
+            os.close(lock.fd)  # releases the flock; the file stays (removing it would race with a new holder)
+            lock.fd = None
+
+
+def _read_holder(fd: int) -> str:
+    """'pid N: COMMAND' of the lock's holder (it writes them right after locking: retried briefly)."""
+    import time
+
+    for _ in range(50):
+        try:
+            doc = json.loads(os.pread(fd, 65536, 0).decode() or "null")
+        except (ValueError, UnicodeDecodeError):
+            doc = None
+        if isinstance(doc, dict) and "pid" in doc:
+            return f"pid {doc['pid']}: {doc.get('command', '?')}"
+        time.sleep(0.02)
+    return "holder unknown"
 
 
 def read_checkpoint(meta: str | Path) -> dict:
@@ -139,7 +227,9 @@ def claim_folder(root: str | Path, what: str, restart: bool = False) -> None:
 def write_checkpoint(root: str | Path, what: str, fingerprint: str | None = None) -> None:
     """Write ``root/checkpoint.json``: what the folder holds (see KINDS) and, for a point store, its fingerprint."""
     doc = {"fingerprint": fingerprint, "what": what} if fingerprint is not None else {"what": what}
-    (Path(root) / "checkpoint.json").write_text(json.dumps(doc, indent=2) + "\n")
+    path = Path(root) / "checkpoint.json"
+    with writing(path):
+        path.write_text(json.dumps(doc, indent=2) + "\n")
 
 
 def _canonical(obj) -> str:
@@ -165,12 +255,18 @@ def fingerprint(raw_config: dict, dataset: str | Path | None = None, **settings)
 
 
 def _atomic_write(path: Path, write) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        write(fh)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    """Write ``path`` through a temporary name unique to this process, then rename it (a kill leaves the whole
+    file or none; two processes never share a temporary file)."""
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        with writing(tmp), open(tmp, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def _variables(m):
@@ -230,7 +326,11 @@ class PointStore:
         return sorted(p.stem for p in self.dir.glob("*.npz"))
 
     def save(self, key: str, record: dict, m=None, duals: bool = False) -> None:
-        """Write one finished point: its record and (with ``m``) the model's variable values."""
+        """Write one finished point: its record and (with ``m``) the model's variable values.
+
+        Refused (:class:`~pyomo_heli.interrupts.Interrupted`) once SIGINT or SIGTERM was received: whatever
+        was computed after the signal may be an interrupted solve, and is never stored as a result."""
+        interrupts.check()
         arrays = {"record": np.array(json.dumps(record, default=_json_default))}
         if m is not None:
             arrays["values"] = np.array([np.nan if v.value is None else float(v.value) for v in _variables(m)])

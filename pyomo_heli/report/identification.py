@@ -424,6 +424,10 @@ def write_report(out_dir, cfg, results_dir=None) -> Path:
           f"(NLP build {_fmt(info.get('build_time'), 3)} s, solver setup {_fmt(info.get('solver_setup_time'), 3)} s)",
           "- models compared below: **time-domain (A)** = the J_time anchor (classic output error), "
           "**multi-objective (C)** = the front point closest to the utopia point (Eq. 11)", ""]
+    if info.get("unreliable"):  # an anchor did not converge (pyomo_heli.identify): say so before any number
+        u = info["unreliable"]
+        L += [f"> **UNRELIABLE**: {u.get('reason')}. The {', '.join(u.get('quantities', []))} depend on the "
+              "anchors and are not to be trusted (chosen.json `info.unreliable`).", ""]
     all_problems = [f"{lab}: {p}" for lab, ps in problems.items() for p in ps]
     if all_problems:
         L += ["> **Simulation problems** (the affected curves are missing or cut short in the figures, "

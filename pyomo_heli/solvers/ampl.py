@@ -28,6 +28,7 @@ from pyomo.common.gc_manager import PauseGC
 from pyomo.common.log import LoggingIntercept
 from pyomo.opt import TerminationCondition as TC
 
+from .. import interrupts
 from .casadi_ipopt import MULTIPLIER_MODES, _active_objective, ensure_suffix, resolve_options
 from .errors import SolverFailedError, SolverUnavailableError
 from .result import IPOPT_EXIT_MESSAGES, SUCCESS_STATUSES, SolveResult, status_from_exit_message
@@ -130,12 +131,15 @@ class AmplSolver:
         with tempfile.TemporaryDirectory(prefix="pyomo_heli_ampl_") as tmp:
             logfile = os.path.join(tmp, "solver.log")
             t0 = time.perf_counter()
-            try:
-                results = self._opt.solve(
-                    self.model, tee=verbose, logfile=logfile, options=opts, load_solutions=False
-                )
-            except ApplicationError as exc:
-                raise SolverFailedError(f"{self.name} failed to run: {exc}") from exc
+            with interrupts.guard():  # a terminal's Ctrl-C reaches the solver process too: never a result
+                try:
+                    results = self._opt.solve(
+                        self.model, tee=verbose, logfile=logfile, options=opts, load_solutions=False
+                    )
+                except ApplicationError as exc:
+                    interrupts.check()
+                    raise SolverFailedError(f"{self.name} failed to run: {exc}") from exc
+                interrupts.check()
             wall = time.perf_counter() - t0
             self.last_log = open(logfile).read() if os.path.exists(logfile) else ""
         iterations, status, message = parse_ipopt_log(self.last_log)

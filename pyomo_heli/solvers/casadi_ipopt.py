@@ -47,6 +47,8 @@ from pyomo.common.gc_manager import PauseGC
 from pyomo.core.expr.visitor import identify_mutable_parameters
 from pyomo.repn.plugins.nl_writer import NLWriter
 
+from .. import interrupts
+from ..ioerrors import writing
 from .errors import ModelChangedError, SolverFailedError, SolverUnavailableError
 from .point_rows import PointRowsAssembly, find_point_rows
 from .result import IPOPT_EXIT_MESSAGES, SUCCESS_STATUSES, SolveResult
@@ -216,7 +218,7 @@ class CasadiIpoptSolver:
             try:
                 for con in handled:
                     con.deactivate()
-                with open(path, "w") as ostream:
+                with writing(path), open(path, "w") as ostream:  # a full temporary folder names the file
                     info = NLWriter().write(
                         self.model, ostream, linear_presolve=False, scale_model=False,
                         export_defined_variables=self.export_defined_variables,
@@ -603,7 +605,9 @@ class CasadiIpoptSolver:
         options for this call only.
 
         The final iterate is loaded even when the solve fails, as Ipopt's AMPL
-        driver does; check ``result.success``.
+        driver does; check ``result.success``. A solve stopped by SIGINT or
+        SIGTERM raises :class:`~pyomo_heli.interrupts.Interrupted` and loads
+        nothing (see :mod:`pyomo_heli.interrupts`).
         """
         with PauseGC():  # per-variable Python lists in and out (see rebuild)
             return self._solve(warm_start, options)
@@ -616,10 +620,15 @@ class CasadiIpoptSolver:
         if warm_start in MULTIPLIER_MODES:
             args.update(self._multipliers_from_model())
         t0 = time.perf_counter()
-        try:
-            sol = solver(**args)
-        except RuntimeError as exc:
-            raise SolverFailedError(f"casadi-ipopt failed to run: {exc}") from exc
+        # Ipopt polls Python for signals and swallows the exception (NonIpopt_Exception_Thrown): the guard
+        # records the signal, and an interrupted solve raises Interrupted instead of returning an iterate
+        with interrupts.guard():
+            try:
+                sol = solver(**args)
+            except RuntimeError as exc:
+                interrupts.check()
+                raise SolverFailedError(f"casadi-ipopt failed to run: {exc}") from exc
+            interrupts.check()
         wall = time.perf_counter() - t0
         stats = solver.stats()
         self.last_stats = stats  # casadi's solver statistics of this call (iterations, t_wall_* per function)

@@ -1,0 +1,29 @@
+"""Output failures named by their path: a full disk is an I/O error of a file, never "bad input".
+
+Python's ``OSError`` from a failed ``write`` (no space left, file too large,
+an I/O error) carries no file name. :func:`writing` adds it, so the command
+line can say which file could not be written (exit status 1).
+"""
+from __future__ import annotations
+
+import errno
+from contextlib import contextmanager
+
+#: errno values of a failed output (not of a missing or forbidden input path): exit status 1, not 2
+OUTPUT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EROFS, errno.EPIPE,
+                           errno.ENOMEM, errno.ENXIO})
+
+
+class OutputError(OSError):
+    """Writing ``filename`` failed (errno and strerror of the underlying OSError)."""
+
+
+@contextmanager
+def writing(path):
+    """Re-raise an OSError without a file name as :class:`OutputError` naming ``path``."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.filename is None and not isinstance(exc, OutputError):
+            raise OutputError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+        raise

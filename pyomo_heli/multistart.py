@@ -37,7 +37,7 @@ from .nlp.identification import initialise_at
 from .pareto.front import FrontPoint, ParetoSolver, _Snapshot
 from .pareto.result import write_csv, write_json
 from . import interrupts
-from .pareto.store import FolderLock, PointStore, fingerprint
+from .pareto.store import FolderLock, PointStore, claim_folder, fingerprint
 
 PROBLEMS = ("time", "epsilon")
 
@@ -136,6 +136,7 @@ def run_multistart(cfg: IdentificationConfig, out: str | Path, starts: int = 20,
         raise ValueError(f"--rtol must be a finite number > 0, got {rtol}")
     if epsilon is not None and not (math.isfinite(epsilon) and epsilon >= 0):
         raise ValueError(f"--epsilon must be a finite number >= 0 (J_trim >= 0), got {epsilon}")
+    claim_folder(out, "multi-start", restart)  # another command's folder: refused before anything is written
     with interrupts.guard(), FolderLock(out, "multi-start"):
         return _run_multistart(cfg, Path(out), starts, seed, problem, epsilon, rtol, restart, progress)
 

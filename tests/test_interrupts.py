@@ -256,3 +256,22 @@ def test_full_disk_while_storing_a_point_names_the_file(tmp_path, monkeypatch, c
     assert re.search(rf"I/O error: {re.escape(str(out))}/points/A\.npz\.{os.getpid()}\.tmp: No space left on "
                      rf"device; rerun with --traceback", line), line
     assert list((out / "points").iterdir()) == []
+
+
+def test_sigterm_stops_close_loop_inside_an_iteration(logged, tmp_path):
+    """close-loop identifies iteration 0 in iter_0/: SIGTERM during its anchor B stops the loop (exit 130),
+    A stays on disk, B is not stored, no loop.json claims a finished iteration. (The rerun resumes
+    iter_0 through identify's store, whose equality with an uninterrupted run is tested above.)"""
+    cfg, log = logged
+    out = tmp_path / "loop"
+    log.unlink(missing_ok=True)
+    proc = _cli("close-loop", cfg, "--out", out, "--max-iterations", 0)
+    a_done = out / "iter_0" / "points" / "A.npz"
+    _wait(proc, lambda: a_done.exists() and _in_solve(log), "iteration 0's anchor B started")
+    proc.send_signal(signal.SIGTERM)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130
+    line = _one_line(stderr)
+    assert "interrupted by SIGTERM while solving point B (not stored)" in line and str(out) in line
+    assert sorted(p.name for p in (out / "iter_0" / "points").iterdir()) == ["A.npz"]
+    assert not (out / "loop.json").exists() and not (out / "iter_0" / "chosen.json").exists()

@@ -1,0 +1,113 @@
+"""The results folder's lock, per-process temporary names, no store write after an interrupt, --starts bound.
+
+Fast checks of the pieces; the end-to-end runs (real signals, two real runs on one folder) are in
+tests/test_interrupts.py.
+"""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from pyomo_heli import interrupts
+from pyomo_heli.cli import main
+from pyomo_heli.pareto import store as store_module
+from pyomo_heli.pareto.store import LOCK_FILE, FolderBusyError, FolderLock, PointStore
+
+ROOT = Path(__file__).parent.parent
+TINY = ROOT / "tests" / "configs" / "tiny_case1_noisy.toml"
+
+
+def _holder(folder: Path):
+    """Another process holding the folder's lock until killed."""
+    code = ("import sys, time; from pyomo_heli.pareto.store import FolderLock\n"
+            f"with FolderLock({str(folder)!r}, 'identification'):\n"
+            "    print('locked', flush=True); time.sleep(600)\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-c", code, "identify", "cfg.toml"], env=env, stdout=subprocess.PIPE,
+                            text=True)
+    assert proc.stdout.readline().strip() == "locked"
+    return proc
+
+
+def test_a_locked_folder_is_refused_naming_the_holder_and_freed_when_it_dies(tmp_path):
+    proc = _holder(tmp_path)
+    try:
+        with pytest.raises(FolderBusyError) as err:
+            with FolderLock(tmp_path):
+                pass
+        msg = str(err.value)
+        assert "\n" not in msg and f"pid {proc.pid}:" in msg and str(tmp_path) in msg and "--out" in msg
+        # the command line refuses the same way, in one line, before touching the folder (exit 2)
+        assert main(["identify", str(TINY), "--out", str(tmp_path), "--no-report"]) == 2
+        assert sorted(p.name for p in tmp_path.iterdir()) == [LOCK_FILE]
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    with FolderLock(tmp_path):  # the kernel released the lock with its holder: the stale file does not block
+        with FolderLock(tmp_path):  # re-entrant within one process
+            pass
+
+
+def test_temporary_names_are_unique_to_the_process_and_never_left_behind(tmp_path, monkeypatch):
+    s = PointStore(tmp_path, "fp")
+    seen = []
+    real_replace = os.replace
+    monkeypatch.setattr(store_module.os, "replace", lambda a, b: (seen.append(Path(a).name), real_replace(a, b)))
+    s.save("B", {"x": 1.0})
+    assert seen == [f"B.npz.{os.getpid()}.tmp"] and s.record("B") == {"x": 1.0}
+
+    def broken(fh, **arrays):
+        fh.write(b"PK\x03")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(store_module.np, "savez", broken)
+    with pytest.raises(OSError, match="A.npz"):
+        s.save("A", {"x": 2.0})
+    assert sorted(p.name for p in s.dir.iterdir()) == ["B.npz"]
+
+
+def test_no_point_is_stored_once_an_interrupt_arrived(tmp_path):
+    """An interrupt that a solver swallowed still stops the store: nothing computed after it is saved."""
+    s = PointStore(tmp_path, "fp")
+    with interrupts.guard():
+        with pytest.raises(interrupts.Interrupted):
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5)  # the handler raises at once
+        assert interrupts.requested() == signal.SIGINT
+        with pytest.raises(interrupts.Interrupted):
+            s.save("A", {"x": 1.0})
+    assert s.keys() == [] and interrupts.requested() is None  # the guard's end forgets it
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # and puts the old handler back
+
+
+def test_starts_bounded_and_drawn_one_at_a_time(tmp_path, monkeypatch, capsys):
+    from pyomo_heli import multistart
+    from pyomo_heli.config import load_identification_config
+
+    assert main(["multistart", str(TINY), "--starts", "10000000", "--out", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--starts" in err and "10,000" in err and not (tmp_path / "m").exists()
+
+    drawn = []
+    real = multistart.draw_start
+
+    def draw(free, k, seed):
+        drawn.append(k)
+        return real(free, k, seed)
+
+    class Stop(Exception):
+        pass
+
+    def stop(*a, **k):
+        raise Stop
+
+    monkeypatch.setattr(multistart, "draw_start", draw)
+    monkeypatch.setattr(multistart, "initialise_at", stop)
+    with pytest.raises(Stop):  # the first start: only its guess was drawn, not 10,000 up front
+        multistart.run_multistart(load_identification_config(TINY), tmp_path / "n", starts=multistart.MAX_STARTS,
+                                  progress=lambda *_: None)
+    assert drawn == [0]

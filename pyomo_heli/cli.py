@@ -453,6 +453,7 @@ def cmd_uncertainty(args) -> int:
     from .dataset import load_flight_test
     from .nlp.identification import identification_data
     from .pareto.result import IdentificationResult
+    from .pareto.store import LOCK_FILE, FolderLock
     from .uncertainty.front import add_uncertainty
 
     if args.out:
@@ -467,12 +468,14 @@ def cmd_uncertainty(args) -> int:
     if result.chosen is None:
         raise UserError(f"{Path(args.results) / 'chosen.json'}: no chosen point (no front point converged); "
                         f"no standard errors to compute")
-    if args.out and Path(args.out).resolve() != Path(args.results).resolve():
-        shutil.copytree(args.results, args.out, dirs_exist_ok=True)
     for which in ("time_domain", "chosen"):
         print(_solver_status_line(result, which))
-    data = identification_data(cfg)
-    add_uncertainty(result, cfg, data, args.out or args.results, points=args.points)
+    with FolderLock(args.out or args.results, "uncertainty"):  # no identify may write there meanwhile
+        if args.out and Path(args.out).resolve() != Path(args.results).resolve():
+            shutil.copytree(args.results, args.out, dirs_exist_ok=True,
+                            ignore=shutil.ignore_patterns(LOCK_FILE))
+        data = identification_data(cfg)
+        add_uncertainty(result, cfg, data, args.out or args.results, points=args.points)
     print(f"standard errors in {args.out or args.results} (front.csv, chosen.json, identifiability.csv)")
     return 0
 

@@ -118,7 +118,8 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=prin
     if "linear" in getattr(cfg, "objectives", ()):
         from .identify_linear import run_tri_identification
 
-        return run_tri_identification(cfg, out, progress)  # uncertainty, resume: two-objective runs only
+        with interrupts.guard(), FolderLock(out, "identification"):
+            return run_tri_identification(cfg, out, progress)  # uncertainty, resume: two-objective runs only
     with interrupts.guard(), FolderLock(out, "identification"):
         return _run_identification(cfg, Path(out), progress, restart, uncertainty)
 

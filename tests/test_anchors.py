@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from pyomo_heli.cli import _solver_status_line, main
+from pyomo_heli.cli import main
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.identify import run_identification
 from pyomo_heli.pareto.front import ParetoSolver
@@ -84,6 +84,8 @@ def test_anchor_failing_after_its_retries_is_marked_unreliable(tmp_path, monkeyp
     a = pd.read_csv(out / "front.csv").set_index("kind").loc["A"]
     assert not a["success"] and a["warm_start"] == "none (Maximum_Iterations_Exceeded), then primal from anchor B"
     # commands that analyse a point say how its solve ended
+    from pyomo_heli.cli import _solver_status_line
+
     result = IdentificationResult.load(out)
     line = _solver_status_line(result, "time_domain")
     assert "Maximum_Iterations_Exceeded" in line and "did not converge" in line

@@ -111,3 +111,24 @@ def test_starts_bounded_and_drawn_one_at_a_time(tmp_path, monkeypatch, capsys):
         multistart.run_multistart(load_identification_config(TINY), tmp_path / "n", starts=multistart.MAX_STARTS,
                                   progress=lambda *_: None)
     assert drawn == [0]
+
+
+@pytest.mark.parametrize("error", [ZeroDivisionError("float division by zero"), RuntimeError("casadi crashed")])
+def test_internal_error_is_exit_1_with_the_traceback_hint(monkeypatch, capsys, error):
+    """An internal error never passes for bad input (before: a RuntimeError gave exit 2, others a traceback)."""
+    import pyomo_heli.dataset.cli as dataset_cli
+
+    def broken(directory):
+        raise error
+
+    monkeypatch.setattr(dataset_cli, "check_data", broken)
+    data = str(ROOT / "data" / "bo105_synthetic")
+    assert main(["check-data", data]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == (f"pyomo-heli check-data: internal error: {type(error).__name__}: {error}; rerun with --traceback "
+                   f"(or PYOMO_HELI_TRACEBACK=1) to see where")
+    assert main(["check-data", data, "--traceback"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback (most recent call last)" in err and "in broken" in err
+    monkeypatch.setenv("PYOMO_HELI_TRACEBACK", "1")
+    assert main(["check-data", data]) == 1 and "in broken" in capsys.readouterr().err

@@ -60,14 +60,14 @@ def reference(logged, tmp_path_factory):
 
 
 def _in_solve(log: Path) -> bool:
-    """The Ipopt log shows iteration 2 of a solve that has not ended (a solver re-used for several solves
+    """The Ipopt log shows iteration 1 of a solve that has not ended (a solver re-used for several solves
     appends to its log: only what follows the last EXIT line counts)."""
     try:
         text = log.read_text()
     except (FileNotFoundError, UnicodeDecodeError):
         return False
     current = text.rsplit("EXIT:", 1)[-1]
-    return bool(re.search(r"^\s+2 ", current, re.M)) and IPOPT_SWALLOWED not in current
+    return bool(re.search(r"^\s+1 ", current, re.M)) and IPOPT_SWALLOWED not in current
 
 
 def _wait(proc, condition, what):
@@ -176,17 +176,26 @@ def test_sigint_in_multistart_keeps_the_counts(logged, tmp_path):
 
 def test_two_runs_started_together_one_is_refused(logged, reference, tmp_path):
     """Two identical commands on one empty folder: one runs, the other is refused naming it; the folder equals
-    an uninterrupted run (before, both ran, sharing one temporary file name, and one crashed)."""
+    an uninterrupted run (before, both ran on the folder at once, sharing one temporary file name)."""
     cfg, _ = logged
     out = tmp_path / "shared"
-    procs = [_cli("identify", cfg, "--out", out, "--no-report", "--uncertainty", "none") for _ in range(2)]
-    results = [p.communicate(timeout=600) for p in procs]
-    codes = sorted(p.returncode for p in procs)
-    assert codes == [0, 2], results
-    winner = next(p for p in procs if p.returncode == 0)
-    refused = next(r for p, r in zip(procs, results) if p.returncode == 2)
-    line = _one_line(refused[1])
-    assert "in use by another run" in line and f"pid {winner.pid}:" in line and "pyomo-heli identify" in line
+    command = ("identify", cfg, "--out", out, "--no-report", "--uncertainty", "none")
+    first = _cli(*command)
+    # the second starts once the first holds the folder, and the first is paused (SIGSTOP) meanwhile: the
+    # tiny run takes seconds, so on a loaded machine it could otherwise end before the second even starts
+    # looking, and the test would prove nothing
+    lock = out / ".pyomo-heli.lock"
+    _wait(first, lambda: lock.is_file() and f'"pid": {first.pid},' in lock.read_text(), "the first run took the lock")
+    first.send_signal(signal.SIGSTOP)
+    try:
+        second = _cli(*command)
+        _, err_second = second.communicate(timeout=600)
+    finally:
+        first.send_signal(signal.SIGCONT)
+    _, err_first = first.communicate(timeout=600)
+    assert (first.returncode, second.returncode) == (0, 2), (err_first, err_second)
+    line = _one_line(err_second)
+    assert "in use by another run" in line and f"pid {first.pid}:" in line and "pyomo-heli identify" in line
     files = sorted(str(p.relative_to(out)) for p in out.rglob("*"))
     assert files == sorted(str(p.relative_to(reference)) for p in reference.rglob("*"))
     _same_results(out, reference)

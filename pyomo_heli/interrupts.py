@@ -85,8 +85,9 @@ def guard():
             _depth[0] -= 1
         return
     _received.clear()
-    old = {s: signal.getsignal(s) for s in SIGNALS}
-    for s in SIGNALS:
+    # a signal the process was told to ignore (SIG_IGN, e.g. SIGINT of a background job) stays ignored
+    old = {s: h for s in SIGNALS if (h := signal.getsignal(s)) is not signal.SIG_IGN}
+    for s in old:
         signal.signal(s, _handler)
     _depth[0] = 1
     try:

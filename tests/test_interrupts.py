@@ -31,7 +31,14 @@ def _env(**extra):
     return {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]), **extra}
 
 
+def _default_sigint():
+    """In the child: SIGINT to its default, even when the test runs as a background job (which ignores it,
+    and a process keeps an ignored SIGINT ignored: see pyomo_heli.interrupts)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _cli(*args, env=None, **kw):
+    kw.setdefault("preexec_fn", _default_sigint)
     kw.setdefault("stdout", subprocess.PIPE)
     kw.setdefault("stderr", subprocess.PIPE)
     return subprocess.Popen([sys.executable, "-m", "pyomo_heli", *map(str, args)], env=env or _env(), text=True,

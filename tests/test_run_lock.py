@@ -73,15 +73,16 @@ def test_temporary_names_are_unique_to_the_process_and_never_left_behind(tmp_pat
 def test_no_point_is_stored_once_an_interrupt_arrived(tmp_path):
     """An interrupt that a solver swallowed still stops the store: nothing computed after it is saved."""
     s = PointStore(tmp_path, "fp")
+    before = signal.getsignal(signal.SIGTERM)
     with interrupts.guard():
         with pytest.raises(interrupts.Interrupted):
-            os.kill(os.getpid(), signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGTERM)
             time.sleep(5)  # the handler raises at once
-        assert interrupts.requested() == signal.SIGINT
+        assert interrupts.requested() == signal.SIGTERM
         with pytest.raises(interrupts.Interrupted):
             s.save("A", {"x": 1.0})
     assert s.keys() == [] and interrupts.requested() is None  # the guard's end forgets it
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # and puts the old handler back
+    assert signal.getsignal(signal.SIGTERM) is before  # and puts the old handler back
 
 
 def test_starts_bounded_and_drawn_one_at_a_time(tmp_path, monkeypatch, capsys):

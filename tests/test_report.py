@@ -22,6 +22,7 @@ from pyomo_heli.dataset import FlightTest, load_flight_test, write_flight_test
 from pyomo_heli.pareto.result import IdentificationResult
 from pyomo_heli.report import identification as rep
 from pyomo_heli.report import plots
+from pyomo_heli.simulation import replay
 from pyomo_heli.units import KT
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -194,7 +195,7 @@ def test_failed_simulation_is_reported_not_raised(tmp_path, monkeypatch):
     out = tmp_path / "out"
     res = _fake_result(out)
     cfg = load_identification_config(_config(tmp_path, ds))
-    real = rep.simulate
+    real = replay.simulate
     bad = res.chosen["parameters"]["CL_alpha_HT"]
 
     def flaky(model, *args, **kw):  # the multi-objective model "diverges"
@@ -202,7 +203,7 @@ def test_failed_simulation_is_reported_not_raised(tmp_path, monkeypatch):
             raise RuntimeError("simulation failed: Required step size is less than spacing between numbers.")
         return real(model, *args, **kw)
 
-    monkeypatch.setattr(rep, "simulate", flaky)
+    monkeypatch.setattr(replay, "simulate", flaky)
     path = rep.write_report(out, cfg)
     text = path.read_text()
     assert f"multi-objective (C): maneuver {VAL}: simulation failed" in text

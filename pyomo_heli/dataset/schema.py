@@ -6,23 +6,23 @@ the files, where every column name carries its unit (``<quantity>_<unit>``); see
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from ..channels import INPUTS
+from ..units import DEG, KT
+
 FORMAT_NAME = "pyomo_heli-flighttest"
 FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
 TRUTH_NAME = "truth.json"  # evaluation-only ground truth; never opened by this package
 ROLES = ("identification", "validation")
-INPUT_CHANNELS = ("col", "lon")
+INPUT_CHANNELS = INPUTS
 NAME_PATTERN = r"[A-Za-z0-9_-]+"
 
-KT = 1852.0 / 3600.0  # m/s per knot
-DEG = math.pi / 180.0  # rad per degree
 
 #: model speed range of trim speeds [kt]
 SPEED_RANGE_KT = (0.0, 150.0)

@@ -2,7 +2,7 @@
 
 The residuals are computed with the float model (the same physics, trims and
 RK4 replay as :mod:`pyomo_heli.simulation.sensitivity`, i.e. the output-error
-model of the identification): each maneuver starts from the model's own trim
+model of the identification, :mod:`pyomo_heli.simulation.replay`): each maneuver starts from the model's own trim
 at the maneuver's trim speed and is driven by the model's trim inputs plus the
 measured input increments; a trim point is the model's trim at the measured
 speed and flight-path angle.
@@ -31,31 +31,26 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..channels import OUTPUTS, RESIDUAL_DISPLAY_UNITS, TRIM_CHANNELS
 from ..config import IdentificationConfig, load_identification_config
 from ..dataset import load_flight_test
 from ..nlp.identification import prepare_data
 from ..pareto.result import IdentificationResult, write_json
 from ..physics.model import HelicopterModel
-from ..simulation.integrate import sampled, simulate
-from ..simulation.trim import trim_sweep
+from ..simulation.replay import model_trims, replay
 from ..units import DEG, KT
 from .innovations import innovations
 from .timeseries import TEST_RATE_HZ
 
 #: time outputs whose residuals are computed (every recorded output the model predicts)
-TIME_OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
-#: trim channels
-TRIM_CHANNELS = ("col", "lon", "theta")
+TIME_OUTPUTS = OUTPUTS
 #: model quantities kept next to the residuals (regressors for the diagnosis), when the model has them
 MODEL_EXTRAS = ("u", "w", "q", "theta", "lambda_i", "beta_1c", "col", "lon")
 #: rotor-flow regressors added from the model's states: mu_d (in-plane advance ratio of the disc) and
 #: chi (wake skew angle, atan2(mu_d, lambda_d): 0 in hover, -> 90 deg at speed)
 FLOW_EXTRAS = ("mu", "chi")
 #: display unit and SI -> display factor, for printing only
-DISPLAY = {"q": ("deg/s", 1 / DEG), "theta": ("deg", 1 / DEG), "n_x": ("g", 1.0), "n_z": ("g", 1.0),
-           "TAS": ("m/s", 1.0), "beta_0": ("deg", 1 / DEG), "col": ("deg", 1 / DEG), "lon": ("deg", 1 / DEG)}
-#: |model output| beyond which a replay counts as diverged (SI)
-DIVERGED = {"q": 3.0, "theta": 1.5, "n_x": 3.0, "n_z": 5.0, "TAS": 150.0, "beta_0": 0.5}
+DISPLAY = RESIDUAL_DISPLAY_UNITS
 ROLES = ("identification", "validation")
 #: constant input offset of the input-offset sensitivities [rad] (small: the response is linear in it)
 OFFSET_STEP = 1e-3 * DEG
@@ -223,46 +218,15 @@ def flow_regressors(model: HelicopterModel, states: dict, inputs: dict) -> dict:
     return {"mu": np.array(mu_d, dtype=float), "chi": np.arctan2(mu_d, lam_d)}
 
 
-def _replay(model: HelicopterModel, mv, trim, offsets: dict | None = None) -> pd.DataFrame:
-    """Simulate one maneuver as the identification does (RK4, 4 sub-steps per sample).
-
-    ``offsets``: constant input offsets [rad] added to the increments (for input-offset sensitivities).
-    """
-    t = mv.data["t"].to_numpy(dtype=float)
-    offsets = offsets or {}
-    inc = {k: sampled(t, v + offsets.get(k, 0.0)) for k, v in mv.increments().items()}
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        sim = simulate(model, trim, t, inc, method="rk4", substeps=4)
-    for o, lim in DIVERGED.items():
-        if o in sim and not (np.all(np.isfinite(sim[o])) and np.all(np.abs(sim[o]) < lim)):
-            raise RuntimeError(f"model output {o} diverged (|{o}| > {lim:g} SI)")
-    return sim
-
-
 def _trims(model: HelicopterModel, trims: pd.DataFrame, extra_speeds, problems: list) -> dict:
     """Model trim points keyed by (round(V, 6), round(gamma_fp, 9)); None where trim fails."""
     keys = {(round(float(v), 6), round(float(g), 9)) for v, g in zip(trims["V"], trims.get("gamma_fp", 0.0 * trims["V"]))}
     keys |= {(round(float(v), 6), 0.0) for v in extra_speeds}
     out = {}
     for g in sorted({k[1] for k in keys}):
-        speeds = sorted(k[0] for k in keys if k[1] == g)
-        try:
-            with np.errstate(all="ignore"), warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                out.update({(v, g): tp for v, tp in zip(speeds, trim_sweep(model, speeds, gamma_fp=g))})
-            continue
-        except Exception:  # noqa: BLE001 - fall back to one speed at a time, report what fails
-            pass
-        for v in speeds:
-            try:
-                with np.errstate(all="ignore"), warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    out[(v, g)] = trim_sweep(model, [v], gamma_fp=g)[0]
-            except Exception as exc:  # noqa: BLE001
-                out[(v, g)] = None
-                problems.append(f"model trim failed at {v / KT:.1f} kt, gamma {g / DEG:.1f} deg: "
-                                f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}")
+        tps, failed = model_trims(model, [k[0] for k in keys if k[1] == g], gamma_fp=g)
+        out.update({(v, g): tp for v, tp in tps.items()})
+        problems.extend(f"model trim failed at {v / KT:.1f} kt, gamma {g / DEG:.1f} deg: {msg}" for v, msg in failed)
     return out
 
 
@@ -318,7 +282,7 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
             problems.append(f"maneuver {mv.name}: no model trim at {mv.trim_speed / KT:.1f} kt, not replayed")
             continue
         try:
-            sim = _replay(model, mv, tp)
+            sim = replay(model, mv, tp)
         except Exception as exc:  # noqa: BLE001 - an unstable model must not stop the diagnosis
             problems.append(f"maneuver {mv.name}: replay failed ({str(exc).splitlines()[0] or type(exc).__name__})")
             continue
@@ -340,7 +304,7 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
         if input_offsets:
             for c in ("col", "lon"):
                 try:
-                    sim_c = _replay(model, mv, tp, {c: OFFSET_STEP})
+                    sim_c = replay(model, mv, tp, offsets={c: OFFSET_STEP})
                 except Exception:  # noqa: BLE001 - keep the residuals, drop the sensitivity
                     problems.append(f"maneuver {mv.name}: input-offset replay ({c}) failed")
                     continue

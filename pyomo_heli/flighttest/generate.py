@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..channels import OUTPUTS
 from ..physics.model import HelicopterModel
 from ..simulation.inputs import InputSignal
 from ..simulation.integrate import simulate
@@ -29,7 +30,7 @@ GENERATOR_VERSION = 1
 #: steady record kept before and after each maneuver so that the zero-phase
 #: anti-alias filter has no edge transient inside the delivered record [s]
 PAD = 1.0
-RECORDED = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
+RECORDED = OUTPUTS
 
 
 def truth_model(cfg: GeneratorConfig) -> HelicopterModel:

@@ -22,16 +22,17 @@ import numpy as np
 import pyomo.environ as pyo
 from pyomo.common.gc_manager import PauseGC
 
-from ..physics.model import FLAPPING, INPUTS, HelicopterModel
-from ..simulation.integrate import sampled, simulate
+from ..channels import INPUTS, OUTPUTS, TRIM_CHANNELS
+from ..physics.model import FLAPPING, HelicopterModel
+from ..simulation.replay import replay
 from ..simulation.trim import trim_sweep
 from .maneuver_block import build_maneuver_block, initialise_from
 from .objectives import add_known_noise_time_objective, add_time_objective, add_trim_objective, noise_sigmas
 from .parameters import FreeParameter, add_parameters
 from .trim_block import build_trim_block
 
-TIME_OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
-TRIM_OUTPUTS = ("col", "lon", "theta")
+TIME_OUTPUTS = OUTPUTS
+TRIM_OUTPUTS = TRIM_CHANNELS
 #: bound of the estimated input errors, in noise sigmas (NLPOptions.input_errors)
 INPUT_ERROR_BOUND = 6.0
 
@@ -123,7 +124,7 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
 
     # --- trim blocks, initialised from float trims at the initial guess
     sim_model = _model_at(model, free)
-    float_trims = trim_sweep(sim_model, data.speeds)
+    float_trims, sims = _float_start(sim_model, data)
     m.trim_speeds = pyo.Set(initialize=range(len(data.speeds)), ordered=True)
     m.trim = pyo.Block(m.trim_speeds)
     for i, (V, tp) in enumerate(zip(data.speeds, float_trims)):
@@ -150,17 +151,11 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
     m.maneuver_names = pyo.Set(initialize=names, ordered=True)
     m.man = pyo.Block(m.maneuver_names)
     residuals = {o: [] for o in opts.time_outputs}
-    init_res = {o: [] for o in opts.time_outputs}
     for mv in data.maneuvers:
-        i = data.speed_index(mv.trim_speed)
         blk = m.man[mv.name]
-        t = mv.data["t"].to_numpy()
-        inc = mv.increments()
-        build_maneuver_block(blk, model, pmap, t, inc, m.trim[i], ncp=opts.ncp, scheme=opts.scheme,
+        build_maneuver_block(blk, model, pmap, mv.data["t"].to_numpy(), mv.increments(),
+                             m.trim[data.speed_index(mv.trim_speed)], ncp=opts.ncp, scheme=opts.scheme,
                              input_errors=opts.input_errors)
-        tp = float_trims[i]
-        sim = simulate(sim_model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=2)
-        initialise_from(blk, sim, sim_model.state_names)
         if opts.mutable_data:
             blk.y_meas = pyo.Var(list(opts.time_outputs), blk.samples)
         for o in opts.time_outputs:
@@ -169,7 +164,7 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
                 residuals[o].extend(blk.y_meas[o, tt] - blk.y[o, tt] for tt in blk.samples)
             else:
                 residuals[o].extend(float(y) - blk.y[o, tt] for y, tt in zip(meas, blk.samples))
-            init_res[o].extend(meas - sim[o].to_numpy())
+    init_res = _start_maneuvers(m, data, sims, sim_model.state_names, opts.time_outputs)
     if opts.input_errors and opts.mutable_data and opts.noise_sigma is None:
         raise ValueError("input_errors with mutable_data needs noise_sigma: sigmas estimated from the lead-in "
                          "of the first data set would be kept for every other one")
@@ -204,6 +199,31 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
     if opts.mutable_data:
         set_measurements(m, data)
     return m
+
+
+def _float_start(sim_model: HelicopterModel, data: IdentificationData) -> tuple[list, dict]:
+    """The start of the NLP at ``sim_model``'s parameters: float trims at every trim speed of ``data``
+    and the RK4 replay (2 sub-steps per sample, no divergence rule) of every maneuver from its speed's
+    trim. Raises TrimError when the model cannot be trimmed."""
+    float_trims = trim_sweep(sim_model, data.speeds)
+    sims = {mv.name: replay(sim_model, mv, float_trims[data.speed_index(mv.trim_speed)], substeps=2, check=False)
+            for mv in data.maneuvers}
+    return float_trims, sims
+
+
+def _start_maneuvers(m: pyo.ConcreteModel, data: IdentificationData, sims: dict, states, outputs) -> dict:
+    """Set every maneuver block's variables to its replay in ``sims`` (input errors at zero); return
+    output -> data - replay at every sample (the start of the covariance estimate)."""
+    init_res = {o: [] for o in outputs}
+    for mv in data.maneuvers:
+        blk, sim = m.man[mv.name], sims[mv.name]
+        initialise_from(blk, sim, states)
+        if blk.component("u_err") is not None:
+            for v in blk.u_err.values():
+                v.set_value(0.0)
+        for o in outputs:
+            init_res[o].extend(mv.data[o].to_numpy() - sim[o].to_numpy())
+    return init_res
 
 
 def _pin(var, value: float) -> None:
@@ -404,7 +424,7 @@ def initialise_at(m: pyo.ConcreteModel, data: IdentificationData, model: Helicop
     for n in m.free_parameters:
         m.theta_s[n].set_value(float(values[n]) / by_name[n].scale)
     sim_model = model.with_parameters(**{n: float(values[n]) for n in m.free_parameters})
-    float_trims = trim_sweep(sim_model, data.speeds)
+    float_trims, sims = _float_start(sim_model, data)
     for i, tp in enumerate(float_trims):
         blk = m.trim[i]
         guess = {**tp.to_dict(), **tp.extra_states}
@@ -413,19 +433,7 @@ def initialise_at(m: pyo.ConcreteModel, data: IdentificationData, model: Helicop
                 getattr(blk, name).set_value(float(guess[name]), skip_validation=True)
         blk.V.set_value(float(data.speeds[i]), skip_validation=True)
     outputs = list(m.time_outputs) if m.component("time_outputs") is not None else []
-    init_res = {o: [] for o in outputs}
-    for mv in data.maneuvers:
-        i = data.speed_index(mv.trim_speed)
-        t = mv.data["t"].to_numpy()
-        inc = mv.increments()
-        sim = simulate(sim_model, float_trims[i], t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4",
-                       substeps=2)
-        initialise_from(m.man[mv.name], sim, sim_model.state_names)
-        if m.man[mv.name].component("u_err") is not None:
-            for v in m.man[mv.name].u_err.values():
-                v.set_value(0.0)
-        for o in outputs:
-            init_res[o].extend(mv.data[o].to_numpy() - sim[o].to_numpy())
+    init_res = _start_maneuvers(m, data, sims, sim_model.state_names, outputs)
     if m.component("mean_square") is not None:  # known-noise J_time (input errors): its mean squares
         for c in m.mean_square:
             m.mean_square[c].set_value(pyo.value(m.sum_square[c]) / pyo.value(m.square_count[c]))

@@ -24,8 +24,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..physics.model import HelicopterModel
-from ..simulation.integrate import sampled, simulate
-from ..simulation.sensitivity import maneuver_outputs
+from ..simulation.replay import maneuver_outputs, replay
 from ..simulation.trim import trim_float
 from .objectives import R_FLOOR, j_time_value
 from .parameters import FreeParameter
@@ -58,10 +57,8 @@ def simulate_outputs(model: HelicopterModel, maneuvers, outputs, integrator: str
         raise ValueError(f"integrator must be 'rk4', 'rk4-casadi' or 'solve_ivp', got {integrator!r}")
     out = {o: [] for o in outputs}
     for mv in maneuvers:
-        t = mv.data["t"].to_numpy()
-        inc = {k: sampled(t, v) for k, v in mv.increments().items()}
-        df = simulate(model, trim_float(model, mv.trim_speed), t, inc, method=IVP_METHOD, rtol=IVP_RTOL,
-                      atol=IVP_ATOL)
+        df = replay(model, mv, trim_float(model, mv.trim_speed), check=False, method=IVP_METHOD, rtol=IVP_RTOL,
+                    atol=IVP_ATOL)
         for o in outputs:
             out[o].append(df[o].to_numpy())
     return {o: np.concatenate(v) if v else np.zeros(0) for o, v in out.items()}

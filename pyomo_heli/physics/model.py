@@ -15,15 +15,14 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..channels import INPUTS, OUTPUTS  # noqa: F401 - re-exported: the model's vocabulary
 from . import eom, fuselage, inflow, rotor, tail
 from .extensions import Extension
 from .ops import NUMPY
 from .parameters import ParameterSet, bo105
 
 STATES = ("u", "w", "q", "theta", "lambda_i")
-INPUTS = ("col", "lon")
 FLAPPING = ("beta_0", "beta_1c", "beta_1s")
-OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
 #: Intermediates that several equations of one time point use (flapping rows,
 #: state rates, load factors). A back end with ``ops.share(name, expr)``
 #: (the collocation blocks) gets each of them once as a named quantity, so the

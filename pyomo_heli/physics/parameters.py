@@ -23,6 +23,8 @@ import numbers
 from dataclasses import dataclass, field, replace
 from typing import Iterable, Mapping
 
+from ..units import DEG
+
 
 @dataclass(frozen=True)
 class ParameterSpec:
@@ -63,7 +65,6 @@ class ParameterSpec:
         return self.value * factor, unit
 
 
-DEG = math.pi / 180.0
 
 #: domain name -> (test, wording) for ParameterSpec.domain
 DOMAINS = {

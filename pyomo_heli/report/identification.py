@@ -11,187 +11,37 @@ and writes next to them:
 - ``metrics.json``      the RMS errors (SI) and every simulation problem, machine-readable
 - ``report.md``         all of the above, linked, with the front table
 
-Model predictions are computed here, independently of the NLP, with the
-float model (:mod:`pyomo_heli.simulation`): trims by continuation from
-hover, maneuvers from the model's own trim at the maneuver's trim speed
-with inputs = model trim + measured increments, as the identification does.
-A trim or simulation that fails is recorded and reported, never raised.
+Model predictions come from :func:`pyomo_heli.simulation.replay.predict`, independently of the
+NLP, with the float model: trims by continuation from hover, maneuvers from the model's own trim at
+the maneuver's trim speed with inputs = model trim + measured increments, as the identification
+does. A trim or simulation that fails is recorded and reported, never raised; this module only
+formats.
 ``truth.json`` of the dataset is read only here, for the truth column.
 """
 from __future__ import annotations
 
 import json
 import math
-import warnings
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from ..channels import OUTPUTS, TRIM_CHANNELS
 from ..dataset import load_flight_test
-from ..dataset.schema import MANEUVER_QUANTITIES
 from ..nlp.identification import prepare_data
 from ..pareto.result import IdentificationResult, write_json
 from ..physics.model import HelicopterModel
-from ..simulation.integrate import sampled, simulate
-from ..simulation.trim import TrimPoint, trim_sweep
+from ..simulation.replay import Prediction, predict
 from ..units import KT
 from . import plots
 
 #: outputs compared on the validation maneuvers (all recorded time outputs)
-VALIDATION_OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
-TRIM_CHANNELS = ("col", "lon", "theta")
+VALIDATION_OUTPUTS = OUTPUTS
 #: speeds of the model trim curves [m/s]: 0 .. 120 kt every 2.5 kt
 CURVE_SPEEDS = tuple(np.arange(0.0, 120.0 + 1e-9, 2.5) * KT)
 TIME_DOMAIN = "time-domain (A)"
 MULTI_OBJECTIVE = "multi-objective (C)"
-
-
-# ---------------------------------------------------------------- model predictions
-@dataclass
-class Prediction:
-    """What one parameter set predicts for the data, computed with the float model (SI units).
-
-    ``trims``: speed (rounded key, see :func:`speed_key`) -> TrimPoint or None
-    (failed). ``maneuvers``: name -> simulated DataFrame or None (failed or
-    diverged). ``partial``: name -> the record of a diverged simulation up to
-    where it left the plausible range. ``problems``: one readable line per
-    failed trim or simulation.
-    """
-
-    label: str
-    parameters: dict
-    trims: dict = field(default_factory=dict)
-    maneuvers: dict = field(default_factory=dict)
-    partial: dict = field(default_factory=dict)
-    problems: list = field(default_factory=list)
-
-    def shown_runs(self) -> dict:
-        """name -> record to plot: the full simulation, the diverged part, or None."""
-        return {n: (sim if sim is not None else self.partial.get(n)) for n, sim in self.maneuvers.items()}
-
-    def trim_table(self, speeds) -> pd.DataFrame:
-        """V and the trim channels at ``speeds`` [m/s], NaN where the model could not be trimmed."""
-        rows = []
-        for v in speeds:
-            tp = self.trims.get(speed_key(v))
-            rows.append({"V": float(v), **{c: (getattr(tp, c) if tp is not None else np.nan) for c in TRIM_CHANNELS}})
-        return pd.DataFrame(rows, columns=["V", *TRIM_CHANNELS])
-
-
-def speed_key(v: float) -> float:
-    return round(float(v), 6)
-
-
-def model_trims(model: HelicopterModel, speeds) -> tuple[dict, list]:
-    """Trim ``model`` at ``speeds`` [m/s] by continuation from hover.
-
-    Returns (speed key -> TrimPoint or None, problems). One sweep through
-    every speed first; if it breaks, each speed is tried on its own so that
-    one bad speed costs only itself.
-    """
-    speeds = sorted({speed_key(v) for v in speeds})
-    try:
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            tps = trim_sweep(model, speeds)
-        return dict(zip(speeds, tps)), []
-    except Exception:  # noqa: BLE001 - any failure of the physics is reported, not raised
-        pass
-    out, failed = {}, []
-    for v in speeds:
-        try:
-            with np.errstate(all="ignore"), warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                out[v] = trim_sweep(model, [v])[0]
-        except Exception as exc:  # noqa: BLE001
-            out[v] = None
-            failed.append((v, str(exc).splitlines()[0] if str(exc) else type(exc).__name__))
-    problems = []
-    if failed:
-        kts = ", ".join(f"{v / KT:.1f}" for v, _ in failed)
-        problems.append(f"trim failed at {len(failed)} speed(s) [kt]: {kts} (first: {failed[0][1]})")
-    return out, problems
-
-
-#: |value| beyond which a simulated output counts as diverged (the dataset's plausibility limits, SI)
-DIVERGENCE_LIMITS = {q.si: q.limit for q in MANEUVER_QUANTITIES if q.si in VALIDATION_OUTPUTS and q.limit}
-#: the record is integrated in pieces of this length [s], so that a diverging model is stopped early
-CHUNK_S = 1.0
-
-
-class Diverged(RuntimeError):
-    """The simulated response left the plausible range; ``partial`` holds the record up to there."""
-
-    def __init__(self, message: str, partial: pd.DataFrame):
-        super().__init__(message)
-        self.partial = partial
-
-
-def simulate_maneuver(model: HelicopterModel, maneuver, trim: TrimPoint) -> pd.DataFrame:
-    """Replay a measured maneuver: start at ``trim``, inputs = trim inputs + measured increments.
-
-    The record is integrated in pieces of about ``CHUNK_S`` (each piece starts
-    from the state at the end of the previous one), so that a diverging model
-    is stopped as soon as an output leaves ``DIVERGENCE_LIMITS``: then
-    :class:`Diverged` is raised with the record up to there. Raises
-    RuntimeError if the integration itself fails.
-    """
-    t = maneuver.data["t"].to_numpy(dtype=float)
-    inc = {k: sampled(t, v) for k, v in maneuver.increments().items()}
-    names = model.state_names
-    per = max(int(round(CHUNK_S * (len(t) - 1) / max(t[-1] - t[0], 1e-12))), 1) if len(t) > 1 else 1
-    pieces, x0, i0 = [], None, 0
-    while True:
-        i1 = min(i0 + per, len(t) - 1)
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            sim = simulate(model, trim, t[i0:i1 + 1], inc, x0=x0, method="rk4", substeps=4)
-        if len(sim) != i1 + 1 - i0:
-            raise RuntimeError(f"simulation stopped after {i0 + len(sim)} of {len(t)} samples")
-        pieces.append(sim if not pieces else sim.iloc[1:])
-        vals = sim[[c for c in VALIDATION_OUTPUTS if c in sim]]
-        bad = ~np.isfinite(vals.to_numpy(dtype=float))
-        for c, lim in DIVERGENCE_LIMITS.items():
-            if c in vals:
-                bad[:, list(vals.columns).index(c)] |= np.abs(vals[c].to_numpy(dtype=float)) > lim
-        if bad.any():
-            k = int(np.argmax(bad.any(axis=1)))
-            col = vals.columns[int(np.argmax(bad[k]))]
-            partial = pd.concat(pieces, ignore_index=True)
-            partial = partial[partial["t"] <= sim["t"].iloc[k]].reset_index(drop=True)
-            raise Diverged(f"diverged: {col} left its plausible range at t = {sim['t'].iloc[k]:.2f} s", partial)
-        if i1 >= len(t) - 1:
-            break
-        x0 = {n: float(sim[n].iloc[-1]) for n in names}
-        i0 = i1
-    return pd.concat(pieces, ignore_index=True)
-
-
-def predict(label: str, model: HelicopterModel, parameters: dict, trim_speeds, maneuvers) -> Prediction:
-    """Trims at ``trim_speeds`` [m/s] and simulations of ``maneuvers`` for ``model`` at ``parameters`` (SI)."""
-    mdl = model.with_parameters(**parameters) if parameters else model
-    speeds = set(speed_key(v) for v in trim_speeds) | {speed_key(mv.trim_speed) for mv in maneuvers}
-    trims, problems = model_trims(mdl, speeds)
-    pred = Prediction(label=label, parameters=dict(parameters), trims=trims, problems=list(problems))
-    for mv in maneuvers:
-        tp = trims.get(speed_key(mv.trim_speed))
-        if tp is None:
-            pred.maneuvers[mv.name] = None
-            pred.problems.append(f"maneuver {mv.name}: no model trim at {mv.trim_speed / KT:.1f} kt, not simulated")
-            continue
-        try:
-            pred.maneuvers[mv.name] = simulate_maneuver(mdl, mv, tp)
-        except Diverged as exc:
-            pred.maneuvers[mv.name] = None
-            pred.partial[mv.name] = exc.partial
-            pred.problems.append(f"maneuver {mv.name}: simulation {exc} (shown up to there, no RMS)")
-        except Exception as exc:  # noqa: BLE001 - an unstable model must not stop the report
-            pred.maneuvers[mv.name] = None
-            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            pred.problems.append(f"maneuver {mv.name}: simulation failed ({msg})")
-    return pred
 
 
 def _rms(x) -> float:

@@ -16,20 +16,10 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from ..units import DEG, KT
+from ..channels import DISPLAY_UNITS, OUTPUTS, TRIM_CHANNELS
 
 #: display unit and SI -> display factor of every plotted quantity
-UNITS = {
-    "q": ("deg/s", 1 / DEG),
-    "theta": ("deg", 1 / DEG),
-    "n_x": ("g", 1.0),
-    "n_z": ("g", 1.0),
-    "TAS": ("kt", 1 / KT),
-    "beta_0": ("deg", 1 / DEG),
-    "col": ("deg", 1 / DEG),
-    "lon": ("deg", 1 / DEG),
-    "V": ("kt", 1 / KT),
-}
+UNITS = DISPLAY_UNITS
 #: axis names (matplotlib mathtext)
 SYMBOLS = {
     "q": "$q$",
@@ -141,7 +131,7 @@ def plot_pareto_front(front: pd.DataFrame, utopia: Sequence[float], nadir: Seque
 
 # ---------------------------------------------------------------- Fig. 5
 def plot_trim_vs_speed(trims: pd.DataFrame, curves: Mapping[str, pd.DataFrame],
-                       channels: Sequence[str] = ("col", "lon", "theta"),
+                       channels: Sequence[str] = TRIM_CHANNELS,
                        styles: Mapping[str, dict] | None = None, title: str | None = None) -> Figure:
     """Trim inputs and attitude against airspeed (paper Fig. 5).
 
@@ -194,7 +184,7 @@ def _ylim(data_vals: list, model_vals: list):
 
 
 def plot_validation(maneuvers: Mapping[str, pd.DataFrame], predictions: Mapping[str, Mapping[str, pd.DataFrame | None]],
-                    outputs: Sequence[str] = ("q", "theta", "n_x", "n_z", "TAS", "beta_0"),
+                    outputs: Sequence[str] = OUTPUTS,
                     inputs: Mapping[str, Sequence[str]] | None = None, styles: Mapping[str, dict] | None = None,
                     titles: Mapping[str, str] | None = None,
                     notes: Mapping[str, Sequence[str]] | None = None, column_width: float = 4.8) -> Figure:

@@ -24,33 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..physics.model import HelicopterModel
-from .compiled import simulate_outputs
-from .integrate import sampled, simulate
-from .trim import trim_float, trim_sweep
-
-
-def maneuver_outputs(model: HelicopterModel, maneuvers, outputs, substeps: int = 4,
-                     compiled: bool = True) -> dict[str, np.ndarray]:
-    """Model outputs at the samples of every maneuver, concatenated per output (SI).
-
-    RK4 with ``substeps`` steps per sample interval, evaluated by casadi (:mod:`.compiled`, about
-    20x faster: studies/simulation_speed.py) or, with ``compiled=False``, by the Python integrator
-    of :mod:`.integrate`; the two agree to rounding.
-    """
-    out = {o: [] for o in outputs}
-    for mv in maneuvers:
-        t = mv.data["t"].to_numpy()
-        inc = mv.increments()
-        tp = trim_float(model, mv.trim_speed)
-        if compiled:
-            y = simulate_outputs(model, tp, t, inc, outputs, substeps)
-            for o in outputs:
-                out[o].append(y[o])
-            continue
-        df = simulate(model, tp, t, {k: sampled(t, v) for k, v in inc.items()}, method="rk4", substeps=substeps)
-        for o in outputs:
-            out[o].append(df[o].to_numpy())
-    return {o: np.concatenate(v) if v else np.zeros(0) for o, v in out.items()}
+from .replay import maneuver_outputs
+from .trim import trim_sweep
 
 
 def trim_outputs(model: HelicopterModel, speeds, outputs) -> dict[str, np.ndarray]:

@@ -57,9 +57,9 @@ class BenchmarkSettings:
     #: machine varies by 10-30 % between runs, enough to move the growth exponent by 0.1 (docs/performance.md)
     repeats: int = 1
     #: also build, set up and solve point A at the first size with every row through the NL file
-    #: (``CasadiIpoptSolver.point_rows = False``, the route before the point-described rows)
+    #: (``CasadiSettings.point_rows = False``, the route before the point-described rows)
     compare_nl_route: bool = False
-    #: the whole benchmark with every row through the NL file (``CasadiIpoptSolver.point_rows = False``)
+    #: the whole benchmark with every row through the NL file (``CasadiSettings.point_rows = False``)
     nl_route: bool = False
     overrides: dict = field(default_factory=dict)  # config table overrides, as load_identification_config
     command: str = ""
@@ -181,21 +181,23 @@ def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=pr
     return row
 
 
+def with_point_rows(pareto, point_rows: bool):
+    """Front settings whose casadi-ipopt adapter takes the point-rows route ``point_rows`` (its
+    ``CasadiSettings.point_rows``, passed as the solver option ``point_rows``) unless the config's
+    ``[solver] point_rows`` already chose one."""
+    if pareto.solver != "casadi-ipopt":
+        return pareto
+    return dataclasses.replace(pareto, solver_options={"point_rows": point_rows, **pareto.solver_options})
+
+
 def measure_nl_route(cfg, base: IdentificationData, k: int, progress=print) -> dict:
     """Build, set-up and point A at size k with every row written to the NL file (no point rows)."""
-    from .solvers.casadi_ipopt import CasadiIpoptSolver
-
     data = repeat_maneuvers(base, k)
     t0 = time.perf_counter()
     m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
     build = time.perf_counter() - t0
-    old = CasadiIpoptSolver.point_rows
-    CasadiIpoptSolver.point_rows = False
-    try:
-        ps = ParetoSolver(m, dataclasses.replace(cfg.pareto, cold_check=False))
-        a = ps.point_a()
-    finally:
-        CasadiIpoptSolver.point_rows = old
+    ps = ParetoSolver(m, dataclasses.replace(with_point_rows(cfg.pareto, False), cold_check=False))
+    a = ps.point_a()
     row = {"size": k, "build_time": build, "setup_time": a.setup_time,
            "setup_breakdown": dict(getattr(ps.solver, "setup_breakdown", {})), "point_a": _point(a),
            "a_solve_time": a.wall_time, "a_iterations": a.iterations,
@@ -269,17 +271,11 @@ def run_benchmark(settings: BenchmarkSettings, out: str | Path | None = None, pr
             Path(out).parent.mkdir(parents=True, exist_ok=True)
             Path(out).write_text(json.dumps(result, indent=1, default=float))
 
-    from .solvers.casadi_ipopt import CasadiIpoptSolver
-
     result["route"] = "NL file only" if settings.nl_route else "point rows"
+    routed = dataclasses.replace(cfg, pareto=with_point_rows(cfg.pareto, not settings.nl_route))
     for i, k in enumerate(settings.sizes):
-        old = CasadiIpoptSolver.point_rows
-        CasadiIpoptSolver.point_rows = not settings.nl_route
-        try:
-            result["sizes"].append(measure_size(cfg, base, int(k), settings.front and i == 0, progress,
-                                                settings.repeats))
-        finally:
-            CasadiIpoptSolver.point_rows = old
+        result["sizes"].append(measure_size(routed, base, int(k), settings.front and i == 0, progress,
+                                            settings.repeats))
         save()
         if i == 0 and settings.shooting != "none":
             progress(f"single shooting ({settings.shooting}) on size {k} ...")

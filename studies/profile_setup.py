@@ -32,9 +32,9 @@ if str(ROOT) not in sys.path:
 from pyomo_heli.config import ConfigError, load_identification_config  # noqa: E402
 from pyomo_heli.identify import build_problem  # noqa: E402
 from pyomo_heli.pareto.front import ParetoSolver  # noqa: E402
-from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver, resolve_options  # noqa: E402
+from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver, CasadiSettings, resolve_options  # noqa: E402
 
-#: variant name -> CasadiIpoptSolver class attributes; the first is the default, the second the alternative
+#: variant name -> CasadiSettings fields; the first is the default, the second the alternative
 COMPARISONS = {
     "defined-variables": {"defined variables (default)": {"export_defined_variables": True},
                           "inlined": {"export_defined_variables": False}},
@@ -46,26 +46,19 @@ STAGES = ("nl_write", "casadi_import", "expand", "jacobian", "hessian", "nlpsol"
 
 
 def measure(cfg, attributes: dict) -> dict:
-    """Build the NLP and the solver with the given adapter attributes; seconds per stage."""
-    saved = {k: getattr(CasadiIpoptSolver, k) for k in attributes}
-    try:
-        for k, v in attributes.items():
-            setattr(CasadiIpoptSolver, k, v)
-        t0 = time.perf_counter()
-        m, _, _ = build_problem(cfg)
-        build = time.perf_counter() - t0
-        ps = ParetoSolver(m, cfg.pareto)
-        opts, verbose, _ = resolve_options(ps.solver.options, None, "none")
-        ps.solver._solver_for(opts, verbose)  # builds the Hessian
-        s = ps.solver
-        row = {"variables": len(s.variables), "graph_instructions": s.graph_instructions, "build": build}
-        row.update(s.setup_breakdown)
-        row["set-up"] = sum(s.setup_breakdown.values())
-        row["hessian_split"] = s._hessian_split
-        return row
-    finally:
-        for k, v in saved.items():
-            setattr(CasadiIpoptSolver, k, v)
+    """Build the NLP and the solver with the given adapter settings; seconds per stage."""
+    t0 = time.perf_counter()
+    m, _, _ = build_problem(cfg)
+    build = time.perf_counter() - t0
+    ParetoSolver(m, cfg.pareto)  # scales the objectives and builds the front's objective on the model
+    s = CasadiIpoptSolver(m, cfg.pareto.solver_options, CasadiSettings(**attributes))  # the adapter measured
+    opts, verbose, _ = resolve_options(s.options, None, "none")
+    s._solver_for(opts, verbose)  # builds the Hessian
+    row = {"variables": len(s.variables), "graph_instructions": s.graph_instructions, "build": build}
+    row.update(s.setup_breakdown)
+    row["set-up"] = sum(s.setup_breakdown.values())
+    row["hessian_split"] = s._hessian_split
+    return row
 
 
 def main(argv=None) -> int:

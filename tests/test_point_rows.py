@@ -1,11 +1,12 @@
 """The maneuver blocks' physics rows evaluated point by point (solvers/point_rows.py) against the NL route.
 
 The second method here is the NL file itself: the same Pyomo model solved with every row written to the
-NL file and differentiated by casadi as one graph (``CasadiIpoptSolver.point_rows = False``). Rows,
+NL file and differentiated by casadi as one graph (``CasadiSettings(point_rows=False)``). Rows,
 Jacobian and Lagrangian Hessian must agree entry by entry at the same point, and the solves must agree.
 """
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,7 @@ from pyomo_heli.config import load_identification_config
 from pyomo_heli.identify import build_problem
 from pyomo_heli.nlp.parameters import free_parameter_values
 from pyomo_heli.pareto.front import ParetoSolver
-from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver
+from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver, CasadiSettings
 from pyomo_heli.uncertainty.reduced_hessian import _sparse
 
 HERE = Path(__file__).parent
@@ -26,12 +27,7 @@ CONFIGS = {"input_errors": HERE / "configs" / "tiny_case1_input_errors.toml",
 
 
 def _solver(m, point_rows: bool, first: bool = True) -> CasadiIpoptSolver:
-    old = CasadiIpoptSolver.point_rows, CasadiIpoptSolver.point_rows_first
-    CasadiIpoptSolver.point_rows, CasadiIpoptSolver.point_rows_first = point_rows, first
-    try:
-        return CasadiIpoptSolver(m)
-    finally:
-        CasadiIpoptSolver.point_rows, CasadiIpoptSolver.point_rows_first = old
+    return CasadiIpoptSolver(m, settings=CasadiSettings(point_rows=point_rows, point_rows_first=first))
 
 
 @pytest.mark.parametrize("case, first", [("input_errors", True), ("output_error", True), ("output_error", False)])
@@ -78,14 +74,10 @@ def test_point_a_is_the_same_solve():
     """Point A through both routes: the same iterations and the same estimate (to solver tolerance)."""
     out = {}
     for flag in (False, True):
-        old = CasadiIpoptSolver.point_rows
-        CasadiIpoptSolver.point_rows = flag
-        try:
-            cfg = load_identification_config(CONFIGS["input_errors"])
-            m, _, _ = build_problem(cfg)
-            p = ParetoSolver(m, cfg.pareto).point_a()
-        finally:
-            CasadiIpoptSolver.point_rows = old
+        cfg = load_identification_config(CONFIGS["input_errors"])
+        m, _, _ = build_problem(cfg)
+        pareto = dataclasses.replace(cfg.pareto, solver_options={**cfg.pareto.solver_options, "point_rows": flag})
+        p = ParetoSolver(m, pareto).point_a()
         assert p.success, p.status
         out[flag] = (p.iterations, p.J_time, free_parameter_values(m))
     print("NL route vs point rows:", out)
@@ -117,5 +109,5 @@ def test_solver_point_rows_setting(tmp_path, text, message):
     cfg = load_identification_config(f)
     m, _, _ = build_problem(cfg)
     solver = ParetoSolver(m, cfg.pareto).solver
-    assert solver.point_rows is False and solver._assembly is None
+    assert solver.settings.point_rows is False and solver._assembly is None
     assert "point_rows" not in solver.options  # not handed to Ipopt

@@ -208,16 +208,15 @@ def chain_with_dense_row(n=400):
     return m
 
 
-def test_dense_row_jacobian_is_fast_and_exact(monkeypatch):
+def test_dense_row_jacobian_is_fast_and_exact():
     m = chain_with_dense_row()
     res = make_solver(m).solve()
     assert res.success and res.setup_time < 3.0  # casadi's own colouring: ~15 s at n=4000
     fast = [m.p.value] + xs(m) + [m.dual[m.eps_con]]
-    from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver
+    from pyomo_heli.solvers.casadi_ipopt import CasadiSettings
 
-    monkeypatch.setattr(CasadiIpoptSolver, "dense_row_threshold", 10**9)  # casadi's default Jacobian
     m2 = chain_with_dense_row()
-    assert make_solver(m2).solve().success
+    assert make_solver(m2, settings=CasadiSettings(dense_row_threshold=10**9)).solve().success  # casadi's Jacobian
     assert fast == pytest.approx([m2.p.value] + xs(m2) + [m2.dual[m2.eps_con]], abs=1e-7)
 
 
@@ -357,15 +356,14 @@ def chain_with_dense_blocks(n=2500, k=24):
     return m
 
 
-def test_blockwise_hessian_equals_casadi_hessian(monkeypatch):
+def test_blockwise_hessian_equals_casadi_hessian():
     import numpy as np
 
-    from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver, resolve_options
+    from pyomo_heli.solvers.casadi_ipopt import CasadiSettings, resolve_options
 
     def build(custom):
-        monkeypatch.setattr(CasadiIpoptSolver, "custom_hessian", custom)
         m = chain_with_dense_blocks()
-        solver = make_solver(m)
+        solver = make_solver(m, settings=CasadiSettings(custom_hessian=custom))
         opts, verbose, _ = resolve_options(solver.options, None, "primal")
         hess = solver._solver_for(opts, verbose).get_function("nlp_hess_l")
         return m, solver, hess

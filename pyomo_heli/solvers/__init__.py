@@ -40,8 +40,10 @@ __all__ = [
 ]
 
 
-def make_solver(model, name: str = "casadi-ipopt", options: dict | None = None):
+def make_solver(model, name: str = "casadi-ipopt", options: dict | None = None, settings=None):
     """Create a solver object for ``model``; it has ``solve(warm_start=..., options=...)``.
+
+    ``settings``: the casadi-ipopt adapter's switches (:class:`.casadi_ipopt.CasadiSettings`; None: defaults).
 
     Raises ValueError for an unknown name and SolverUnavailableError when the
     backend cannot run here.
@@ -49,7 +51,9 @@ def make_solver(model, name: str = "casadi-ipopt", options: dict | None = None):
     if name == "casadi-ipopt":
         from .casadi_ipopt import CasadiIpoptSolver
 
-        return CasadiIpoptSolver(model, options)
+        return CasadiIpoptSolver(model, options, settings)
+    if settings is not None:
+        raise ValueError(f"solver {name!r}: settings apply to casadi-ipopt only")
     if name in ("pounce", "ipopt"):
         from .ampl import AmplSolver
 

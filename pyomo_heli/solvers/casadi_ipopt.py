@@ -39,6 +39,7 @@ from __future__ import annotations
 import os
 import tempfile
 import time
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pyomo.environ as pyo
@@ -140,6 +141,42 @@ def _bound(value, default):
     return default if value is None else float(value)
 
 
+@dataclass(frozen=True)
+class CasadiSettings:
+    """Switches of the casadi-ipopt adapter (how it builds derivatives, not Ipopt options).
+
+    Passed to :class:`CasadiIpoptSolver` (``settings=``); ``point_rows`` can also come from the
+    solver options (``[solver] point_rows``). The defaults are the production route; the other
+    values are kept for comparison (benchmark, tests).
+    """
+
+    #: A Jacobian row or column, or a Hessian column, is *dense* when it has
+    #: more nonzeros than this and than ``dense_factor`` times the 99th
+    #: percentile of its kind; dense ones get their own derivative blocks
+    #: (see :meth:`_jacobian_function`, :meth:`_hessian_function`). A huge
+    #: value gives casadi's own Jacobian and Hessian.
+    dense_row_threshold: int = 20
+    dense_factor: float = 3.0
+    #: False: let casadi derive the Lagrangian Hessian (slow with dense
+    #: columns; kept for comparison).
+    custom_hessian: bool = True
+    #: percentile of the Hessian column degrees that defines "typical" (see _hessian_function)
+    hessian_dense_percentile: int = 90
+    #: named Pyomo Expressions (the collocation blocks' shared intermediates) go to the NL file
+    #: as defined variables, written and differentiated once; False inlines them into every
+    #: equation that uses them (the same functions, a graph about twice as large; kept for
+    #: comparison: studies/profile_setup.py --compare defined-variables)
+    export_defined_variables: bool = True
+    #: blocks that describe their rows point by point (``blk.point_rows``, the maneuver blocks) get
+    #: those rows from one compiled function per point mapped over the points instead of from the
+    #: NL file (solvers/point_rows.py); False: everything through the NL file (kept for comparison)
+    point_rows: bool = True
+    #: with point rows: their rows and their own variables first, the NL file's after. The NL route
+    #: puts the nonlinear rows and variables (these) first too; with them last, point A took 13.5 s
+    #: instead of 11.3 s on Case 1, same iterations (MUMPS' pivoting; docs/performance.md)
+    point_rows_first: bool = True
+
+
 class CasadiIpoptSolver:
     """Ipopt-in-casadi adapter for one Pyomo model; build once, re-solve often.
 
@@ -149,37 +186,15 @@ class CasadiIpoptSolver:
         The Pyomo model. Its NL representation is written at construction.
     options:
         Ipopt options (e.g. ``tol``, ``max_iter``, ``max_wall_time``,
-        ``mu_strategy``) plus ``verbose`` (True prints Ipopt's iteration log).
+        ``mu_strategy``) plus ``verbose`` (True prints Ipopt's iteration log)
+        and ``point_rows`` (a :class:`CasadiSettings` switch).
+    settings:
+        The adapter's switches (:class:`CasadiSettings`; default: the production route).
     """
 
     name = "casadi-ipopt"
-    #: A Jacobian row or column, or a Hessian column, is *dense* when it has
-    #: more nonzeros than this and than ``dense_factor`` times the 99th
-    #: percentile of its kind; dense ones get their own derivative blocks
-    #: (see :meth:`_jacobian_function`, :meth:`_hessian_function`). A huge
-    #: value gives casadi's own Jacobian and Hessian.
-    dense_row_threshold = 20
-    dense_factor = 3.0
-    #: False: let casadi derive the Lagrangian Hessian (slow with dense
-    #: columns; kept for comparison).
-    custom_hessian = True
-    #: percentile of the Hessian column degrees that defines "typical" (see _hessian_function)
-    hessian_dense_percentile = 90
-    #: named Pyomo Expressions (the collocation blocks' shared intermediates) go to the NL file
-    #: as defined variables, written and differentiated once; False inlines them into every
-    #: equation that uses them (the same functions, a graph about twice as large; kept for
-    #: comparison: studies/profile_setup.py --compare defined-variables)
-    export_defined_variables = True
-    #: blocks that describe their rows point by point (``blk.point_rows``, the maneuver blocks) get
-    #: those rows from one compiled function per point mapped over the points instead of from the
-    #: NL file (solvers/point_rows.py); False: everything through the NL file (kept for comparison)
-    point_rows = True
-    #: with point rows: their rows and their own variables first, the NL file's after. The NL route
-    #: puts the nonlinear rows and variables (these) first too; with them last, point A took 13.5 s
-    #: instead of 11.3 s on Case 1, same iterations (MUMPS' pivoting; docs/performance.md)
-    point_rows_first = True
 
-    def __init__(self, model, options: dict | None = None):
+    def __init__(self, model, options: dict | None = None, settings: CasadiSettings | None = None):
         try:
             import casadi
         except ImportError as exc:  # pragma: no cover - casadi is a dependency
@@ -191,8 +206,9 @@ class CasadiIpoptSolver:
         self._ca = casadi
         self.model = model
         self.options = dict(options or {})
+        self.settings = settings or CasadiSettings()
         if "point_rows" in self.options:  # our own switch, not an Ipopt option ([solver] point_rows)
-            self.point_rows = bool(self.options.pop("point_rows"))
+            self.settings = replace(self.settings, point_rows=bool(self.options.pop("point_rows")))
         self._pending_setup = 0.0
         #: seconds spent per set-up stage, summed over rebuilds (for the benchmark)
         self.setup_breakdown = {"nl_write": 0.0, "casadi_import": 0.0, "expand": 0.0, "point_rows": 0.0,
@@ -210,7 +226,7 @@ class CasadiIpoptSolver:
     def _rebuild(self) -> None:
         ca = self._ca
         t0 = time.perf_counter()
-        blocks = find_point_rows(self.model) if self.point_rows else []
+        blocks = find_point_rows(self.model) if self.settings.point_rows else []
         # the point-described rows are evaluated by their blocks' compiled functions, not the NL file
         handled = [con for pr in blocks for con, _, _ in pr.rows if con.active]
         with tempfile.TemporaryDirectory(prefix="pyomo_heli_nl_") as tmp:
@@ -221,7 +237,7 @@ class CasadiIpoptSolver:
                 with writing(path), open(path, "w") as ostream:  # a full temporary folder names the file
                     info = NLWriter().write(
                         self.model, ostream, linear_presolve=False, scale_model=False,
-                        export_defined_variables=self.export_defined_variables,
+                        export_defined_variables=self.settings.export_defined_variables,
                     )
             finally:
                 for con in handled:
@@ -239,7 +255,7 @@ class CasadiIpoptSolver:
         if blocks:
             column_of = {id(v): i for i, v in enumerate(self.variables)}
             A = self._assembly = PointRowsAssembly(ca, blocks, column_of, len(self.variables))
-            if self.point_rows_first:
+            if self.settings.point_rows_first:
                 A.shift_columns(self._n_nl, len(A.extra))
                 self.variables = A.extra + self.variables
                 self.constraints = A.constraints + self.constraints
@@ -302,7 +318,8 @@ class CasadiIpoptSolver:
         """Indices whose nonzero count is an outlier (see ``dense_row_threshold``)."""
         if len(counts) == 0:
             return []
-        threshold = max(self.dense_row_threshold, self.dense_factor * np.percentile(counts, percentile))
+        cfg = self.settings
+        threshold = max(cfg.dense_row_threshold, cfg.dense_factor * np.percentile(counts, percentile))
         return np.flatnonzero(counts > threshold).tolist()
 
     def _scan_expressions(self) -> None:
@@ -456,7 +473,7 @@ class CasadiIpoptSolver:
         # small NLP; with the 99th percentile they hid themselves and the
         # symmetric colouring of the rest took 8.5 s instead of 2.2 s at 3k
         # variables (benchmark --quick, docs/performance.md).
-        d2 = rest[self._dense(degree, percentile=self.hessian_dense_percentile)].tolist()
+        d2 = rest[self._dense(degree, percentile=self.settings.hessian_dense_percentile)].tolist()
         if not d1 and not d2:
             return None
         dense = d1 + d2
@@ -507,7 +524,7 @@ class CasadiIpoptSolver:
             opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False, "no_nlp_grad": True}
             if self._jac_g is not None:
                 opts["jac_g"] = self._jac_g
-            if self.custom_hessian and str(ipopt.get("hessian_approximation", "exact")) == "exact":
+            if self.settings.custom_hessian and str(ipopt.get("hessian_approximation", "exact")) == "exact":
                 if self._hess_lag is False:
                     t_h = time.perf_counter()
                     self._hess_lag = self._hessian_function()

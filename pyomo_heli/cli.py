@@ -376,7 +376,8 @@ def cmd_diagnose(args) -> int:
     from pathlib import Path
 
     from .diagnosis.analysis import diagnose
-    from .diagnosis.residuals import load_result_config, compute_residuals
+    from .config import load_result_config
+    from .diagnosis.residuals import compute_residuals
     from .pareto.result import IdentificationResult
     from .report.diagnosis import write_diagnosis_report
 

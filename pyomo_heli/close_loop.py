@@ -50,7 +50,7 @@ from . import interrupts
 from .config import ConfigError, IdentificationConfig
 from .dataset import load_flight_test
 from .diagnosis import attribution as attr
-from .diagnosis.candidates import CANDIDATES, make_candidate
+from .diagnosis.candidates import CANDIDATES, model_with_candidates
 from .identify import build_problem, identification_fingerprint, run_identification, shape_values
 from .nlp.identification import identification_data, prepare_data
 from .nlp.parameters import FreeParameter
@@ -58,8 +58,7 @@ from .pareto.result import write_json
 from .pareto.store import FolderLock, claim_folder, read_checkpoint, write_checkpoint
 from .physics.model import HelicopterModel
 from .report.identification import CURVE_SPEEDS, predict, trim_rms, validation_rms
-
-LOOP_FILE = "loop.json"
+from .report.loop import LOOP_FILE, load_loop  # noqa: F401 - load_loop re-exported (studies)
 
 
 @dataclass
@@ -143,15 +142,6 @@ def errors_of(model: HelicopterModel, params: dict, id_mans, val_mans, trims, la
     return {"identification_rms": validation_rms(pred, id_mans)["all"],
             "validation_rms": validation_rms(pred, val_mans)["all"] if val_mans else {},
             "trim_rms": trim_rms(pred, trims)["all"], "problems": pred.problems}
-
-
-def model_with_candidates(model: HelicopterModel, names, shape: dict | None = None) -> HelicopterModel:
-    """``model`` plus the candidate extensions ``names`` (in order), their shape parameters at ``shape`` (the
-    values a loop iteration held; defaults for those not given). The one place a loop iteration's model is
-    rebuilt from its record (the loop, ``config_of_result``, the loop report)."""
-    out = HelicopterModel(parameters=model.parameters,
-                          extensions=tuple(model.extensions) + tuple(make_candidate(n) for n in names))
-    return out.with_parameters(**(shape or {}))
 
 
 def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: float) -> IdentificationConfig:
@@ -439,8 +429,3 @@ def _close_loop(cfg, out: Path, settings, progress, restart, ft, id_data, val_ma
         i += 1
 
 
-def load_loop(out) -> dict:
-    f = Path(out) / LOOP_FILE
-    if not f.is_file():
-        raise FileNotFoundError(f"{out}: no {LOOP_FILE}; is this a close-loop results folder?")
-    return json.loads(f.read_text())

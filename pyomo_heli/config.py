@@ -390,3 +390,11 @@ def _objectives_use(raw: dict, f: str):
         return order, LinearSettings.from_table(lin_raw)
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"{f} [linear]: {exc}") from None
+
+
+def load_result_config(results_dir: str | Path, config: str | Path | None = None) -> IdentificationConfig:
+    """The identification config of a results folder (``config`` overrides the path its ``chosen.json``
+    names, see :func:`pyomo_heli.diagnosis.residuals.find_config`), its dataset taken from the config."""
+    from .diagnosis.residuals import find_config
+
+    return load_identification_config(config or find_config(results_dir))

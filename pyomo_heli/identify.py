@@ -13,8 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from .config import IdentificationConfig
-from .dataset import load_flight_test
-from .nlp.identification import build_identification_nlp, identification_data
+from .nlp.identification import build_problem
 from .pareto.front import ParetoSolver, utopia_distance
 from .pareto.result import IdentificationResult, write_csv
 from . import interrupts
@@ -58,14 +57,6 @@ def _point_dict(p) -> dict:
 def _mean(series):
     series = pd.to_numeric(series, errors="coerce").dropna()
     return float(series.mean()) if len(series) else None
-
-
-def build_problem(cfg: IdentificationConfig):
-    """Load the data and build the NLP of a config (no solve). Returns (nlp, data, flight_test)."""
-    ft = load_flight_test(cfg.dataset)
-    data = identification_data(cfg, ft)
-    m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
-    return m, data, ft
 
 
 def identification_fingerprint(cfg: IdentificationConfig) -> str:

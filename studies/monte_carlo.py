@@ -31,7 +31,7 @@ def main(argv=None) -> int:
     from pyomo_heli.physics.parameters import bo105
     from pyomo_heli.report.monte_carlo import plot_monte_carlo, summary_markdown
     from pyomo_heli.uncertainty.monte_carlo import ProblemSpec, run_monte_carlo
-    from pyomo_heli.uncertainty.realizations import flight_test_noise
+    from pyomo_heli.flighttest.config import flight_test_noise
 
     from _study_args import nonneg_int, out_folder
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyomo_heli.config import load_identification_config
-from pyomo_heli.diagnosis.residuals import Residuals, compute_residuals, find_config, result_residuals
+from pyomo_heli.config import load_identification_config, load_result_config
+from pyomo_heli.diagnosis.residuals import Residuals, compute_residuals, find_config
 from pyomo_heli.pareto.result import IdentificationResult
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -83,7 +83,7 @@ def test_find_config_reports_a_missing_config(tmp_path):
     res.info = {**res.info, "config": "no/such/config.toml"}
     res.save(tmp_path)
     with pytest.raises(FileNotFoundError, match="info.config"):
-        result_residuals(tmp_path)
+        load_result_config(tmp_path)
 
 
 def test_time_rows_align_with_simulation_sensitivities(clean_residuals):

@@ -18,6 +18,7 @@ Registry: :data:`CANDIDATES` (name -> class); :func:`make_candidate` builds one.
 from __future__ import annotations
 
 from ..physics.extensions import Extension
+from ..physics.model import HelicopterModel
 from ..physics.parameters import DEG, ParameterSpec
 
 LN2 = 0.6931471805599453
@@ -286,3 +287,12 @@ def make_candidate(name: str) -> Candidate:
         close = difflib.get_close_matches(name, list(CANDIDATES), n=2)
         hint = f" (did you mean {' or '.join(close)}?)" if close else ""
         raise KeyError(f"unknown candidate extension {name!r}{hint}; choose from {', '.join(CANDIDATES)}") from None
+
+
+def model_with_candidates(model: HelicopterModel, names, shape: dict | None = None) -> HelicopterModel:
+    """``model`` plus the candidate extensions ``names`` (in order), their shape parameters at ``shape`` (the
+    values a loop iteration held; defaults for those not given). The one place a loop iteration's model is
+    rebuilt from its record (the loop, ``config_of_result``, the loop report)."""
+    out = HelicopterModel(parameters=model.parameters,
+                          extensions=tuple(model.extensions) + tuple(make_candidate(n) for n in names))
+    return out.with_parameters(**(shape or {}))

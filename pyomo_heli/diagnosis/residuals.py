@@ -27,12 +27,12 @@ import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
 from ..channels import OUTPUTS, RESIDUAL_DISPLAY_UNITS, TRIM_CHANNELS
-from ..config import IdentificationConfig, load_identification_config
 from ..dataset import load_flight_test
 from ..nlp.identification import prepare_data
 from ..pareto.result import IdentificationResult, write_json
@@ -41,6 +41,9 @@ from ..simulation.replay import model_trims, replay
 from ..units import DEG, KT
 from .innovations import innovations
 from .timeseries import TEST_RATE_HZ
+
+if TYPE_CHECKING:  # the config layer sits above the diagnosis: annotation only
+    from ..config import IdentificationConfig
 
 #: time outputs whose residuals are computed (every recorded output the model predicts)
 TIME_OUTPUTS = OUTPUTS
@@ -402,21 +405,12 @@ def find_config(results_dir: str | Path, result: IdentificationResult | None = N
                             f"(tried the current folder and the parents of {results_dir}); pass it explicitly")
 
 
-def load_result_config(results_dir: str | Path, config: str | Path | None = None) -> IdentificationConfig:
-    """The identification config of a results folder, its dataset taken from the config."""
-    res = IdentificationResult.load(results_dir)
-    return load_identification_config(config or find_config(results_dir, res))
-
-
-def result_residuals(results_dir: str | Path, config: str | Path | None = None, roles=ROLES
-                     ) -> tuple[IdentificationConfig, dict[str, Residuals]]:
+def result_residuals(results_dir: str | Path, cfg: IdentificationConfig, roles=ROLES) -> dict[str, Residuals]:
     """Residuals of a results folder at the chosen point (Eq. 11) and at the time-domain point (A).
 
-    Returns ``(cfg, {"chosen": Residuals, "time_domain": Residuals})``.
-    ``config`` overrides the path stored in ``chosen.json``.
+    ``cfg``: the folder's identification config (``pyomo_heli.config.load_result_config``).
+    Returns ``{"chosen": Residuals, "time_domain": Residuals}``.
     """
     res = IdentificationResult.load(results_dir)
-    cfg = load_identification_config(config or find_config(results_dir, res))
-    out = {"chosen": compute_residuals(cfg, res.chosen["parameters"], "multi-objective (C)", roles),
-           "time_domain": compute_residuals(cfg, res.time_domain["parameters"], "time-domain (A)", roles)}
-    return cfg, out
+    return {"chosen": compute_residuals(cfg, res.chosen["parameters"], "multi-objective (C)", roles),
+            "time_domain": compute_residuals(cfg, res.time_domain["parameters"], "time-domain (A)", roles)}

@@ -258,3 +258,16 @@ def load_config(path: str | Path) -> GeneratorConfig:
                            description=_get(ds, "description", wd, str, ""), seed=int(seed),
                            parameters=params, effects=effects, sensors=sensors, noise=noise, trim_speeds=speeds,
                            trim_sigma=ts, trim_offset=to, maneuvers=plans, trim_stream=trim_stream)
+
+
+def flight_test_noise(generator_config: str | Path) -> tuple[dict, dict]:
+    """(sigma, trim_sigma) in SI of a flight-test generator config (e.g. data/bo105_synthetic.toml).
+
+    A trim point's noise is its averaging noise and its not-quite-steady offset
+    together: sqrt(sigma^2 + offset^2).
+    """
+    cfg = load_config(generator_config)
+    sigma = dict(cfg.sensors.sigma)
+    trim = {k: math.hypot(cfg.trim_sigma.get(k, 0.0), cfg.trim_offset.get(k, 0.0))
+            for k in set(cfg.trim_sigma) | set(cfg.trim_offset)}
+    return sigma, trim

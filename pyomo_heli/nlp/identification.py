@@ -403,6 +403,16 @@ def identification_data(cfg, ft=None) -> IdentificationData:
     return data
 
 
+def build_problem(cfg):
+    """Load the data and build the NLP of a config (no solve). Returns (nlp, data, flight_test)."""
+    from ..dataset import load_flight_test
+
+    ft = load_flight_test(cfg.dataset)
+    data = identification_data(cfg, ft)
+    m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
+    return m, data, ft
+
+
 def maneuver_outputs(m: pyo.ConcreteModel, name: str, outputs) -> dict[str, np.ndarray]:
     blk = m.man[name]
     return {o: np.array([pyo.value(blk.y[o, t]) for t in blk.samples]) for o in outputs}

@@ -395,7 +395,7 @@ def _parameter_section(cfg, m) -> list[str]:
 # ---------------------------------------------------------------- entry point
 def inspect_problem(cfg, diagnostics: bool = True) -> str:
     """Build the NLP of ``cfg`` (no solve) and return the inspection report as text."""
-    from ..identify import build_problem
+    from .identification import build_problem
 
     m, data, _ = build_problem(cfg)
     out = ["=" * WIDTH, "1. problem"] + ["=" * WIDTH] + _header(cfg, m, data)

@@ -27,8 +27,9 @@ import pyomo.environ as pyo
 
 from ..nlp.parameters import free_parameter_values
 from ..solvers import make_solver, scale_multipliers
-from .front import (LEAVE_ANCHOR_OPTIONS, FrontPoint, ParetoSettings, _Snapshot, epsilon_grid,
-                    pin_objective_settings, solve_with_fallback)
+from .front import (LEAVE_ANCHOR_OPTIONS, FrontPoint, ParetoSettings, epsilon_grid, pin_objective_settings,
+                    solve_with_fallback)
+from .snapshot import Snapshot
 
 OBJECTIVES = ("time", "trim", "linear")
 #: fraction of the anchor range kept above each objective's minimum at the tight end of the grid
@@ -129,11 +130,11 @@ class TriParetoSolver:
         a = self._solve("time", 0, "A", warm_start="none", grid=(0, 0))
         if not a.success:
             raise RuntimeError(f"anchor A (J_time alone) failed: {a.status}")
-        snap_a = _Snapshot(self.m)
+        snap_a = Snapshot(self.m)
         b = self._lexicographic("trim", "B", -1, snap_a)
-        snap_b = _Snapshot(self.m)
+        snap_b = Snapshot(self.m)
         c = self._lexicographic("linear", "C", -2, snap_a)
-        snap_c = _Snapshot(self.m)
+        snap_c = Snapshot(self.m)
         self.anchor_points = {"A": a, "B": b, "C": c}
         self.snapshots.update({"A": snap_a, "B": snap_b, "C": snap_c})
         return a, b, c
@@ -156,7 +157,7 @@ class TriParetoSolver:
         scale = max(abs(a.J_time), 1.0)
         self.snapshots["A"].restore()
         scale_multipliers(self.m, self.scale["time"] / scale)  # A's multipliers belong to A's objective scale
-        last_good = _Snapshot(self.m)
+        last_good = Snapshot(self.m)
         index = 1
         for i in range(n1):
             cols = range(n2) if i % 2 == 0 else range(n2 - 1, -1, -1)
@@ -171,7 +172,7 @@ class TriParetoSolver:
                         grid=(i, j), options=opts if ws != "primal" else None),
                     s.warm_start, last_good)
                 if p.success:
-                    last_good = self.snapshots[index] = _Snapshot(self.m)
+                    last_good = self.snapshots[index] = Snapshot(self.m)
                 else:
                     last_good.restore()
                 self.points.append(p)

@@ -14,11 +14,13 @@ The models are replayed with the float simulator (as the identification report d
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pandas as pd
 
 from ..dataset import load_flight_test
+from ..diagnosis.candidates import model_with_candidates
 from ..nlp.identification import prepare_data
 from ..physics.model import HelicopterModel
 from ..units import KT
@@ -27,11 +29,21 @@ from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _f
                              read_truth, read_truth_effects, validation_rms)
 
 
+#: the closed loop's record in its results folder (written by :mod:`pyomo_heli.close_loop`)
+LOOP_FILE = "loop.json"
+
+
+def load_loop(out) -> dict:
+    """The closed loop's record ``loop.json`` in folder ``out``."""
+    f = Path(out) / LOOP_FILE
+    if not f.is_file():
+        raise FileNotFoundError(f"{out}: no {LOOP_FILE}; is this a close-loop results folder?")
+    return json.loads(f.read_text())
+
+
 def iteration_model(base: HelicopterModel, it: dict) -> HelicopterModel:
     """The model of one loop iteration: the config's base model plus that iteration's extensions (with the
     shape parameters the loop's shape rule fixed for them)."""
-    from ..close_loop import model_with_candidates
-
     return model_with_candidates(base, it["extensions"], it.get("shape_parameters"))
 
 
@@ -161,8 +173,6 @@ WIDE = 4
 
 def write_loop_report(out, cfg) -> Path:
     """Figures and ``loop_report.md`` of the loop in ``out`` (``cfg``: the loop's identification config)."""
-    from ..close_loop import load_loop
-
     out = Path(out)
     doc = load_loop(out)
     ft = load_flight_test(cfg.dataset)

@@ -4,13 +4,12 @@ Realization k of seed s draws from ``numpy.random.default_rng([s, k])``, so
 each realization is the same whichever process computes it and in whatever
 order. Maneuver outputs get independent Gaussian white noise of standard
 deviation ``sigma[output]`` at every sample; trim points get
-``trim_sigma[output]`` per point.
+``trim_sigma[output]`` per point. The sigmas of a generated flight test:
+:func:`pyomo_heli.flighttest.config.flight_test_noise`.
 """
 from __future__ import annotations
 
 import dataclasses
-import math
-from pathlib import Path
 
 import numpy as np
 
@@ -32,18 +31,3 @@ def noisy_copy(data: IdentificationData, sigma: dict, trim_sigma: dict, seed: in
         if o in trims:
             trims[o] = trims[o].to_numpy(dtype=float) + rng.standard_normal(len(trims)) * float(trim_sigma[o])
     return IdentificationData(maneuvers=maneuvers, trims=trims, speed_tol=data.speed_tol)
-
-
-def flight_test_noise(generator_config: str | Path) -> tuple[dict, dict]:
-    """(sigma, trim_sigma) in SI of a flight-test generator config (e.g. data/bo105_synthetic.toml).
-
-    A trim point's noise is its averaging noise and its not-quite-steady offset
-    together: sqrt(sigma^2 + offset^2).
-    """
-    from ..flighttest.config import load_config
-
-    cfg = load_config(generator_config)
-    sigma = dict(cfg.sensors.sigma)
-    trim = {k: math.hypot(cfg.trim_sigma.get(k, 0.0), cfg.trim_offset.get(k, 0.0))
-            for k in set(cfg.trim_sigma) | set(cfg.trim_offset)}
-    return sigma, trim

@@ -1,0 +1,77 @@
+"""The replay module: model trims with a per-speed fallback, and one maneuver replayed from the model's trim."""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pyomo_heli.dataset import load_flight_test
+from pyomo_heli.physics.model import HelicopterModel
+from pyomo_heli.simulation import replay as rp
+from pyomo_heli.simulation.integrate import sampled, simulate
+from pyomo_heli.simulation.trim import trim_float
+from pyomo_heli.units import DEG, KT
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "bo105_synthetic"
+
+
+@pytest.fixture(scope="module")
+def maneuver():
+    ft = load_flight_test(DATA)
+    mv = next(m for m in ft.maneuvers.values() if m.role == "identification")
+    return dataclasses.replace(mv, data=mv.data[mv.data["t"] <= mv.data["t"].iloc[0] + 3.0].reset_index(drop=True))
+
+
+def test_checked_replay_in_pieces_is_the_one_piece_integration(maneuver):
+    """The divergence check integrates in 1 s pieces; that is the same RK4 arithmetic as one piece, to the bit,
+    and the same as calling the integrator directly."""
+    model = HelicopterModel()
+    tp = trim_float(model, maneuver.trim_speed)
+    checked = rp.replay(model, maneuver, tp)
+    whole = rp.replay(model, maneuver, tp, check=False)
+    t = maneuver.data["t"].to_numpy()
+    direct = simulate(model, tp, t, {k: sampled(t, v) for k, v in maneuver.increments().items()}, method="rk4",
+                      substeps=4)
+    assert len(checked) == len(t) > 2 * (1 + rp.CHUNK_S * maneuver.sample_rate)  # at least three pieces
+    for c in direct.columns:
+        np.testing.assert_array_equal(checked[c].to_numpy(), whole[c].to_numpy(), err_msg=c)
+        np.testing.assert_array_equal(whole[c].to_numpy(), direct[c].to_numpy(), err_msg=c)
+
+
+def test_a_constant_input_offset_moves_the_replay_like_an_increment(maneuver):
+    model = HelicopterModel()
+    tp = trim_float(model, maneuver.trim_speed)
+    a = rp.replay(model, maneuver, tp, offsets={"lon": 0.1 * DEG})
+    b = rp.replay(model, maneuver, tp)
+    np.testing.assert_allclose(a["lon"] - b["lon"], 0.1 * DEG, rtol=0, atol=1e-15)
+    assert np.allclose(a["col"], b["col"], rtol=0, atol=1e-15) and not np.allclose(a["q"], b["q"], atol=1e-9)
+
+
+def test_divergence_limits_are_the_dataset_plausibility_limits():
+    from pyomo_heli.dataset.schema import MANEUVER_QUANTITIES
+
+    expected = {q.si: q.limit for q in MANEUVER_QUANTITIES if q.limit}
+    assert rp.DIVERGENCE_LIMITS == {k: v for k, v in expected.items() if k in rp.OUTPUTS}
+    assert rp.DIVERGENCE_LIMITS["q"] == pytest.approx(360 * DEG) and rp.DIVERGENCE_LIMITS["TAS"] == pytest.approx(250 * KT)
+
+
+def test_model_trims_fall_back_to_one_speed_at_a_time(monkeypatch):
+    """A sweep that breaks costs only the speed that fails; the others are the sweep's own trims."""
+    model = HelicopterModel()
+    real = rp.trim_sweep
+    bad = 40 * KT
+
+    def sweep(m, speeds, gamma_fp=0.0):
+        if any(abs(v - bad) < 1e-6 for v in speeds):
+            raise RuntimeError("no trim here\nsecond line")
+        return real(m, speeds, gamma_fp=gamma_fp)
+
+    monkeypatch.setattr(rp, "trim_sweep", sweep)
+    speeds = [0.0, 20 * KT, bad, 60 * KT]
+    trims, failed = rp.model_trims(model, speeds)
+    assert failed == [(rp.speed_key(bad), "no trim here")]
+    assert trims[rp.speed_key(bad)] is None
+    for v in (0.0, 20 * KT, 60 * KT):
+        assert trims[rp.speed_key(v)].theta == pytest.approx(real(model, [v])[0].theta, abs=1e-8)  # trim tolerance

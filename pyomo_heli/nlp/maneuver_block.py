@@ -24,6 +24,35 @@ from .point_rows import PointRows
 from .trim_block import STATE_BOUNDS
 
 
+def collocation_point(x: Mapping, dx: Mapping, beta, base: Mapping, du: Mapping, err: Mapping, p, ops,
+                      extensions, states) -> SimpleNamespace:
+    """The equations of one collocation point: the one place they are written.
+
+    Both the Pyomo rules of :func:`build_maneuver_block` (``lhs == rhs``) and the compiled point rows
+    (``lhs - rhs``, :func:`_point_rows`) are built from it, with Pyomo or casadi ``ops``.
+
+    x, dx: state -> value and time derivative at the point; beta: the three flapping angles [rad];
+    p: parameter name -> value. The inputs are u_k = base_k + du_k + err_k [rad]: the start trim's
+    input, the measured increment (interpolated at the point) and the estimated input error (0
+    without errors in variables).
+
+    Returns the evaluated physics ``ctx`` (:func:`~pyomo_heli.physics.model.evaluate`) with
+    ``ctx.equations``: the (lhs, rhs) pairs of the point in row order, coef_s * dx_s = f_s for every
+    state in ``states``, then r_i = 0 for the three flapping residuals. The output equations
+    y_k = output_k at the samples come from :func:`output_equation`.
+    """
+    u = {k: base[k] + du[k] + err[k] for k in INPUTS}
+    ctx = evaluate(x, u, p, ops=ops, beta=beta, extensions=extensions)
+    ctx.equations = ([(ctx.state_eqs[s][0] * dx[s], ctx.state_eqs[s][1]) for s in states]
+                     + [(r, 0) for r in ctx.flap_residuals])
+    return ctx
+
+
+def output_equation(ctx, k: str, y):
+    """(lhs, rhs) of output ``k`` at a sample: its variable ``y`` equals the model output."""
+    return y, ctx.outputs[k]
+
+
 def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples, increments: Mapping[str, np.ndarray],
                          start, ncp: int = 3, scheme: str = "LAGRANGE-RADAU",
                          initial_guess=None, input_errors: tuple = ()) -> None:
@@ -85,21 +114,20 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
 
     def ctx_at(t):
         if t not in ctxs:
-            x = {s: blk.x[s, t] for s in states}
-            u = {k: getattr(start, k) + blk.du[k, t] + u_err(k, t) for k in INPUTS}
-            beta = [blk.beta[b, t] for b in FLAPPING]
-            ops_t = SimpleNamespace(**vars(ops), share=share_at(t))
-            ctxs[t] = evaluate(x, u, pmap, ops=ops_t, beta=beta, extensions=model.extensions)
+            ctxs[t] = collocation_point({s: blk.x[s, t] for s in states}, {s: blk.dx[s, t] for s in states},
+                                        [blk.beta[b, t] for b in FLAPPING], {k: getattr(start, k) for k in INPUTS},
+                                        {k: blk.du[k, t] for k in INPUTS}, {k: u_err(k, t) for k in INPUTS}, pmap,
+                                        SimpleNamespace(**vars(ops), share=share_at(t)), model.extensions, states)
         return ctxs[t]
 
-    def ode_rule(_, s, t):
-        if t == t0:
-            return pyo.Constraint.Skip
-        coef, rhs = ctx_at(t).state_eqs[s]
-        return coef * blk.dx[s, t] == rhs
+    def equation(t, row):
+        lhs, rhs = ctx_at(t).equations[row]
+        return lhs == rhs
 
-    blk.ode = pyo.Constraint(states, blk.t, rule=ode_rule)
-    blk.flapping = pyo.Constraint(range(3), blk.t, rule=lambda _, i, t: ctx_at(t).flap_residuals[i] == 0)
+    index = {s: j for j, s in enumerate(states)}
+    blk.ode = pyo.Constraint(states, blk.t, rule=lambda _, s, t: pyo.Constraint.Skip if t == t0
+                             else equation(t, index[s]))
+    blk.flapping = pyo.Constraint(range(3), blk.t, rule=lambda _, i, t: equation(t, len(states) + i))
     init = {"u": start.u, "w": start.w, "q": 0.0, "theta": start.theta, "lambda_i": start.lambda_i}
     for e in model.extensions:
         for s in e.states:
@@ -111,7 +139,12 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
     # row that inlines the whole force model at every sample.
     out_names = list(ctx_at(t0).outputs)
     blk.y = pyo.Var(out_names, blk.samples, initialize=0.0)
-    blk.output_eq = pyo.Constraint(out_names, blk.samples, rule=lambda _, k, t: blk.y[k, t] == ctx_at(t).outputs[k])
+
+    def output_rule(_, k, t):
+        lhs, rhs = output_equation(ctx_at(t), k, blk.y[k, t])
+        return lhs == rhs
+
+    blk.output_eq = pyo.Constraint(out_names, blk.samples, rule=output_rule)
     blk.point_rows = _point_rows(blk, model, pmap, start, states, out_names, input_errors, err_where)
     if initial_guess is not None:
         initialise_from(blk, initial_guess, states)
@@ -123,7 +156,7 @@ def _point_rows(blk, model, pmap, start, states, out_names, channels, err_where)
     Leaves of a point: states, their derivatives, flapping angles, outputs (samples only; 0 elsewhere),
     the start trim's inputs, the two input-error samples around the point per error channel, the
     free parameters (scaled Vars). Data: the measured input increments and the error weights. The
-    function is :func:`evaluate` with casadi symbols, written as the Pyomo rules above write it.
+    function is :func:`collocation_point` with casadi symbols, the equations the Pyomo rules are built from.
     """
     times, samples = list(blk.t), set(blk.samples)
     t0 = times[0]
@@ -145,18 +178,14 @@ def _point_rows(blk, model, pmap, start, states, out_names, channels, err_where)
         z, d = ca.SX.sym("z", len(leaf_names)), ca.SX.sym("d", len(data_names))
         leaf = dict(zip(leaf_names, ca.vertsplit(z)))
         dat = dict(zip(data_names, ca.vertsplit(d)))
-        u = {}
-        for k in INPUTS:
-            u[k] = leaf[f"base:{k}"] + dat[f"du:{k}"]
-            if k in channels:
-                w = dat[f"w:{k}"]
-                u[k] = u[k] + (w * leaf[f"err_a:{k}"] + (1.0 - w) * leaf[f"err_b:{k}"])
+        err = {k: (dat[f"w:{k}"] * leaf[f"err_a:{k}"] + (1.0 - dat[f"w:{k}"]) * leaf[f"err_b:{k}"]
+                   if k in channels else 0.0) for k in INPUTS}
         p = {**fixed, **{n: scale[n] * leaf[f"p:{n}"] for n in free}}
-        ctx = evaluate({s: leaf[f"x:{s}"] for s in states}, u, p, ops=ops,
-                       beta=[leaf[f"beta:{b}"] for b in FLAPPING], extensions=extensions)
-        rows = [ctx.state_eqs[s][0] * leaf[f"dx:{s}"] - ctx.state_eqs[s][1] for s in states]
-        rows += [ctx.flap_residuals[i] for i in range(3)]
-        rows += [leaf[f"y:{k}"] - ctx.outputs[k] for k in out_names]
+        ctx = collocation_point({s: leaf[f"x:{s}"] for s in states}, {s: leaf[f"dx:{s}"] for s in states},
+                                [leaf[f"beta:{b}"] for b in FLAPPING], {k: leaf[f"base:{k}"] for k in INPUTS},
+                                {k: dat[f"du:{k}"] for k in INPUTS}, err, p, ops, extensions, states)
+        eqs = ctx.equations + [output_equation(ctx, k, leaf[f"y:{k}"]) for k in out_names]
+        rows = [lhs - rhs for lhs, rhs in eqs]
         return ca.Function("collocation_point", [z, d], [ca.vertcat(*rows)], ["z", "d"], ["r"])
 
     pr = PointRows(leaf_names=leaf_names, data_names=data_names, make_function=make_function)

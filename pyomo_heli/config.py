@@ -244,9 +244,9 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
     obj = raw.get("objectives", {})
     _only(obj, ("use", "time_outputs", "trim_outputs", "covariance", "input_errors", "noise_sigma"),
           f"{f} [objectives]")
-    t_out = tuple(_names(_need(obj, "time_outputs", f"{f} [objectives]", list, ["q", "theta", "n_x", "n_z", "TAS"]),
+    t_out = tuple(_names(_need(obj, "time_outputs", f"{f} [objectives]", list, list(NLPOptions.time_outputs)),
                          f"{f} [objectives]", "time_outputs"))
-    r_out = tuple(_names(_need(obj, "trim_outputs", f"{f} [objectives]", list, ["col", "lon", "theta"]),
+    r_out = tuple(_names(_need(obj, "trim_outputs", f"{f} [objectives]", list, list(NLPOptions.trim_outputs)),
                          f"{f} [objectives]", "trim_outputs"))
     for o in t_out:
         if o not in TIME_OUTPUTS:

@@ -30,9 +30,9 @@ import pandas as pd
 from ..channels import OUTPUTS, TRIM_CHANNELS
 from ..dataset.schema import MANEUVER_QUANTITIES
 from ..physics.model import HelicopterModel
+from ..units import KT
 from .compiled import simulate_outputs
 from .integrate import sampled, simulate
-from ..units import KT
 from .trim import TrimPoint, trim_float, trim_sweep
 
 #: |value| beyond which a replayed output counts as diverged: the dataset's plausibility limits (SI)

@@ -54,7 +54,8 @@ def test_divergence_limits_are_the_dataset_plausibility_limits():
 
     expected = {q.si: q.limit for q in MANEUVER_QUANTITIES if q.limit}
     assert rp.DIVERGENCE_LIMITS == {k: v for k, v in expected.items() if k in rp.OUTPUTS}
-    assert rp.DIVERGENCE_LIMITS["q"] == pytest.approx(360 * DEG) and rp.DIVERGENCE_LIMITS["TAS"] == pytest.approx(250 * KT)
+    assert rp.DIVERGENCE_LIMITS["q"] == pytest.approx(360 * DEG)
+    assert rp.DIVERGENCE_LIMITS["TAS"] == pytest.approx(250 * KT)
 
 
 def test_model_trims_fall_back_to_one_speed_at_a_time(monkeypatch):

@@ -34,9 +34,10 @@ import pandas as pd
 from .config import IdentificationConfig
 from .identify import build_problem
 from .nlp.identification import initialise_at
-from .pareto.front import FrontPoint, ParetoSolver, _Snapshot
+from .pareto.front import FrontPoint, ParetoSolver
 from .pareto.result import write_csv, write_json
 from . import interrupts
+from .pareto.snapshot import Snapshot
 from .pareto.store import FolderLock, PointStore, claim_folder, fingerprint
 
 PROBLEMS = ("time", "epsilon")
@@ -150,7 +151,7 @@ def _run_multistart(cfg, out: Path, starts, seed, problem, epsilon, rtol, restar
     m, data, _ = build_problem(cfg)
     ps = ParetoSolver(m, cfg.pareto)  # its one solver and the switchable objective; no front is traced
     progress(f"built NLP and solver in {time.perf_counter() - t0:.1f} s")
-    initial = _Snapshot(m)
+    initial = Snapshot(m)
     eps = math.inf if epsilon is None else float(epsilon)
     rows, resumed = [], 0
     for k in range(starts):

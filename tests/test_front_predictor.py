@@ -7,7 +7,8 @@ last one without the predictor (same optimum, the predicted start is nearer).
 import pyomo.environ as pyo
 import pytest
 
-from pyomo_heli.pareto.front import ParetoSettings, _Snapshot
+from pyomo_heli.pareto.front import ParetoSettings
+from pyomo_heli.pareto.snapshot import Snapshot
 from pyomo_heli.solvers import make_solver
 
 from test_solvers import rosenbrock_eps, xs
@@ -24,12 +25,12 @@ def test_extrapolation_is_linear_clipped_to_bounds_and_keeps_multiplier_signs():
     m.ipopt_zL_out = pyo.Suffix(direction=pyo.Suffix.IMPORT)
     m.dual[m.c] = -1.0
     m.ipopt_zL_out[m.y] = 0.2
-    old = _Snapshot(m)
+    old = Snapshot(m)
     m.x.set_value(2.0)
     m.y.set_value(0.8)
     m.dual[m.c] = -3.0
     m.ipopt_zL_out[m.y] = 0.1
-    new = _Snapshot(m)
+    new = Snapshot(m)
     new.extrapolated(old, 0.5).restore()
     assert m.x.value == pytest.approx(2.5)  # 2 + 0.5 (2 - 1)
     assert m.y.value == pytest.approx(0.95)  # 0.8 + 0.5 (0.8 - 0.5)
@@ -49,10 +50,10 @@ def test_extrapolation_keeps_missing_values_and_new_multipliers():
     m.z = pyo.Var()  # never given a value
     m.c = pyo.Constraint(expr=m.x >= 0)
     m.dual = pyo.Suffix(direction=pyo.Suffix.IMPORT_EXPORT)
-    old = _Snapshot(m)
+    old = Snapshot(m)
     m.x.set_value(2.0)
     m.dual[m.c] = 0.7  # only the newer snapshot has this multiplier
-    new = _Snapshot(m)
+    new = Snapshot(m)
     m.z.set_value(5.0)
     new.extrapolated(old, 0.5).restore()
     assert m.x.value == pytest.approx(2.5)
@@ -60,7 +61,7 @@ def test_extrapolation_keeps_missing_values_and_new_multipliers():
     assert m.dual[m.c] == pytest.approx(0.7)
     m.w = pyo.Var(initialize=0.0)
     with pytest.raises(ValueError, match="different models"):
-        _Snapshot(m).extrapolated(old, 0.5)
+        Snapshot(m).extrapolated(old, 0.5)
 
 
 def test_secant_start_is_nearer_and_solves_to_the_same_point():
@@ -69,10 +70,10 @@ def test_secant_start_is_nearer_and_solves_to_the_same_point():
     grid = (1.6, 1.4, 1.2)
     m.eps = grid[0]
     assert solver.solve(warm_start="none").success
-    s0 = _Snapshot(m)
+    s0 = Snapshot(m)
     m.eps = grid[1]
     assert solver.solve(warm_start="continuation").success
-    s1 = _Snapshot(m)
+    s1 = Snapshot(m)
     # the reference: the next point solved from the last solution
     m.eps = grid[2]
     plain = solver.solve(warm_start="continuation")

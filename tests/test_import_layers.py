@@ -2,7 +2,7 @@
 
 The layers, lowest first (a top-level module or subpackage of pyomo_heli per name):
 
-0. vocabulary: the package itself (``__version__``), ``units``, ``channels``, ``tomlfile``
+0. vocabulary: ``_version``, ``units``, ``channels``, ``tomlfile``, ``resources``
 1. ``physics``: the model's equations
 2. ``simulation``, ``dataset``, ``solvers``: the float model in time, the data files, the NLP solvers
 3. ``nlp``: the Pyomo problem
@@ -15,8 +15,9 @@ The layers, lowest first (a top-level module or subpackage of pyomo_heli per nam
 8. ``flighttest``: the synthetic flight-test generator, with the truth effects; nothing of the
    analysis below may import it (the truth must not reach the identification or the diagnosis)
 9. ``report``: figures and tables of results; it formats, it runs nothing above it
-10. workflows: ``identify``, ``identify_linear``, ``close_loop``, ``multistart``, ``benchmark``
-11. ``cli``, ``__main__``
+10. workflows: ``identify``, ``identify_linear``, ``close_loop``, ``trim_loop``, ``multistart``, ``benchmark``
+11. the front doors: ``cli``, ``__main__``, the Python ``api`` and the package's ``__init__`` (it
+    re-exports the API and registers the Pyomo solver plugin)
 
 Every import counts, also those inside functions; only imports under ``if TYPE_CHECKING:``
 (annotations, never executed) are exempt.
@@ -31,7 +32,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "pyomo_heli"
 
 LAYERS = [
-    {"", "units", "channels", "tomlfile"},
+    {"_version", "units", "channels", "tomlfile", "resources"},
     {"physics"},
     {"simulation", "dataset", "solvers"},
     {"nlp"},
@@ -41,8 +42,8 @@ LAYERS = [
     {"uncertainty"},
     {"flighttest"},
     {"report"},
-    {"identify", "identify_linear", "close_loop", "multistart", "benchmark"},
-    {"cli", "__main__"},
+    {"identify", "identify_linear", "close_loop", "trim_loop", "multistart", "benchmark"},
+    {"cli", "__main__", "api", ""},
 ]
 LAYER_OF = {name: k for k, names in enumerate(LAYERS) for name in names}
 

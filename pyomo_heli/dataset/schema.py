@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..channels import INPUTS
+from ..channels import INPUTS, TRIM_CHANNELS
 from ..units import DEG, KT
 
 FORMAT_NAME = "pyomo_heli-flighttest"
@@ -83,9 +83,8 @@ INPUT_STD_FLOOR_DEG = 0.01
 #: relative difference allowed between a manifest constant and the model parameter it stands for
 #: (mass_kg / m, rho_kg_m3 / rho, g_m_s2 / g), see ``check_model_matches_manifest``
 MODEL_MATCH_RTOL = 0.005
-#: trim channels that may be left empty in a row of trims.csv (each quantity measured at its own speeds);
-#: every row must carry at least one of them
-TRIM_CHANNELS = ("col", "lon", "theta")
+#: the trim channels (TRIM_CHANNELS, from channels.py) may be left empty in a row of trims.csv (each
+#: quantity measured at its own speeds); every row must carry at least one of them
 #: conventions.lon_sign values: +1 the format's own (positive aft), -1 the recorded lon is positive forward
 LON_SIGNS = (1, -1)
 #: conventions.theta_datum_deg given as this word: the datum is unknown and estimated by the identification

@@ -242,7 +242,7 @@ def fingerprint(raw_config: dict, dataset: str | Path | None = None, **settings)
     The dataset enters by content (not path), so moving a checkout keeps the
     fingerprint, while editing a data file changes it.
     """
-    from .. import __version__
+    from .._version import __version__
 
     h = hashlib.sha256()
     h.update(_canonical({"config": raw_config, "settings": settings, "version": __version__}).encode())

@@ -219,7 +219,7 @@ class CasadiIpoptSolver:
     def rebuild(self) -> None:
         """Rewrite the NL file and re-import it; needed after structural changes."""
         # The cyclic garbage collector is paused while the model's components are listed and read
-        # (per-variable and per-row Python lists at 100k rows; see _Snapshot in pareto.front).
+        # (per-variable and per-row Python lists at 100k rows; see pareto.snapshot).
         with PauseGC():
             self._rebuild()
 

@@ -568,7 +568,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("simulate", help="simulate a maneuver from trim (scipy)")
     s.add_argument("--speed-kt", type=finite_float, required=True)
     s.add_argument("--input", action="append", metavar="CH:SHAPE:AMP_DEG:STEP_S",
-                   help="input increment, e.g. lon:3211:0.5:0.5 (shapes 3211, doublet, step, pulse)")
+                   help="input increment, e.g. lon:3211:0.5:0.5 (shapes 3211, doublet, step, pulse); "
+                   "a log frequency sweep: CH:sweep:AMP_DEG:LENGTH_S[:WMIN_RAD_S:WMAX_RAD_S[:DWELL_CYCLES]], "
+                   "e.g. lon:sweep:0.5:90:0.3:20")
     s.add_argument("--duration", type=positive_float, default=15.0, help="record length [s]")
     s.add_argument("--rate", type=positive_float, default=50.0, help="output sample rate [Hz]")
     s.add_argument("--t-start", type=nonneg_float, default=1.0, help="time the input starts [s], before --duration")

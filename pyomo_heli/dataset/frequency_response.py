@@ -70,6 +70,10 @@ class FrequencyResponse:
     input_power: np.ndarray  # input autospectrum / its peak
     coherent: np.ndarray  # bool: inside the coherent band
     maneuvers: list = field(default_factory=list)
+    #: normalised random error of |T| (Bendat-Piersol, from coherence); phase error ~ degrees(random_error) [deg]
+    random_error: np.ndarray | None = None
+    #: the other inputs this response is conditioned on (composite/conditioned estimates; empty for SISO)
+    conditioned_on: tuple = ()
 
     @property
     def gain_db(self) -> np.ndarray:
@@ -82,18 +86,23 @@ class FrequencyResponse:
     def band(self) -> "FrequencyResponse":
         """Only the coherent bins."""
         k = self.coherent
+        err = None if self.random_error is None else self.random_error[k]
         return FrequencyResponse(self.speed, self.output, self.input, self.omega[k], self.T[k], self.coherence[k],
-                                 self.input_power[k], self.coherent[k], list(self.maneuvers))
+                                 self.input_power[k], self.coherent[k], list(self.maneuvers), err,
+                                 tuple(self.conditioned_on))
 
     @property
     def label(self) -> str:
         return f"{self.output}/{self.input} at {self.speed / (1852 / 3600):.0f} kt"
 
     def to_frame(self) -> pd.DataFrame:
-        return pd.DataFrame({"speed": self.speed, "output": self.output, "input": self.input, "omega": self.omega,
-                             "T_re": self.T.real, "T_im": self.T.imag, "coherence": self.coherence,
-                             "input_power": self.input_power, "coherent": self.coherent,
-                             "maneuvers": " ".join(self.maneuvers)})
+        cols = {"speed": self.speed, "output": self.output, "input": self.input, "omega": self.omega,
+                "T_re": self.T.real, "T_im": self.T.imag, "coherence": self.coherence,
+                "input_power": self.input_power, "coherent": self.coherent, "maneuvers": " ".join(self.maneuvers)}
+        if self.random_error is not None:  # composite estimates only: the SISO files keep their columns
+            cols["random_error"] = self.random_error
+            cols["conditioned_on"] = " ".join(self.conditioned_on)
+        return pd.DataFrame(cols)
 
 
 def estimate(maneuvers, output: str, input: str, settings: SpectralSettings | None = None) -> FrequencyResponse:
@@ -166,7 +175,247 @@ def load_responses(path: str | Path) -> list[FrequencyResponse]:
     out = []
     for (V, o, i), g in df.groupby(["speed", "output", "input"], sort=False):
         mans = str(g["maneuvers"].iloc[0]).split() if "maneuvers" in g else []
+        err = g["random_error"].to_numpy() if "random_error" in g else None
+        cond = tuple(str(g["conditioned_on"].iloc[0]).split()) if "conditioned_on" in g and \
+            isinstance(g["conditioned_on"].iloc[0], str) else ()
         out.append(FrequencyResponse(float(V), o, i, g["omega"].to_numpy(), g["T_re"].to_numpy() + 1j * g["T_im"].to_numpy(),
                                      g["coherence"].to_numpy(), g["input_power"].to_numpy(),
-                                     g["coherent"].astype(bool).to_numpy(), mans))
+                                     g["coherent"].astype(bool).to_numpy(), mans, err, cond))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Composite-window, multi-input conditioned frequency responses (CIFER practice, for frequency sweeps)
+# ---------------------------------------------------------------------------------------------------------------
+
+#: largest coherence used in a weight: noise-free data has gamma^2 -> 1 and would give infinite weights
+WEIGHT_COHERENCE_CAP = 0.999
+
+
+@dataclass
+class CompositeSettings:
+    """Composite windowing (Tischler and Remple, ch. 7; CIFER's COMPOSITE) and the coherent band.
+
+    Each window length in ``windows_s`` gives a Welch estimate (Hann, ``overlap``); a window of length
+    T_w counts only at omega >= ``min_periods`` * 2 pi / T_w (it must hold that many periods) and only
+    if it has at least two segments in the data; no frequency below ``record_periods`` periods in the
+    longest record counts (Tischler and Remple: record length >= 4-5 times the longest period). The estimates are averaged at each frequency of a
+    logarithmic grid of ``n_omega`` points in [omega_min, omega_max] with the weights 1 / eps_r^2
+    (random error from coherence, below). A bin is coherent where the composite (partial) coherence
+    gamma^2 >= ``coherence_min`` (the usual 0.6 guideline).
+    """
+
+    windows_s: tuple = (5.0, 10.0, 15.0, 20.0, 30.0)  # [s]
+    overlap: float = 0.8  # CIFER's default
+    nfft_factor: int = 2
+    coherence_min: float = 0.6
+    omega_min: float = 0.3  # [rad/s]
+    omega_max: float = 20.0  # [rad/s]
+    n_omega: int = 100
+    min_periods: float = 2.0
+    record_periods: float = 5.0
+
+    def __post_init__(self):
+        self.windows_s = tuple(float(w) for w in self.windows_s)
+        if not self.windows_s or min(self.windows_s) <= 0:
+            raise ValueError(f"composite windows_s must be positive window lengths [s], got {self.windows_s}")
+        if not 0 <= self.overlap < 1:
+            raise ValueError(f"composite overlap must be in [0, 1), got {self.overlap}")
+        if not 0 < self.coherence_min < 1:
+            raise ValueError(f"composite coherence_min must be in (0, 1), got {self.coherence_min}")
+        if not 0 < self.omega_min < self.omega_max:
+            raise ValueError(f"composite omega_min must be in (0, omega_max), got {self.omega_min}, {self.omega_max}")
+        if self.n_omega < 2 or self.min_periods <= 0 or self.record_periods < 0:
+            raise ValueError(f"composite n_omega must be >= 2 and min_periods > 0, got {self.n_omega}, "
+                             f"{self.min_periods}")
+
+
+@dataclass
+class WindowSpectra:
+    """Segment-averaged spectra of one window length over several records.
+
+    f [Hz]; Gxx [nf, q, q] with Gxx[:, i, j] = csd(x_i, x_j) (one-sided, conj(X_i) X_j); Gxy [nf, q];
+    Gyy [nf]; n_d = number of averaged segments (Welch, all records).
+    """
+
+    window_s: float
+    f: np.ndarray
+    Gxx: np.ndarray
+    Gxy: np.ndarray
+    Gyy: np.ndarray
+    n_d: int
+
+
+def _record_arrays(mv, names):
+    """Increments on the first sample of the named columns of a maneuver (or a DataFrame with ``sample_rate``)."""
+    data = mv.data
+    return [data[c].to_numpy(dtype=float) - float(data[c].iloc[0]) for c in names]
+
+
+def window_spectra(records, inputs, output: str, window_s: float, overlap: float = 0.8,
+                   nfft_factor: int = 2) -> WindowSpectra | None:
+    """Welch spectral matrices of (inputs, output) for one window length; None if no record holds 2 segments.
+
+    Records of different lengths are combined by their segment counts (each record's Welch average
+    weighted by its number of segments), so the result is the average over every segment.
+    """
+    q = len(inputs)
+    acc = None
+    n_total = 0
+    f = None
+    for mv in records:
+        fs = mv.sample_rate
+        n = int(round(window_s * fs))
+        step = n - int(round(overlap * n))
+        if n < MIN_WINDOW_SAMPLES or step < 1 or mv.n_samples < n + step:
+            continue  # fewer than two segments: no average at this window length
+        segs = 1 + (mv.n_samples - n) // step
+        sig = _record_arrays(mv, list(inputs) + [output])
+        kw = dict(fs=fs, window="hann", nperseg=n, noverlap=n - step, detrend=False, nfft=nfft_factor * n)
+        if f is not None and abs(fs - rate) > 1e-9:
+            raise ValueError(f"maneuver {mv.name}: sample rate {fs:g} Hz differs from {rate:g} Hz of the others")
+        rate = fs
+        G = np.empty((q + 1, q + 1), dtype=object)
+        for i in range(q + 1):
+            for j in range(i, q + 1):
+                f, G[i, j] = signal.csd(sig[i], sig[j], **kw)
+                if i != j:
+                    G[j, i] = np.conj(G[i, j])
+        M = np.stack([np.stack(list(row), axis=-1) for row in G], axis=-2)  # [nf, q+1, q+1]
+        acc = segs * M if acc is None else acc + segs * M
+        n_total += segs
+    if acc is None:
+        return None
+    M = acc / n_total
+    return WindowSpectra(window_s, f, M[:, :q, :q], M[:, :q, q], M[:, q, q].real, n_total)
+
+
+def conditioned(Gxx, Gxy, Gyy):
+    """MIMO H1 responses and coherences from spectral matrices (Bendat and Piersol, ch. 7).
+
+    For y = sum_i H_i x_i + n:   H = Gxx^-1 Gxy
+    multiple coherence           gamma^2_y:x = Gxy^H Gxx^-1 Gxy / Gyy
+    partial coherence of x_i     gamma^2_iy.o = |G_iy.o|^2 / (G_ii.o G_yy.o)
+    with the spectra conditioned on the other inputs o:  G_ab.o = G_ab - G_ao G_oo^-1 G_ob.
+    With one input this is the ordinary H1 and coherence. Returns H [nf, q], multiple [nf], partial [nf, q].
+    """
+    nf, q = Gxy.shape
+    H = np.full((nf, q), np.nan + 0j)
+    mult = np.zeros(nf)
+    part = np.zeros((nf, q))
+    for k in range(nf):
+        A, b, gyy = Gxx[k], Gxy[k], Gyy[k]
+        if not (np.all(np.isfinite(A)) and gyy > 0) or np.linalg.cond(A) > 1e12:
+            continue  # an input without power here, or inputs moving together: not separable
+        h = np.linalg.solve(A, b)
+        H[k] = h
+        mult[k] = float(np.real(np.conj(b) @ h) / gyy)
+        for i in range(q):
+            o = [j for j in range(q) if j != i]
+            if not o:
+                part[k, i] = abs(b[i]) ** 2 / (A[i, i].real * gyy)
+                continue
+            Aoo = A[np.ix_(o, o)]
+            gii = A[i, i] - A[i, o] @ np.linalg.solve(Aoo, A[o, i])
+            giy = b[i] - A[i, o] @ np.linalg.solve(Aoo, b[o])
+            gyo = gyy - np.real(np.conj(b[o]) @ np.linalg.solve(Aoo, b[o]))
+            part[k, i] = abs(giy) ** 2 / (gii.real * gyo) if gii.real > 0 and gyo > 0 else 0.0
+    return H, np.clip(mult, 0.0, 1.0), np.clip(part, 0.0, 1.0)
+
+
+def random_error(multiple, partial, n_d, q: int = 1):
+    """Normalised random error of |H| (Bendat and Piersol, eq. 9.90; ch. 9 for one input):
+
+        eps_r = sqrt(1 - gamma^2_y:x) / (|gamma_iy.o| sqrt(2 (n_d - q + 1)))
+
+    with one input (q = 1) eps_r = sqrt(1 - gamma^2) / (|gamma| sqrt(2 n_d)). The phase error is about
+    eps_r [rad]. n_d is the number of averaged segments; with overlapping segments they are not
+    independent, so eps_r is somewhat optimistic.
+    """
+    dof = max(n_d - q + 1, 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = np.sqrt(np.clip(1 - np.asarray(multiple), 0, None)) / (np.sqrt(np.asarray(partial)) * np.sqrt(2 * dof))
+    return np.where(np.asarray(partial) > 0, e, np.inf)
+
+
+def _interp_complex(x, xp, fp):
+    return np.interp(x, xp, fp.real) + 1j * np.interp(x, xp, fp.imag)
+
+
+def composite_responses(records, output: str, inputs, settings: CompositeSettings | None = None,
+                        speed: float | None = None) -> list[FrequencyResponse]:
+    """Composite-window frequency responses of ``output`` to each of ``inputs`` (conditioned on the others).
+
+    ``records`` are maneuvers (``data``, ``sample_rate``, ``n_samples``, ``name``, ``trim_speed``) at one
+    flight condition, all recording every input in ``inputs``. Returns one FrequencyResponse per input on
+    the logarithmic grid, with ``coherence`` the composite partial coherence (ordinary coherence for one
+    input), ``random_error`` eps_r, and ``coherent`` the bins with gamma^2 >= coherence_min.
+    """
+    s = settings or CompositeSettings()
+    inputs = tuple(inputs)
+    if not records:
+        raise ValueError(f"no record to estimate {output}/{', '.join(inputs)} from")
+    if not inputs or len(set(inputs)) != len(inputs):
+        raise ValueError(f"inputs must be distinct input names, got {inputs}")
+    for mv in records:
+        for c in inputs + (output,):
+            if c not in mv.data:
+                raise ValueError(f"maneuver {mv.name}: no column '{c}'")
+    if speed is None:
+        speeds = {round(float(mv.trim_speed), 6) for mv in records}
+        if len(speeds) != 1:
+            raise ValueError(f"records at different speeds {sorted(speeds)}: spectra of one flight condition only")
+        speed = float(records[0].trim_speed)
+    q = len(inputs)
+    omega = np.geomspace(s.omega_min, s.omega_max, s.n_omega)
+    wsum = np.zeros((s.n_omega, q))
+    Tsum = np.zeros((s.n_omega, q), dtype=complex)
+    psum = np.zeros((s.n_omega, q))
+    esum = np.zeros((s.n_omega, q))
+    guu = np.zeros((s.n_omega, q))
+    used = []
+    longest = max((mv.n_samples - 1) / mv.sample_rate for mv in records)  # [s]
+    omega_record = s.record_periods * 2 * np.pi / longest
+    for w in s.windows_s:
+        sp = window_spectra(records, inputs, output, w, s.overlap, s.nfft_factor)
+        if sp is None:
+            continue
+        used.append(w)
+        wo = 2 * np.pi * sp.f
+        H, mult, part = conditioned(sp.Gxx, sp.Gxy, sp.Gyy)
+        ok_native = np.isfinite(H).all(axis=1)
+        valid = (omega >= s.min_periods * 2 * np.pi / w) & (omega <= wo[-1]) & (omega >= omega_record)
+        if not ok_native.any():
+            continue
+        # interpolate the window's spectra-derived quantities onto the composite grid
+        m_i = np.interp(omega, wo[ok_native], mult[ok_native])
+        for i in range(q):
+            T_i = _interp_complex(omega, wo[ok_native], H[ok_native, i])
+            p_i = np.interp(omega, wo[ok_native], part[ok_native, i])
+            e_i = random_error(np.minimum(m_i, WEIGHT_COHERENCE_CAP), np.minimum(p_i, WEIGHT_COHERENCE_CAP),
+                               sp.n_d, q)
+            wt = np.where(valid & np.isfinite(e_i), 1.0 / e_i ** 2, 0.0)
+            wsum[:, i] += wt
+            Tsum[:, i] += wt * T_i
+            psum[:, i] += wt * p_i
+            esum[:, i] += wt * np.where(np.isfinite(e_i), e_i, 0.0)
+            guu[:, i] += wt * np.interp(omega, wo, sp.Gxx[:, i, i].real)
+    if not used:
+        raise ValueError(f"records of {output}/{', '.join(inputs)} are shorter than two segments of every window "
+                         f"length {s.windows_s} s")
+    out = []
+    names = [mv.name for mv in records]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for i, inp in enumerate(inputs):
+            have = wsum[:, i] > 0
+            T = np.where(have, Tsum[:, i] / wsum[:, i], np.nan + 0j)
+            coh = np.where(have, psum[:, i] / wsum[:, i], 0.0)
+            # composite error: the weighted mean of the windows' errors (the windows share their data,
+            # so combining them as independent estimates would overstate the accuracy)
+            err = np.where(have, esum[:, i] / wsum[:, i], np.inf)
+            gi = np.where(have, guu[:, i] / wsum[:, i], 0.0)
+            power = gi / gi.max() if gi.max() > 0 else gi
+            ok = have & (coh >= s.coherence_min) & np.isfinite(T)
+            out.append(FrequencyResponse(float(speed), output, inp, omega, T, coh, power, ok, list(names), err,
+                                         tuple(x for x in inputs if x != inp)))
     return out

@@ -16,7 +16,7 @@ from ..tomlfile import read_toml
 from ..dataset.schema import (G_RANGE_M_S2, INPUT_CHANNELS, MANEUVER_QUANTITIES, MASS_RANGE_KG, MIN_SAMPLES,
                               NAME_PATTERN, RHO_RANGE_KG_M3, ROLES, SPEED_RANGE_KT)
 from ..physics.parameters import bo105
-from ..simulation.inputs import SHAPES
+from ..simulation.inputs import SHAPES, InputSignal, InputSpecError
 from ..units import DEG, KT, SENSOR_SIGMA_KEYS
 from .sensors import DEFAULT_SIGMA, DEFAULT_VIBRATION, SensorConfig
 from .truth_effects import TRUTH_EFFECTS
@@ -38,6 +38,10 @@ class ManeuverPlan:
     duration: float  # s
     t_start: float = 2.0
     ramp: float = 0.1
+    #: sweep only (shape "sweep", ``step`` = whole sweep length): frequency range [rad/s], dwell cycles
+    omega_min: float = 0.3
+    omega_max: float = 20.0
+    dwell: int = 2
 
 
 @dataclass
@@ -82,7 +86,9 @@ SENSOR_KEYS = ("noise", "sim_rate_hz", "record_rate_hz", "antialias_hz", "sigma"
 TRIM_KEYS = ("speeds_kt", "sigma_col_deg", "sigma_lon_deg", "sigma_theta_deg", "offset_col_deg", "offset_lon_deg",
              "offset_theta_deg")
 MANEUVER_KEYS = ("name", "role", "speed_kt", "channel", "shape", "amplitude_deg", "step_s", "duration_s",
-                 "t_start_s", "ramp_s")
+                 "t_start_s", "ramp_s", "omega_min_rad_s", "omega_max_rad_s", "dwell_cycles")
+#: keys only a frequency sweep takes
+SWEEP_KEYS = ("omega_min_rad_s", "omega_max_rad_s", "dwell_cycles")
 #: plausible |amplitude| of a maneuver input: the dataset format's limit of the recorded input column
 INPUT_LIMITS = {q.si: (q.limit, q.limit_text) for q in MANEUVER_QUANTITIES if q.si in INPUT_CHANNELS}
 
@@ -154,8 +160,30 @@ def _maneuver(mv, where: str, record_rate: float) -> ManeuverPlan:
         raise ConfigError(f"{where}: key 't_start_s' = {t_start:g} s lies after the end of the record "
                           f"(duration_s = {duration:g} s): the input would not be recorded")
     ramp = _number(_get(mv, "ramp_s", where, float, 0.1), "ramp_s", where, lo=0.0, unit="s")
+    sweep = {}
+    if shape != "sweep":
+        for k in SWEEP_KEYS:
+            if k in mv:
+                raise ConfigError(f"{where}: key '{k}' applies only to shape 'sweep', not {shape!r}")
+    else:
+        sweep["omega_min"] = _number(_get(mv, "omega_min_rad_s", where, float, 0.3), "omega_min_rad_s", where,
+                                     lo=0.0, lo_open=True, unit="rad/s")
+        sweep["omega_max"] = _number(_get(mv, "omega_max_rad_s", where, float, 20.0), "omega_max_rad_s", where,
+                                     lo=sweep["omega_min"], lo_open=True, unit="rad/s")
+        dwell = _get(mv, "dwell_cycles", where, int, 2)
+        if isinstance(dwell, bool) or dwell < 0:
+            raise ConfigError(f"{where}: key 'dwell_cycles' must be an integer >= 0, got {dwell!r}")
+        sweep["dwell"] = dwell
+        try:  # the shape's own checks (length against dwell and lowest period)
+            InputSignal(channel, shape, amplitude * DEG, step, omega_min=sweep["omega_min"],
+                        omega_max=sweep["omega_max"], dwell=dwell)
+        except InputSpecError as exc:
+            raise ConfigError(f"{where}: key 'step_s' (the sweep length): {exc}") from None
+        if t_start + step > duration:
+            raise ConfigError(f"{where}: key 'step_s' = {step:g} s (the sweep length) from t_start_s = {t_start:g} s "
+                              f"runs past duration_s = {duration:g} s")
     return ManeuverPlan(name=name, role=role, speed=speed * KT, channel=channel, shape=shape,
-                        amplitude=amplitude * DEG, step=step, duration=duration, t_start=t_start, ramp=ramp)
+                        amplitude=amplitude * DEG, step=step, duration=duration, t_start=t_start, ramp=ramp, **sweep)
 
 
 def load_config(path: str | Path) -> GeneratorConfig:

@@ -50,11 +50,19 @@ def simulate_maneuvers(cfg: GeneratorConfig, model: HelicopterModel):
     runs = {}
     for plan in cfg.maneuvers:
         sig = InputSignal(plan.channel, plan.shape, plan.amplitude, plan.step, t_start=plan.t_start + PAD,
-                          ramp=plan.ramp)
+                          ramp=plan.ramp, omega_min=plan.omega_min, omega_max=plan.omega_max, dwell=plan.dwell)
         t = np.arange(0.0, plan.duration + 2 * PAD + 1e-9, 1.0 / cfg.sensors.sim_rate)
         runs[plan.name] = simulate(model, trims[plan.speed], t, {plan.channel: sig},
                                    max_step=0.05)  # below the 0.1 s input ramps: no edge is stepped over
     return trims, runs
+
+
+def _describe(p) -> str:
+    """Manifest description of a maneuver plan."""
+    if p.shape == "sweep":
+        return (f"{p.channel} sweep, {np.degrees(p.amplitude):g} deg, {p.omega_min:g}-{p.omega_max:g} rad/s, "
+                f"{p.dwell} dwell cycles, {p.step:g} s long, from t = {p.t_start:g} s")
+    return f"{p.channel} {p.shape}, {np.degrees(p.amplitude):g} deg, step {p.step:g} s, from t = {p.t_start:g} s"
 
 
 def noise_streams(cfg: GeneratorConfig):
@@ -99,8 +107,7 @@ def generate(cfg: GeneratorConfig, out: str | Path) -> Path:
         "atmosphere": {"rho_kg_m3": model.parameters["rho"], "g_m_s2": model.parameters["g"]},
         "mass_kg": model.parameters["m"],
         "maneuvers": [{"name": p.name, "role": p.role, "trim_speed_kt": round(p.speed / 0.514444444444, 6),
-                       "inputs": [p.channel], "description": f"{p.channel} {p.shape}, "
-                       f"{np.degrees(p.amplitude):g} deg, step {p.step:g} s, from t = {p.t_start:g} s"}
+                       "inputs": [p.channel], "description": _describe(p)}
                       for p in cfg.maneuvers],
     }
     write_flight_test(out, manifest, maneuvers, pd.DataFrame(rows))

@@ -93,6 +93,44 @@ dwell_cycles = 1
         load_config(p)
 
 
+def test_generated_flight_test_records_the_sweep(tmp_path):
+    """The generator applies the configured sweep: the recorded (noise-free) input is the shape itself."""
+    from pyomo_heli.flighttest.generate import generate_from_file
+
+    cfg = tmp_path / "g.toml"
+    cfg.write_text("""
+[dataset]
+name = "s"
+aircraft = "bo105"
+seed = 1
+[sensors]
+noise = false
+sim_rate_hz = 100
+record_rate_hz = 50
+[trims]
+speeds_kt = [80]
+[[maneuvers]]
+name = "lon_sweep"
+role = "identification"
+speed_kt = 80
+channel = "lon"
+shape = "sweep"
+amplitude_deg = 0.5
+step_s = 8
+duration_s = 10
+omega_min_rad_s = 2
+omega_max_rad_s = 15
+dwell_cycles = 0
+t_start_s = 1
+""")
+    generate_from_file(cfg, tmp_path / "out")
+    d = pd.read_csv(tmp_path / "out" / "maneuvers" / "lon_sweep.csv")
+    s = InputSignal("lon", "sweep", math.radians(0.5), 8.0, t_start=1.0, omega_min=2.0, omega_max=15.0, dwell=0)
+    lon = np.radians(d["lon_deg"].to_numpy())
+    assert np.max(np.abs(lon - lon[0] - s(d["t_s"].to_numpy()))) < 1e-9
+    assert np.max(np.abs(lon - lon[0])) == pytest.approx(math.radians(0.5), rel=1e-3)
+
+
 def test_conditioning_on_an_analytic_two_input_case():
     """H = Gxx^-1 Gxy and coherences on spectra built from a known two-input system with output noise."""
     rng = np.random.default_rng(3)

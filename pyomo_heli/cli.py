@@ -285,8 +285,9 @@ def cmd_generate_data(args) -> int:
     if args.seed is not None and args.seed < 0:
         raise UserError(f"option --seed must be an integer >= 0, got {args.seed}")
     _check_out_dir(args.out)
-    out = generate_from_file(args.config, args.out, seed=args.seed)
-    print(f"wrote synthetic flight test to {out}")
+    replaced = (Path(args.out) / "manifest.json").is_file()
+    out = generate_from_file(args.config, args.out, seed=args.seed, force=args.force)
+    print(f"wrote synthetic flight test to {out}" + (" (replacing the flight test that was there)" if replaced else ""))
     return 0
 
 
@@ -582,6 +583,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--config", required=True)
     g.add_argument("--out", required=True)
     g.add_argument("--seed", type=int, help="replace the config's [dataset] seed (another noise realisation)")
+    g.add_argument("--force", action="store_true",
+                   help="replace a flight test already in --out (its old files are deleted), or write beside "
+                        "other files there; without it such an --out is refused")
     g.set_defaults(func=cmd_generate_data)
 
     i = sub.add_parser("identify", help="multi-objective identification from a config (Pareto front)")

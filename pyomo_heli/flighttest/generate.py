@@ -74,11 +74,101 @@ def noise_streams(cfg: GeneratorConfig):
     return maneuvers, np.random.default_rng(children[trim])
 
 
-def generate(cfg: GeneratorConfig, out: str | Path) -> Path:
-    """Write the dataset (manifest, maneuver tables, trims) and truth.json to ``out``."""
+class OutputFolderError(ValueError):
+    """``out`` holds data that generating would overwrite or mix with (one line naming the folder)."""
+
+
+#: results folders of the other commands, recognised by these files: never a place for a flight test
+_RESULT_MARKERS = ("checkpoint.json", "front.csv", "chosen.json", "loop.json", "starts.csv", "multistart.json")
+
+
+def _visible(folder: Path) -> list[Path]:
+    return sorted(p for p in folder.iterdir() if not p.name.startswith("."))
+
+
+def _listed(paths, root: Path, at_most: int = 5) -> str:
+    names = [p.relative_to(root).as_posix() + ("/" if p.is_dir() else "") for p in paths]
+    return ", ".join(names[:at_most]) + (f", ... ({len(names)} in all)" if len(names) > at_most else "")
+
+
+def flight_test_files(out: Path) -> list[Path]:
+    """The files of the flight test in ``out``: manifest, trim table, truth and every maneuver file the manifest
+    lists, plus CSV files left in ``maneuvers/`` (the writer's default place, e.g. orphans of an older version)."""
+    files = [out / "manifest.json", out / "truth.json", out / "trims.csv"]
+    try:
+        man = json.loads((out / "manifest.json").read_text(encoding="utf-8-sig"))
+    except (OSError, ValueError):
+        man = {}
+    if isinstance(man, dict):
+        rels = [man.get("trim_file")] + [e.get("file") for e in man.get("maneuvers", []) if isinstance(e, dict)] \
+            if isinstance(man.get("maneuvers", []), list) else [man.get("trim_file")]
+        for rel in rels:
+            if isinstance(rel, str) and rel and not Path(rel).is_absolute() and ".." not in Path(rel).parts:
+                files.append(out / rel)
+    if (out / "maneuvers").is_dir():
+        files += list((out / "maneuvers").glob("*.csv"))
+    seen, unique = set(), []
+    for f in files:
+        if f.is_file() and f not in seen:
+            seen.add(f)
+            unique.append(f)
+    return unique
+
+
+def check_output_folder(out: str | Path, force: bool = False) -> None:
+    """Refuse an ``out`` that holds data (OutputFolderError, one line naming the folder), unless ``force``.
+
+    - a new or empty folder: fine;
+    - a flight test (``manifest.json``): refused unless ``force``, which replaces it (its old files are deleted
+      by :func:`clear_flight_test` once the new one has been simulated, so none is left orphaned);
+    - a results folder of another command (``checkpoint.json``, ``front.csv``, ``loop.json``, ...): refused,
+      ``force`` or not;
+    - a folder holding other files: refused unless ``force``, which writes the flight test beside them.
+    """
+    out = Path(out)
+    if not out.is_dir():
+        return
+    present = _visible(out)
+    if not present:
+        return
+    results = [out / n for n in _RESULT_MARKERS if (out / n).exists()]
+    if results:
+        raise OutputFolderError(f"option --out: {out} holds pyomo-heli results ({_listed(results, out)}), not a "
+                                f"flight test; choose another --out")
+    if (out / "manifest.json").is_file():
+        if force:
+            return
+        old = flight_test_files(out)
+        raise OutputFolderError(f"option --out: {out} already holds a flight test ({_listed(old, out)}); "
+                                f"generate-data does not overwrite data: choose another --out, or give --force "
+                                f"to replace it")
+    if not force:
+        raise OutputFolderError(f"option --out: {out} holds other files ({_listed(present, out)}) and no flight "
+                                f"test; choose a new or empty folder, or give --force to write beside them")
+
+
+def clear_flight_test(out: Path) -> list[Path]:
+    """Delete the flight test in ``out`` (see :func:`flight_test_files`) before a new one is written there;
+    returns the deleted files. Folders left empty are removed; nothing else is touched."""
+    gone = flight_test_files(out)
+    for f in gone:
+        f.unlink()
+    for d in sorted({f.parent for f in gone}, key=lambda p: -len(p.parts)):
+        if d != out and d.is_dir() and not any(d.iterdir()):
+            d.rmdir()
+    return gone
+
+
+def generate(cfg: GeneratorConfig, out: str | Path, force: bool = False) -> Path:
+    """Write the dataset (manifest, maneuver tables, trims) and truth.json to ``out``.
+
+    ``out`` must be new or empty (:func:`check_output_folder`); ``force`` replaces a flight test there (its old
+    files are deleted after the simulation, just before the new ones are written) or writes beside other files.
+    """
     from ..dataset import write_flight_test
 
     out = Path(out)
+    check_output_folder(out, force)
     model = truth_model(cfg)
     trims, runs = simulate_maneuvers(cfg, model)
     maneuver_streams, trim_rng = noise_streams(cfg)
@@ -110,6 +200,8 @@ def generate(cfg: GeneratorConfig, out: str | Path) -> Path:
                        "inputs": [p.channel], "description": _describe(p)}
                       for p in cfg.maneuvers],
     }
+    if (out / "manifest.json").is_file():  # --force on a flight test: none of its files may outlive it
+        clear_flight_test(out)
     write_flight_test(out, manifest, maneuvers, pd.DataFrame(rows))
     truth = {
         "note": "Ground truth for evaluation only; identification code never reads this file.",
@@ -126,9 +218,11 @@ def generate(cfg: GeneratorConfig, out: str | Path) -> Path:
     return out
 
 
-def generate_from_file(config: str | Path, out: str | Path, seed: int | None = None) -> Path:
+def generate_from_file(config: str | Path, out: str | Path, seed: int | None = None, force: bool = False) -> Path:
     """Generate the flight test of ``config`` into ``out``; ``seed`` replaces its [dataset] seed (another noise
-    realisation of the same flight test: truth, maneuvers, trims and noise levels unchanged)."""
+    realisation of the same flight test: truth, maneuvers, trims and noise levels unchanged). ``force``: see
+    :func:`generate`."""
+    check_output_folder(out, force)  # before the config's checks too: nothing is read or simulated in vain
     cfg = load_config(config)
     if seed is not None:
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -136,4 +230,4 @@ def generate_from_file(config: str | Path, out: str | Path, seed: int | None = N
         import dataclasses
 
         cfg = dataclasses.replace(cfg, seed=seed)
-    return generate(cfg, out)
+    return generate(cfg, out, force=force)

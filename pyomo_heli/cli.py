@@ -125,20 +125,9 @@ def _check_out_file(path, option: str = "--out") -> None:
         raise UserError(f"option {option}: cannot write {path}: permission denied")
 
 
-def _check_free_match(cfg, result, results_dir) -> None:
-    """The config's free parameters are those of the results folder (else their values would be mixed up)."""
-    have, want = list(result.parameters), [f.name for f in cfg.free]
-    missing = [n for n in want if n not in have]
-    extra = [n for n in have if n not in want]
-    if missing or extra:
-        parts = []
-        if missing:
-            parts.append(f"config {cfg.path} frees {', '.join(missing)}, which results folder {results_dir} lacks")
-        if extra:
-            parts.append(f"results folder {results_dir} holds {', '.join(extra)}, "
-                         f"which config {cfg.path} does not free")
-        raise UserError("; ".join(parts) + f" (results: {', '.join(have) or 'none'}; "
-                        f"config: {', '.join(want) or 'none'}); give the config the results came from")
+def _warning(cmd: str):
+    """A one-line warning on stderr, prefixed like the command's errors."""
+    return lambda msg: print(f"pyomo-heli {cmd}: warning: {msg}", file=sys.stderr)
 
 
 def _point_parameters(result, which: str, results_dir) -> dict:
@@ -387,17 +376,16 @@ def cmd_diagnose(args) -> int:
     if args.out is not None:
         _check_out_dir(args.out)
     res = IdentificationResult.load(args.results_dir)
-    cfg = load_result_config(args.results_dir, args.config)
-    if res.info.get("extensions"):  # an iteration of close-loop: the config plus the effects the loop added
-        from .close_loop import config_of_result
-
-        cfg = config_of_result(cfg, res)
-    _check_free_match(cfg, res, args.results_dir)
+    # the config (given, or named in chosen.json) plus a close-loop iteration's effects, checked against the folder
+    notes = []  # records the folder lacks: said once the command has checked everything else
+    cfg = load_result_config(args.results_dir, args.config, res, warn=notes.append)
     parameters = _point_parameters(res, args.point, args.results_dir)
     rate, source = _data_rate_hz(cfg)
     if args.test_rate_hz > rate * (1 + 1e-9):
         raise UserError(f"option --test-rate-hz: {args.test_rate_hz:g} Hz is above the sample rate of the data "
                         f"({rate:g} Hz, {source}); the whiteness test cannot sample faster than the data")
+    for note in notes:
+        _warning("diagnose")(note)
     label = "multi-objective (C)" if args.point == "chosen" else "time-domain (A)"
     out = Path(args.out or args.results_dir)
     print(f"diagnosing {label} of {args.results_dir} (config {cfg.path})")
@@ -463,20 +451,25 @@ def cmd_uncertainty(args) -> int:
     cfg = load_identification_config(args.config)
     result = IdentificationResult.load(args.results)
     if result.info.get("extensions"):  # an iteration of close-loop: the config plus the effects the loop added
-        from .close_loop import config_of_result
+        from .config import config_of_result
 
         cfg = config_of_result(cfg, result)
-    _check_free_match(cfg, result, args.results)
+    from .provenance import check_results_match
+
+    notes = []  # records the folder lacks: said once the command has checked everything else
+    check_results_match(cfg, result, args.results, warn=notes.append)
     if result.chosen is None:
         raise UserError(f"{Path(args.results) / 'chosen.json'}: no chosen point (no front point converged); "
                         f"no standard errors to compute")
+    data = identification_data(cfg)
+    for note in notes:
+        _warning("uncertainty")(note)
     for which in ("time_domain", "chosen"):
         print(_solver_status_line(result, which))
     with FolderLock(args.out or args.results, "uncertainty"):  # no identify may write there meanwhile
         if args.out and Path(args.out).resolve() != Path(args.results).resolve():
             shutil.copytree(args.results, args.out, dirs_exist_ok=True,
                             ignore=shutil.ignore_patterns(LOCK_FILE))
-        data = identification_data(cfg)
         add_uncertainty(result, cfg, data, args.out or args.results, points=args.points)
     print(f"standard errors in {args.out or args.results} (front.csv, chosen.json, identifiability.csv)")
     return 0
@@ -525,7 +518,10 @@ def cmd_report_linear(args) -> int:
     from .report.linear import write_linear_report
 
     cfg = load_identification_config(args.config)
-    print(f"report: {write_linear_report(args.out, cfg)}")
+    notes = []  # records the folder lacks (checked against the config before anything is written)
+    print(f"report: {write_linear_report(args.out, cfg, warn=notes.append)}")
+    for note in notes:
+        _warning("report-linear")(note)
     return 0
 
 

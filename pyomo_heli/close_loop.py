@@ -47,7 +47,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import interrupts
-from .config import ConfigError, IdentificationConfig
+from .config import ConfigError, IdentificationConfig, config_of_result  # noqa: F401 - re-exported
 from .dataset import load_flight_test
 from .diagnosis import attribution as attr
 from .diagnosis.candidates import CANDIDATES, model_with_candidates
@@ -233,31 +233,6 @@ def select_shape(cfg: IdentificationConfig, cand, file: Path, alpha: float,
     return dataclasses.replace(cfg, model=cfg.model.with_parameters(**doc["values"])), doc
 
 
-def config_of_result(cfg: IdentificationConfig, result) -> IdentificationConfig:
-    """The config of a loop iteration's identification: ``cfg`` (the loop's config) plus the candidates the loop
-    added (``result.info['extensions']``), their strengths free and their shape parameters at the values the
-    iteration used (``result.info['shape_parameters']``). Lets commands that take a config and a results folder
-    (``pyomo-heli uncertainty``) work on ``DIR/iter_i``. ConfigError if the folder does not fit the config.
-    """
-    have = [e.name for e in cfg.model.extensions]
-    listed = list(result.info.get("extensions", []))
-    if listed[:len(have)] != have:
-        raise ConfigError(f"{cfg.path}: the results were identified with extensions {listed}, the config declares {have}")
-    model = model_with_candidates(cfg.model, listed[len(have):], result.info.get("shape_parameters"))
-    free = list(cfg.free)
-    for n in result.parameters[len(free):]:
-        if n not in model.parameters:
-            raise ConfigError(f"{cfg.path}: the results' free parameter {n!r} is neither in the config nor a strength of "
-                              f"the effects {listed[len(have):]}")
-        spec = model.parameters.spec(n)
-        lo, hi = spec.bounds
-        free.append(FreeParameter(n, min(max(spec.value, lo), hi), lo, hi, spec.scale or 1.0))
-    if [f.name for f in free] != list(result.parameters):
-        raise ConfigError(f"{cfg.path}: the results' free parameters {result.parameters} do not extend the config's "
-                          f"{[f.name for f in cfg.free]}")
-    return dataclasses.replace(cfg, model=model, free=free)
-
-
 class IdentificationFailed(RuntimeError):
     """An iteration's identification converged at no front point: the loop cannot go on (the input was fine)."""
 
@@ -304,6 +279,13 @@ def _finished(cfg: IdentificationConfig, folder: Path):
             and Path(res.info.get("config", "")).resolve() == Path(cfg.path).resolve()
             and Path(res.info.get("dataset", "")).resolve() == Path(cfg.dataset).resolve()
             and len(res.front) == cfg.pareto.points)
+    if same:  # and the recorded maneuvers, dataset content and model (folders that record them)
+        from .provenance import ResultsMismatchError, check_results_match
+
+        try:
+            check_results_match(cfg, res, folder, warn=lambda msg: None)
+        except ResultsMismatchError:
+            return None
     return res if same else None
 
 

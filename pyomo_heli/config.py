@@ -392,9 +392,49 @@ def _objectives_use(raw: dict, f: str):
         raise ConfigError(f"{f} [linear]: {exc}") from None
 
 
-def load_result_config(results_dir: str | Path, config: str | Path | None = None) -> IdentificationConfig:
-    """The identification config of a results folder (``config`` overrides the path its ``chosen.json``
-    names, see :func:`pyomo_heli.diagnosis.residuals.find_config`), its dataset taken from the config."""
-    from .diagnosis.residuals import find_config
+def config_of_result(cfg: IdentificationConfig, result) -> IdentificationConfig:
+    """The config of a loop iteration's identification: ``cfg`` (the loop's config) plus the candidates the loop
+    added (``result.info['extensions']``), their strengths free and their shape parameters at the values the
+    iteration used (``result.info['shape_parameters']``). Lets commands that take a config and a results folder
+    (``pyomo-heli uncertainty``) work on ``DIR/iter_i``. ConfigError if the folder does not fit the config.
+    """
+    import dataclasses
 
-    return load_identification_config(config or find_config(results_dir))
+    from .diagnosis.candidates import model_with_candidates
+
+    have = [e.name for e in cfg.model.extensions]
+    listed = list(result.info.get("extensions", []))
+    if listed[:len(have)] != have:
+        raise ConfigError(f"{cfg.path}: the results were identified with extensions {listed}, the config declares {have}")
+    model = model_with_candidates(cfg.model, listed[len(have):], result.info.get("shape_parameters"))
+    free = list(cfg.free)
+    for n in result.parameters[len(free):]:
+        if n not in model.parameters:
+            raise ConfigError(f"{cfg.path}: the results' free parameter {n!r} is neither in the config nor a strength of "
+                              f"the effects {listed[len(have):]}")
+        spec = model.parameters.spec(n)
+        lo, hi = spec.bounds
+        free.append(FreeParameter(n, min(max(spec.value, lo), hi), lo, hi, spec.scale or 1.0))
+    if [f.name for f in free] != list(result.parameters):
+        raise ConfigError(f"{cfg.path}: the results' free parameters {result.parameters} do not extend the config's "
+                          f"{[f.name for f in cfg.free]}")
+    return dataclasses.replace(cfg, model=model, free=free)
+
+
+def load_result_config(results_dir: str | Path, config: str | Path | None = None, result=None,
+                       warn=None) -> IdentificationConfig:
+    """The identification config of a results folder (``config``, else the one named in ``chosen.json``, see
+    :func:`pyomo_heli.diagnosis.residuals.find_config`), checked against the folder: free parameters, fitted
+    maneuvers, dataset content and model must agree (:func:`pyomo_heli.provenance.check_results_match`,
+    ResultsMismatchError otherwise). For an iteration of close-loop, the config plus the effects the loop added
+    (:func:`config_of_result`)."""
+    from .diagnosis.residuals import find_config
+    from .pareto.result import IdentificationResult
+    from .provenance import check_results_match
+
+    res = result or IdentificationResult.load(results_dir)
+    cfg = load_identification_config(config or find_config(results_dir, res))
+    if res.info.get("extensions"):
+        cfg = config_of_result(cfg, res)
+    check_results_match(cfg, res, results_dir, **({"warn": warn} if warn else {}))
+    return cfg

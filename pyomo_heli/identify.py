@@ -14,29 +14,16 @@ import pandas as pd
 
 from .config import IdentificationConfig
 from .nlp.identification import build_problem
+from .physics.extensions import extension_forms  # noqa: F401 - re-exported
 from .pareto.front import ParetoSolver, utopia_distance
 from .pareto.result import IdentificationResult, write_csv
 from . import interrupts
 from .pareto.store import FolderLock, PointStore, claim_folder, fingerprint
+from .provenance import provenance_info
 
 
 #: what the anchors define: unreliable when one of them did not converge (chosen.json info.unreliable)
 UNRELIABLE_WITHOUT_ANCHORS = ("utopia", "nadir", "epsilon grid", "utopia_distance", "chosen", "direct")
-
-
-def extension_forms(extensions) -> dict:
-    """name -> short hash of the extension class's source: tells a result of an older form of an effect apart."""
-    import hashlib
-    import inspect
-
-    out = {}
-    for e in extensions:
-        try:
-            src = inspect.getsource(type(e))
-        except (OSError, TypeError):
-            src = type(e).__qualname__
-        out[e.name] = hashlib.sha1(src.encode()).hexdigest()[:12]
-    return out
 
 
 def shape_values(model) -> dict:
@@ -178,7 +165,8 @@ def _run_identification(cfg, out: Path, progress, restart, uncertainty) -> Ident
                               "quantities": list(UNRELIABLE_WITHOUT_ANCHORS)} if anchor_failures else None),
               "resumed_points": sum(bool(getattr(p, "from_disk", False)) for p in points),
               "mean_iterations_front": _mean(front.loc[front.kind == "eps", "iterations"]),
-              "mean_iterations_front_cold": _mean(front.loc[front.kind == "eps", "cold_iterations"])})
+              "mean_iterations_front_cold": _mean(front.loc[front.kind == "eps", "cold_iterations"]),
+              **provenance_info(cfg)})  # the config by content, the data's hash, the model: checked by readers
     result.save(out)
     if uncertainty and uncertainty != "none" and result.chosen is not None:
         from .uncertainty.front import add_uncertainty

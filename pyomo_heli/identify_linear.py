@@ -26,6 +26,7 @@ from .dataset.frequency_response import frequency_responses, save_responses
 from .nlp.identification import build_identification_nlp, identification_data
 from .pareto.result import IdentificationResult
 from .pareto.tri_front import TriParetoSolver, utopia_distance_n
+from .provenance import provenance_info
 
 
 def _point_dict(p) -> dict:
@@ -102,6 +103,6 @@ def run_tri_identification(cfg, out, progress=print) -> IdentificationResult:
               "grid": [cfg.pareto.points, cfg.linear.points],
               "eps_trim": list(ps.eps_trim), "eps_linear": list(ps.eps_linear),
               "bi_objective": {"chosen": _point_dict(bi), "utopia": list(bi_utopia), "nadir": list(bi_nadir)},
-              "failed_points": int((~front["success"].astype(bool)).sum())})
+              "failed_points": int((~front["success"].astype(bool)).sum()), **provenance_info(cfg)})
     result.save(out)
     return result

@@ -39,7 +39,7 @@ LAYERS = [
     {"nlp"},
     {"pareto"},
     {"diagnosis"},
-    {"config", "linear_settings"},
+    {"config", "linear_settings", "provenance"},
     {"uncertainty"},
     {"flighttest"},
     {"report"},

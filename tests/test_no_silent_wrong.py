@@ -106,3 +106,179 @@ def test_generate_data_refuses_a_folder_of_other_files_and_results(tmp_path, cap
         _one_line(capsys, str(results), "front.csv")
     assert main(["generate-data", "--config", str(cfg), "--out", str(other), "--force"]) == 0
     assert (other / "mine.txt").read_text() == "keep me\n" and (other / "manifest.json").is_file()
+
+
+# ============================================================== results and config must agree
+TINY_ID = """\
+# tiny identification for the results-against-config checks
+[data]
+dataset = "data"
+maneuvers = [{maneuver}]
+validation = []
+max_duration_s = 2.0
+resample_hz = 25
+{model}
+[parameters.theta_twist]
+unit = "deg/m"
+initial = -2.1228
+lower = -10.0
+upper = 0.0
+scale = 1.0
+
+[parameters.CL_alpha_HT]
+unit = "1/rad"
+initial = 4.3516
+lower = 0.1
+upper = 10.0
+scale = 5.0
+
+[pareto]
+points = 2
+"""
+
+
+def _id_config(folder: Path, name: str = "tiny.toml", maneuver: str = "lon3211_80kt_a", model: str = "") -> Path:
+    path = folder / name
+    path.write_text(TINY_ID.format(maneuver=f'"{maneuver}"', model=model))
+    return path
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    """A real identification (2 front points, one 2 s record) on a copy of the bundled flight test, with the
+    config given by a relative name, as a user in a checkout does; the folder is copied per test."""
+    root = tmp_path_factory.mktemp("checkout")
+    shutil.copytree(ROOT / "data" / "bo105_synthetic", root / "data")
+    _id_config(root)
+    import os
+
+    cwd = os.getcwd()
+    os.chdir(root)
+    try:
+        assert main(["identify", "tiny.toml", "--out", "res", "--no-report", "--uncertainty", "none"]) == 0
+    finally:
+        os.chdir(cwd)
+    return root
+
+
+@pytest.fixture
+def checkout(fitted, tmp_path, monkeypatch):
+    """A private copy of the fitted checkout (data, config, results), the current folder."""
+    root = tmp_path / "checkout"
+    shutil.copytree(fitted, root)
+    monkeypatch.chdir(root)
+    return root
+
+
+def test_results_record_the_config_by_content_and_the_data_and_model(checkout):
+    info = json.loads((checkout / "res" / "chosen.json").read_text())["info"]
+    text = (checkout / "tiny.toml").read_text()
+    import hashlib
+
+    assert info["config"] == "tiny.toml" and info["config_text"] == text
+    assert info["config_sha256"] == hashlib.sha256(text.encode()).hexdigest()
+    assert info["maneuvers"] == ["lon3211_80kt_a"]
+    assert len(info["dataset_sha256"]) == 64 and len(info["model_fingerprint"]) == 64
+    # the folder agrees with its own config: no refusal, no note
+    from pyomo_heli.config import load_result_config
+
+    notes = []
+    cfg = load_result_config(checkout / "res", warn=notes.append)
+    assert [f.name for f in cfg.free] == ["theta_twist", "CL_alpha_HT"] and notes == []
+    # only a comment changed: accepted, with a note that the file is not the one recorded
+    (checkout / "tiny.toml").write_text(text + "# a comment\n")
+    load_result_config(checkout / "res", warn=notes.append)
+    assert len(notes) == 1 and "info.config_text" in notes[0]
+
+
+def test_diagnose_refuses_a_config_name_that_resolves_to_another_maneuver(checkout, tmp_path, capsys):
+    """A results folder read from another checkout: its relative config name finds a file fitting another maneuver."""
+    other = tmp_path / "other_checkout"
+    other.mkdir()
+    (other / "data").symlink_to(checkout / "data")
+    _id_config(other, maneuver="lon3211_80kt_b")
+    shutil.copytree(checkout / "res", other / "res")
+    import os
+
+    os.chdir(other)
+    assert main(["diagnose", "res", "--out", str(tmp_path / "d")]) == 2
+    _one_line(capsys, "res", "lon3211_80kt_a", "lon3211_80kt_b", "info.config_text")
+    assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize("command", ["diagnose", "uncertainty"])
+def test_an_explicit_config_with_other_maneuvers_is_refused(checkout, tmp_path, command, capsys):
+    cfg = _id_config(checkout, "other.toml", maneuver="col3211_80kt_a")
+    argv = (["diagnose", "res", "--config", str(cfg), "--out", str(tmp_path / "o")] if command == "diagnose" else
+            ["uncertainty", str(cfg), "--results", "res", "--out", str(tmp_path / "o"), "--points", "chosen"])
+    assert main(argv) == 2
+    _one_line(capsys, "lon3211_80kt_a", "col3211_80kt_a", "other.toml")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("command", ["diagnose", "uncertainty"])
+def test_edited_data_is_refused(checkout, tmp_path, command, capsys):
+    """The same config on data edited since the fit (one sample of the fitted record)."""
+    f = checkout / "data" / "maneuvers" / "lon3211_80kt_a.csv"
+    lines = f.read_text().splitlines(keepends=True)
+    lines[5] = lines[5].replace(",", ",1", 1)  # col_deg of the 5th sample gains a leading 1 (still plausible)
+    f.write_text("".join(lines))
+    assert main(["check-data", "data"]) == 0  # valid data, only not the data of the fit
+    capsys.readouterr()
+    argv = (["diagnose", "res", "--out", str(tmp_path / "o")] if command == "diagnose" else
+            ["uncertainty", "tiny.toml", "--results", "res", "--out", str(tmp_path / "o"), "--points", "chosen"])
+    assert main(argv) == 2
+    _one_line(capsys, "dataset", "content", "res")
+
+
+def test_another_model_is_refused(checkout, tmp_path, capsys):
+    cfg = _id_config(checkout, "heavier.toml", model="[model]\nparameters = { Iyy = 5500.0 }\n")
+    assert main(["diagnose", "res", "--config", str(cfg), "--out", str(tmp_path / "o")]) == 2
+    _one_line(capsys, "model differs", "Iyy", "5500")
+
+
+def test_an_extra_parameter_in_chosen_json_is_refused(checkout, tmp_path, capsys):
+    path = checkout / "res" / "chosen.json"
+    doc = json.loads(path.read_text())
+    doc["chosen"]["parameters"]["Iyy"] = 6000.0  # applied to the model, it would change the diagnosis silently
+    path.write_text(json.dumps(doc))
+    assert main(["diagnose", "res", "--out", str(tmp_path / "o")]) == 2
+    _one_line(capsys, "chosen.json", "chosen.parameters", "Iyy")
+
+
+def test_a_folder_without_the_records_is_checked_for_what_it_has(checkout):
+    """Folders written before the records existed (docs/results): maneuvers and free parameters still checked, the
+    rest named as not checked."""
+    from pyomo_heli.config import load_result_config
+    from pyomo_heli.provenance import ResultsMismatchError
+
+    path = checkout / "res" / "chosen.json"
+    doc = json.loads(path.read_text())
+    for k in ("dataset_sha256", "model", "model_fingerprint", "config_sha256", "config_text"):
+        del doc["info"][k]
+    path.write_text(json.dumps(doc))
+    notes = []
+    load_result_config(checkout / "res", warn=notes.append)
+    assert len(notes) == 1 and "no dataset content, no model" in notes[0] and "not checked" in notes[0]
+    other = _id_config(checkout, "other.toml", maneuver="col3211_80kt_a")
+    with pytest.raises(ResultsMismatchError, match="col3211_80kt_a"):
+        load_result_config(checkout / "res", other, warn=notes.append)
+
+
+def test_close_loop_does_not_reuse_an_iteration_fitted_to_other_data(checkout):
+    """A finished identification without checkpoint.json (a copy, as under docs/results) on edited data is
+    identified again, not reused."""
+    from pyomo_heli.close_loop import _finished
+    from pyomo_heli.config import load_identification_config
+
+    (checkout / "res" / "checkpoint.json").unlink()
+    cfg = load_identification_config("tiny.toml")
+    path = checkout / "res" / "chosen.json"  # as if identified in this copy (the loop compares the data's path)
+    doc = json.loads(path.read_text())
+    doc["info"]["dataset"] = str(cfg.dataset)
+    path.write_text(json.dumps(doc))
+    assert _finished(cfg, checkout / "res") is not None  # same data: reused
+    lines = (checkout / "data" / "maneuvers" / "lon3211_80kt_a.csv").read_text().splitlines(keepends=True)
+    lines[5] = lines[5].replace(",", ",1", 1)
+    (checkout / "data" / "maneuvers" / "lon3211_80kt_a.csv").write_text("".join(lines))
+    assert _finished(cfg, checkout / "res") is None

@@ -51,7 +51,7 @@ def _read_json_object(path: Path) -> dict:
 
 def check_point_record(point, params: list, path: Path, key: str | None, may_be_null: bool = False,
                  finite: bool = False) -> None:
-    """A point record: an object whose 'parameters' hold a number for every free parameter.
+    """A point record: an object whose 'parameters' hold a number for every free parameter and nothing else.
 
     ``finite``: every value finite; otherwise only a point that does not say it failed (``success``) must be.
     """
@@ -65,6 +65,11 @@ def check_point_record(point, params: list, path: Path, key: str | None, may_be_
     values = point.get("parameters")
     if not isinstance(values, dict):
         raise ResultFileError(f"{path}: key '{pk}' must be an object (name -> value), got {values!r}")
+    extra = [n for n in values if n not in params]
+    if extra:  # applied to the model, such a value would change it silently
+        raise ResultFileError(f"{path}: key '{pk}' holds {', '.join(map(repr, extra))}, which "
+                              f"{'is' if len(extra) == 1 else 'are'} not among the free parameters of the results "
+                              f"(key 'parameters': {', '.join(params) or 'none'})")
     must_be_finite = finite or point.get("success", True) is not False
     for n in params:
         if n not in values:

@@ -92,3 +92,18 @@ class PitchMomentOffset(Extension):
 
     def extra_forces(self, ctx):
         return 0.0, 0.0, ctx.p["dM_offset"]
+
+
+def extension_forms(extensions) -> dict:
+    """name -> short hash of the extension class's source: tells a result of an older form of an effect apart."""
+    import hashlib
+    import inspect
+
+    out = {}
+    for e in extensions:
+        try:
+            src = inspect.getsource(type(e))
+        except (OSError, TypeError):
+            src = type(e).__qualname__
+        out[e.name] = hashlib.sha1(src.encode()).hexdigest()[:12]
+    return out

@@ -277,11 +277,15 @@ def band_errors(responses, curves: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def write_linear_report(out_dir, cfg) -> Path:
-    """Figures and ``report_linear.md`` of a tri-objective results folder."""
+def write_linear_report(out_dir, cfg, warn=None) -> Path:
+    """Figures and ``report_linear.md`` of a tri-objective results folder; the folder must agree with ``cfg``
+    (:func:`pyomo_heli.provenance.check_results_match`; ``warn`` gets its notes on records the folder lacks)."""
+    from ..provenance import check_results_match
+
     out = Path(out_dir)
     result = IdentificationResult.load(out)
     check_tri_objective(out, cfg, result)
+    check_results_match(cfg, result, out, **({"warn": warn} if warn else {}))
     front = read_front(out)
     responses = read_responses(out)
     truth = read_truth(cfg.dataset)

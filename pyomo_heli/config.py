@@ -168,6 +168,10 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
         if not isinstance(val, list):
             raise ConfigError(f"{f} [data]: field 'validation' must be \"validation\" or a list of names")
         _names(val, f"{f} [data]", "validation", allow_empty=True)
+        both = [n for n in val if isinstance(mans, list) and n in mans]
+        if both:  # a record the fit has seen validates nothing
+            raise ConfigError(f"{f} [data]: maneuver(s) {', '.join(both)} listed in both 'maneuvers' (fitted) and "
+                              f"'validation'; a validation record must be one the fit has not seen")
     resample = _finite(data, "resample_hz", f"{f} [data]")
     if resample is not None and not resample > 0:
         raise ConfigError(f"{f} [data]: field 'resample_hz' must be a positive number")

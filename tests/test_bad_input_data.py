@@ -234,6 +234,11 @@ BAD_CONFIGS = {
     "t_start after the record": (_sub("duration_s = 4", "duration_s = 4\nt_start_s = 4.5"),
                                  [MAN, "'t_start_s'", "duration_s = 4"]),
     "default t_start after a short record": (_sub("duration_s = 4", "duration_s = 1.5"), [MAN, "'t_start_s'"]),
+    # a record whose declared input never moves: check-data refuses it (issue 32), so the generator does too
+    "t_start at the end of the record": (_sub("duration_s = 4", "duration_s = 4\nt_start_s = 4"),
+                                         [MAN, "'t_start_s'", "at the end"]),
+    "zero amplitude": (_sub("amplitude_deg = 0.5", "amplitude_deg = 0"), [MAN, "'amplitude_deg'", "never move"]),
+    "record rate in kHz": (_sub("[sensors]", "[sensors]\nrecord_rate_hz = 50000"), ["'record_rate_hz'", "plausible"]),
     "negative ramp": (_sub("duration_s = 4", "duration_s = 4\nramp_s = -0.1"), [MAN, "'ramp_s'"]),
     "maneuver speed 300 kt": (_sub("speed_kt = 80", "speed_kt = 300"),
                               [MAN, "'speed_kt'", "300", f"{SPEED_RANGE_KT[0]:g}..{SPEED_RANGE_KT[1]:g} kt"]),
@@ -287,7 +292,7 @@ def test_bad_generator_config_raises_config_error_naming_file_and_key(case, tmp_
         assert w in msg, f"{case}: {w!r} not in {msg!r}"
 
 
-@pytest.mark.parametrize("extra", ["", "t_start_s = 4", "t_start_s = 0\nramp_s = 0", "amplitude_deg = 0"])
+@pytest.mark.parametrize("extra", ["", "t_start_s = 3.9", "t_start_s = 0\nramp_s = 0", "amplitude_deg = -0.5"])
 def test_edge_values_are_accepted(extra, tmp_path):
     text = TINY if not extra else TINY.replace("amplitude_deg = 0.5\n", "") + extra + "\n"
     if "amplitude_deg" not in text:

@@ -176,13 +176,18 @@ def test_both_inputs_declared_is_accepted(ds):
     assert validate_flight_test(ds) == []
 
 
-def test_noise_only_records_are_not_judged(ds):
-    """A record whose declared channel holds only noise, like the undeclared one: nothing to contradict."""
+def test_noise_only_record_is_named(ds, capsys):
+    """A record whose declared channel holds only noise, like the undeclared one: it excites nothing it declares
+    (issue 32: a declared input that never moves; no undeclared channel is blamed)."""
     p = ds / LON
     d = pd.read_csv(p)
     d["lon_deg"] = d["lon_deg"].iloc[0] + (d["col_deg"] - d["col_deg"].mean()).to_numpy()[::-1]
     d.to_csv(p, index=False)
-    assert validate_flight_test(ds) == []
+    lines = _check(ds, capsys)
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"error: manifest.json: field 'maneuvers[0].inputs': ['lon'], but in {LON} the "
+                               f"declared input column 'lon_deg' (std over the record ")
+    assert "never moves beyond noise" in lines[0] and "col_deg" not in lines[0]
 
 
 def test_off_axis_movement_below_the_dominance_ratio_is_accepted(ds):

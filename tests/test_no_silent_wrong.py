@@ -282,3 +282,107 @@ def test_close_loop_does_not_reuse_an_iteration_fitted_to_other_data(checkout):
     lines[5] = lines[5].replace(",", ",1", 1)
     (checkout / "data" / "maneuvers" / "lon3211_80kt_a.csv").write_text("".join(lines))
     assert _finished(cfg, checkout / "res") is None
+
+
+# ============================================================== plausibility checks, one line each
+SMALL = ROOT / "tests" / "data" / "m0_noise_small"
+LON = "maneuvers/lon3211_80kt.csv"
+
+
+@pytest.fixture
+def small(tmp_path):
+    return Path(shutil.copytree(SMALL, tmp_path / "ds"))
+
+
+def _check_data_line(ds, capsys, *fragments) -> str:
+    assert main(["check-data", str(ds)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    for f in fragments:
+        assert f in err[0], (f, err[0])
+    return err[0]
+
+
+@pytest.mark.parametrize("sep, word", [(";", "semicolons"), ("\t", "tabs")])
+@pytest.mark.parametrize("file", [LON, "trims.csv"])
+def test_a_separator_other_than_comma_is_named(small, capsys, sep, word, file):
+    p = small / file
+    p.write_text(p.read_text().replace(",", sep))
+    _check_data_line(small, capsys, file, word, "not commas")
+
+
+def _edit_time(ds, f):
+    import pandas as pd
+
+    d = pd.read_csv(ds / LON)
+    d["t_s"] = f(d["t_s"])
+    d.to_csv(ds / LON, index=False, float_format="%.10g")
+
+
+@pytest.mark.parametrize("factor, rate", [(1000.0, "0.05 Hz"), (1e300, "5e-299 Hz"), (1e-4, "500000 Hz")])
+def test_a_sample_rate_outside_1_to_10000_hz_is_refused(small, capsys, factor, rate):
+    """Time in ms, time stamps 1e300 s apart, time in units of 0.1 ms: the data's 50 Hz become implausible."""
+    _edit_time(small, lambda t: t * factor)
+    _check_data_line(small, capsys, LON, "sample rate " + rate, "1..10,000 Hz")
+
+
+def test_a_declared_input_that_never_moves_is_refused(small, capsys):
+    import pandas as pd
+
+    from pyomo_heli.dataset import DatasetError, load_flight_test
+
+    d = pd.read_csv(small / LON)
+    d["lon_deg"] = d["lon_deg"].iloc[0]  # the 3211 was never flown: the stick held at trim
+    d.to_csv(small / LON, index=False, float_format="%.10g")
+    _check_data_line(small, capsys, "maneuvers[0].inputs", "'lon_deg'", "never moves")
+    with pytest.raises(DatasetError, match="never moves"):  # loading refuses it too
+        load_flight_test(small)
+
+
+def test_a_bom_in_a_config_is_named(tmp_path, capsys):
+    text = (CONFIGS / "m0_noise_small.toml").read_text().replace('"../data/', f'"{ROOT / "tests" / "data"}/')
+    cfg = tmp_path / "bom.toml"
+    cfg.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    assert main(["inspect", str(cfg), "--no-diagnostics"]) == 2
+    _one_line(capsys, str(cfg), "byte-order mark", "BOM")
+    gen = tmp_path / "gen_bom.toml"
+    gen.write_bytes(b"\xef\xbb\xbf" + _gen_config(tmp_path, ["a_80kt"]).read_bytes())
+    assert main(["generate-data", "--config", str(gen), "--out", str(tmp_path / "ft")]) == 2
+    _one_line(capsys, str(gen), "BOM")
+
+
+def _small_config(tmp_path, data: str = "", tol: str = "1e-8") -> Path:
+    text = (CONFIGS / "m0_noise_small.toml").read_text().replace('"../data/', f'"{ROOT / "tests" / "data"}/')
+    assert "tol = 1e-8," in text
+    text = text.replace("[data]\n", "[data]\n" + data, 1).replace("tol = 1e-8,", f"tol = {tol},")
+    path = tmp_path / "small.toml"
+    path.write_text(text)
+    return path
+
+
+def test_a_record_listed_for_fitting_and_validation_is_refused(tmp_path, capsys):
+    cfg = _small_config(tmp_path, 'maneuvers = ["lon3211_80kt", "londoublet_20kt"]\n'
+                                  'validation = ["londoublet_80kt_val", "londoublet_20kt"]\n')
+    assert main(["identify", str(cfg), "--out", str(tmp_path / "r")]) == 2
+    _one_line(capsys, str(cfg), "londoublet_20kt", "both", "'validation'")
+    assert not (tmp_path / "r").exists()
+
+
+def test_a_record_used_for_fitting_and_validation_by_role_is_refused(tmp_path):
+    """Fitted by its role in the manifest, validation by name (and the converse)."""
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.nlp.identification import identification_data
+
+    for data in ('validation = ["coldoublet_hover"]\n', 'maneuvers = ["lon3211_80kt", "londoublet_80kt_val"]\n'):
+        cfg = load_identification_config(_small_config(tmp_path, data))
+        with pytest.raises(ValueError, match=r"small.toml \[data\]: maneuver\(s\) (coldoublet_hover|londoublet_80kt_val) "
+                                             r"both fitted"):
+            identification_data(cfg)
+
+
+@pytest.mark.parametrize("tol", ["1e300", "0.5", "1e-20"])
+def test_a_solver_tolerance_outside_a_sane_range_is_refused(tmp_path, capsys, tol):
+    cfg = _small_config(tmp_path, tol=tol)
+    assert main(["identify", str(cfg), "--out", str(tmp_path / "r")]) == 2
+    _one_line(capsys, str(cfg), "[solver]", "'tol'", "sane range")
+    assert not (tmp_path / "r").exists()

@@ -79,7 +79,7 @@ def test_casadi_ipopt_messages():
 def test_casadi_ipopt_accepts_what_casadi_converts():
     # casadi converts numbers to the registered type: an int for a real option, an integral float
     # for an integer one; option names and strings are case-insensitive in Ipopt
-    validate_solver_options("casadi-ipopt", {"tol": 1, "max_wall_time": 600, "max_iter": 1000.0})
+    validate_solver_options("casadi-ipopt", {"obj_scaling_factor": 1, "max_wall_time": 600, "max_iter": 1000.0})
     validate_solver_options("casadi-ipopt", {"linear_solver": "MUMPS", "mu_strategy": "adaptive"})
     validate_solver_options("casadi-ipopt", {"hessian_approximation": "limited-memory", "acceptable_tol": 1e-6})
 

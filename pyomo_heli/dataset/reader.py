@@ -38,6 +38,7 @@ from .schema import (
     PITOT_MIN_KT,
     RHO_RANGE_KG_M3,
     ROLES,
+    SAMPLE_RATE_RANGE_HZ,
     SPACING_TOL,
     SPEED_RANGE_KT,
     ESTIMATE,
@@ -248,6 +249,13 @@ class _Reader:
         if not rows:
             self.add(rel, None, "file is empty (no header line)")
             return None
+        if len(rows[0]) == 1:  # one field: the header is not comma-separated (every column would be "missing")
+            for sep, what in ((";", "semicolons (;)"), ("\t", "tabs"), ("|", "vertical bars (|)")):
+                if sep in rows[0][0]:
+                    self.add(rel, None, f"fields are separated by {what}, not commas: the format is comma-separated "
+                                        f"with '.' as decimal point (docs/data_format.md); save the file as "
+                                        f"comma-separated CSV")
+                    return None
         header = [h.strip() for h in rows[0]]
         data = rows[1:]
         recognised = column_names(quantities)
@@ -433,6 +441,11 @@ class _Reader:
         if dup.size or dec.size:
             return False
         med = float(np.median(dt))
+        lo, hi = SAMPLE_RATE_RANGE_HZ
+        if not lo <= 1.0 / med <= hi:
+            self.add(rel, name, f"sample rate {1 / med:.6g} Hz (median spacing {med:.6g} s) is outside the plausible "
+                                f"{lo:g}..{hi:,.0f} Hz: is the time column in seconds?")
+            return False
         irregular = np.flatnonzero(np.abs(dt - med) > SPACING_TOL * med) + 1
         if irregular.size:
             self.add(rel, name, f"inconsistent sample rate: spacing varies by more than {SPACING_TOL:.0%} around "
@@ -691,12 +704,16 @@ class _Reader:
             std[ch] = float(np.std(x))
             noise[ch] = float(np.median(np.abs(np.diff(x)))) / (0.6745 * math.sqrt(2.0)) if x.size > 1 else 0.0
         declared = e["inputs"]
+
+        def moves(ch):
+            return std[ch] > max(INPUT_NOISE_FACTOR * noise[ch], INPUT_STD_FLOOR_DEG * DEG)
+
+        n0 = len(self.problems)
         weakest = min(declared, key=lambda c: std[c])
         for ch in INPUT_CHANNELS:
             if ch in declared:
                 continue
-            moves = std[ch] > max(INPUT_NOISE_FACTOR * noise[ch], INPUT_STD_FLOOR_DEG * DEG)
-            if moves and std[ch] > INPUT_DOMINANCE * std[weakest]:
+            if moves(ch) and std[ch] > INPUT_DOMINANCE * std[weakest]:
                 if std[weakest] > 0:
                     how = (f"moves {std[ch] / std[weakest]:.3g} times as much as the declared '{names[weakest]}' "
                            f"(std over the record {std[ch] / DEG:.3g} vs {std[weakest] / DEG:.3g} deg, above "
@@ -708,6 +725,15 @@ class _Reader:
                          f"{declared!r}, but in {rel} the undeclared input column '{names[ch]}' {how}: list the "
                          "input(s) the record excites (frequency responses take a maneuver as single-input on "
                          "this field)")
+        if len(self.problems) == n0 and not any(moves(ch) for ch in declared):
+            # nothing else contradicts the declaration, but the record excites none of what it declares
+            self.add(MANIFEST_NAME, f"maneuvers[{e['index']}].inputs",
+                     f"{declared!r}, but in {rel} the declared input column{'s' if len(declared) > 1 else ''} "
+                     + ", ".join(f"'{names[ch]}' (std over the record {std[ch] / DEG:.3g} deg, noise about "
+                                 f"{noise[ch] / DEG:.2g} deg)" for ch in declared)
+                     + f" never move{'s' if len(declared) == 1 else ''} beyond noise ({INPUT_NOISE_FACTOR:g}x the "
+                       f"noise and {INPUT_STD_FLOOR_DEG:g} deg): a record that excites no input identifies nothing; "
+                       "check the file or the role")
 
     def load_trims(self, rel, maneuver_names, maneuver_speeds_kt=None):
         n0 = len(self.problems)

@@ -14,7 +14,7 @@ import re
 from ..tomlfile import read_toml
 
 from ..dataset.schema import (G_RANGE_M_S2, INPUT_CHANNELS, MANEUVER_QUANTITIES, MASS_RANGE_KG, MIN_SAMPLES,
-                              NAME_PATTERN, RHO_RANGE_KG_M3, ROLES, SPEED_RANGE_KT)
+                              NAME_PATTERN, RHO_RANGE_KG_M3, ROLES, SAMPLE_RATE_RANGE_HZ, SPEED_RANGE_KT)
 from ..physics.parameters import bo105
 from ..simulation.inputs import SHAPES, InputSignal, InputSpecError
 from ..units import DEG, KT, SENSOR_SIGMA_KEYS
@@ -150,15 +150,18 @@ def _maneuver(mv, where: str, record_rate: float) -> ManeuverPlan:
     if abs(amplitude * DEG) > limit:
         raise ConfigError(f"{where}: key 'amplitude_deg' = {amplitude:g} deg is beyond the plausible input "
                           f"limit {limit_text} of the dataset format")
+    if amplitude == 0:  # check-data refuses a record whose declared input never moves
+        raise ConfigError(f"{where}: key 'amplitude_deg' = 0: the maneuver's input '{channel}' would never move "
+                          f"(the dataset format refuses a record that excites no declared input)")
     step = _number(_get(mv, "step_s", where, float), "step_s", where, lo=0.0, lo_open=True, unit="s")
     duration = _number(_get(mv, "duration_s", where, float), "duration_s", where, lo=0.0, lo_open=True, unit="s")
     if duration < (MIN_SAMPLES - 1) / record_rate:  # check-data needs MIN_SAMPLES samples
         raise ConfigError(f"{where}: key 'duration_s' = {duration:g} s gives fewer than {MIN_SAMPLES} samples at "
                           f"record_rate_hz = {record_rate:g}")
     t_start = _number(_get(mv, "t_start_s", where, float, 2.0), "t_start_s", where, lo=0.0, unit="s")
-    if t_start > duration:  # t_start_s = duration_s is allowed: a record of the trim alone
-        raise ConfigError(f"{where}: key 't_start_s' = {t_start:g} s lies after the end of the record "
-                          f"(duration_s = {duration:g} s): the input would not be recorded")
+    if t_start >= duration:  # a record of the trim alone: its declared input would never move (check-data)
+        raise ConfigError(f"{where}: key 't_start_s' = {t_start:g} s lies {'at' if t_start == duration else 'after'} "
+                          f"the end of the record (duration_s = {duration:g} s): the input would not be recorded")
     ramp = _number(_get(mv, "ramp_s", where, float, 0.1), "ramp_s", where, lo=0.0, unit="s")
     sweep = {}
     if shape != "sweep":
@@ -244,6 +247,9 @@ def load_config(path: str | Path) -> GeneratorConfig:
                        unit="Hz")
     record_rate = _number(_get(sen, "record_rate_hz", ws, float, 50.0), "record_rate_hz", ws, lo=0.0,
                           lo_open=True, unit="Hz")
+    if not SAMPLE_RATE_RANGE_HZ[0] <= record_rate <= SAMPLE_RATE_RANGE_HZ[1]:  # check-data's plausible rates
+        raise ConfigError(f"{ws}: key 'record_rate_hz' = {record_rate:g} Hz is outside the plausible "
+                          f"{SAMPLE_RATE_RANGE_HZ[0]:g}..{SAMPLE_RATE_RANGE_HZ[1]:,.0f} Hz of the dataset format")
     antialias = _number(_get(sen, "antialias_hz", ws, float, 10.0), "antialias_hz", ws, lo=0.0, lo_open=True,
                         unit="Hz")
     tas_low = _number(_get(sen, "tas_sigma_low_speed_m_s", ws, float, 1.0), "tas_sigma_low_speed_m_s", ws, lo=0.0)

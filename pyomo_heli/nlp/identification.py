@@ -397,6 +397,13 @@ def identification_data(cfg, ft=None) -> IdentificationData:
             if missing:
                 raise ValueError(f"field 'validation': maneuver(s) {missing} not in the dataset; it has "
                                  f"{', '.join(ft.maneuvers)}")
+        # a record used for both fitting and validation validates nothing (by name or by the manifest's roles)
+        validation = (set(cfg.validation) if isinstance(cfg.validation, list) else
+                      {n for n, mv in ft.maneuvers.items() if mv.role == cfg.validation})
+        both = [mv.name for mv in data.maneuvers if mv.name in validation]
+        if both:
+            raise ValueError(f"maneuver(s) {', '.join(both)} both fitted (field 'maneuvers') and validation records "
+                             f"(field 'validation'); a validation record must be one the fit has not seen")
     except (KeyError, ValueError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
         raise ValueError(f"{cfg.path} [data]: {msg}") from None

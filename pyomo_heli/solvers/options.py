@@ -107,6 +107,13 @@ def _show(value) -> str:
     return repr(value) if isinstance(value, str) else str(value).lower() if isinstance(value, bool) else str(value)
 
 
+#: convergence tolerances outside these ranges are refused for every backend: above, a solve reports success at
+#: a point that is no optimum (``tol = 1e300`` "converged" at the initial guess); below, double precision cannot
+#: meet the test (Ipopt's defaults: tol 1e-8, acceptable_tol 1e-6, constr_viol_tol and compl_inf_tol 1e-4)
+TOLERANCE_RANGES = {"tol": (1e-14, 1e-2), "acceptable_tol": (1e-14, 1e-2), "constr_viol_tol": (1e-14, 1e-2),
+                    "compl_inf_tol": (1e-14, 1e-2)}
+
+
 def _check_generic(key: str, value) -> None:
     if isinstance(value, bool):
         raise ValueError(
@@ -119,6 +126,12 @@ def _check_generic(key: str, value) -> None:
         raise ValueError(f"option {key!r} must be a number or a string, got {type(value).__name__} {value!r}")
     if isinstance(value, str) and ("\0" in value or "\n" in value):
         raise ValueError(f"option {key!r} must be a one-line string, got {value!r}")
+    if key in TOLERANCE_RANGES and isinstance(value, (int, float)):
+        lo, hi = TOLERANCE_RANGES[key]
+        if not lo <= value <= hi:
+            why = ("a solve would report success at a point that is no optimum" if value > hi else
+                   "double precision cannot meet it")
+            raise ValueError(f"option {key!r} = {value:g} is outside the sane range {lo:g}..{hi:g}: {why}")
 
 
 # ---------------------------------------------------------------- casadi-ipopt

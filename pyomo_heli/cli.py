@@ -125,6 +125,93 @@ def _check_out_file(path, option: str = "--out") -> None:
         raise UserError(f"option {option}: cannot write {path}: permission denied")
 
 
+#: what a run of a command leaves in its folder before the files that name its kind (pareto/store.py KINDS)
+_RUN_LEFTOVERS = ("points", "checkpoint.json")
+
+
+def _visible(folder: Path) -> list[Path]:
+    return sorted(c for c in folder.iterdir() if not c.name.startswith(".") and not c.name.endswith((".tmp", ".lock")))
+
+
+def _names(paths, at_most: int = 5) -> str:
+    names = [p.name + ("/" if p.is_dir() else "") for p in paths]
+    return ", ".join(names[:at_most]) + (f", ... ({len(names)} in all)" if len(names) > at_most else "")
+
+
+def _check_out_not_foreign(path, kind: str, option: str = "--out") -> None:
+    """Refuse a results folder that holds someone else's files: a flight test, or files that are no results of
+    pyomo-heli. ``kind``: ``identification``, ``multi-start`` or ``close-loop`` (pareto/store.py KINDS). A new
+    or empty folder is fine; a results folder of any kind passes here (the command's own claim_folder refuses
+    another command's results, naming them)."""
+    from .pareto.store import StoreMismatchError, folder_kind
+
+    p = Path(path)
+    if not p.is_dir():
+        return
+    present = _visible(p)
+    if not present:
+        return
+    if (p / "manifest.json").is_file():
+        raise UserError(f"option {option}: {path} is a flight-test folder (manifest.json); results are never "
+                        f"written into data: choose another {option}")
+    try:
+        if folder_kind(p, strict=False) is not None:
+            return
+    except StoreMismatchError:
+        return  # a damaged checkpoint.json: the command names it
+    others = [c for c in present if c.name not in _RUN_LEFTOVERS]
+    if others:
+        raise UserError(f"option {option}: {path} holds files that are not results of pyomo-heli "
+                        f"({_names(others)}); choose a new or empty folder")
+
+
+def _check_diagnosis_out(out, results_dir) -> None:
+    """``diagnose --out``: a new or empty folder, the results folder itself, or a folder holding a diagnosis (rerun);
+    never another results folder (its diagnosis would be replaced by one of other results) or other files."""
+    p = Path(out)
+    if not p.is_dir() or p.resolve() == Path(results_dir).resolve():
+        return
+    present = _visible(p)
+    if not present:
+        return
+    if (p / "manifest.json").is_file():
+        raise UserError(f"option --out: {out} is a flight-test folder (manifest.json); choose another --out")
+    if (p / "chosen.json").is_file() or (p / "loop.json").is_file() or (p / "starts.csv").is_file():
+        raise UserError(f"option --out: {out} is another results folder ({_names(present)}); its own diagnosis "
+                        f"would be replaced by one of {results_dir}: choose another --out (default: {results_dir})")
+    if not (p / "diagnosis.json").is_file():
+        raise UserError(f"option --out: {out} holds files that are no diagnosis ({_names(present)}); choose a new or "
+                        f"empty folder")
+
+
+def _check_copy_out(out, results_dir) -> None:
+    """``uncertainty --out``: a new or empty folder, the results folder, or an earlier copy of the same results
+    (same anchor A and chosen point); never another results folder or other files."""
+    p = Path(out)
+    if not p.is_dir() or p.resolve() == Path(results_dir).resolve():
+        return
+    present = _visible(p)
+    if not present:
+        return
+    if (p / "manifest.json").is_file():
+        raise UserError(f"option --out: {out} is a flight-test folder (manifest.json); choose another --out")
+
+    def key(folder):
+        try:
+            ch = json.loads((Path(folder) / "chosen.json").read_text())
+            td = json.loads((Path(folder) / "time_domain.json").read_text())
+            return (td["parameters"], td["J_time"], (ch["chosen"] or {}).get("parameters"))
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            return None
+
+    mine = key(p)
+    if mine is not None and mine == key(results_dir):
+        return  # an earlier copy of these results: updated in place
+    what = "other results" if (p / "chosen.json").is_file() else "other files"
+    raise UserError(f"option --out: {out} holds {what} ({_names(present)}), not a copy of {results_dir}; choose a "
+                    f"new or empty folder")
+
+
 def _warning(cmd: str):
     """A one-line warning on stderr, prefixed like the command's errors."""
     return lambda msg: print(f"pyomo-heli {cmd}: warning: {msg}", file=sys.stderr)
@@ -310,6 +397,7 @@ def cmd_close_loop(args) -> int:
                             f"manifest.json (a flight test as written by generate-data)")
         overrides = {"data": {"dataset": str(Path(args.dataset).resolve())}}
     _check_out_dir(args.out)
+    _check_out_not_foreign(args.out, "close-loop")
     cfg = load_identification_config(args.config, overrides)
     settings = loop_settings(cfg)
     if args.max_iterations is not None:
@@ -375,6 +463,7 @@ def cmd_diagnose(args) -> int:
         raise UserError(f"--alpha must lie in (0, 1), got {args.alpha}")
     if args.out is not None:
         _check_out_dir(args.out)
+        _check_diagnosis_out(args.out, args.results_dir)
     res = IdentificationResult.load(args.results_dir)
     # the config (given, or named in chosen.json) plus a close-loop iteration's effects, checked against the folder
     notes = []  # records the folder lacks: said once the command has checked everything else
@@ -408,6 +497,7 @@ def cmd_identify(args) -> int:
 
     overrides = {"pareto": {"cold_check": True}} if getattr(args, "cold_check", False) else None
     _check_out_dir(args.out)
+    _check_out_not_foreign(args.out, "identification")
     cfg = load_identification_config(args.config, overrides)
     print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
           f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
@@ -448,6 +538,7 @@ def cmd_uncertainty(args) -> int:
 
     if args.out:
         _check_out_dir(args.out)
+        _check_copy_out(args.out, args.results)
     cfg = load_identification_config(args.config)
     result = IdentificationResult.load(args.results)
     if result.info.get("extensions"):  # an iteration of close-loop: the config plus the effects the loop added
@@ -480,6 +571,7 @@ def cmd_multistart(args) -> int:
     from .multistart import run_multistart
 
     _check_out_dir(args.out)
+    _check_out_not_foreign(args.out, "multi-start")
     cfg = load_identification_config(args.config)
     problem = "time" if args.epsilon is None else "epsilon"
     print(f"multi-start of {', '.join(f.name for f in cfg.free)} from {args.starts} random initial guesses "

@@ -386,3 +386,58 @@ def test_a_solver_tolerance_outside_a_sane_range_is_refused(tmp_path, capsys, to
     assert main(["identify", str(cfg), "--out", str(tmp_path / "r")]) == 2
     _one_line(capsys, str(cfg), "[solver]", "'tol'", "sane range")
     assert not (tmp_path / "r").exists()
+
+
+# ============================================================== results never written among someone else's files
+@pytest.mark.parametrize("command", ["identify", "multistart", "close-loop"])
+def test_a_run_refuses_an_out_holding_a_flight_test_or_other_files(tmp_path, capsys, command):
+    cfg = _small_config(tmp_path)
+    data = Path(shutil.copytree(SMALL, tmp_path / "data"))
+    before = _tree(data)
+    extra = ["--starts", "1"] if command == "multistart" else []
+    assert main([command, str(cfg), "--out", str(data)] + extra) == 2
+    _one_line(capsys, str(data), "flight-test folder")
+    assert _tree(data) == before
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("x")
+    assert main([command, str(cfg), "--out", str(mine)] + extra) == 2
+    _one_line(capsys, str(mine), "thesis.tex", "not results of pyomo-heli")
+    assert sorted(_tree(mine)) == ["thesis.tex"]
+
+
+def test_diagnose_and_uncertainty_out_refuse_other_results_and_files(checkout, tmp_path, capsys):
+    other = tmp_path / "other_results"
+    shutil.copytree(checkout / "res", other)
+    doc = json.loads((other / "time_domain.json").read_text())
+    doc["J_time"] += 1.0  # another run
+    (other / "time_domain.json").write_text(json.dumps(doc))
+    before = _tree(other)
+    assert main(["diagnose", "res", "--out", str(other)]) == 2
+    _one_line(capsys, str(other), "another results folder")
+    assert main(["uncertainty", "tiny.toml", "--results", "res", "--out", str(other), "--points", "chosen"]) == 2
+    _one_line(capsys, str(other), "other results", "not a copy of res")
+    assert _tree(other) == before
+    notes = tmp_path / "notes"
+    notes.mkdir()
+    (notes / "a.txt").write_text("x")
+    for argv in (["diagnose", "res", "--out", str(notes)],
+                 ["uncertainty", "tiny.toml", "--results", "res", "--out", str(notes), "--points", "chosen"]):
+        assert main(argv) == 2
+        _one_line(capsys, str(notes), "a.txt")
+    assert sorted(_tree(notes)) == ["a.txt"]
+
+
+def test_reruns_into_their_own_output_are_accepted(checkout, tmp_path):
+    """What the refusals must not catch: an earlier copy of the same results (uncertainty --out), a folder holding
+    a diagnosis (diagnose --out), a run's own results folder."""
+    from pyomo_heli.cli import _check_copy_out, _check_diagnosis_out, _check_out_not_foreign
+
+    shutil.copytree(checkout / "res", tmp_path / "copy")
+    _check_copy_out(tmp_path / "copy", "res")
+    (tmp_path / "diag").mkdir()
+    (tmp_path / "diag" / "diagnosis.json").write_text("{}")
+    (tmp_path / "diag" / "diagnosis.md").write_text("")
+    _check_diagnosis_out(tmp_path / "diag", "res")
+    _check_diagnosis_out("res", "res")
+    _check_out_not_foreign("res", "identification")

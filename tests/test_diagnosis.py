@@ -130,6 +130,7 @@ shape = "doublet"
 amplitude_deg = 0.2
 step_s = 0.5
 duration_s = 2
+t_start_s = 1
 """
 
 

@@ -11,13 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from test_close_loop import WAKE_MANEUVERS, make_case
-
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.attribution import _input_error_whitening, attribute, segment_ids
 from pyomo_heli.nlp.identification import prepare_data
 from pyomo_heli.nlp.objectives import lead_in_sigma
 from pyomo_heli.simulation.compiled import input_sensitivities
+from pyomo_heli.studies.small_instances import WAKE_MANEUVERS, make_case
 from pyomo_heli.simulation.trim import trim_float
 
 OUTPUTS = ["q", "theta", "n_x", "n_z", "TAS"]

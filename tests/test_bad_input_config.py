@@ -255,7 +255,7 @@ def test_third_audit_close_loop_info_of_the_wrong_type_is_named(tmp_path, key, v
     import shutil
 
     res = tmp_path / "res"
-    shutil.copytree(Path(__file__).resolve().parent.parent / "docs" / "results" / "close_loop" / "iter_1", res)
+    shutil.copytree(Path(__file__).resolve().parent / "results" / "close_loop_iter_1", res)
     doc = json.loads((res / "chosen.json").read_text())
     doc["info"][key] = value
     (res / "chosen.json").write_text(json.dumps(doc))

@@ -32,10 +32,10 @@ from pyomo_heli.simulation.trim import TrimError, trim_float
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "data" / "bo105_synthetic"
 CLEAN = ROOT / "data" / "bo105_clean"
-TRI_RESULTS = ROOT / "docs" / "results" / "case1_tri"
-TRI_CONFIG = ROOT / "studies" / "case1_tri.toml"
-BI_RESULTS = ROOT / "docs" / "results" / "case1"
-BI_CONFIG = ROOT / "studies" / "case1.toml"
+TRI_RESULTS = ROOT / "tests" / "results" / "case1_tri"  # a copy of the committed Case 1 tri-objective run
+TRI_CONFIG = ROOT / "tests" / "configs" / "case1_tri.toml"
+BI_RESULTS = ROOT / "tests" / "results" / "case1"
+BI_CONFIG = ROOT / "tests" / "configs" / "case1.toml"
 LON = "maneuvers/lon3211_80kt_a.csv"
 TRIMS = "trims.csv"
 KT = 1852.0 / 3600.0
@@ -332,7 +332,7 @@ def test_report_linear_with_a_bi_objective_config(tri, capsys):
 
 def test_report_linear_with_other_free_parameters(tri, capsys, tmp_path):
     cfg = tmp_path / "other.toml"
-    text = TRI_CONFIG.read_text().replace('dataset = "../data/bo105_synthetic"', f'dataset = "{BUNDLED}"')
+    text = TRI_CONFIG.read_text().replace('dataset = "../../data/bo105_synthetic"', f'dataset = "{BUNDLED}"')
     cfg.write_text(text.replace("[parameters.CL_alpha_HT]", "[parameters.Iyy]\n# was CL_alpha_HT", 1)
                    .replace('unit = "1/rad"\ninitial = 4.3516\nlower = 0.1\nupper = 10.0\nscale = 5.0',
                             "unit = \"kg m^2\"\ninitial = 4000.0\nlower = 1000.0\nupper = 9000.0\nscale = 1000.0", 1))

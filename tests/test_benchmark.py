@@ -1,4 +1,4 @@
-"""studies/benchmark.py --quick: JSON structure and the ratio arithmetic (no timing asserts).
+"""The benchmark study (studies/benchmark.py = pyomo_heli.studies.benchmark) --quick: JSON structure and the ratio arithmetic (no timing asserts).
 
 Timings are machine-dependent and never asserted; what is checked is that
 every ratio in the JSON is the stated function of the raw numbers in the
@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench") / "benchmark.json"
-    proc = subprocess.run([sys.executable, str(ROOT / "studies" / "benchmark.py"), "--quick", "--repeat", "2", "--compare-nl-route",
+    proc = subprocess.run([sys.executable, "-m", "pyomo_heli.studies.benchmark", "--quick", "--repeat", "2", "--compare-nl-route",
                            "--out", str(out)],
                           capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -129,6 +129,6 @@ def test_repeat_maneuvers_renames_copies():
 
 
 def test_bad_size_option_exits_2():
-    proc = subprocess.run([sys.executable, str(ROOT / "studies" / "benchmark.py"), "--size", "1,x"],
+    proc = subprocess.run([sys.executable, "-m", "pyomo_heli.studies.benchmark", "--size", "1,x"],
                           capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 2 and "--size" in proc.stderr

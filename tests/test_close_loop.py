@@ -7,7 +7,6 @@ maneuvers, a dense trim sweep (the trims carry most of the information),
 three front points.
 """
 import json
-import textwrap
 from pathlib import Path
 
 import pytest
@@ -17,70 +16,10 @@ from pyomo_heli.close_loop import close_loop, loop_settings
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.attribution import attribute
-from pyomo_heli.flighttest.generate import generate_from_file
 from pyomo_heli.identify import run_identification
 from pyomo_heli.nlp.identification import prepare_data, identification_data
 from pyomo_heli.report.loop import write_loop_report
-
-MANEUVERS = """
-[[maneuvers]]
-name = "lon_20kt"
-role = "identification"
-speed_kt = 20
-channel = "lon"
-shape = "doublet"
-amplitude_deg = 0.5
-step_s = 1.0
-duration_s = 5
-t_start_s = 1.0
-
-[[maneuvers]]
-name = "lon3211_80kt"
-role = "identification"
-speed_kt = 80
-channel = "lon"
-shape = "3211"
-amplitude_deg = 0.5
-step_s = 0.5
-duration_s = 5
-t_start_s = 1.0
-
-[[maneuvers]]
-name = "lon_80kt_val"
-role = "validation"
-speed_kt = 80
-channel = "lon"
-shape = "doublet"
-amplitude_deg = 0.5
-step_s = 1.0
-duration_s = 5
-t_start_s = 1.0
-"""
-
-FREE = {
-    "theta_twist": 'unit = "deg/m"\ninitial = -2.1228\nlower = -10.0\nupper = 0.0\nscale = 1.0',
-    "CL_alpha_HT": "initial = 4.3516\nlower = 0.1\nupper = 10.0\nscale = 5.0",
-    "Iyy": "initial = 6464.9\nlower = 2000.0\nupper = 8000.0\nscale = 5000.0",
-}
-
-
-def make_case(root, effect: str = "", seed: int = 11, free=("theta_twist", "CL_alpha_HT", "Iyy"), points: int = 3,
-              loop: str = "", maneuvers: str = MANEUVERS, input_reference_s: float = 0.0,
-              resample_inputs: str | None = None):
-    """Generate a small dataset with ``effect`` (a [truth.effects.*] table) and write its identification config
-    (``resample_inputs``: written into [data] when given, else the config default applies)."""
-    root.mkdir(parents=True, exist_ok=True)
-    gen = (f'[dataset]\nname = "small"\naircraft = "Bo-105 (small test)"\nseed = {seed}\n\n[truth]\nparameters = {{}}\n'
-           f"{textwrap.dedent(effect)}\n[sensors]\nnoise = true\n\n[trims]\n"
-           "speeds_kt = [10, 15, 20, 25, 30, 40, 50, 60, 80, 100, 120]\n" + maneuvers)
-    (root / "gen.toml").write_text(gen)
-    generate_from_file(root / "gen.toml", root / "data")
-    params = "".join(f"\n[parameters.{n}]\n{FREE[n]}\n" for n in free)
-    res_in = f'resample_inputs = "{resample_inputs}"\n' if resample_inputs else ""
-    ident = (f'[data]\ndataset = "data"\nresample_hz = 25\n{res_in}input_reference_s = {input_reference_s}\n{params}\n'
-             f'[pareto]\npoints = {points}\n\n[solver]\nname = "casadi-ipopt"\n{loop}')
-    (root / "ident.toml").write_text(ident)
-    return load_identification_config(root / "ident.toml")
+from pyomo_heli.studies.small_instances import FREE, MANEUVERS, WAKE_MANEUVERS, make_case  # noqa: F401
 
 
 def identify_and_attribute(cfg, out, **kw):
@@ -178,29 +117,6 @@ def test_flapping_lag_is_found_or_reported_confounded_with_iyy(tmp_path):
 def _pooled_trim(trim_rms: dict) -> float:
     """Root-sum-square of the trim RMS errors over col, lon and theta."""
     return sum(trim_rms[c] ** 2 for c in ("col", "lon", "theta")) ** 0.5
-
-
-# The wake instance: 2 s of quiet lead-in before each input (the generator's default), 6 s records, and the
-# input increments referred to the lead-in mean (input_reference_s = 1.9 s). With increments from the first
-# sample (1 s lead-in, 5 s records, the other tests' MANEUVERS) the 0.02 deg noise of that one sample acts
-# as a constant input offset, and at 80 kt a 0.01 deg lon offset moves theta by 0.46 deg after 5 s: the
-# time-domain anchor of the front then sat at the twist bound and the Eq. 11 point was decided by that
-# artefact, not by the model (docs/close_loop.md, "What the tests show").
-WAKE_MANEUVERS = "".join(
-    f'''
-[[maneuvers]]
-name = "{name}"
-role = "{role}"
-speed_kt = {speed}
-channel = "lon"
-shape = "{shape}"
-amplitude_deg = 0.5
-step_s = {step}
-duration_s = 6
-t_start_s = 2.0
-''' for name, role, speed, shape, step in (("lon_20kt", "identification", 20, "doublet", 1.0),
-                                        ("lon3211_80kt", "identification", 80, "3211", 0.5),
-                                        ("lon_80kt_val", "validation", 80, "doublet", 1.0)))
 
 
 def _truth_replay_errors(cfg, doc):
@@ -455,7 +371,7 @@ def test_config_of_result_rebuilds_a_loop_iteration_or_names_the_mismatch():
 
     from pyomo_heli.close_loop import ConfigError, config_of_result
 
-    cfg = load_identification_config(Path(__file__).resolve().parent.parent / "studies" / "close_loop.toml")
+    cfg = load_identification_config(Path(__file__).resolve().parent / "configs" / "close_loop.toml")
     base = ["theta_twist", "CL_alpha_HT", "Iyy"]
     it1 = SimpleNamespace(info={"extensions": ["rotor_wake_on_tail"], "shape_parameters": {"n_wt": 3.5}},
                           parameters=base + ["k_wt"])
@@ -491,14 +407,11 @@ def test_generate_data_seed_option_and_close_loop_dataset_option(tmp_path, capsy
 
 @pytest.mark.slow
 def test_score_test_keeps_its_level_on_m0_seeds(tmp_path):
-    """Monte Carlo of the false-positive control (studies/score_test_level.py) on 40 seeds the study did not
+    """Monte Carlo of the false-positive control (pyomo_heli.studies.score_test_level) on 40 seeds the study did not
     use: M0 + noise only, input errors estimated, the loop's score test (F(1, df) reference, input errors
     eliminated). With a family-wise level of 1 %, 3 or more accepting seeds of 40 would have probability
     below 1 %; over the 400 (seed, candidate) pairs the share of p < 0.01 should be near 1 %."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "studies"))
-    import score_test_level as L
+    from pyomo_heli.studies import score_test_level as L
 
     docs = [L.one_seed(s, "eiv", tmp_path) for s in range(301, 341)]
     table = L.summary(docs).set_index(["scores", "reference"])

@@ -1,7 +1,8 @@
 """Tests of the flight-test dataset format (pyomo_heli.dataset): writer, loader, validator, check-data.
 
-The valid dataset is produced by the pandas-only example in docs/data_format.md (executed here, so
-the documentation stays correct); every malformed case is a small mutation of it.
+The valid dataset is produced by the pandas-only example of docs/data_format.md, kept here as
+tests/data/example_dataset.py (a slow check compares it with the doc's block); every malformed case is a
+small mutation of it.
 """
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ from pyomo_heli.dataset import (
 )
 from pyomo_heli.dataset.cli import check_data
 
-DOC = pathlib.Path(__file__).resolve().parents[1] / "docs" / "data_format.md"
+EXAMPLE = pathlib.Path(__file__).resolve().parent / "data" / "example_dataset.py"
+DOC = pathlib.Path(__file__).resolve().parents[1] / "docs" / "data_format.md"  # read by the slow doc check only
 KT = 1852.0 / 3600.0
 DEG = math.pi / 180.0
 LON = "maneuvers/lon3211_80kt.csv"
@@ -46,14 +48,20 @@ def doc_example_code() -> str:
     return m.group(1)
 
 
+@pytest.mark.slow
+def test_the_doc_example_is_the_tested_one():
+    """docs/data_format.md shows exactly the example the tests run (tests/data/example_dataset.py)."""
+    assert EXAMPLE.read_text().split("\n", 1)[1] == doc_example_code()
+
+
 @pytest.fixture(scope="session")
 def example_src(tmp_path_factory) -> pathlib.Path:
-    """Run the documentation's pandas-only example once; it writes ./bo105_example."""
+    """Run the documentation's pandas-only example (tests/data/example_dataset.py) once; it writes ./bo105_example."""
     where = tmp_path_factory.mktemp("doc_example")
     old = os.getcwd()
     os.chdir(where)
     try:
-        exec(compile(doc_example_code(), str(DOC), "exec"), {"__name__": "doc_example"})
+        exec(compile(EXAMPLE.read_text(), str(EXAMPLE), "exec"), {"__name__": "doc_example"})
     finally:
         os.chdir(old)
     return where / "bo105_example"

@@ -2,7 +2,7 @@
 
 Independent reference: the data generator's truth.
 
-- docs/results/case1 (committed) was identified with M0 on data/bo105_synthetic, whose truth is
+- tests/results/case1 (a copy of the committed Case 1 run, docs/results/case1) was identified with M0 on data/bo105_synthetic, whose truth is
   M0 + the rotor wake on the tail (E1): a trim signature over 10-50 kt of lon lower and theta
   higher than M0 (model_spec.md section 4, E1), i.e. a model-minus-data residual that is a
   positive lon bump and a negative theta bump at low speed, absent in hover and above ~55 kt,
@@ -27,7 +27,7 @@ from pyomo_heli.pareto.result import IdentificationResult
 from pyomo_heli.units import KT
 
 ROOT = Path(__file__).resolve().parents[1]
-CASE1 = ROOT / "docs" / "results" / "case1"
+CASE1 = ROOT / "tests" / "results" / "case1"
 M0_NOISE = ROOT / "tests" / "results" / "m0_noise_small"
 
 
@@ -97,7 +97,7 @@ def test_diagnose_bad_input_is_one_line_exit_2(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_committed_case1_diagnosis_regenerates(tmp_path):
-    """docs/results/case1_diagnosis is what its command produces (about 40 s: slow study)."""
+    """docs/results/case1_diagnosis is what its command produces (about 40 s: a slow regeneration check)."""
     assert main(["diagnose", str(CASE1), "--out", str(tmp_path), "--no-residuals"]) == 0
     new = Diagnosis.load(tmp_path / "diagnosis.json")
     old = Diagnosis.load(ROOT / "docs" / "results" / "case1_diagnosis" / "diagnosis.json")

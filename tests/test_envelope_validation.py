@@ -1,4 +1,4 @@
-"""studies/envelope_validation.py: the loop's first and last models on an independent flight test.
+"""pyomo_heli.studies.envelope_validation: the loop's first and last models on an independent flight test.
 
 The envelope flight test must be the bundled one's truth, sensors and trims with another seed (its header
 says so); the study's numbers are checked against the truth simulator on a two-maneuver instance: at 20 kt,
@@ -7,23 +7,16 @@ the truth replay than its first.
 """
 from __future__ import annotations
 
-import importlib.util
 import tomllib
 from pathlib import Path
 
 import pytest
 
 from pyomo_heli.flighttest.generate import generate_from_file
+from pyomo_heli.studies.envelope_validation import evaluate
 
 ROOT = Path(__file__).resolve().parent.parent
-ENVELOPE = ROOT / "studies" / "validation_envelope.toml"
-
-
-def _study():
-    spec = importlib.util.spec_from_file_location("envelope_validation", ROOT / "studies" / "envelope_validation.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+ENVELOPE = ROOT / "tests" / "configs" / "validation_envelope.toml"  # a copy of studies/validation_envelope.toml
 
 
 def test_envelope_flight_test_shares_the_bundled_truth_sensors_and_trims():
@@ -44,7 +37,7 @@ def test_study_on_two_maneuvers_sees_the_wake_model_closer_to_truth(tmp_path):
     small = head + "".join("[[maneuvers]]" + b for b in blocks if any(f'"{k}"' in b for k in keep))
     (tmp_path / "gen.toml").write_text(small)
     generate_from_file(tmp_path / "gen.toml", tmp_path / "data")
-    tab = _study().evaluate(ROOT / "docs" / "results" / "close_loop", tmp_path / "data")
+    tab = evaluate(ROOT / "tests" / "results" / "close_loop", tmp_path / "data")
     assert set(tab["speeds"]) == {"all", "20 kt", "80 kt"}
     at20 = tab[tab["speeds"] == "20 kt"].set_index("output")
     # evaluation against the truth simulator: the wake-on-tail model's error falls where the wake acts

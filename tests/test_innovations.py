@@ -21,7 +21,7 @@ from pyomo_heli.physics.model import HelicopterModel
 from pyomo_heli.report.identification import read_truth, read_truth_effects
 
 ROOT = Path(__file__).resolve().parent.parent
-EIV = ROOT / "studies" / "close_loop_eiv.toml"
+EIV = ROOT / "tests" / "configs" / "close_loop_eiv.toml"
 FAST = ["lon3211_80kt_a", "lon3211_80kt_b"]  # where the exact model's raw theta residual is coloured
 SLOW = ["londoublet_20kt_a", "londoublet_20kt_b"]  # where the wake acts in the time series
 
@@ -105,7 +105,7 @@ def test_an_output_without_a_known_sigma_keeps_the_plain_test():
     assert series["beta_0"] == "residual" and series["theta"] == "innovation"
 
 
-OE = ROOT / "studies" / "close_loop.toml"
+OE = ROOT / "tests" / "configs" / "close_loop.toml"
 
 
 def test_output_error_config_asks_for_the_innovations_with_diagnosis_input_noise():

@@ -145,13 +145,13 @@ def test_j_linear_alone_on_clean_data(clean_responses):
 # ------------------------------------------------------------------ config switch
 from pyomo_heli.config import ConfigError, load_identification_config  # noqa: E402
 
-CASE1 = DATA.parent.parent / "studies" / "case1.toml"
+CASE1 = DATA.parent.parent / "tests" / "configs" / "case1.toml"
 
 
 def test_objectives_switch_default_is_bi_objective():
     cfg = load_identification_config(CASE1)
     assert cfg.objectives == ("time", "trim") and cfg.linear is None
-    tri = load_identification_config(DATA.parent.parent / "studies" / "case1_tri.toml")
+    tri = load_identification_config(DATA.parent.parent / "tests" / "configs" / "case1_tri.toml")
     assert tri.objectives == ("time", "trim", "linear")
     assert tri.linear.pairs == (("q", "lon"), ("n_z", "col")) and tri.linear.points == 3
     assert tri.linear.speeds == pytest.approx((0.0, 80 * KT))
@@ -186,7 +186,7 @@ def test_linear_report_from_a_results_folder(tmp_path, clean_responses):
     from pyomo_heli.report.linear import write_linear_report
 
     _, responses = clean_responses
-    cfg = load_identification_config(DATA.parent.parent / "studies" / "case1_tri.toml",
+    cfg = load_identification_config(DATA.parent.parent / "tests" / "configs" / "case1_tri.toml",
                                      {"data": {"dataset": str(DATA)}})
     truth = json.loads((DATA / "truth.json").read_text())["parameters"]
     params = {f.name: truth[f.name] for f in cfg.free}

@@ -75,7 +75,7 @@ def test_default_is_project_and_the_fingerprint_keys_on_the_resolved_value():
     from pyomo_heli.identify import identification_fingerprint
     from pyomo_heli.pareto.store import fingerprint
 
-    case1 = Path(__file__).resolve().parent.parent / "studies" / "case1.toml"
+    case1 = Path(__file__).resolve().parent / "configs" / "case1.toml"
     pinned = load_identification_config(case1)
     assert pinned.resample_inputs == "sample"
     default = load_identification_config(case1, {"data": {"resample_inputs": "project"}})

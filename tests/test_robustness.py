@@ -203,7 +203,7 @@ def test_multistart_share_and_resume(reference, tmp_path):
 @pytest.mark.slow
 def test_case1_multistart_share_at_least_90_percent(tmp_path):
     """The study of docs/results.md: Case 1 (10 Hz), 20 seeded starts, >= 90 % reach the best J_time."""
-    cfg = load_identification_config(ROOT / "studies" / "multistart_case1.toml")
+    cfg = load_identification_config(ROOT / "tests" / "configs" / "multistart_case1.toml")
     res = run_multistart(cfg, tmp_path, starts=20, seed=1, progress=print)
     assert len(res.starts) == 20
     assert res.share >= 0.9

@@ -133,13 +133,15 @@ def test_adapter_keys_and_names():
 
 
 def _committed_configs():
-    paths = sorted(glob.glob(os.path.join(ROOT, "studies", "*.toml")) + glob.glob(os.path.join(ROOT, "tests", "configs", "*.toml")))
+    """The test configs by default; the study configs of the checkout (studies/*.toml) with --runslow."""
+    studies = sorted(glob.glob(os.path.join(ROOT, "studies", "*.toml")))
+    paths = sorted(glob.glob(os.path.join(ROOT, "tests", "configs", "*.toml"))) + studies
     out = []
     for path in paths:
         with open(path, "rb") as fh:
             solver = tomllib.load(fh).get("solver", {})
         out.append(pytest.param(solver.get("name", "casadi-ipopt"), dict(solver.get("options", {})),
-                                id=os.path.relpath(path, ROOT)))
+                                id=os.path.relpath(path, ROOT), marks=[pytest.mark.slow] if path in studies else []))
     return out
 
 

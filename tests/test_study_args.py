@@ -1,4 +1,4 @@
-"""The study scripts refuse bad arguments with one argparse error line (exit 2) before any work
+"""The studies (pyomo_heli.studies, run by studies/*.py) refuse bad arguments with one argparse error line (exit 2) before any work
 (docs/robustness.md, "Bad input"); found by the second bad-input audit (2026-11-25)."""
 from __future__ import annotations
 
@@ -20,15 +20,16 @@ ROOT = Path(__file__).resolve().parent.parent
     (["monte_carlo.py", "--workers", "-1"], "argument --workers: must be an integer >= 0"),
     (["close_loop_seeds.py", "--out", "OUT"], "nothing to do: give --seeds and/or --existing"),
     (["close_loop_seeds.py", "--seeds", "1", "--config", "nope.toml", "--out", "OUT"], "--config nope.toml: file not found"),
-    (["envelope_validation.py", "--loops", "docs/results/close_loop", "--data-config", "nope.toml", "--out", "OUT"],
+    (["envelope_validation.py", "--loops", "tests/results/close_loop", "--data-config", "nope.toml", "--out", "OUT"],
      "--data-config nope.toml: file not found"),
-    (["benchmark.py", "--quick", "--out", "docs"], "--out docs: is a folder, expected a file name"),
+    (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path):
     argv = [str(tmp_path / "out") if a == "OUT" else a for a in argv]
     if "--out" not in argv:
         argv += ["--out", str(tmp_path / "out")]
-    r = subprocess.run([sys.executable, str(ROOT / "studies" / argv[0]), *argv[1:]], cwd=ROOT, capture_output=True,
+    module = "pyomo_heli.studies." + argv[0].removesuffix(".py")  # what studies/<name>.py runs
+    r = subprocess.run([sys.executable, "-m", module, *argv[1:]], cwd=ROOT, capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 2, r.stderr
     assert message in r.stderr.strip().splitlines()[-1], r.stderr

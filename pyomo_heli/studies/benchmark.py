@@ -19,9 +19,7 @@ import shlex
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:  # run as a script from a checkout
-    sys.path.insert(0, str(ROOT))
+ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, tests/configs/
 
 from pyomo_heli.benchmark import BenchmarkSettings, format_tables, run_benchmark  # noqa: E402
 from pyomo_heli.config import ConfigError  # noqa: E402
@@ -71,8 +69,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="tiny instance in seconds (ignores --config/--size)")
     ap.add_argument("--out", type=Path, default=Path("results") / "benchmark.json", help="JSON output")
     args = ap.parse_args(argv)
-    from _study_args import out_file
-
+    from .args import out_file
     out_file(ap, args.out)  # before the benchmark runs, not after
     overrides: dict = {}
     if args.points is not None:

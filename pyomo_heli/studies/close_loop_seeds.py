@@ -42,7 +42,7 @@ from pyomo_heli.nlp.identification import prepare_data
 from pyomo_heli.report.identification import VALIDATION_OUTPUTS, predict, read_truth
 from pyomo_heli.report.loop import iteration_model, label, truth_replay_errors, validation_change_table
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, data/
 WAKE = "rotor_wake_on_tail"
 PARAMETERS = ("theta_twist", "CL_alpha_HT", "Iyy")
 TRIM = ("col", "lon", "theta")
@@ -148,8 +148,7 @@ def markdown(tab: pd.DataFrame) -> str:
 
 
 def main() -> None:
-    from _study_args import in_file, nonneg_int, out_folder
-
+    from .args import in_file, nonneg_int, out_folder
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=nonneg_int, nargs="*", default=[])
     ap.add_argument("--out", type=Path, required=True)

@@ -41,7 +41,7 @@ from pyomo_heli.report.identification import VALIDATION_OUTPUTS, predict
 from pyomo_heli.report.loop import iteration_model, label, truth_replay_errors, validation_change_table
 from pyomo_heli.units import KT
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, data/
 
 
 def loop_config(loop: Path, doc: dict, data: Path):
@@ -141,15 +141,14 @@ def _table(df: pd.DataFrame) -> list[str]:
             + ["| " + " | ".join(fmt(c, v) for c, v in zip(df.columns, r)) + " |" for r in df.itertuples(index=False)])
 
 
-def main() -> None:
-    from _study_args import in_file, out_folder
-
+def main(argv=None) -> int:
+    from .args import in_file, out_folder
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loops", type=Path, nargs="+", required=True, help="close-loop results folders")
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--data-config", type=Path, default=ROOT / "studies" / "validation_envelope.toml")
     ap.add_argument("--data", type=Path, help="an existing flight-test folder (default: generate OUT/data)")
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     for p in a.loops:
         if not (p / "loop.json").is_file():
             ap.error(f"--loops {p}: no loop.json there (a close-loop results folder is needed)")
@@ -167,7 +166,8 @@ def main() -> None:
     text = markdown(tab, data)
     (a.out / "envelope_validation.md").write_text(text)
     print(text)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -30,7 +30,7 @@ from pyomo_heli.physics.model import HelicopterModel
 from pyomo_heli.report.identification import read_truth, read_truth_effects
 from pyomo_heli.report.loop import iteration_model
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, data/
 
 
 def cases(cfg, loop: Path | None) -> list[tuple[str, HelicopterModel, dict, bool]]:

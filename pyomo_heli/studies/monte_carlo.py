@@ -23,7 +23,7 @@ import argparse
 import sys
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[2] / "studies"
 
 
 def main(argv=None) -> int:
@@ -33,8 +33,7 @@ def main(argv=None) -> int:
     from pyomo_heli.uncertainty.monte_carlo import ProblemSpec, run_monte_carlo
     from pyomo_heli.flighttest.config import flight_test_noise
 
-    from _study_args import nonneg_int, out_folder
-
+    from .args import nonneg_int, out_folder
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", default=str(HERE / "monte_carlo.toml"), help="identification config (clean data)")
     ap.add_argument("--noise-from", default=str(HERE.parent / "data" / "bo105_synthetic.toml"),

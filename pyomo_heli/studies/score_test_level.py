@@ -3,7 +3,7 @@
     python studies/score_test_level.py --seeds 101-140 --out results/score_test_level [--identification eiv|oe]
                                        [--truth m0|wake]
 
-Every seed generates the small wake instance's flight test of tests/test_close_loop.py (a 20 kt lon doublet
+Every seed generates the small wake instance's flight test (:mod:`pyomo_heli.studies.small_instances`, the close-loop tests' instance) (a 20 kt lon doublet
 and an 80 kt lon 3-2-1-1 for identification, 6 s each with a 2 s lead-in, 11 level trims; 80 kt validation
 doublet unused) from **M0 with sensor noise only**, so every candidate's true strength is zero. It
 identifies twist and CL_alpha_HT (2 front points, the Eq. 11 point solved directly, as the loop diagnoses),
@@ -39,20 +39,16 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tests"))
+from pyomo_heli.config import load_identification_config
+from pyomo_heli.diagnosis.attribution import SEGMENT_S, Attribution, attribute
+from pyomo_heli.diagnosis.candidates import make_candidate
+from pyomo_heli.identify import run_identification
+from pyomo_heli.nlp.identification import identification_data
 
-import test_close_loop as T  # noqa: E402  (the instances are defined with the tests)
-from _study_args import out_folder, positive_float  # noqa: E402  (beside this script)
-
-from pyomo_heli.config import load_identification_config  # noqa: E402
-from pyomo_heli.diagnosis.attribution import SEGMENT_S, Attribution, attribute  # noqa: E402
-from pyomo_heli.diagnosis.candidates import make_candidate  # noqa: E402
-from pyomo_heli.identify import run_identification  # noqa: E402
-from pyomo_heli.nlp.identification import identification_data  # noqa: E402
+from . import small_instances as T
+from .args import out_folder, positive_float
 
 EIV = '\n[objectives]\ninput_errors = ["col", "lon"]\n'
-
 
 WAKE = "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n"
 

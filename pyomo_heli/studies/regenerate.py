@@ -1,0 +1,235 @@
+"""The commands that regenerate ``docs/results``, in order, and what of their output is kept.
+
+    python studies/regenerate_docs.py                       # list every command (nothing is run)
+    python studies/regenerate_docs.py --check               # list, and check that every config, script and input exists
+    python studies/regenerate_docs.py --run case1 case2     # run these entries into docs/results (their inputs first)
+    python studies/regenerate_docs.py --run all --out results/docs_results   # everything, elsewhere (hours)
+
+Each entry names a folder of ``docs/results``, the commands that write it (from the checkout root; ``{out}``
+is the ``--out`` folder, default ``docs/results``) and the files of it that are committed: after its
+commands, every other file of the folder (loop folders of a seeds study, figures no doc shows, generated
+flight tests) is deleted, so the regenerated folder holds what the docs show and quote. Entries run in
+the order listed; an entry whose input is another entry's folder (a diagnosis of ``case1``, the seeds
+studies' ``--existing`` loops) needs that one first: ``--run`` adds those inputs itself. The times are
+one core of the project's 2-core machine. The benchmark's ``.txt`` files are its printed output.
+"""
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import shlex
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, data/, docs/
+
+IDENTIFY_FILES = ("chosen.json", "front.csv", "identifiability.csv", "metrics.json", "parameters.csv",
+                  "parameters.md", "pareto_front.png", "report.md", "time_domain.json", "trim_vs_speed.png",
+                  "validation.png")
+FRONT_FILES = ("chosen.json", "front.csv", "time_domain.json")
+TRI_FILES = ("band_errors.csv", "bode.png", "chosen.json", "front.csv", "front_projections.png",
+             "parameters_tri.csv", "report_linear.md", "time_domain.json")
+LOOP_FILES = ("loop.json", "loop_report.md", "shape_*.json", "iter_*/chosen.json", "iter_*/front.csv",
+              "iter_*/time_domain.json")
+SEEDS = "20261123 20261124 20261125 20261126 20261127"
+BENCH = "python studies/benchmark.py"
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One folder of docs/results: its commands, the files kept, the entries it reads, about how long."""
+
+    folder: str
+    commands: tuple[str, ...]
+    keep: tuple[str, ...]
+    needs: tuple[str, ...] = ()
+    minutes: float = 1.0
+    stdout: dict = field(default_factory=dict)  # command index -> file (in the folder) for its printed output
+
+
+ENTRIES: tuple[Entry, ...] = (
+    Entry("case1", ("pyomo-heli identify studies/case1.toml --out {out}/case1 --cold-check --restart",),
+          IDENTIFY_FILES, minutes=6),
+    Entry("case2", ("pyomo-heli identify studies/case2.toml --out {out}/case2 --restart",), IDENTIFY_FILES,
+          minutes=1.5),
+    Entry("case1_project", ("pyomo-heli identify studies/case1_project.toml --out {out}/case1_project "
+                            "--no-report --restart",), FRONT_FILES, minutes=1.5),
+    Entry("case2_project", ("pyomo-heli identify studies/case2_project.toml --out {out}/case2_project "
+                            "--no-report --restart",), FRONT_FILES, minutes=1.5),
+    Entry("case1_diagnosis", ("pyomo-heli diagnose {out}/case1 --out {out}/case1_diagnosis --no-residuals",),
+          ("diagnosis.md", "diagnosis.json", "diagnosis_trim.png"), needs=("case1",), minutes=1),
+    Entry("case2_diagnosis", ("pyomo-heli diagnose {out}/case2 --out {out}/case2_diagnosis --no-residuals",),
+          ("diagnosis.md",), needs=("case2",), minutes=1),
+    Entry("case2_uncertainty", ("pyomo-heli uncertainty studies/case2.toml --results {out}/case2 "
+                                "--out {out}/case2_uncertainty --points chosen",),
+          FRONT_FILES + ("identifiability.csv",), needs=("case2",), minutes=1),
+    Entry("case1_tri", ("pyomo-heli identify studies/case1_tri.toml --out {out}/case1_tri --restart",), TRI_FILES,
+          minutes=45),
+    Entry("case2_tri", ("pyomo-heli identify studies/case2_tri.toml --out {out}/case2_tri --restart",), TRI_FILES,
+          minutes=30),
+    Entry("close_loop", ("pyomo-heli close-loop studies/close_loop.toml --out {out}/close_loop --restart",),
+          LOOP_FILES + ("loop_trim_vs_speed.png",), minutes=9),
+    Entry("close_loop_eiv", ("pyomo-heli close-loop studies/close_loop_eiv.toml --out {out}/close_loop_eiv "
+                             "--restart",), LOOP_FILES, minutes=9),
+    Entry("close_loop_seeds", (f"python studies/close_loop_seeds.py --seeds {SEEDS} --existing {{out}}/close_loop "
+                               f"--out {{out}}/close_loop_seeds",),
+          ("seeds.md", "seeds.csv"), needs=("close_loop",), minutes=45),
+    Entry("close_loop_seeds_eiv", (f"python studies/close_loop_seeds.py --config studies/close_loop_eiv.toml "
+                                   f"--seeds {SEEDS} --existing {{out}}/close_loop_eiv "
+                                   f"--out {{out}}/close_loop_seeds_eiv",),
+          ("seeds.md", "seeds.csv"), needs=("close_loop_eiv",), minutes=50),
+    Entry("envelope_validation", ("python studies/envelope_validation.py --loops {out}/close_loop_eiv "
+                                  + " ".join(f"{{out}}/close_loop_seeds_eiv/loop_{s}" for s in SEEDS.split())
+                                  + " {out}/close_loop "
+                                  + " ".join(f"{{out}}/close_loop_seeds/loop_{s}" for s in SEEDS.split())
+                                  + " --out {out}/envelope_validation",),
+          ("envelope_validation.md",), needs=("close_loop_seeds", "close_loop_seeds_eiv"), minutes=6),
+    Entry("innovation_check", ("python studies/innovation_check.py --loop {out}/close_loop_eiv "
+                               "--out {out}/innovation_check",), ("summary.csv",), needs=("close_loop_eiv",),
+          minutes=2),
+    Entry("score_test_level", (
+        "python studies/score_test_level.py --seeds 101-200 --out {out}/score_test_level",
+        "python studies/score_test_level.py --seeds 101-200 --identification oe --out {out}/score_test_level",
+        "python studies/score_test_level.py --seeds 101-140 --truth wake --out {out}/score_test_level",
+        "python studies/score_test_level.py --seeds 101-140 --truth wake --identification oe "
+        "--out {out}/score_test_level",
+        "python studies/score_test_level.py --seeds 101-200 --variance white --out {out}/score_test_level",
+        "python studies/score_test_level.py --seeds 101-140 --truth wake --variance white --out {out}/score_test_level",
+        "python studies/score_test_level.py --seeds 101-200 --variance white_offsets --out {out}/score_test_level",
+        "python studies/score_test_level.py --seeds 101-140 --truth wake --variance white_offsets "
+        "--out {out}/score_test_level"),
+        ("*/summary*.csv",), minutes=30),
+    Entry("monte_carlo", ("python studies/monte_carlo.py --realizations 20 --out {out}/monte_carlo",),
+          ("monte_carlo.json", "monte_carlo.png", "realizations.csv", "summary.csv", "summary.md"), minutes=45),
+    Entry("multistart_case1", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "
+                               "--out {out}/multistart_case1 --restart",), ("multistart.json", "starts.csv"),
+          minutes=15),
+    Entry("multistart_case1_eps", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "
+                                   "--epsilon 0.2008495658274336 --out {out}/multistart_case1_eps --restart",),
+          ("multistart.json", "starts.csv"), minutes=20),
+    Entry("benchmark", (
+        f"{BENCH} --size 1,2,4,8 --repeat 3 --shooting rk4 --shooting-max-sims 0 --compare-nl-route "
+        "--out {out}/benchmark/benchmark_case1_all.json",
+        f"{BENCH} --size 1,2,4,8 --no-front --no-shooting --repeat 3 --out {{out}}/benchmark/benchmark_scaling_full.json",
+        f"{BENCH} --no-front --shooting rk4-casadi --shooting-max-sims 0 --compare-nl-route "
+        "--out {out}/benchmark/benchmark_case1_shooting_casadi_point_rows.json",
+        f"{BENCH} --size 1,2,4,8 --no-front --no-shooting --max-duration 1.5 --repeat 3 "
+        "--out {out}/benchmark/benchmark_scaling_cropped_gather.json"),
+        ("*.json", "*.txt"), minutes=45,
+        stdout={0: "benchmark_case1_all.txt", 1: "benchmark_scaling_full.txt",
+                2: "benchmark_case1_shooting_casadi_point_rows.txt", 3: "benchmark_scaling_cropped_gather.txt"}),
+)
+BY_NAME = {e.folder: e for e in ENTRIES}
+
+
+def argv_of(command: str, out: str) -> list[str]:
+    """The command as an argument list for this interpreter (``pyomo-heli`` = ``python -m pyomo_heli.cli``)."""
+    args = shlex.split(command.format(out=out))
+    if args[0] == "pyomo-heli":
+        return [sys.executable, "-m", "pyomo_heli.cli", *args[1:]]
+    if args[0] == "python":
+        return [sys.executable, *args[1:]]
+    raise ValueError(f"cannot run {command!r}")
+
+
+def with_inputs(names: list[str]) -> list[Entry]:
+    """The named entries and, before them, the entries they read, in the order of :data:`ENTRIES`."""
+    wanted: set[str] = set()
+
+    def add(name: str) -> None:
+        if name not in wanted:
+            wanted.add(name)
+            for n in BY_NAME[name].needs:
+                add(n)
+
+    for n in names:
+        add(n)
+    return [e for e in ENTRIES if e.folder in wanted]
+
+
+def problems(entry: Entry, out: str) -> list[str]:
+    """What is wrong with an entry's commands without running them: a config or script that is missing, or
+    options that ``pyomo-heli``'s own parser refuses."""
+    import contextlib
+    import io
+
+    from ..cli import build_parser
+
+    missing = []
+    for command in entry.commands:
+        args = shlex.split(command.format(out=out))
+        for a in args:
+            if a.endswith((".toml", ".py")) and not (ROOT / a).is_file():
+                missing.append(f"{entry.folder}: {a} not found")
+        if args[0] == "pyomo-heli":
+            err = io.StringIO()
+            try:
+                with contextlib.redirect_stderr(err):
+                    build_parser().parse_args(args[1:])
+            except SystemExit:
+                missing.append(f"{entry.folder}: {command}: {err.getvalue().strip().splitlines()[-1]}")
+    return missing
+
+
+def prune(folder: Path, keep: tuple[str, ...]) -> list[Path]:
+    """Delete every file of ``folder`` that matches none of ``keep`` (globs relative to it), then empty folders."""
+    removed = []
+    for f in sorted(p for p in folder.rglob("*") if p.is_file()):
+        rel = f.relative_to(folder).as_posix()
+        if not any(fnmatch.fnmatchcase(rel, k) for k in keep):
+            f.unlink()
+            removed.append(f)
+    for d in sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: -len(p.parts)):
+        if not any(d.iterdir()):
+            d.rmdir()
+    return removed
+
+
+def run(entries: list[Entry], out: str) -> None:
+    for e in entries:
+        for i, command in enumerate(e.commands):
+            print(f"[{e.folder}] {command.format(out=out)}", flush=True)
+            if i in e.stdout:
+                (Path(out) / e.folder).mkdir(parents=True, exist_ok=True)
+                with open(Path(out) / e.folder / e.stdout[i], "w") as fh:
+                    proc = subprocess.run(argv_of(command, out), cwd=ROOT, stdout=fh)
+            else:
+                proc = subprocess.run(argv_of(command, out), cwd=ROOT)
+            if proc.returncode != 0:
+                raise SystemExit(f"[{e.folder}] failed with exit status {proc.returncode}: {command.format(out=out)}")
+    for e in entries:  # last, so that later entries could read the loops and data of earlier ones
+        removed = prune((Path(out) if Path(out).is_absolute() else ROOT / out) / e.folder, e.keep)
+        print(f"[{e.folder}] kept the committed files, removed {len(removed)} others", flush=True)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--run", nargs="+", metavar="FOLDER", help="run these entries (or 'all') with their inputs")
+    ap.add_argument("--check", action="store_true", help="also check that every named config and script exists")
+    ap.add_argument("--out", default="docs/results", help="results root, relative to the checkout (default docs/results)")
+    a = ap.parse_args(argv)
+    if a.run:
+        unknown = [n for n in a.run if n != "all" and n not in BY_NAME]
+        if unknown:
+            ap.error(f"--run: unknown folder {unknown[0]!r}; one of {', '.join(BY_NAME)} or all")
+        entries = list(ENTRIES) if "all" in a.run else with_inputs(a.run)
+    else:
+        entries = list(ENTRIES)
+    missing = [p for e in entries for p in problems(e, a.out)] if (a.check or a.run) else []
+    for e in entries:
+        print(f"# {a.out}/{e.folder}  (about {e.minutes:g} min; keeps {', '.join(e.keep)})")
+        for command in e.commands:
+            print("    " + command.format(out=a.out))
+    print(f"# {len(entries)} folders, about {sum(e.minutes for e in entries) / 60:.1f} h on one core")
+    if missing:
+        print("\n".join(missing), file=sys.stderr)
+        return 2
+    if a.run:
+        run(entries, a.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -516,7 +516,7 @@ def test_appended_maneuvers_keep_the_trims_with_trim_stream(tmp_path):
 
 def test_zero_input_sigma_keeps_every_other_channels_noise(tmp_path):
     """Setting one channel's sigma to 0 removes its noise and nothing else: the generator draws every
-    channel's noise whatever its sigma (studies/input_noise_check.py relies on this)."""
+    channel's noise whatever its sigma (studies that switch one channel's noise off rely on this)."""
     sigma = ("sigma = {{ q_deg_s = 0.2, theta_deg = 0.1, nx_g = 0.005, nz_g = 0.01, tas_m_s = 0.5, "
              "beta0_deg = 0.05, col_deg = 0.02, lon_deg = 0.02 }}")  # the bundled flight test's line
     noisy = TINY.replace("noise = true", "noise = true\n" + sigma)

@@ -12,7 +12,7 @@ from pyomo_heli.simulation.trim import trim_float
 from pyomo_heli.solvers import make_solver
 from pyomo_heli.units import KT
 
-#: docs/model.md section 15 (pyomo-heli linearize --speeds-kt 0 80)
+#: docs/model_parameters.md section 15 (pyomo-heli linearize --speeds-kt 0 80)
 DOC_POLES = {0.0: [-3.7736, -3.7470, -0.2580, 0.0220 - 0.4056j, 0.0220 + 0.4056j],
              80.0: [-5.8486, -3.6994, -0.7155, 0.0099 - 0.2918j, 0.0099 + 0.2918j]}
 

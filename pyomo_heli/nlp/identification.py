@@ -307,7 +307,7 @@ def prepare_data(ft, maneuvers="identification", resample_hz: float | None = Non
     measurement times on the element boundaries: nothing is snapped.
     ``resample_inputs``: how the measured inputs (col, lon) reach the coarse samples: ``sample``
     keeps every k-th sample like the outputs; ``project`` (the default since 2026-11-25; it removes the
-    picked inputs' bias, docs/model.md) takes the coarse values whose linear interpolant is closest to
+    picked inputs' bias, docs/model_nlp.md 10.3) takes the coarse values whose linear interpolant is closest to
     the whole record (:func:`project_inputs`).
     ``input_reference_s``: the input increments are referred to the mean over the first
     ``input_reference_s`` seconds of each record (0: its first sample), see ``Maneuver.increments``.

@@ -1,6 +1,6 @@
 """Rigid-body longitudinal equations of motion and measured outputs.
 
-docs/model.md sections 7-8 (model_spec.md 1.9-1.10). Body axes at the CG:
+docs/model_forces.md sections 7-8 (model_spec.md 1.9-1.10). Body axes at the CG:
 x forward, z down, theta nose-up.
 """
 from __future__ import annotations

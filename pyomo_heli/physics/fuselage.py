@@ -1,4 +1,4 @@
-"""Fuselage drag and Munk moment (docs/model.md section 5; model_spec.md 1.7)."""
+"""Fuselage drag and Munk moment (docs/model_forces.md section 5; model_spec.md 1.7)."""
 from __future__ import annotations
 
 from typing import Mapping

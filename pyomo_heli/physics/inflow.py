@@ -1,6 +1,6 @@
 """Uniform inflow: Glauert momentum theory with first-order dynamics.
 
-docs/model.md section 4 (model_spec.md 1.5). The flow is rotated into the
+docs/model_forces.md section 4 (model_spec.md 1.5). The flow is rotated into the
 tip-path-plane (disc) frame by the forward TPP tilt beta_1c.
 """
 from __future__ import annotations

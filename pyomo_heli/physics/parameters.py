@@ -8,7 +8,7 @@ source and a default identification range/scale. Sources are abbreviated:
 - ``paper``: the multi-objective PID paper, Tables 2-3 ("actual Bo-105").
 - ``TUD``: TU Delft teaching/6-DoF Bo-105 model lineage (lecture code).
 - ``ISA``: International Standard Atmosphere, sea level.
-- ``choice``: a modelling choice of this project, see docs/model.md.
+- ``choice``: a modelling choice of this project, see docs/model_parameters.md.
 
 Values tagged ``[L]`` in model_spec.md are engineering guesses; they are fixed,
 never identified by default.

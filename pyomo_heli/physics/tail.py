@@ -1,4 +1,4 @@
-"""Horizontal tail (docs/model.md section 6; model_spec.md 1.8)."""
+"""Horizontal tail (docs/model_forces.md section 6; model_spec.md 1.8)."""
 from __future__ import annotations
 
 from typing import Mapping

@@ -157,7 +157,8 @@ def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=pr
         "a_solve_time": a_time, "a_solve_times": times or [a.wall_time],
         "a_solve_iterations": iters or [a.iterations], "a_iterations": a.iterations,
         "a_time_per_iteration": a_time / max(a.iterations, 1),
-        "a_solve_breakdown": solve_breakdown(getattr(ps.solver, "last_stats", None), a.wall_time) if not front else None,
+        "a_solve_breakdown": (solve_breakdown(getattr(ps.solver, "last_stats", None), a.wall_time)
+                              if not front else None),
     }
     progress(f"size {k}: set-up {setup:.1f} s, point A {a.status} in {a.iterations} it, {a_time:.2f} s"
              + (f" (median of {len(times)}: {', '.join(f'{t:.2f}' for t in times)})" if len(times) > 1 else ""))
@@ -219,7 +220,8 @@ def compute_ratios(result: dict) -> dict:
         r["front_end_to_end_over_a_end_to_end"] = (fixed + f["solve_time"]) / (fixed + a)
         r["warm_over_cold_iterations"] = (f["interior_warm_iterations"] / f["interior_cold_iterations"]
                                           if f["interior_cold_iterations"] else None)
-        r["warm_over_cold_time"] = f["interior_warm_time"] / f["interior_cold_time"] if f["interior_cold_time"] else None
+        r["warm_over_cold_time"] = (f["interior_warm_time"] / f["interior_cold_time"]
+                                    if f["interior_cold_time"] else None)
         r["setup_share_of_front"] = fixed / (fixed + f["solve_time"])
     nl = result.get("nl_route")
     if nl and first is not None:
@@ -323,12 +325,13 @@ def format_tables(result: dict) -> str:
     reps = [s for s in result["sizes"] if len(s.get("a_solve_times", [])) > 1]
     if reps:
         lines += ["", "Point A solved cold " + str(len(reps[0]["a_solve_times"])) + " times per size (the table "
-                  "gives the median) [s]: " + "; ".join(f"{s['size']}x " + ", ".join(_fmt(t) for t in s["a_solve_times"])
-                                                       for s in reps)]
+                  "gives the median) [s]: "
+                  + "; ".join(f"{s['size']}x " + ", ".join(_fmt(t) for t in s["a_solve_times"]) for s in reps)]
     split = [s for s in result["sizes"] if s.get("a_solve_breakdown")]
     if split:
         lines += ["", "Point A's solve per iteration [s]: function evaluations (casadi) and the rest of Ipopt "
-                  "(mostly MUMPS)", "", "| size | objective + gradient | constraints + Jacobian | Hessian | rest of Ipopt |",
+                  "(mostly MUMPS)", "",
+                  "| size | objective + gradient | constraints + Jacobian | Hessian | rest of Ipopt |",
                   "|---|---|---|---|---|"]
         for s in split:
             b, n = s["a_solve_breakdown"], max(s["a_iterations"], 1)
@@ -351,8 +354,9 @@ def format_tables(result: dict) -> str:
                      f"(interior) | {_fmt(f['interior_cold_time'])} (interior) | |")
     nl = result.get("nl_route")
     if nl:
-        lines += ["", f"The same size with every row through the NL file (no point rows), same process:", "",
-                  "| route | build [s] | set-up [s] | point A solve [s] | A iterations | J_time |", "|---|---|---|---|---|---|"]
+        lines += ["", "The same size with every row through the NL file (no point rows), same process:", "",
+                  "| route | build [s] | set-up [s] | point A solve [s] | A iterations | J_time |",
+                  "|---|---|---|---|---|---|"]
         for name, s in (("point rows (above)", first), ("NL file only", nl)):
             lines.append(f"| {name} | {_fmt(s['build_time'])} | {_fmt(s['setup_time'])} | {_fmt(s['a_solve_time'])} | "
                          f"{s['a_iterations']} | {s['point_a']['J_time']:.10g} |")

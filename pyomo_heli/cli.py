@@ -256,7 +256,8 @@ def _parse_params(items, model):
             raise UserError(f"--param {item!r} must read NAME=VALUE")
         name, val = item.split("=", 1)
         if name not in model.parameters:
-            raise UserError(model.parameters._unknown(name).replace("unknown parameter name", "unknown parameter name in --param"))
+            raise UserError(model.parameters._unknown(name).replace("unknown parameter name",
+                                                                    "unknown parameter name in --param"))
         try:
             values[name] = float(val)
         except ValueError:
@@ -289,7 +290,8 @@ def cmd_trim(args) -> int:
         records.append({"speed_kt": v_kt, "col_deg": row["col"] / DEG, "lon_deg": row["lon"] / DEG,
                         "theta_deg": row["theta"] / DEG, "lambda_i": row["lambda_i"],
                         "beta_0_deg": row["beta_0"] / DEG, "beta_1c_deg": row["beta_1c"] / DEG})
-    head = f"{'speed kt':>8} {'col deg':>8} {'lon deg':>8} {'theta deg':>9} {'lambda_i':>9} {'beta_0 deg':>10} {'beta_1c deg':>11}"
+    head = (f"{'speed kt':>8} {'col deg':>8} {'lon deg':>8} {'theta deg':>9} {'lambda_i':>9} {'beta_0 deg':>10} "
+            f"{'beta_1c deg':>11}")
     print(head)
     for r in records:
         print(f"{r['speed_kt']:8.1f} {r['col_deg']:8.3f} {r['lon_deg']:8.3f} {r['theta_deg']:9.3f} "
@@ -329,8 +331,8 @@ def cmd_simulate(args) -> int:
             raise UserError(f"--input {text!r}: {exc}") from None
         if abs(sig.amplitude) > MAX_INPUT_DEG * DEG:
             raise UserError(f"--input {text!r}: amplitude {sig.amplitude / DEG:g} deg is outside "
-                            f"+-{MAX_INPUT_DEG:g} deg (an increment on trim; larger ones leave the control travel and the model's "
-                            f"small-angle, attached-flow range)")
+                            f"+-{MAX_INPUT_DEG:g} deg (an increment on trim; larger ones leave the control travel and "
+                            f"the model's small-angle, attached-flow range)")
         signals.append(sig)
     channels = [s.channel for s in signals]
     if len(set(channels)) != len(channels):
@@ -530,7 +532,6 @@ def cmd_uncertainty(args) -> int:
     from pathlib import Path
 
     from .config import load_identification_config
-    from .dataset import load_flight_test
     from .nlp.identification import identification_data
     from .pareto.result import IdentificationResult
     from .pareto.store import LOCK_FILE, FolderLock

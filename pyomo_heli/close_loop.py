@@ -121,7 +121,8 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
         s.shape = raw["shape"]
     if "uncertainty" in raw:
         if raw["uncertainty"] not in ("chosen", "none"):
-            raise ConfigError(f"{where}: field 'uncertainty' must be \"chosen\" or \"none\", got {raw['uncertainty']!r}")
+            raise ConfigError(f"{where}: field 'uncertainty' must be \"chosen\" or \"none\", "
+                              f"got {raw['uncertainty']!r}")
         s.uncertainty = raw["uncertainty"]
     if "score_inputs" in raw:
         if raw["score_inputs"] not in ("eliminated", "measured"):
@@ -272,7 +273,8 @@ def _finished(cfg: IdentificationConfig, folder: Path):
         return None
     from .identify import extension_forms
 
-    same = (res.info.get("shape_parameters", {}) == shape_values(cfg.model) and res.parameters == [f.name for f in cfg.free]
+    same = (res.info.get("shape_parameters", {}) == shape_values(cfg.model)
+            and res.parameters == [f.name for f in cfg.free]
             and res.info.get("extensions") == [e.name for e in cfg.model.extensions]
             and res.info.get("extension_forms", {}) == extension_forms(cfg.model.extensions)
             and res.info.get("input_reference_s", 0.0) == cfg.input_reference_s

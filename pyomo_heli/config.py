@@ -285,7 +285,8 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
         raise ConfigError(f"{f} [solver]: unknown key(s) {', '.join(unknown)}; use name, options, point_rows")
     solver = _need(sol, "name", f"{f} [solver]", str, "casadi-ipopt")
     if solver not in SOLVER_NAMES:
-        raise ConfigError(f"{f} [solver]: field 'name': unknown solver '{solver}'; choose from {', '.join(SOLVER_NAMES)}")
+        raise ConfigError(f"{f} [solver]: field 'name': unknown solver '{solver}'; "
+                          f"choose from {', '.join(SOLVER_NAMES)}")
     solver_options = dict(_need(sol, "options", f"{f} [solver]", dict, {}))
     if "point_rows" in solver_options:
         raise ConfigError(f"{f} [solver]: point_rows is a [solver] field, not an Ipopt option")
@@ -322,7 +323,8 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
                                 input_reference_s=float(in_ref), resample_inputs=res_in, diagnosis=diagnosis)
 
 
-def _input_errors(obj: dict, f, in_ref, table: str = "objectives", key: str = "input_errors") -> tuple[tuple, dict | None]:
+def _input_errors(obj: dict, f, in_ref, table: str = "objectives",
+                  key: str = "input_errors") -> tuple[tuple, dict | None]:
     """[objectives] input_errors (errors in variables) and the optional [objectives.noise_sigma] table; the
     same for [diagnosis] input_noise and [diagnosis.noise_sigma] (``table``, ``key``)."""
     chans = tuple(_names(_need(obj, key, f"{f} [{table}]", list, []), f"{f} [{table}]", key, allow_empty=True))

@@ -1,6 +1,7 @@
 """Performance benchmark: build, set-up, solve, warm vs cold front, single shooting, scaling (docs/performance.md).
 
-The study is ``pyomo_heli.studies.benchmark``; ``python studies/benchmark.py --help`` lists its options.
+The study is ``pyomo_heli.studies.benchmark``;
+``python studies/benchmark.py --help`` lists its options.
 """
 import sys
 from pathlib import Path

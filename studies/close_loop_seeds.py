@@ -1,6 +1,7 @@
 """The full-size closed loop on several noise realisations, and how often each criterion holds (docs/close_loop.md).
 
-The study is ``pyomo_heli.studies.close_loop_seeds``; ``python studies/close_loop_seeds.py --help`` lists its options.
+The study is ``pyomo_heli.studies.close_loop_seeds``;
+``python studies/close_loop_seeds.py --help`` lists its options.
 """
 import sys
 from pathlib import Path

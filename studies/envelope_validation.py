@@ -1,6 +1,7 @@
 """A closed loop's first and last models on an independent flight test, hover to 100 kt (docs/close_loop.md).
 
-The study is ``pyomo_heli.studies.envelope_validation``; ``python studies/envelope_validation.py --help`` lists its options.
+The study is ``pyomo_heli.studies.envelope_validation``;
+``python studies/envelope_validation.py --help`` lists its options.
 """
 import sys
 from pathlib import Path

@@ -1,6 +1,7 @@
 """Whiteness of the exact model's residuals with and without the input noise taken out (docs/close_loop.md).
 
-The study is ``pyomo_heli.studies.innovation_check``; ``python studies/innovation_check.py --help`` lists its options.
+The study is ``pyomo_heli.studies.innovation_check``;
+``python studies/innovation_check.py --help`` lists its options.
 """
 import sys
 from pathlib import Path

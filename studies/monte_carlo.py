@@ -1,6 +1,7 @@
 """Monte Carlo over noise realisations: bias and spread of the estimates (docs/uncertainty.md).
 
-The study is ``pyomo_heli.studies.monte_carlo``; ``python studies/monte_carlo.py --help`` lists its options.
+The study is ``pyomo_heli.studies.monte_carlo``;
+``python studies/monte_carlo.py --help`` lists its options.
 """
 import sys
 from pathlib import Path

@@ -1,6 +1,7 @@
 """List (default) or run the commands that regenerate docs/results (docs/results.md, "Regenerating").
 
-The study is ``pyomo_heli.studies.regenerate``; ``python studies/regenerate_docs.py --help`` lists its options.
+The study is ``pyomo_heli.studies.regenerate``;
+``python studies/regenerate_docs.py --help`` lists its options.
 """
 import sys
 from pathlib import Path

@@ -1,6 +1,7 @@
 """How often the loop's score test fires when no effect is missing (docs/close_loop.md).
 
-The study is ``pyomo_heli.studies.score_test_level``; ``python studies/score_test_level.py --help`` lists its options.
+The study is ``pyomo_heli.studies.score_test_level``;
+``python studies/score_test_level.py --help`` lists its options.
 """
 import sys
 from pathlib import Path

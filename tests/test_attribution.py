@@ -55,7 +55,8 @@ def test_whitening_is_the_input_error_eliminated_metric_and_causal(instance):
         idx = np.concatenate([j * n_time + start + np.arange(len(t)) for j in range(len(OUTPUTS))])
         Su = np.vstack([S_u[o] for o in OUTPUTS])
         Wd = np.repeat([1.0 / sigma[o] ** 2 for o in OUTPUTS], len(t))
-        F_ee = (Su * Wd[:, None]).T @ Su + np.diag(np.repeat([1.0 / sigma["col"] ** 2, 1.0 / sigma["lon"] ** 2], len(t)))
+        prior = np.repeat([1.0 / sigma["col"] ** 2, 1.0 / sigma["lon"] ** 2], len(t))
+        F_ee = (Su * Wd[:, None]).T @ Su + np.diag(prior)
         WSu = Wd[:, None] * Su
         P[np.ix_(idx, idx)] = np.diag(Wd) - WSu @ np.linalg.solve(F_ee, WSu.T)
         smooth[idx] = 1e-3 * Su[:, len(t):].sum(axis=1)  # a constant 1 mrad lon error over the record

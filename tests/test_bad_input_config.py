@@ -121,7 +121,8 @@ def test_config_that_is_a_folder_or_not_text(tmp_path):
 
 
 def test_physics_refuses_values_it_cannot_take():
-    """The parameter table's domains (docs/model_parameters.md section 12): the same check serves configs and --param."""
+    """The parameter table's domains (docs/model_parameters.md section 12): the same check serves configs and
+    --param."""
     m = HelicopterModel()
     for name, value in (("m", -1.0), ("rho", 0.0), ("Omega", math.inf), ("theta_twist", math.nan),
                         ("r_ref", 1.5), ("Iyy", -5.0)):

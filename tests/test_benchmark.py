@@ -1,4 +1,5 @@
-"""The benchmark study (studies/benchmark.py = pyomo_heli.studies.benchmark) --quick: JSON structure and the ratio arithmetic (no timing asserts).
+"""The benchmark study (studies/benchmark.py = pyomo_heli.studies.benchmark) --quick: JSON structure and the
+ratio arithmetic (no timing asserts).
 
 Timings are machine-dependent and never asserted; what is checked is that
 every ratio in the JSON is the stated function of the raw numbers in the
@@ -14,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyomo_heli.benchmark import compute_ratios, growth_exponent, parameter_difference, repeat_maneuvers, solve_breakdown
+from pyomo_heli.benchmark import (compute_ratios, growth_exponent, parameter_difference, repeat_maneuvers,
+                                  solve_breakdown)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -22,8 +24,8 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench") / "benchmark.json"
-    proc = subprocess.run([sys.executable, "-m", "pyomo_heli.studies.benchmark", "--quick", "--repeat", "2", "--compare-nl-route",
-                           "--out", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "pyomo_heli.studies.benchmark", "--quick", "--repeat", "2",
+                           "--compare-nl-route", "--out", str(out)],
                           capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-2000:]
     return json.loads(out.read_text()), proc.stdout
@@ -75,7 +77,8 @@ def test_quick_ratio_arithmetic(quick):
     assert r["front_over_cold_a"] == pytest.approx(f["solve_time"] / one["a_solve_time"])
     fixed = one["build_time"] + one["setup_time"]
     assert r["setup_share_of_front"] == pytest.approx(fixed / (fixed + f["solve_time"]))
-    assert r["warm_over_cold_iterations"] == pytest.approx(f["points"][1]["iterations"] / f["points"][1]["cold_iterations"])
+    p1 = f["points"][1]
+    assert r["warm_over_cold_iterations"] == pytest.approx(p1["iterations"] / p1["cold_iterations"])
     samples = [s["samples"] for s in res["sizes"]]
     times = [s["a_solve_time"] for s in res["sizes"]]
     # two sizes: the slope is exactly the log ratio

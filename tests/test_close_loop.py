@@ -12,13 +12,11 @@ from pathlib import Path
 import pytest
 
 from pyomo_heli.cli import main
-from pyomo_heli.close_loop import close_loop, loop_settings
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.attribution import attribute
 from pyomo_heli.identify import run_identification
 from pyomo_heli.nlp.identification import prepare_data, identification_data
-from pyomo_heli.report.loop import write_loop_report
 from pyomo_heli.studies.small_instances import FREE, MANEUVERS, WAKE_MANEUVERS, make_case  # noqa: F401
 
 
@@ -164,7 +162,8 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
 
     val = list(prepare_data(load_flight_test(cfg.dataset), cfg.validation,
                             input_reference_s=cfg.input_reference_s).maneuvers)
-    p0, p1 = (predict(str(k), iteration_model(cfg.model, it), it["parameters"], [], val) for k, it in enumerate((it0, it1)))
+    p0, p1 = (predict(str(k), iteration_model(cfg.model, it), it["parameters"], [], val)
+              for k, it in enumerate((it0, it1)))
     change = validation_change_table(p0, p1, val)
     print(change.to_string())
     assert len(change) == 6 and not change["significant rise"].any()
@@ -296,10 +295,8 @@ def test_an_older_form_of_a_candidate_is_not_reused():
 
 
 # the shape of the wake boundary shows where the tail is near it: about 45-55 kt for this candidate
-SHAPE_MANEUVERS = WAKE_MANEUVERS.replace('"lon3211_80kt"', '"lon3211_50kt"').replace("speed_kt = 80\nchannel = \"lon\"\n"
-                                                                                     "shape = \"3211\"",
-                                                                                     "speed_kt = 50\nchannel = \"lon\"\n"
-                                                                                     "shape = \"3211\"")
+SHAPE_MANEUVERS = WAKE_MANEUVERS.replace('"lon3211_80kt"', '"lon3211_50kt"').replace(
+    "speed_kt = 80\nchannel = \"lon\"\nshape = \"3211\"", "speed_kt = 50\nchannel = \"lon\"\nshape = \"3211\"")
 
 
 @pytest.mark.parametrize("n_true, fitted", [(3.0, True), (6.0, False)])
@@ -396,12 +393,14 @@ def test_generate_data_seed_option_and_close_loop_dataset_option(tmp_path, capsy
     files = ["trims.csv", "truth.json"] + [f"maneuvers/{p.name}" for p in (cfg.dataset / "maneuvers").iterdir()]
     match, mismatch, errors = filecmp.cmpfiles(cfg.dataset, tmp_path / "same", files, shallow=False)
     assert not mismatch and not errors
-    a, b = json.loads((cfg.dataset / "truth.json").read_text()), json.loads((tmp_path / "other" / "truth.json").read_text())
+    a = json.loads((cfg.dataset / "truth.json").read_text())
+    b = json.loads((tmp_path / "other" / "truth.json").read_text())
     assert a["parameters"] == b["parameters"] and a["seed"] == 11 and b["seed"] == 12
     assert (cfg.dataset / "trims.csv").read_text() != (tmp_path / "other" / "trims.csv").read_text()
     assert main(["generate-data", "--config", gen, "--seed", "-1", "--out", str(tmp_path / "bad")]) == 2
     assert "option --seed must be an integer >= 0" in capsys.readouterr().err
-    assert main(["close-loop", str(cfg.path), "--dataset", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")]) == 2
+    assert main(["close-loop", str(cfg.path), "--dataset", str(tmp_path / "nowhere"),
+                 "--out", str(tmp_path / "o")]) == 2
     assert "option --dataset: folder" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 

@@ -2,7 +2,8 @@
 
 Independent reference: the data generator's truth.
 
-- tests/results/case1 (a copy of the committed Case 1 run, docs/results/case1) was identified with M0 on data/bo105_synthetic, whose truth is
+- tests/results/case1 (a copy of the committed Case 1 run, docs/results/case1) was identified with M0 on
+  data/bo105_synthetic, whose truth is
   M0 + the rotor wake on the tail (E1): a trim signature over 10-50 kt of lon lower and theta
   higher than M0 (model_spec.md section 4, E1), i.e. a model-minus-data residual that is a
   positive lon bump and a negative theta bump at low speed, absent in hover and above ~55 kt,
@@ -14,7 +15,6 @@ Independent reference: the data generator's truth.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
@@ -76,7 +76,8 @@ def test_m0_noise_only_result_is_diagnosed_noise_only_via_the_cli(tmp_path, caps
     assert d.verdict["white_identification"] is True
     # the saved residuals reload and give the same RMS as the diagnosis recorded
     r = Residuals.load(tmp_path / "residuals_chosen")
-    assert r.rms()["rms"].tolist() == pytest.approx([row["rms"] for row in d.rms], rel=1e-6)  # time.csv.gz keeps 10 digits
+    # time.csv.gz keeps 10 digits
+    assert r.rms()["rms"].tolist() == pytest.approx([row["rms"] for row in d.rms], rel=1e-6)
     md = (tmp_path / "diagnosis.md").read_text()
     assert "noise only" in md and "![trim residuals](diagnosis_trim.png)" in md
     assert "residuals look like noise only" in capsys.readouterr().out

@@ -10,7 +10,6 @@ residuals must reproduce.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np

@@ -1,10 +1,8 @@
 """The extension seam: zero strength gives M0 exactly, in every route."""
 import numpy as np
-import pyomo.environ as pyo
 import pytest
 
-from pyomo_heli.flighttest.truth_effects import SPEC_STRENGTHS, TRUTH_EFFECTS, make_effect
-from pyomo_heli.nlp.parameters import add_parameters
+from pyomo_heli.flighttest.truth_effects import TRUTH_EFFECTS, make_effect
 from pyomo_heli.nlp.trim_table import trim_table
 from pyomo_heli.physics.extensions import PitchMomentOffset
 from pyomo_heli.physics.model import HelicopterModel

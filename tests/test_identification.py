@@ -6,7 +6,6 @@ the noise-free data, a single-shooting fit, and Eq. 11 recomputed from
 front.csv.
 """
 import json
-import math
 import subprocess
 import sys
 from pathlib import Path

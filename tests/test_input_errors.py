@@ -71,8 +71,8 @@ def test_input_errors_recover_the_truth_where_output_error_does_not(fits):
     the realised errors are +0.03 % (inputs picked, the default until 2026-11-25) and +5.3 % (inputs
     projected, the default since), against -100 and -95 % for output error. Hence 10 % for twist."""
     eiv, oe = fits["input_errors"][2], fits["output_error"][2]
-    print({n: (f"output error {100 * (oe[n] / TRUTH[n] - 1):+.2f} %", f"input errors {100 * (eiv[n] / TRUTH[n] - 1):+.2f} %")
-           for n in ("theta_twist", "CL_alpha_HT")})
+    print({n: (f"output error {100 * (oe[n] / TRUTH[n] - 1):+.2f} %",
+               f"input errors {100 * (eiv[n] / TRUTH[n] - 1):+.2f} %") for n in ("theta_twist", "CL_alpha_HT")})
     assert abs(oe["theta_twist"] / TRUTH["theta_twist"] - 1) > 0.5
     assert eiv["theta_twist"] == pytest.approx(TRUTH["theta_twist"], rel=0.10)
     assert eiv["CL_alpha_HT"] == pytest.approx(TRUTH["CL_alpha_HT"], rel=0.01)

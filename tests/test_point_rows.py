@@ -32,7 +32,8 @@ def _solver(m, point_rows: bool, first: bool = True) -> CasadiIpoptSolver:
 
 @pytest.mark.parametrize("case, first", [("input_errors", True), ("output_error", True), ("output_error", False)])
 def test_rows_jacobian_and_hessian_equal_the_nl_route(case, first):
-    cfg = load_identification_config(CONFIGS[case], {"data": {"dataset": str(HERE.parent / "data" / "bo105_synthetic")}})
+    bundled = str(HERE.parent / "data" / "bo105_synthetic")
+    cfg = load_identification_config(CONFIGS[case], {"data": {"dataset": bundled}})
     m, _, _ = build_problem(cfg)
     ParetoSolver(m, cfg.pareto)._set_objective("time")  # the objective every front point solves
     nl, pr = _solver(m, False), _solver(m, True, first)

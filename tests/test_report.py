@@ -60,7 +60,8 @@ def _tiny_dataset(path: Path, truth: bool) -> Path:
 
 
 def _point(index, kind, J_time, J_trim, twist, cl, eps=None, success=True, iterations=20, cold=None):
-    return {"cold_iterations": cold, "cold_wall_time": None if cold is None else 3.0,"index": index, "kind": kind, "epsilon": eps, "J_time": J_time, "J_trim": J_trim, "success": success,
+    return {"cold_iterations": cold, "cold_wall_time": None if cold is None else 3.0, "index": index, "kind": kind,
+            "epsilon": eps, "J_time": J_time, "J_trim": J_trim, "success": success,
             "status": "Solve_Succeeded" if success else "Infeasible_Problem_Detected", "iterations": iterations,
             "wall_time": 1.5, "setup_time": 0.0, "warm_start": "primal",
             "parameters": {"theta_twist": twist, "CL_alpha_HT": cl}}

@@ -1,5 +1,4 @@
 """Two routes agree: float simulator vs Pyomo trim block and Pyomo collocation."""
-import math
 
 import numpy as np
 import pyomo.environ as pyo
@@ -7,7 +6,7 @@ import pytest
 
 from pyomo_heli.nlp.maneuver_block import build_maneuver_block
 from pyomo_heli.nlp.parameters import add_parameters
-from pyomo_heli.nlp.trim_block import build_trim_block, trim_block_values
+from pyomo_heli.nlp.trim_block import build_trim_block
 from pyomo_heli.nlp.trim_table import trim_table
 from pyomo_heli.physics.model import STATES, HelicopterModel
 from pyomo_heli.simulation.inputs import InputSignal

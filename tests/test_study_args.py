@@ -1,5 +1,5 @@
-"""The studies (pyomo_heli.studies, run by studies/*.py) refuse bad arguments with one argparse error line (exit 2) before any work
-(docs/robustness.md, "Bad input"); found by the second bad-input audit (2026-11-25)."""
+"""The studies (pyomo_heli.studies, run by studies/*.py) refuse bad arguments with one argparse error line (exit 2)
+before any work (docs/robustness.md, "Bad input"); found by the second bad-input audit (2026-11-25)."""
 from __future__ import annotations
 
 import subprocess
@@ -19,7 +19,8 @@ ROOT = Path(__file__).resolve().parent.parent
     (["monte_carlo.py", "--seed", "-1"], "argument --seed: must be an integer >= 0"),
     (["monte_carlo.py", "--workers", "-1"], "argument --workers: must be an integer >= 0"),
     (["close_loop_seeds.py", "--out", "OUT"], "nothing to do: give --seeds and/or --existing"),
-    (["close_loop_seeds.py", "--seeds", "1", "--config", "nope.toml", "--out", "OUT"], "--config nope.toml: file not found"),
+    (["close_loop_seeds.py", "--seeds", "1", "--config", "nope.toml", "--out", "OUT"],
+     "--config nope.toml: file not found"),
     (["envelope_validation.py", "--loops", "tests/results/close_loop", "--data-config", "nope.toml", "--out", "OUT"],
      "--data-config nope.toml: file not found"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),

@@ -17,7 +17,8 @@ import pytest
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.flighttest.sensors import DEFAULT_SIGMA
-from pyomo_heli.nlp.identification import NLPOptions, build_identification_nlp, prepare_data, identification_data, set_measurements
+from pyomo_heli.nlp.identification import (NLPOptions, build_identification_nlp, identification_data, prepare_data,
+                                           set_measurements)
 from pyomo_heli.nlp.parameters import FreeParameter
 from pyomo_heli.physics.parameters import bo105
 from pyomo_heli.uncertainty.cramer_rao import PointInformation, cramer_rao, point_information
@@ -46,7 +47,8 @@ def test_cramer_rao_agrees_with_monte_carlo_spread(tmp_path):
         clean = run_monte_carlo(spec, 1, seed=11, sigma={}, trim_sigma={}, out=None, crb=False, executor=ex,
                                 **quiet).estimates
     s = res.summary().set_index("parameter")
-    print(s[["mean", "std", "crb", "std/crb"]].to_string(), "\nnoise-free:", clean[["CL_alpha_HT", "Iyy"]].to_dict("records"))
+    print(s[["mean", "std", "crb", "std/crb"]].to_string(), "\nnoise-free:",
+          clean[["CL_alpha_HT", "Iyy"]].to_dict("records"))
     assert (s["n"] == n).all() and res.estimates["success"].all()
     for p in ("CL_alpha_HT", "Iyy"):
         ratio = s.loc[p, "std/crb"]

@@ -135,7 +135,8 @@ def _shape_sentence(t: ShapeTest) -> str:
     pmin = min(t.p_values.values())
     if not t.structured:
         return (f"trim {t.channel}: noise only (smallest p = {pmin:.2g} >= {t.alpha / len(t.p_values):.2g}"
-                + (f", a shift of {', '.join(t.nuisance)} allowed" if t.nuisance else "") + f"); RMS {t.rms * fac:.3g} {unit}"
+                + (f", a shift of {', '.join(t.nuisance)} allowed" if t.nuisance else "")
+                + f"); RMS {t.rms * fac:.3g} {unit}"
                 + (f", {t.rms_after * fac:.3g} {unit} after the parameter shift" if t.nuisance else ""))
     parts = [f"trim {t.channel}: {t.description} (p = {pmin:.2g}"
              + (f", beyond a shift of {', '.join(t.nuisance)})" if t.nuisance else ")")]

@@ -112,7 +112,8 @@ class Attribution:
         return self.scores.set_index("name").loc[self.accepted].to_dict()
 
     def __str__(self) -> str:
-        cols = ["name", "LM", "df", "LM_needed", "p_value", "significant", "kappa_hat", "kept", "like", "like_corr", "trim_share"]
+        cols = ["name", "LM", "df", "LM_needed", "p_value", "significant", "kappa_hat", "kept", "like", "like_corr",
+                "trim_share"]
         lines = [f"score test: significant when p < {self.alpha:g}/{len(self.scores)} (LM > LM_needed; "
                  f"{self.threshold:.3g} for chi-square(1)); accept when LM >= {self.ratio:g} x runner-up's",
                  self.scores[cols].to_string(index=False, float_format=lambda x: f"{x:.4g}"),

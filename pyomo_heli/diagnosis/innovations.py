@@ -121,7 +121,8 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
         try:
             df = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps)
         except Exception as exc:  # noqa: BLE001 - the raw residual tests stay available
-            problems.append(f"maneuver {mv.name}: innovations failed ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})")
+            why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            problems.append(f"maneuver {mv.name}: innovations failed ({why})")
             continue
         df.insert(0, "role", role)
         df.insert(0, "maneuver", mv.name)

@@ -223,7 +223,8 @@ def flow_regressors(model: HelicopterModel, states: dict, inputs: dict) -> dict:
 
 def _trims(model: HelicopterModel, trims: pd.DataFrame, extra_speeds, problems: list) -> dict:
     """Model trim points keyed by (round(V, 6), round(gamma_fp, 9)); None where trim fails."""
-    keys = {(round(float(v), 6), round(float(g), 9)) for v, g in zip(trims["V"], trims.get("gamma_fp", 0.0 * trims["V"]))}
+    gammas = trims.get("gamma_fp", 0.0 * trims["V"])
+    keys = {(round(float(v), 6), round(float(g), 9)) for v, g in zip(trims["V"], gammas)}
     keys |= {(round(float(v), 6), 0.0) for v in extra_speeds}
     out = {}
     for g in sorted({k[1] for k in keys}):
@@ -397,7 +398,8 @@ def find_config(results_dir: str | Path, result: IdentificationResult | None = N
         raise FileNotFoundError(f"{results_dir / 'chosen.json'}: field info.config is missing; pass the config "
                                 f"explicitly")
     p = Path(name)
-    candidates = [p] if p.is_absolute() else [p] + [d / p for d in [results_dir.resolve(), *results_dir.resolve().parents]]
+    here = results_dir.resolve()
+    candidates = [p] if p.is_absolute() else [p] + [d / p for d in [here, *here.parents]]
     for c in candidates:
         if c.is_file():
             return c

@@ -87,7 +87,8 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
     t0 = times[0]
     for (s, t), v in blk.x.items():
         if s in STATE_BOUNDS:
-            v.setlb(STATE_BOUNDS[s][0]); v.setub(STATE_BOUNDS[s][1])
+            v.setlb(STATE_BOUNDS[s][0])
+            v.setub(STATE_BOUNDS[s][1])
     blk.beta["beta_1c", :].setlb(STATE_BOUNDS["beta_1c"][0])
     blk.beta["beta_1c", :].setub(STATE_BOUNDS["beta_1c"][1])
     # Radau uses no derivative at t0; fixing it keeps the model free of dangling variables.

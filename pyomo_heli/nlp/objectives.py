@@ -199,7 +199,6 @@ def j_time_value(residuals: dict, outputs: list[str], covariance: str = "diagona
     R = E @ E.T / N + np.diag([floor[o] ** 2 for o in outputs])
     if covariance == "diagonal":
         R = np.diag(np.diag(R))
-    Rinv = np.linalg.inv(R)
     # At R's ML estimate the quadratic term of Eq. 5 is N n_y / 2 (exact without the floor).
     return float(N * len(outputs) / 2 + N / 2 * math.log(np.linalg.det(R)))
 

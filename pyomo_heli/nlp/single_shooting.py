@@ -89,7 +89,6 @@ def fit_single_shooting(model: HelicopterModel, maneuvers, free: list[FreeParame
         return {o: meas[o] - y[o] for o in outputs}
 
     e = residuals_of(z)
-    N = len(meas[outputs[0]])
     R = {o: float(np.mean(e[o] ** 2) + R_FLOOR[o] ** 2) for o in outputs}
     k = 0
     done = False

@@ -11,7 +11,6 @@ so a solver adapter can re-solve (continuation in speed) without rebuilding.
 """
 from __future__ import annotations
 
-import math
 from types import SimpleNamespace
 
 import pyomo.environ as pyo

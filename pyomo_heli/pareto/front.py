@@ -49,7 +49,6 @@ finished point's stored solution and gives the same numbers.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np

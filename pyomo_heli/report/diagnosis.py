@@ -192,7 +192,7 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
     if command:
         L += [f"Produced by `{command}`.", ""]
     L += [f"- model: **{diag.label}**" + (f" from `{results_dir}`" if results_dir else ""),
-          f"- parameters (SI): " + ", ".join(f"{k} = {v:.6g}" for k, v in diag.parameters.items()),
+          "- parameters (SI): " + ", ".join(f"{k} = {v:.6g}" for k, v in diag.parameters.items()),
           f"- config: `{diag.info.get('config', 'n/a')}`; dataset: `{diag.info.get('dataset', 'n/a')}`; "
           f"model extensions: {', '.join(diag.info.get('extensions', [])) or 'none (M0)'}",
           f"- residual = model - data; alpha = {s['alpha']:g}; whiteness tested at {s['test_rate_hz']:g} Hz; "
@@ -210,7 +210,7 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
         unit, fac = _unit(c)
         f = t["fit"]
         trows.append({"channel": c, "shape": t["shape"], **{f"p {k}": v for k, v in t["p_values"].items()},
-                      f"RMS": t["rms"] * fac, "RMS after shape": t["rms_after"] * fac, "unit": unit,
+                      "RMS": t["rms"] * fac, "RMS after shape": t["rms_after"] * fac, "unit": unit,
                       "bump centre [kt]": f["centre"] / KT if "centre" in f else np.nan,
                       "bump amplitude": f["amplitude"] * fac if "amplitude" in f else np.nan,
                       "runs z": t["runs"].get("z")})
@@ -224,8 +224,9 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
     if len(w):
         piv = w.pivot_table(index=["role", "maneuver"], columns="output", values="p", sort=False).reset_index()
         inn = s.get("innovations")
-        what = (f"innovations of {', '.join(inn['outputs'])} (the measured inputs' noise taken out, nuisance projected off; "
-                "docs/diagnosis.md), residuals with the per-maneuver nuisance removed for any other output"
+        what = (f"innovations of {', '.join(inn['outputs'])} (the measured inputs' noise taken out, nuisance "
+                "projected off; docs/diagnosis.md), residuals with the per-maneuver nuisance removed for any "
+                "other output"
                 if inn else "residuals with the per-maneuver nuisance removed")
         L += [f"Ljung-Box p-values ({what}, at {s['test_rate_hz']:g} Hz; "
               f"white when p > alpha / number of tests of the role, bound {_fmt(w['bound'].min(), 2)} for "

@@ -241,8 +241,8 @@ def write_report(out_dir, cfg, results_dir=None) -> Path:
                                 {lab: pr.shown_runs() for lab, pr in preds.items()}, VALIDATION_OUTPUTS,
                                 inputs={mv.name: mv.inputs for mv in val_mans},
                                 titles={mv.name: f"{mv.name} ({mv.trim_speed / KT:.0f} kt)" for mv in val_mans},
-                                notes={mv.name: [f"{lab}: diverged" for lab, pr in preds.items() if mv.name in pr.partial]
-                                       for mv in val_mans})
+                                notes={mv.name: [f"{lab}: diverged" for lab, pr in preds.items()
+                                                 if mv.name in pr.partial] for mv in val_mans})
     _save(fig, out / "validation.png")
 
     # --- tables and metrics

@@ -322,7 +322,8 @@ def write_linear_report(out_dir, cfg, warn=None) -> Path:
                                           ("bi-objective", result.info["bi_objective"]["chosen"]),
                                           ("tri-objective", result.chosen), ("Eq. 11 direct (3 obj.)", result.direct))
                          if d is not None])
-    shown = front.drop(columns=[c for c in front.columns if c.startswith("cold_") or c in ("warm_start",)], errors="ignore")
+    shown = front.drop(columns=[c for c in front.columns if c.startswith("cold_") or c in ("warm_start",)],
+                       errors="ignore")
     text = [f"# Tri-objective identification: {cfg.path.name}", "",
             f"Objectives {', '.join(result.info['objectives'])}; grid {result.info['grid'][0]} (J_trim) x "
             f"{result.info['grid'][1]} (J_linear); total time {result.info['total_time']:.0f} s; "

@@ -132,8 +132,8 @@ def validation_change_table(pred0, pred1, val_mans, segment_s: float = 1.0, alph
                 continue
             c = mean_square_change(r0, r1, seg, alpha)
             unit = plots.UNITS[o][0]
-            rows.append({"output": o, f"RMS before": float(plots.shown(o, c.ms0**0.5)),
-                         f"RMS after": float(plots.shown(o, c.ms1**0.5)), "unit": unit,
+            rows.append({"output": o, "RMS before": float(plots.shown(o, c.ms0**0.5)),
+                         "RMS after": float(plots.shown(o, c.ms1**0.5)), "unit": unit,
                          "change [%]": c.rms_change_pct, "z": c.z, "p (rise)": c.p_rise, "segments": c.segments,
                          "significant rise": c.rise_significant})
     return pd.DataFrame(rows)
@@ -238,7 +238,8 @@ def write_loop_report(out, cfg) -> Path:
     L += ["## Iterations", ""]
     for it in its:
         L += [f"### {label(it)}", "", f"Results: `{it['results_dir']}/` (front, report). "
-              f"Parameters at the diagnosed point ({it.get('point', 'closest front point')}, SI): " + ", ".join(f"{k} = {_fmt(v, 6)}" for k, v in it["parameters"].items())
+              f"Parameters at the diagnosed point ({it.get('point', 'closest front point')}, SI): "
+              + ", ".join(f"{k} = {_fmt(v, 6)}" for k, v in it["parameters"].items())
               + f"; J_time = {_fmt(it['J_time'], 8)}, J_trim = {_fmt(it['J_trim'], 5)}.", ""]
         sh = it.get("shape_selection")
         if sh:
@@ -257,7 +258,8 @@ def write_loop_report(out, cfg) -> Path:
                              "like", "like_corr", "trim_share") if c in sc]]
         need = ("LM > LM_needed, its own F(1, df) quantile" if with_df else f"LM > {a['threshold']:.3g}")
         L += [f"Score test (significant when p < {a['alpha']:g}/{len(sc)}, i.e. {need}; accepted "
-              f"when LM >= {a['ratio']:g} x runner-up's; confounded when projected |rho| >= {a['confound_corr']:g}):", "",
+              f"when LM >= {a['ratio']:g} x runner-up's; confounded when projected |rho| >= "
+              f"{a['confound_corr']:g}):", "",
               markdown_table(sc, digits=4), "", f"**Decision: {a['decision']}** - {a['message']}", ""]
         if a.get("confounded_pairs"):
             L += ["Confounded pairs among the significant candidates (projected correlation): "

@@ -79,7 +79,8 @@ def plot_pareto_front(front: pd.DataFrame, utopia: Sequence[float], nadir: Seque
     span_trim = (n_trim - u_trim) if n_trim > u_trim else 1.0
 
     def norm(j_time, j_trim):
-        return (np.asarray(j_trim, dtype=float) - u_trim) / span_trim, (np.asarray(j_time, dtype=float) - u_time) / span_time
+        return ((np.asarray(j_trim, dtype=float) - u_trim) / span_trim,
+                (np.asarray(j_time, dtype=float) - u_time) / span_time)
 
     for ax, tf in ((ax_raw, lambda jt, jr: (np.asarray(jr, dtype=float), np.asarray(jt, dtype=float))), (ax_n, norm)):
         x, y = tf(good["J_time"], good["J_trim"])

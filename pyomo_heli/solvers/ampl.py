@@ -144,7 +144,8 @@ class AmplSolver:
             self.last_log = open(logfile).read() if os.path.exists(logfile) else ""
         iterations, status, message = parse_ipopt_log(self.last_log)
         if status is None:
-            status = _TERMINATION_TO_STATUS.get(results.solver.termination_condition, str(results.solver.termination_condition))
+            tc = results.solver.termination_condition
+            status = _TERMINATION_TO_STATUS.get(tc, str(tc))
         if message is None:
             message = IPOPT_EXIT_MESSAGES.get(status, str(results.solver.message))
         if len(results.solution) == 0:

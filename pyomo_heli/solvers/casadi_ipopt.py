@@ -407,7 +407,8 @@ class CasadiIpoptSolver:
             lf, lg = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", g.shape[0])
             h_nl = ca.Function("nl_hess_l", [x, ca.SX.sym("p", 0), lf, lg],
                                [ca.triu(ca.hessian(lf * f + ca.dot(lg, g), x)[0])])
-        X, P, lf, lg = ca.MX.sym("x", n), ca.MX.sym("p", 0), ca.MX.sym("lam_f"), ca.MX.sym("lam_g", len(self.constraints))
+        X, P = ca.MX.sym("x", n), ca.MX.sym("p", 0)
+        lf, lg = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", len(self.constraints))
         c0, r0 = self._nl_col0, self._nl_row0
         H_nl = h_nl(X[c0:c0 + n_nl], P, lf, lg[r0:r0 + m_nl])
         lam_map = lg[:r0] if r0 else lg[m_nl:]
@@ -431,7 +432,8 @@ class CasadiIpoptSolver:
         return (ca.Function("nlp", [X, P], [f_nl, g], ["x", "p"], ["f", "g"]),
                 # dense: casadi hands Ipopt the output buffer as it is, and the structural zeros of a
                 # sparse gradient would be whatever the buffer held (seen: inf_du 1e12 at iteration 0)
-                ca.Function("nlp_grad_f", [X, P], [f_g, ca.densify(ca.vertcat(ca.MX(c0, 1), gf, ca.MX(n - n_nl - c0, 1)))], ["x", "p"],
+                ca.Function("nlp_grad_f", [X, P],
+                            [f_g, ca.densify(ca.vertcat(ca.MX(c0, 1), gf, ca.MX(n - n_nl - c0, 1)))], ["x", "p"],
                             ["f", "grad_f_x"]))
 
     def _nl_hessian_function(self):
@@ -548,10 +550,12 @@ class CasadiIpoptSolver:
         hint = "call solver.rebuild() to rewrite the NL file"
         for var in self.variables:
             if var.fixed:
-                raise ModelChangedError(f"variable {var.name} was free when the NL was written and is now fixed; {hint}")
+                raise ModelChangedError(f"variable {var.name} was free when the NL was written and is now fixed; "
+                                        f"{hint}")
         for var, val in self._fixed_at_write.items():
             if not var.fixed:
-                raise ModelChangedError(f"variable {var.name} was fixed when the NL was written and is now free; {hint}")
+                raise ModelChangedError(f"variable {var.name} was fixed when the NL was written and is now free; "
+                                        f"{hint}")
             if var.value != val:
                 raise ModelChangedError(
                     f"fixed variable {var.name} changed value ({val} -> {var.value}) since the NL was written; {hint}"

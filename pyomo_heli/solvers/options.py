@@ -140,7 +140,7 @@ class _Ipopt:
 
     def __init__(self, path: str):
         lib = ctypes.CDLL(path)
-        D, I, B, VP = ctypes.c_double, ctypes.c_int, ctypes.c_bool, ctypes.c_void_p
+        D, I, B, VP = ctypes.c_double, ctypes.c_int, ctypes.c_bool, ctypes.c_void_p  # noqa: E741 (ctypes int)
         DP, IP = ctypes.POINTER(D), ctypes.POINTER(I)
         # callback types of IpStdCInterface.h; never called (nothing is solved)
         self._f_t = ctypes.CFUNCTYPE(B, I, DP, B, DP, VP)

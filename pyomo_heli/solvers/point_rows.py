@@ -129,7 +129,8 @@ class PointRowsAssembly:
         """g of the evaluated constraints (m x 1) at the NLP vector X (MX, n x 1)."""
         ca = self.ca
         x_ext = self._extended(X)
-        return self._select_rows([b["F"].map(b["n_pts"])(self._gather(x_ext, b), ca.DM(b["data"])) for b in self._blocks])
+        return self._select_rows([b["F"].map(b["n_pts"])(self._gather(x_ext, b), ca.DM(b["data"]))
+                                  for b in self._blocks])
 
     def _scatter(self, entries, shape):
         """(rows, cols, weights, local positions) of all local entries -> (sparsity, how), where
@@ -207,7 +208,9 @@ class PointRowsAssembly:
                 g_row, g_col = b["row_of"][P, lr[None, :]], b["leaf_col"][P, lc[None, :]]
                 ok = (g_row >= 0) & (g_col < self.n)
                 local_pos = total + P * k + np.arange(k)[None, :]  # vec of the (k x n_pts) output
-                rows.append(g_row[ok]); cols.append(g_col[ok]); pos.append(local_pos[ok])
+                rows.append(g_row[ok])
+                cols.append(g_col[ok])
+                pos.append(local_pos[ok])
                 funs.append(f)
                 total += k * b["n_pts"]
             rows, cols, pos = (_cat(a) for a in (rows, cols, pos))
@@ -238,7 +241,10 @@ class PointRowsAssembly:
                 # diagonal twice (d2/dv2 of f(v, v) = f_aa + 2 f_ab + f_bb)
                 w = np.where((la[None, :] != lb[None, :]) & (ca_ == cb_), 2.0, 1.0)
                 local_pos = total + P * k + np.arange(k)[None, :]
-                rows.append(i[ok]); cols.append(j[ok]); weights.append(w[ok]); pos.append(local_pos[ok])
+                rows.append(i[ok])
+                cols.append(j[ok])
+                weights.append(w[ok])
+                pos.append(local_pos[ok])
                 funs.append(f)
                 total += k * b["n_pts"]
             entries = (_cat(rows), _cat(cols), _cat(weights, float), _cat(pos), total)

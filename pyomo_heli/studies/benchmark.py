@@ -2,8 +2,8 @@
 
     python studies/benchmark.py                               # Case 1 config, front + single shooting, size 1x
     python studies/benchmark.py --shooting solve_ivp          # classic shooting over scipy solve_ivp (slow)
-    python studies/benchmark.py --size 1,2,4,8 --no-front --no-shooting --repeat 3   # scaling from the bundled size (~12 min)
-    python studies/benchmark.py --size 1,2,4,8 --no-front --no-shooting --max-duration 1.5 --repeat 3   # cropped, ~1 min
+    python studies/benchmark.py --size 1,2,4,8 --no-front --no-shooting --repeat 3   # scaling, bundled size (12 min)
+    python studies/benchmark.py --size 1,2,4,8 --no-front --no-shooting --max-duration 1.5 --repeat 3   # cropped, 1 min
     python studies/benchmark.py --size 1,2,4,8 --repeat 3 --shooting rk4 --shooting-max-sims 0 --compare-nl-route
                                                               # every target in one run (~30 min, 7 GB)
     python studies/benchmark.py --quick                       # seconds; what the test suite runs

@@ -136,7 +136,8 @@ def markdown(tab: pd.DataFrame) -> str:
               "", "| realisation | " + " | ".join(f"{n} err % / SE % / err/SE" for n in PARAMETERS) + " |",
               "|---|" + "---|" * len(PARAMETERS)]
     lines += ["| " + str(r["realisation"]) + " | "
-              + " | ".join(f"{r[f'{n} err1 %']:+.2f} / {r[f'{n} SE1 %']:.2f} / {r[f'{n} err1/SE']:+.2f}" for n in PARAMETERS)
+              + " | ".join(f"{r[f'{n} err1 %']:+.2f} / {r[f'{n} SE1 %']:.2f} / {r[f'{n} err1/SE']:+.2f}"
+                           for n in PARAMETERS)
               + " |" for _, r in tab.iterrows()]
     rises = [f"{r['realisation']}: {o} {r[f'val {o} change %']:+.2f} % (p = {r[f'val {o} p(rise)']:.3g})"
              for _, r in tab.iterrows() for o in VALIDATION_OUTPUTS if r[f"val {o} change %"] > 0]

@@ -80,8 +80,8 @@ def main(argv=None) -> int:
                          "median p": float(w["p"].median()),
                          "failing": "; ".join(f"{r.output} in {r.maneuver} (p = {r.p:.1e})" for r in bad.itertuples())})
             tests.append(w.assign(model=name, whiteness_of=series))
-            print(f"{name}, {series}: noise only = {d.verdict['noise_only']}; not white: {rows[-1]['failing'] or 'none'}",
-                  flush=True)
+            print(f"{name}, {series}: noise only = {d.verdict['noise_only']}; "
+                  f"not white: {rows[-1]['failing'] or 'none'}", flush=True)
     summary = pd.DataFrame(rows)
     summary.to_csv(a.out / "summary.csv", index=False)
     pd.concat(tests, ignore_index=True).to_csv(a.out / "whiteness.csv", index=False, float_format="%.6g")

@@ -112,7 +112,8 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("benchmark", (
         f"{BENCH} --size 1,2,4,8 --repeat 3 --shooting rk4 --shooting-max-sims 0 --compare-nl-route "
         "--out {out}/benchmark/benchmark_case1_all.json",
-        f"{BENCH} --size 1,2,4,8 --no-front --no-shooting --repeat 3 --out {{out}}/benchmark/benchmark_scaling_full.json",
+        f"{BENCH} --size 1,2,4,8 --no-front --no-shooting --repeat 3 "
+        "--out {out}/benchmark/benchmark_scaling_full.json",
         f"{BENCH} --no-front --shooting rk4-casadi --shooting-max-sims 0 --compare-nl-route "
         "--out {out}/benchmark/benchmark_case1_shooting_casadi_point_rows.json",
         f"{BENCH} --size 1,2,4,8 --no-front --no-shooting --max-duration 1.5 --repeat 3 "
@@ -208,7 +209,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--run", nargs="+", metavar="FOLDER", help="run these entries (or 'all') with their inputs")
     ap.add_argument("--check", action="store_true", help="also check that every named config and script exists")
-    ap.add_argument("--out", default="docs/results", help="results root, relative to the checkout (default docs/results)")
+    ap.add_argument("--out", default="docs/results",
+                    help="results root, relative to the checkout (default docs/results)")
     a = ap.parse_args(argv)
     if a.run:
         unknown = [n for n in a.run if n != "all" and n not in BY_NAME]

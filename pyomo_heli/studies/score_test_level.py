@@ -3,10 +3,11 @@
     python studies/score_test_level.py --seeds 101-140 --out results/score_test_level [--identification eiv|oe]
                                        [--truth m0|wake]
 
-Every seed generates the small wake instance's flight test (:mod:`pyomo_heli.studies.small_instances`, the close-loop tests' instance) (a 20 kt lon doublet
-and an 80 kt lon 3-2-1-1 for identification, 6 s each with a 2 s lead-in, 11 level trims; 80 kt validation
-doublet unused) from **M0 with sensor noise only**, so every candidate's true strength is zero. It
-identifies twist and CL_alpha_HT (2 front points, the Eq. 11 point solved directly, as the loop diagnoses),
+Every seed generates the small wake instance's flight test (:mod:`pyomo_heli.studies.small_instances`, the
+close-loop tests' instance: a 20 kt lon doublet and an 80 kt lon 3-2-1-1 for identification, 6 s each with
+a 2 s lead-in, 11 level trims; 80 kt validation doublet unused) from **M0 with sensor noise only**, so every
+candidate's true strength is zero. It identifies twist and CL_alpha_HT (2 front points, the Eq. 11 point
+solved directly, as the loop diagnoses),
 with the measured col and lon errors estimated (``--identification eiv``, the default:
 ``[objectives] input_errors``, sigmas from the 1.9 s lead-in) or without (``oe``), and scores the whole
 candidate library at that point (:func:`pyomo_heli.diagnosis.attribution.attribute`, robust) twice: with
@@ -55,7 +56,8 @@ WAKE = "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n"
 
 def variant(segment_s: float = SEGMENT_S, variance: str = "batch") -> str:
     """File-name suffix of a score-test variant ("" for the loop's own test)."""
-    return ("" if segment_s == SEGMENT_S else f"_segment_{segment_s:g}") + ("" if variance == "batch" else f"_{variance}")
+    return (("" if segment_s == SEGMENT_S else f"_segment_{segment_s:g}")
+            + ("" if variance == "batch" else f"_{variance}"))
 
 
 def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, segment_s: float = SEGMENT_S,
@@ -132,7 +134,8 @@ def summary(docs: list[dict]) -> pd.DataFrame:
                      "seeds with a significant candidate": int(sum(bool(a.scores["significant"].any()) for a in atts)),
                      "seeds accepting": int(sum(a.decision == "accepted" for a in atts)),
                      "decisions": ", ".join(f"{k} {v}" for k, v in pd.Series(
-                         [a.accepted if a.decision == "accepted" else a.decision for a in atts]).value_counts().items())})
+                         [a.accepted if a.decision == "accepted" else a.decision for a in atts]
+                     ).value_counts().items())})
     return pd.DataFrame(rows)
 
 

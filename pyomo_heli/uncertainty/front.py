@@ -47,8 +47,8 @@ def add_uncertainty(result, cfg, data, out=None, progress=print, points: str = "
             front.at[i, k] = v
         by_index[int(r["index"])] = (u, info)
         progress(f"  standard errors, point {int(r['index']):>2}: "
-                 + " ".join(f"{n}={u.values[n]:.6g}+-{u.se[n]:.3g}" if not u.at_bound[n] else f"{n} at {u.at_bound[n]} bound"
-                            for n in names))
+                 + " ".join(f"{n}={u.values[n]:.6g}+-{u.se[n]:.3g}" if not u.at_bound[n]
+                            else f"{n} at {u.at_bound[n]} bound" for n in names))
     for point in (result.time_domain, result.chosen):
         if point and int(point["index"]) in by_index:
             point["uncertainty"] = by_index[int(point["index"])][0].to_dict()

@@ -151,7 +151,8 @@ class MonteCarloResult:
                 se = d[se_col].to_numpy(dtype=float) if se_col in d else np.array([np.nan])
                 crb = float(np.nanmedian(se)) if np.isfinite(se).any() else float("nan")
                 std = float(np.std(x, ddof=1)) if len(x) > 1 else float("nan")
-                at_bound = int(d["at_bound"].astype(object).fillna("").astype(str).str.contains(p).sum()) if "at_bound" in d else 0
+                at_bound = (int(d["at_bound"].astype(object).fillna("").astype(str).str.contains(p).sum())
+                            if "at_bound" in d else 0)
                 rows.append({"estimator": e, "parameter": p, "n": len(x), "truth": tr, "mean": float(np.mean(x)),
                              "bias": float(np.mean(x)) - tr, "bias %": 100 * (float(np.mean(x)) - tr) / abs(tr)
                              if tr else float("nan"), "std": std, "crb": crb,

@@ -52,8 +52,8 @@ class Entry:
 ENTRIES: tuple[Entry, ...] = (
     Entry("case1", ("pyomo-heli identify studies/case1.toml --out {out}/case1 --cold-check --restart",),
           IDENTIFY_FILES, minutes=6),
-    Entry("case2", ("pyomo-heli identify studies/case2.toml --out {out}/case2 --restart",), IDENTIFY_FILES,
-          minutes=1.5),
+    Entry("case2", ("pyomo-heli identify studies/case2.toml --out {out}/case2 --restart",),
+          tuple(f for f in IDENTIFY_FILES if f != "validation.png"), minutes=1.5),  # Case 1's shows the picture
     Entry("case1_project", ("pyomo-heli identify studies/case1_project.toml --out {out}/case1_project "
                             "--no-report --restart",), FRONT_FILES, minutes=1.5),
     Entry("case2_project", ("pyomo-heli identify studies/case2_project.toml --out {out}/case2_project "

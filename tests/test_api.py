@@ -119,10 +119,10 @@ def test_from_frames_rejects_bad_data_naming_the_column():
 
 
 def test_load_results_of_the_committed_case1():
-    """The committed Case 1 results (docs/results/case1) read through the API: C of docs/results.md."""
-    res = ph.load_results(HERE.parent / "docs" / "results" / "case1")
+    """The committed Case 1 results (a copy in tests/results/case1) read through the API: C of docs/results.md."""
+    res = ph.load_results(HERE / "results" / "case1")
     est = res.estimates().set_index(["point", "parameter"])
-    chosen = json.loads((HERE.parent / "docs" / "results" / "case1" / "chosen.json").read_text())["chosen"]
+    chosen = json.loads((HERE / "results" / "case1" / "chosen.json").read_text())["chosen"]
     assert est.loc[("C", "theta_twist"), "estimate"] == pytest.approx(
         chosen["parameters"]["theta_twist"] * 180 / math.pi, rel=1e-12)
     assert est.loc[("C", "theta_twist"), "unit"] == "deg/m"

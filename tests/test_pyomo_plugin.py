@@ -127,7 +127,8 @@ def test_parmest_through_the_labelled_model_reaches_point_a():
 
 @pytest.mark.slow
 def test_idaes_scaled_point_a_reaches_the_same_estimate():
-    """The IDAES Scaler's scaled copy of the NLP solves to the unscaled estimate (studies/scaling_check.py)."""
+    """The IDAES Scaler's scaled copy of the NLP solves to the unscaled estimate (the one-off scaling check of
+    commit 921fc42)."""
     from idaes.core.scaling import get_scaling_factor
 
     from pyomo_heli.config import load_identification_config

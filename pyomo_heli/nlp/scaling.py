@@ -14,7 +14,8 @@ scaling factors into the model's ``scaling_factor`` suffixes (IDAES's convention
 
 :func:`scaled_model` applies the factors with Pyomo's ``core.scale_model`` transformation; the casadi
 adapter then solves the scaled copy through the NL file (``point_rows=False``: the compiled point rows
-are written for the unscaled variables). ``studies/scaling_check.py`` compares the iterations of point A:
+are written for the unscaled variables). The one-off check of commit 921fc42
+(``git show 921fc42:studies/scaling_check.py``) compares the iterations of point A:
 on its default instance (small_case1_noisy.toml, lon3211_80kt_a cut to 3 s, 4946 variables) both reach the
 same estimate (to 2e-13), unscaled in 31 Ipopt iterations, scaled in 33; with the constraint factors alone
 (variables unscaled) Ipopt's restoration failed. Ipopt's own gradient-based scaling, the scaled free

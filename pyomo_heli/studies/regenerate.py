@@ -109,6 +109,9 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("multistart_case1_eps", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "
                                    "--epsilon 0.2008495658274336 --out {out}/multistart_case1_eps --restart",),
           ("multistart.json", "starts.csv"), minutes=20),
+    Entry("bo105_flight_trims", ("pyomo-heli trim-loop studies/bo105_flight_trims.toml "
+                                 "--out {out}/bo105_flight_trims",),
+          ("report.md", "trim_curves.png", "trim_loop.json", "trim_residuals.png"), minutes=2),
     Entry("benchmark", (
         f"{BENCH} --size 1,2,4,8 --repeat 3 --shooting rk4 --shooting-max-sims 0 --compare-nl-route "
         "--out {out}/benchmark/benchmark_case1_all.json",

@@ -5,7 +5,8 @@ They are package data under ``pyomo_heli/data`` and are found with :mod:`importl
 ``pyomo_heli/data/case1.toml`` and ``pyomo_heli/data/bo105_synthetic`` are symlinks to
 ``studies/case1.toml`` and ``data/bo105_synthetic`` (one copy of each in the repository); the wheel
 holds real copies; the functions return the resolved path, so in the source tree they name
-``studies/case1.toml`` and ``data/bo105_synthetic`` themselves. The demo config names its dataset as ``../data/bo105_synthetic``, which points at
+``studies/case1.toml`` and ``data/bo105_synthetic`` themselves. The demo config names its dataset as
+``../data/bo105_synthetic``, which points at
 the bundled flight test both from ``studies/`` and from ``pyomo_heli/data/``.
 """
 from __future__ import annotations

@@ -162,7 +162,8 @@ def load_trim_loop_config(path) -> TrimLoopConfig:
     from .solvers import SOLVER_NAMES, validate_solver_options
 
     if solver not in SOLVER_NAMES:
-        raise TrimLoopError(f"{f} [solver]: field 'name': unknown solver {solver!r}; choose from {', '.join(SOLVER_NAMES)}")
+        raise TrimLoopError(f"{f} [solver]: field 'name': unknown solver {solver!r}; "
+                            f"choose from {', '.join(SOLVER_NAMES)}")
     try:
         validate_solver_options(solver, options)
     except ValueError as exc:
@@ -398,7 +399,8 @@ def score_trims(model: HelicopterModel, conventions, pts: pd.DataFrame, identifi
         top, second = sig[0], (sig[1] if len(sig) > 1 else None)
         if second is None or second["evidence"] * ratio <= top["evidence"]:
             decision, accepted = "accepted", top["name"]
-            message = f"{top['name']} LM {top['LM']:.3g} (p = {top['p_value']:.2g}), {top['strength']} ~ {top['kappa_hat']:.4g}"
+            message = (f"{top['name']} LM {top['LM']:.3g} (p = {top['p_value']:.2g}), "
+                       f"{top['strength']} ~ {top['kappa_hat']:.4g}")
         else:
             a, b = proj[top["name"]], proj[second["name"]]
             rho = float(a @ b / math.sqrt(max((a @ a) * (b @ b), 1e-300)))
@@ -689,7 +691,8 @@ def write_trim_report(cfg: TrimLoopConfig, doc: dict, out) -> Path:
         L += [f"Source: {doc['source']}", ""]
     L += [f"Front: {doc['front']}.", "",
           "## Conventions applied by the model's output equations", "",
-          f"- collective: recorded at r/R = {c['collective_station'] if c['collective_station'] is not None else 'r_ref'}"
+          "- collective: recorded at r/R = "
+          f"{c['collective_station'] if c['collective_station'] is not None else 'r_ref'}"
           f" (model col at r_ref = {c['model_r_ref']:g}); col_rec = col + (r_c - r_ref) theta_twist R",
           f"- longitudinal cyclic sign: {c['lon_sign']:+d} (+1: positive aft)",
           "- pitch-attitude datum: " + ("unknown, **estimated** (theta_datum below)" if c["theta_datum_estimated"]
@@ -699,12 +702,15 @@ def write_trim_report(cfg: TrimLoopConfig, doc: dict, out) -> Path:
         L.append(f"- assumption: {a}")
     n_id, n_val = doc["counts"]["identification"], doc["counts"]["validation"]
     L += ["", "## Data", "",
-          f"Trim points per channel, identification / held out ({_held_text(doc['holdout_every'])}): " + ", ".join(f"{ch} {n_id[ch]}/{n_val[ch]}" for ch in TRIM_CHANNELS), ""]
+          f"Trim points per channel, identification / held out ({_held_text(doc['holdout_every'])}): "
+          + ", ".join(f"{ch} {n_id[ch]}/{n_val[ch]}" for ch in TRIM_CHANNELS), ""]
     L += ["## Iterations", ""]
     for it in doc["iterations"]:
-        L += [f"### Iteration {it['iteration']}" + (f" (with {', '.join(it['extensions'])})" if it["extensions"] else ""),
-              "", f"J_trim = {it['solve']['J_trim']:.4g} deg^2 (Ipopt {it['solve']['status']}, {it['solve']['iterations']} "
-              f"iterations; float-model check {it['J_trim_float']:.4g}); residual sigma {it['residual_sigma_deg']:.3f} deg, "
+        L += [f"### Iteration {it['iteration']}"
+              + (f" (with {', '.join(it['extensions'])})" if it["extensions"] else ""),
+              "", f"J_trim = {it['solve']['J_trim']:.4g} deg^2 (Ipopt {it['solve']['status']}, "
+              f"{it['solve']['iterations']} iterations; float-model check {it['J_trim_float']:.4g}); "
+              f"residual sigma {it['residual_sigma_deg']:.3f} deg, "
               f"{it['dof']} degrees of freedom", "",
               "| parameter | estimate | standard error | robust SE | unit |", "|---|---|---|---|---|"]
         for n, p in it["parameters"].items():
@@ -730,7 +736,8 @@ def write_trim_report(cfg: TrimLoopConfig, doc: dict, out) -> Path:
     for role in ("identification", "validation"):
         for ch in TRIM_CHANNELS:
             if ch in last["rms_deg"][role]:
-                L.append(f"| {role} | {ch} | {doc['initial']['rms_deg'][role][ch]:.3f} | {last['rms_deg'][role][ch]:.3f} |")
+                L.append(f"| {role} | {ch} | {doc['initial']['rms_deg'][role][ch]:.3f} | "
+                         f"{last['rms_deg'][role][ch]:.3f} |")
     raw = doc["initial"]["rms_deg_without_conventions"]
     L += ["", "Before = the initial model with the declared conventions applied; without them (collective read as "
               "if at r_ref, no datum) the initial RMS on all identification points would be "

@@ -89,7 +89,8 @@ def test_wheel_runs_the_demo_from_an_empty_folder(tmp_path):
                    check=True)
     (whl,) = wheels.glob("pyomo_heli-*.whl")
     names = set(zipfile.ZipFile(whl).namelist())
-    assert {"pyomo_heli/py.typed", "pyomo_heli/data/case1.toml", "pyomo_heli/data/bo105_synthetic/manifest.json"} <= names
+    assert {"pyomo_heli/py.typed", "pyomo_heli/data/case1.toml",
+            "pyomo_heli/data/bo105_synthetic/manifest.json"} <= names
     assert {f"pyomo_heli/{f}" for f in _package_data_files()} <= names
     site = tmp_path / "site"
     zipfile.ZipFile(whl).extractall(site)

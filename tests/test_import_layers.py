@@ -19,6 +19,7 @@ The layers, lowest first (a top-level module or subpackage of pyomo_heli per nam
 10. workflows: ``identify``, ``identify_linear``, ``close_loop``, ``trim_loop``, ``multistart``, ``benchmark``
 11. the front doors: ``cli``, ``__main__``, the Python ``api`` and the package's ``__init__`` (it
     re-exports the API and registers the Pyomo solver plugin)
+12. ``studies``: the reusable studies run by ``studies/*.py`` (they drive the command line and the workflows)
 
 Every import counts, also those inside functions; only imports under ``if TYPE_CHECKING:``
 (annotations, never executed) are exempt.
@@ -45,6 +46,7 @@ LAYERS = [
     {"report"},
     {"identify", "identify_linear", "close_loop", "trim_loop", "multistart", "benchmark"},
     {"cli", "__main__", "api", ""},
+    {"studies"},
 ]
 LAYER_OF = {name: k for k, names in enumerate(LAYERS) for name in names}
 

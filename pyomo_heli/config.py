@@ -411,13 +411,14 @@ def config_of_result(cfg: IdentificationConfig, result) -> IdentificationConfig:
     have = [e.name for e in cfg.model.extensions]
     listed = list(result.info.get("extensions", []))
     if listed[:len(have)] != have:
-        raise ConfigError(f"{cfg.path}: the results were identified with extensions {listed}, the config declares {have}")
+        raise ConfigError(f"{cfg.path}: the results were identified with extensions {listed}, "
+                          f"the config declares {have}")
     model = model_with_candidates(cfg.model, listed[len(have):], result.info.get("shape_parameters"))
     free = list(cfg.free)
     for n in result.parameters[len(free):]:
         if n not in model.parameters:
-            raise ConfigError(f"{cfg.path}: the results' free parameter {n!r} is neither in the config nor a strength of "
-                              f"the effects {listed[len(have):]}")
+            raise ConfigError(f"{cfg.path}: the results' free parameter {n!r} is neither in the config nor a "
+                              f"strength of the effects {listed[len(have):]}")
         spec = model.parameters.spec(n)
         lo, hi = spec.bounds
         free.append(FreeParameter(n, min(max(spec.value, lo), hi), lo, hi, spec.scale or 1.0))

@@ -375,8 +375,8 @@ def test_a_record_used_for_fitting_and_validation_by_role_is_refused(tmp_path):
 
     for data in ('validation = ["coldoublet_hover"]\n', 'maneuvers = ["lon3211_80kt", "londoublet_80kt_val"]\n'):
         cfg = load_identification_config(_small_config(tmp_path, data))
-        with pytest.raises(ValueError, match=r"small.toml \[data\]: maneuver\(s\) (coldoublet_hover|londoublet_80kt_val) "
-                                             r"both fitted"):
+        with pytest.raises(ValueError, match=r"small.toml \[data\]: maneuver\(s\) "
+                                             r"(coldoublet_hover|londoublet_80kt_val) both fitted"):
             identification_data(cfg)
 
 

@@ -27,7 +27,6 @@ def test_sweep_shape_follows_the_exponential_law():
     s = InputSignal("lon", "sweep", math.radians(1.0), 60.0, t_start=2.0, omega_min=0.5, omega_max=12.0, dwell=2)
     assert s.dwell_time == pytest.approx(2 * 2 * math.pi / 0.5)
     # instantaneous frequency: omega_min through the dwell, then omega_min + C2 (e^(C1 s/T_s) - 1) (wmax - wmin)
-    ts = 60.0 - s.dwell_time
     assert s.sweep_frequency(10.0) == pytest.approx(0.5)
     assert s.sweep_frequency(60.0) == pytest.approx(0.5 + SWEEP_C2 * (math.exp(SWEEP_C1) - 1) * 11.5)
     # the phase is the integral of the frequency (trapezoid on a fine grid)

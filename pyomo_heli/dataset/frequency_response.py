@@ -178,7 +178,8 @@ def load_responses(path: str | Path) -> list[FrequencyResponse]:
         err = g["random_error"].to_numpy() if "random_error" in g else None
         cond = tuple(str(g["conditioned_on"].iloc[0]).split()) if "conditioned_on" in g and \
             isinstance(g["conditioned_on"].iloc[0], str) else ()
-        out.append(FrequencyResponse(float(V), o, i, g["omega"].to_numpy(), g["T_re"].to_numpy() + 1j * g["T_im"].to_numpy(),
+        out.append(FrequencyResponse(float(V), o, i, g["omega"].to_numpy(),
+                                     g["T_re"].to_numpy() + 1j * g["T_im"].to_numpy(),
                                      g["coherence"].to_numpy(), g["input_power"].to_numpy(),
                                      g["coherent"].astype(bool).to_numpy(), mans, err, cond))
     return out
@@ -199,7 +200,8 @@ class CompositeSettings:
     Each window length in ``windows_s`` gives a Welch estimate (Hann, ``overlap``); a window of length
     T_w counts only at omega >= ``min_periods`` * 2 pi / T_w (it must hold that many periods) and only
     if it has at least two segments in the data; no frequency below ``record_periods`` periods in the
-    longest record counts (Tischler and Remple: record length >= 4-5 times the longest period). The estimates are averaged at each frequency of a
+    longest record counts (Tischler and Remple: record length >= 4-5 times the longest period). The estimates
+    are averaged at each frequency of a
     logarithmic grid of ``n_omega`` points in [omega_min, omega_max] with the weights 1 / eps_r^2
     (random error from coherence, below). A bin is coherent where the composite (partial) coherence
     gamma^2 >= ``coherence_min`` (the usual 0.6 guideline).
@@ -262,7 +264,7 @@ def window_spectra(records, inputs, output: str, window_s: float, overlap: float
     q = len(inputs)
     acc = None
     n_total = 0
-    f = None
+    f = rate = None  # rate: the sample rate of the records seen so far
     for mv in records:
         fs = mv.sample_rate
         n = int(round(window_s * fs))

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .log import info
 from .config import load_identification_config
 from .dataset import load_flight_test
 from .nlp.identification import IdentificationData, build_identification_nlp, prepare_data
@@ -113,7 +114,7 @@ def solve_breakdown(stats: dict | None, total: float) -> dict | None:
     return out
 
 
-def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=print, repeats: int = 1) -> dict:
+def measure_size(cfg, base: IdentificationData, k: int, front: bool, progress=info, repeats: int = 1) -> dict:
     """Build, set up and solve point A (and, if ``front``, the whole front) with the maneuvers repeated k times.
 
     Without the front, point A is solved ``repeats`` times from the same initial point (each solve cold); the
@@ -191,7 +192,7 @@ def with_point_rows(pareto, point_rows: bool):
     return dataclasses.replace(pareto, solver_options={"point_rows": point_rows, **pareto.solver_options})
 
 
-def measure_nl_route(cfg, base: IdentificationData, k: int, progress=print) -> dict:
+def measure_nl_route(cfg, base: IdentificationData, k: int, progress=info) -> dict:
     """Build, set-up and point A at size k with every row written to the NL file (no point rows)."""
     data = repeat_maneuvers(base, k)
     t0 = time.perf_counter()
@@ -256,7 +257,7 @@ def _machine() -> dict:
             "platform": platform.platform(), "date_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime())}
 
 
-def run_benchmark(settings: BenchmarkSettings, out: str | Path | None = None, progress=print) -> dict:
+def run_benchmark(settings: BenchmarkSettings, out: str | Path | None = None, progress=info) -> dict:
     """Run every measurement; write ``out`` (JSON) after each finished part; return the result dict."""
     cfg = load_identification_config(settings.config, settings.overrides)
     ft = load_flight_test(cfg.dataset)

@@ -619,33 +619,54 @@ def cmd_report_linear(args) -> int:
 
 
 def cmd_linearize(args) -> int:
-    import numpy as np
-
     from .physics.model import HelicopterModel
+    from .report.linear import linearization_dict, linearization_text
     from .simulation.linearize import linearize_float
 
     for v in args.speeds_kt:
         _check_speed_kt(v, "--speeds-kt")
+    if args.json:
+        _check_out_file(args.json, "--json")
     model = _parse_params(args.param, HelicopterModel())
-    np.set_printoptions(precision=5, linewidth=140, suppress=False)
+    records = []
     for v in args.speeds_kt:
         lin = linearize_float(model, v * KT)
-        print(f"{v:g} kt: finite-difference linearisation of the float model at its trim "
-              f"(states {', '.join(lin.states)}; inputs col, lon [rad])")
-        print("A =\n" + str(lin.A))
-        print("B =\n" + str(lin.B))
-        print("poles [1/s]: " + ", ".join(f"{z.real:.4f}{z.imag:+.4f}j" if abs(z.imag) > 0 else f"{z.real:.4f}"
-                                          for z in lin.poles()))
+        print(linearization_text(lin, v))
+        print()
+        records.append(linearization_dict(lin, v))
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(records, fh, indent=2)
+            fh.write("\n")
+        print(f"wrote {args.json}")
     return 0
 
 
 # ---------------------------------------------------------------- parser
+def _logging_flags(parser, default) -> None:
+    g = parser.add_argument_group("output")
+    g.add_argument("-v", "--verbose", action="count", default=0 if default is None else default,
+                   help="more messages (-v: DEBUG)")
+    g.add_argument("-q", "--quiet", action="store_true", default=False if default is None else default,
+                   help="warnings and errors only (results are still printed)")
+    g.add_argument("--log-file", metavar="FILE", default=default,
+                   help="also append every message, with UTC times, to FILE (each results folder gets its "
+                        "own pyomo_heli.log anyway)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from ._version import __version__
 
+    # -v/-q/--log-file are accepted before the command and after it (the subcommand's copy must not reset
+    # the value given before it: SUPPRESS as its default)
+    common = _Parser(add_help=False)
+    _logging_flags(common, argparse.SUPPRESS)
     p = _Parser(prog="pyomo-heli", description="Multi-objective parameter identification of helicopter models")
     p.add_argument("--version", action="version", version=f"pyomo-heli {__version__}")
+    _logging_flags(p, None)
     sub = p.add_subparsers(dest="command", parser_class=_Parser, metavar="COMMAND")
+    _add_parser = sub.add_parser
+    sub.add_parser = lambda *a, **k: _add_parser(*a, parents=[common], **k)
     sub.required = True
 
     t = sub.add_parser("trim", help="trim table of the model over speed (Pyomo trim block)")
@@ -746,8 +767,11 @@ def build_parser() -> argparse.ArgumentParser:
     rl.add_argument("--out", required=True, help="results folder written by identify")
     rl.set_defaults(func=cmd_report_linear)
 
-    lz = sub.add_parser("linearize", help="A, B and poles of the float model at trim (central differences)")
+    lz = sub.add_parser("linearize", help="labelled A, B, C, D and the mode table of the float model at trim "
+                                          "(central differences)")
     lz.add_argument("--speeds-kt", type=finite_float, nargs="+", default=[0, 80])
+    lz.add_argument("--json", metavar="FILE", help="also write matrices (with state/input/output names and units), "
+                                                   "trim and modes as JSON")
     lz.add_argument("--param", action="append", metavar="NAME=VALUE", help="override a model parameter (SI)")
     lz.set_defaults(func=cmd_linearize)
 
@@ -834,6 +858,8 @@ def main(argv=None) -> int:
     try:
         args = build_parser().parse_args(argv)
         cmd = args.command
+        if args.log_file is not None:
+            _check_out_file(args.log_file, "--log-file")
     except UserError as exc:
         print(f"pyomo-heli: error: {exc}", file=sys.stderr)
         return 2
@@ -842,6 +868,9 @@ def main(argv=None) -> int:
                  SolverUnavailableError, StoreMismatchError, KeyError, ValueError)
     stdout = sys.stdout
     sys.stdout = _Stdout(stdout)
+    from .log import configure_console
+
+    configure_console(-1 if args.quiet else args.verbose, args.log_file)
     try:
         with interrupts.guard():
             code = args.func(args)

@@ -51,6 +51,7 @@ from .config import ConfigError, IdentificationConfig, config_of_result  # noqa:
 from .dataset import load_flight_test
 from .diagnosis import attribution as attr
 from .diagnosis.candidates import CANDIDATES, model_with_candidates
+from .log import Progress, config_and_dataset, info, results_folder
 from .identify import build_problem, identification_fingerprint, run_identification, shape_values
 from .nlp.identification import identification_data, prepare_data
 from .nlp.parameters import FreeParameter
@@ -157,7 +158,7 @@ def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: f
 
 
 def select_shape(cfg: IdentificationConfig, cand, file: Path, alpha: float,
-                 progress=print) -> tuple[IdentificationConfig, dict]:
+                 progress=info) -> tuple[IdentificationConfig, dict]:
     """The shape rule: a candidate's shape parameters from the time series, tested against their defaults.
 
     ``cfg`` already has the candidate in its model with its strength free. Anchor A (min J_time, the
@@ -291,7 +292,7 @@ def _finished(cfg: IdentificationConfig, folder: Path):
     return res if same else None
 
 
-def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=print) -> dict:
+def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> dict:
     """When nothing is accepted: is the residual noise only, or an unexplained residual with a signature?
 
     Uses the residual analysis of :mod:`pyomo_heli.diagnosis.analysis` (trim shapes, whiteness,
@@ -318,7 +319,8 @@ def _score_inputs(cfg: IdentificationConfig, settings: LoopSettings) -> dict:
     return {"input_errors": cfg.nlp.input_errors, "noise_sigma": cfg.nlp.noise_sigma}
 
 
-def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = None, progress=print,
+@results_folder("out", config_and_dataset)
+def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = None, progress=info,
                restart: bool = False) -> dict:
     """Run the loop; returns the content of ``loop.json`` (also written after every iteration).
 
@@ -344,12 +346,14 @@ def _close_loop(cfg, out: Path, settings, progress, restart, ft, id_data, val_ma
            "units": "SI (rad, rad/s, m/s, g)", "iterations": [], "stopped": None}
     i = 0
     added_shape = None  # the shape rule's record for the candidate added last
+    bar = Progress(settings.max_iterations + 1, "loop iterations", at_most=True)
     while True:
         t0 = time.perf_counter()
         names = [e.name for e in cfg.model.extensions]
         progress(f"iteration {i}: model M0{''.join(' + ' + n for n in names)}; free "
                  f"{', '.join(f.name for f in cfg.free)}")
         result = None if restart else _finished(cfg, out / f"iter_{i}")
+        reused = result is not None
         if result is not None:
             progress(f"  iteration {i}: reusing the finished identification in {out / f'iter_{i}'}")
         else:
@@ -397,6 +401,7 @@ def _close_loop(cfg, out: Path, settings, progress, restart, ft, id_data, val_ma
         elif i >= settings.max_iterations:
             doc["stopped"] = (f"iteration limit {settings.max_iterations} reached; {att.accepted} would be added next")
         write_json(out / LOOP_FILE, doc)
+        progress(f"iteration {i} finished" + bar.tick(from_disk=reused))
         if doc["stopped"]:
             progress(f"stopped: {doc['stopped']}")
             return doc

@@ -13,6 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from .config import IdentificationConfig
+from .log import Progress, config_and_dataset, format_parameters, info, results_folder
 from .nlp.identification import build_problem
 from .physics.extensions import extension_forms  # noqa: F401 - re-exported
 from .pareto.front import ParetoSolver, utopia_distance
@@ -68,7 +69,8 @@ def identification_fingerprint(cfg: IdentificationConfig) -> str:
     return fingerprint(raw, cfg.dataset, command="identify", **extra)
 
 
-def run_identification(cfg: IdentificationConfig, out: str | Path, progress=print,
+@results_folder("out", config_and_dataset)
+def run_identification(cfg: IdentificationConfig, out: str | Path, progress=info,
                        restart: bool = False, uncertainty: bool | str = False) -> IdentificationResult:
     """Solve anchors, front and choice; write each front point to ``out/front.csv`` as it finishes.
 
@@ -115,14 +117,16 @@ def _run_identification(cfg, out: Path, progress, restart, uncertainty) -> Ident
     front_csv = out / "front.csv"
     if front_csv.exists():
         front_csv.unlink()
+    bar = Progress(cfg.pareto.points, "front points")
 
     def on_point(p):
         rows.append(p.row())
         write_csv(pd.DataFrame(rows), front_csv)
-        params = " ".join(f"{k}={v:.6g}" for k, v in p.parameters.items())
-        where = " (from disk)" if getattr(p, "from_disk", False) else ""
+        params = format_parameters(p.parameters, cfg.model.parameters)
+        from_disk = getattr(p, "from_disk", False)
+        where = " (from disk)" if from_disk else ""
         progress(f"  point {p.index:>2} {p.kind:<3} J_time={p.J_time:.6g} J_trim={p.J_trim:.6g} {params} "
-                 f"[{p.status}, {p.iterations} it, {p.wall_time:.1f} s]{where}")
+                 f"[{p.status}, {p.iterations} it, {p.wall_time:.1f} s]{where}" + bar.tick(from_disk))
 
     t1 = time.perf_counter()
     ps = ParetoSolver(m, cfg.pareto, on_point=on_point, store=store)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from .log import info
 from .dataset import load_flight_test
 from .dataset.frequency_response import frequency_responses, save_responses
 from .nlp.identification import build_identification_nlp, identification_data
@@ -45,7 +46,7 @@ def data_responses(cfg, ft):
     return frequency_responses(mans, cfg.linear.pairs, cfg.linear.speeds, cfg.linear.spectral)
 
 
-def run_tri_identification(cfg, out, progress=print) -> IdentificationResult:
+def run_tri_identification(cfg, out, progress=info) -> IdentificationResult:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

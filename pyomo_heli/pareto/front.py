@@ -55,6 +55,7 @@ import numpy as np
 import pyomo.environ as pyo
 
 from .. import interrupts
+from ..log import get_logger
 from ..nlp.parameters import free_parameter_values
 from ..solvers import MULTIPLIER_MODES, SolverError, make_solver, scale_multipliers
 from .snapshot import Snapshot as _Snapshot
@@ -197,7 +198,12 @@ class ParetoSolver:
                                              + w["w_utopia"] * utopia)
         self._pin(w_time=1.0 / self.s_time)
         self._snap_initial = _Snapshot(m)
+        log = get_logger("pareto")
+        log.info(f"setting up solver {self.settings.solver} (NL file, casadi functions; the first solve adds the "
+                 f"derivatives): up to minutes on a full-size problem")
+        t0 = time.perf_counter()
         self.solver = make_solver(m, self.settings.solver, self.settings.solver_options)
+        log.debug(f"solver object made in {time.perf_counter() - t0:.1f} s")
         self.points: list[FrontPoint] = []
 
     def _pin(self, **values):

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..log import info
 from .cramer_rao import cramer_rao, point_information
 from .identifiability import identifiability
 
@@ -23,7 +24,7 @@ def _information(cfg, data, parameters):
                              cfg.nlp.trim_outputs, input_errors=cfg.nlp.input_errors, noise_sigma=cfg.nlp.noise_sigma)
 
 
-def add_uncertainty(result, cfg, data, out=None, progress=print, points: str = "all"):
+def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "all"):
     """Compute and attach standard errors (every front point, A, chosen, direct); save to ``out``.
 
     points: "all" front points, or "chosen" (only A, the chosen point and the direct solve).

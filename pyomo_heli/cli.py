@@ -501,8 +501,10 @@ def cmd_identify(args) -> int:
     _check_out_dir(args.out)
     _check_out_not_foreign(args.out, "identification")
     cfg = load_identification_config(args.config, overrides)
-    print(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
-          f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
+    from .log import info
+
+    info(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
+         f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
     result = run_identification(cfg, args.out, uncertainty=getattr(args, "uncertainty", "all"),
                                 restart=getattr(args, "restart", False))
     if result.chosen is None:
@@ -575,10 +577,14 @@ def cmd_multistart(args) -> int:
     _check_out_not_foreign(args.out, "multi-start")
     cfg = load_identification_config(args.config)
     problem = "time" if args.epsilon is None else "epsilon"
-    print(f"multi-start of {', '.join(f.name for f in cfg.free)} from {args.starts} random initial guesses "
-          f"(seed {args.seed}) on {cfg.dataset}")
-    result = run_multistart(cfg, args.out, starts=args.starts, seed=args.seed, problem=problem, epsilon=args.epsilon,
-                            rtol=args.rtol, restart=args.restart)
+    from .log import info
+    from .parallel import dask_executor
+
+    info(f"multi-start of {', '.join(f.name for f in cfg.free)} from {args.starts} random initial guesses "
+         f"(seed {args.seed}) on {cfg.dataset}")
+    with dask_executor(args.workers, args.scheduler) as executor:
+        result = run_multistart(cfg, args.out, starts=args.starts, seed=args.seed, problem=problem,
+                                epsilon=args.epsilon, rtol=args.rtol, restart=args.restart, executor=executor)
     print(result)
     print(f"results in {args.out}")
     if result.best is None and args.epsilon is not None:
@@ -652,6 +658,14 @@ def _logging_flags(parser, default) -> None:
     g.add_argument("--log-file", metavar="FILE", default=default,
                    help="also append every message, with UTC times, to FILE (each results folder gets its "
                         "own pyomo_heli.log anyway)")
+
+
+def _dask_flags(parser, what: str) -> None:
+    parser.add_argument("--workers", type=nonneg_int, default=0,
+                        help=f"solve the {what} on a Dask LocalCluster of this many worker processes "
+                             f"(default 0: one after the other in this process; same results either way)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help=f"send the {what} to the Dask cluster of this scheduler (e.g. tcp://host:8786)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -750,6 +764,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="relative objective tolerance for 'reached the best optimum' (default 1e-6)")
     ms.add_argument("--out", required=True, help="results folder (resumed if it holds finished starts)")
     ms.add_argument("--restart", action="store_true", help="discard finished starts in --out")
+    _dask_flags(ms, "starts")
     ms.set_defaults(func=cmd_multistart)
 
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")

@@ -293,6 +293,13 @@ def _relative(path, start) -> str:
         return str(Path(path).resolve())
 
 
+def _command_line() -> str:
+    prog = Path(sys.argv[0]).name if sys.argv and sys.argv[0] else "python"
+    if prog in ("cli.py", "__main__.py") and "pyomo_heli" in sys.argv[0]:
+        prog = "pyomo-heli"
+    return " ".join([prog] + sys.argv[1:])
+
+
 def provenance(config=None, datasets=(), command: str | None = None, folder=None) -> dict:
     """What made a results folder: versions, git commit, UTC time, config and datasets.
 
@@ -310,7 +317,7 @@ def provenance(config=None, datasets=(), command: str | None = None, folder=None
         "idaes-pse": _version("idaes-pse"),
         "git": git_commit(),
         "utc_time": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "command": command if command is not None else " ".join([Path(sys.argv[0]).name] + sys.argv[1:]),
+        "command": command if command is not None else _command_line(),
     }
     if config is not None:
         config = Path(config)

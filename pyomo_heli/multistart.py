@@ -33,12 +33,13 @@ import pandas as pd
 
 from .config import IdentificationConfig
 from .identify import build_problem
+from .log import Progress, config_and_dataset, format_parameters, info, results_folder
 from .nlp.identification import initialise_at
 from .pareto.front import FrontPoint, ParetoSolver
 from .pareto.result import write_csv, write_json
 from . import interrupts
 from .pareto.snapshot import Snapshot
-from .pareto.store import FolderLock, PointStore, claim_folder, fingerprint
+from .pareto.store import FolderLock, PointStore, claim_folder, fingerprint, variable_values
 
 PROBLEMS = ("time", "epsilon")
 
@@ -121,10 +122,60 @@ def _row(k: int, guess: dict, p: FrontPoint, objective: float) -> dict:
     return row
 
 
+@dataclass(frozen=True)
+class StartTask:
+    """One start: everything its result depends on (picklable, for a Dask worker)."""
+
+    cfg: IdentificationConfig
+    key: str  # the run's fingerprint: a worker builds the NLP of a key once
+    k: int
+    guess: dict
+    epsilon: float
+
+
+_CACHE: dict = {}
+
+
+def _built(cfg: IdentificationConfig, key: str):
+    """(nlp, data, solver, initial snapshot) of a config, built once per worker process."""
+    if key not in _CACHE:
+        _CACHE.clear()
+        m, data, _ = build_problem(cfg)
+        ps = ParetoSolver(m, cfg.pareto)
+        _CACHE[key] = (m, data, ps, Snapshot(m))
+    return _CACHE[key]
+
+
+def _solve_start(m, data, ps, initial, cfg, k: int, guess: dict, eps: float) -> FrontPoint:
+    """Start ``k`` from ``guess``: the model back to its initial state, initialised at the guess, solved cold."""
+    initial.restore()  # every start from the same model state: independent of the others
+    try:
+        initialise_at(m, data, cfg.model, cfg.free, guess)
+    except (RuntimeError, ValueError, ArithmeticError) as exc:
+        return FrontPoint(index=k, kind="start", epsilon=eps, J_time=math.nan, J_trim=math.nan,
+                          parameters={n: math.nan for n in guess}, success=False,
+                          status=f"initialisation failed: {exc}", iterations=0, wall_time=0.0)
+    return ps.solve_objective("time", epsilon=eps, index=k, kind="start")
+
+
+def run_start(task: StartTask) -> tuple[dict, list | None]:
+    """A start on a worker: its row and the solution's variable values (None if nothing was solved)."""
+    m, data, ps, initial = _built(task.cfg, task.key)
+    p = _solve_start(m, data, ps, initial, task.cfg, task.k, task.guess, task.epsilon)
+    values = variable_values(m) if p.iterations > 0 else None
+    return _row(task.k, task.guess, p, p.J_time), values
+
+
+@results_folder("out", config_and_dataset)
 def run_multistart(cfg: IdentificationConfig, out: str | Path, starts: int = 20, seed: int = 0,
                    problem: str = "time", epsilon: float | None = None, rtol: float = 1e-6,
-                   restart: bool = False, progress=print) -> MultistartResult:
-    """Solve ``problem`` from ``starts`` random initial guesses; every start on disk as it finishes."""
+                   restart: bool = False, progress=info, executor=None) -> MultistartResult:
+    """Solve ``problem`` from ``starts`` random initial guesses; every start on disk as it finishes.
+
+    executor: None solves the starts here one after the other; a ``concurrent.futures.Executor`` (e.g. from
+    :func:`pyomo_heli.parallel.dask_executor`) solves them on its workers, each building the NLP once. The
+    results are the same either way (each start restores the same initial state).
+    """
     if problem not in PROBLEMS:
         raise ValueError(f"problem must be one of {', '.join(PROBLEMS)}, got {problem!r}")
     if (problem == "epsilon") != (epsilon is not None):
@@ -139,47 +190,60 @@ def run_multistart(cfg: IdentificationConfig, out: str | Path, starts: int = 20,
         raise ValueError(f"--epsilon must be a finite number >= 0 (J_trim >= 0), got {epsilon}")
     claim_folder(out, "multi-start", restart)  # another command's folder: refused before anything is written
     with interrupts.guard(), FolderLock(out, "multi-start"):
-        return _run_multistart(cfg, Path(out), starts, seed, problem, epsilon, rtol, restart, progress)
+        return _run_multistart(cfg, Path(out), starts, seed, problem, epsilon, rtol, restart, progress, executor)
 
 
-def _run_multistart(cfg, out: Path, starts, seed, problem, epsilon, rtol, restart, progress) -> MultistartResult:
-    store = PointStore(out, fingerprint(cfg.raw, cfg.dataset, command="multistart", seed=seed, problem=problem,
-                                        epsilon=epsilon), restart=restart, what="multi-start")
+def _run_multistart(cfg, out: Path, starts, seed, problem, epsilon, rtol, restart, progress,
+                    executor=None) -> MultistartResult:
+    key = fingerprint(cfg.raw, cfg.dataset, command="multistart", seed=seed, problem=problem, epsilon=epsilon)
+    store = PointStore(out, key, restart=restart, what="multi-start")
     if store.keys():
         progress(f"resuming: {len(store.keys())} finished start(s) in {store.dir}")
     t0 = time.perf_counter()
-    m, data, _ = build_problem(cfg)
-    ps = ParetoSolver(m, cfg.pareto)  # its one solver and the switchable objective; no front is traced
-    progress(f"built NLP and solver in {time.perf_counter() - t0:.1f} s")
-    initial = Snapshot(m)
     eps = math.inf if epsilon is None else float(epsilon)
-    rows, resumed = [], 0
+    rows, resumed = {}, 0
+    bar = Progress(starts, "starts")
+    params_of = cfg.model.parameters
+
+    def finished(k, guess, row, from_disk):
+        rows[k] = row
+        write_csv(pd.DataFrame([rows[i] for i in sorted(rows)]), out / "starts.csv")
+        shown = format_parameters({n: row[n] for n in guess}, params_of)
+        start = format_parameters(guess, params_of)
+        progress(f"  start {k:>3}: from {start} -> {shown} objective={row['objective']:.10g} "
+                 f"[{row['status']}, {row['iterations']} it, {row['wall_time']:.1f} s]"
+                 f"{' (from disk)' if from_disk else ''}" + bar.tick(from_disk))
+
+    todo = []
     for k in range(starts):
-        guess = draw_start(cfg.free, k, seed)  # one at a time: memory does not grow with --starts
-        key = f"start{k:03d}"
-        if store.has(key):
-            row = store.record(key)
+        guess = draw_start(cfg.free, k, seed)
+        if store.has(f"start{k:03d}"):
             resumed += 1
-            where = " (from disk)"
+            finished(k, guess, store.record(f"start{k:03d}"), True)
         else:
-            initial.restore()  # every start from the same model state: independent of the others
-            try:
-                initialise_at(m, data, cfg.model, cfg.free, guess)
-            except (RuntimeError, ValueError, ArithmeticError) as exc:
-                p = FrontPoint(index=k, kind="start", epsilon=eps, J_time=math.nan, J_trim=math.nan,
-                               parameters={n: math.nan for n in guess}, success=False,
-                               status=f"initialisation failed: {exc}", iterations=0, wall_time=0.0)
-            else:
-                p = ps.solve_objective("time", epsilon=eps, index=k, kind="start")
-            objective = p.J_time
-            row = _row(k, guess, p, objective)
-            store.save(key, row, m if p.iterations > 0 else None)
-            where = ""
-        rows.append(row)
-        write_csv(pd.DataFrame(rows), out / "starts.csv")
-        params = " ".join(f"{n}={guess[n]:.6g}->{row[n]:.6g}" for n in guess)
-        progress(f"  start {k:>3}: {params} objective={row['objective']:.10g} "
-                 f"[{row['status']}, {row['iterations']} it, {row['wall_time']:.1f} s]{where}")
+            todo.append(StartTask(cfg, key, k, guess, eps))
+    if executor is None:
+        m, data, _ = build_problem(cfg)
+        ps = ParetoSolver(m, cfg.pareto)  # its one solver and the switchable objective; no front is traced
+        progress(f"built NLP and solver in {time.perf_counter() - t0:.1f} s")
+        initial = Snapshot(m)
+        for t in todo:
+            p = _solve_start(m, data, ps, initial, cfg, t.k, t.guess, eps)
+            row = _row(t.k, t.guess, p, p.J_time)
+            store.save(f"start{t.k:03d}", row, m if p.iterations > 0 else None)
+            finished(t.k, t.guess, row, False)
+    elif todo:
+        from .parallel import run_tasks
+
+        progress(f"solving {len(todo)} start(s) on {type(executor).__name__} workers (each builds the NLP once)")
+
+        def done(t, result):
+            row, values = result
+            store.save(f"start{t.k:03d}", row, values=values)
+            finished(t.k, t.guess, row, False)
+
+        run_tasks(run_start, todo, executor, done)
+    rows = [rows[k] for k in sorted(rows)]
     table = pd.DataFrame(rows)
     ok = table["success"].astype(bool) & np.isfinite(table["objective"])
     best = None

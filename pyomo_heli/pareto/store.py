@@ -273,6 +273,11 @@ def _variables(m):
     return list(m.component_data_objects(pyo.Var, descend_into=True))
 
 
+def variable_values(m) -> list:
+    """The values of every variable of ``m`` in the store's order (nan where unset)."""
+    return [math.nan if v.value is None else float(v.value) for v in _variables(m)]
+
+
 class PointStore:
     """Finished points of one run in ``root/points``, guarded by a fingerprint.
 
@@ -325,17 +330,20 @@ class PointStore:
     def keys(self) -> list[str]:
         return sorted(p.stem for p in self.dir.glob("*.npz"))
 
-    def save(self, key: str, record: dict, m=None, duals: bool = False) -> None:
-        """Write one finished point: its record and (with ``m``) the model's variable values.
+    def save(self, key: str, record: dict, m=None, duals: bool = False, values=None) -> None:
+        """Write one finished point: its record and (with ``m``) the model's variable values, or ``values``
+        as :func:`variable_values` gave them (e.g. on a worker that solved the point).
 
         Refused (:class:`~pyomo_heli.interrupts.Interrupted`) once SIGINT or SIGTERM was received: whatever
         was computed after the signal may be an interrupted solve, and is never stored as a result."""
         interrupts.check()
         arrays = {"record": np.array(json.dumps(record, default=_json_default))}
         if m is not None:
-            arrays["values"] = np.array([np.nan if v.value is None else float(v.value) for v in _variables(m)])
+            arrays["values"] = np.array(variable_values(m))
             if duals:
                 arrays.update(_duals(m))
+        elif values is not None:
+            arrays["values"] = np.asarray(values, dtype=float)
         _atomic_write(self._path(key), lambda fh: np.savez(fh, **arrays))
 
     def record(self, key: str) -> dict:

@@ -14,10 +14,10 @@ worker ran it or what it ran before.
 
 Parallelism: the realizations are independent tasks
 (:func:`run_realization` on a picklable :class:`RealizationTask`). By default
-they run in a ``concurrent.futures.ProcessPoolExecutor``; any object with the
-``concurrent.futures.Executor`` interface can be passed instead, e.g. a Dask
-cluster's ``distributed.Client(...).get_executor()`` (Dask is not a
-dependency). ``workers=0`` runs them in this process. Each finished
+they run on a Dask ``LocalCluster`` of ``workers`` processes; ``scheduler``
+sends them to an existing Dask cluster, and any object with the
+``concurrent.futures.Executor`` interface can be passed instead.
+``workers=0`` runs them in this process. Each finished
 realization is appended to ``realizations.csv`` at once, and a rerun into the
 same folder skips realizations already there.
 """
@@ -27,7 +27,6 @@ import concurrent.futures as cf
 import dataclasses
 import json
 import math
-import multiprocessing
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +38,8 @@ from ..config import load_identification_config
 from ..dataset import load_flight_test
 from ..nlp.identification import build_identification_nlp, identification_data, set_measurements
 from ..pareto.front import ParetoSolver
+from ..log import Progress, format_parameters, info, results_folder
+from ..parallel import dask_executor, run_tasks
 from .cramer_rao import cramer_rao, point_information
 from .realizations import noisy_copy
 
@@ -179,18 +180,17 @@ class MonteCarloResult:
         return self.summary().to_string(index=False, float_format=lambda x: f"{x:.5g}")
 
 
-def _default_executor(workers: int):
-    # spawn: fresh interpreters, no forked solver threads; tasks and results are plain data
-    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-
-
+@results_folder("out", lambda a: (a["problem"].config, []))
 def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: dict, trim_sigma: dict,
                     truth: dict, out=None, multi_objective: bool = True, crb: bool = True, workers: int = 2,
-                    executor: cf.Executor | None = None, progress=print) -> MonteCarloResult:
+                    executor: cf.Executor | None = None, progress=info, scheduler: str | None = None
+                    ) -> MonteCarloResult:
     """Run (or finish) ``realizations`` noise realizations; write each one to ``out`` as it finishes.
 
-    executor: any concurrent.futures Executor (e.g. ``dask.distributed.Client().get_executor()``);
-    default a process pool of ``workers`` processes, or this process when ``workers == 0``.
+    Where they run (:func:`pyomo_heli.parallel.dask_executor`): ``executor`` if given (any
+    concurrent.futures Executor); else the Dask cluster of ``scheduler`` (an address); else a Dask
+    LocalCluster of ``workers`` processes; ``workers == 0``: serially in this process. The estimates are
+    the same wherever they run.
     """
     cfg = load_identification_config(problem.config, json.loads(problem.overrides))
     params = [f.name for f in cfg.free]
@@ -206,31 +206,24 @@ def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: d
     if done:
         progress(f"{len(done)} realizations already in {csv}; running {len(tasks)}")
     t0 = time.perf_counter()
+    bar = Progress(len(tasks), "realisations")
+    shown = cfg.model.parameters
 
-    def finished(new):
+    def finished(task, new):
         rows.extend(new)
         rows.sort(key=lambda r: (int(r["realization"]), str(r["estimator"])))
         if csv is not None:
             pd.DataFrame(rows).to_csv(csv, index=False, float_format="%.12g")
         r = new[0]
         progress(f"  realization {r['realization']:>3}: " + "; ".join(
-            f"{x['estimator']} " + " ".join(f"{p}={x.get(p, float('nan')):.6g}" for p in params)
-            + f" [{x['status']}]" for x in new)
-            + f" ({time.perf_counter() - t0:.0f} s)")
+            f"{x['estimator']} " + format_parameters({p: x.get(p, float("nan")) for p in params}, shown)
+            + f" [{x['status']}]" for x in new) + bar.tick())
 
-    if executor is None and workers == 0:
-        for t in tasks:
-            finished(run_realization(t))
+    if executor is not None:
+        run_tasks(run_realization, tasks, executor, finished)
     else:
-        own = executor is None
-        ex = _default_executor(workers) if own else executor
-        try:
-            futures = [ex.submit(run_realization, t) for t in tasks]
-            for f in cf.as_completed(futures):
-                finished(f.result())
-        finally:
-            if own:
-                ex.shutdown()
+        with dask_executor(workers, scheduler) as ex:
+            run_tasks(run_realization, tasks, ex, finished)
     est = pd.DataFrame(rows)
     result = MonteCarloResult(estimates=est, parameters=params, truth={p: float(truth[p]) for p in params},
                               info={"config": problem.config, "overrides": json.loads(problem.overrides),

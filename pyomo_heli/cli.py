@@ -413,7 +413,7 @@ def cmd_close_loop(args) -> int:
     except IdentificationFailed as exc:  # a failed solve, not bad input: exit 1 as identify
         print(f"pyomo-heli close-loop: {exc}", file=sys.stderr)
         return 1
-    path = write_loop_report(args.out, cfg)
+    path = write_loop_report(args.out, cfg, figure_format=args.figure_format)
     print(f"{len(doc['iterations'])} identification(s); stopped: {doc['stopped']}")
     print(f"loop.json and {path} written")
     return 0
@@ -487,7 +487,7 @@ def cmd_diagnose(args) -> int:
     d = diagnose(r, alpha=args.alpha, test_rate_hz=args.test_rate_hz, seed=args.seed)
     d.save(out / "diagnosis.json")
     cmd = "pyomo-heli diagnose " + " ".join(sys.argv[1:][1:]) if sys.argv[1:2] == ["diagnose"] else None
-    write_diagnosis_report(out, r, d, results_dir=args.results_dir, command=cmd)
+    write_diagnosis_report(out, r, d, results_dir=args.results_dir, command=cmd, figure_format=args.figure_format)
     print(d)
     print(f"wrote {out / 'diagnosis.json'}, {out / 'diagnosis.md'} and figures")
     return 0
@@ -514,11 +514,11 @@ def cmd_identify(args) -> int:
     if not args.no_report and "linear" in cfg.objectives:
         from .report.linear import write_linear_report
 
-        print(f"report: {write_linear_report(args.out, cfg)}")
+        print(f"report: {write_linear_report(args.out, cfg, figure_format=args.figure_format)}")
     elif not args.no_report:
         from .report.identification import write_report
 
-        write_report(args.out, cfg)
+        write_report(args.out, cfg, figure_format=args.figure_format)
     print(result)
     print(f"results in {args.out}")
     unreliable = result.info.get("unreliable")
@@ -618,7 +618,7 @@ def cmd_report_linear(args) -> int:
 
     cfg = load_identification_config(args.config)
     notes = []  # records the folder lacks (checked against the config before anything is written)
-    print(f"report: {write_linear_report(args.out, cfg, warn=notes.append)}")
+    print(f"report: {write_linear_report(args.out, cfg, warn=notes.append, figure_format=args.figure_format)}")
     for note in notes:
         _warning("report-linear")(note)
     return 0
@@ -658,6 +658,14 @@ def _logging_flags(parser, default) -> None:
     g.add_argument("--log-file", metavar="FILE", default=default,
                    help="also append every message, with UTC times, to FILE (each results folder gets its "
                         "own pyomo_heli.log anyway)")
+
+
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+
+def _figure_flag(parser) -> None:
+    parser.add_argument("--figure-format", choices=FIGURE_FORMATS, default="png",
+                        help="file format of the report's figures (default png)")
 
 
 def _dask_flags(parser, what: str) -> None:
@@ -721,6 +729,7 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--uncertainty", choices=("all", "chosen", "none"), default="all",
                    help="Cramer-Rao standard errors for every front point (all, default), only for A, the chosen "
                         "point and the direct solve (chosen, faster), or none")
+    _figure_flag(i)
     i.set_defaults(func=cmd_identify)
 
     cl = sub.add_parser("close-loop", help="identify, attribute the residual to a candidate effect, add it, "
@@ -733,6 +742,7 @@ def build_parser() -> argparse.ArgumentParser:
     cl.add_argument("--restart", action="store_true",
                     help="identify every iteration afresh (finished points and shape decisions in --out are "
                          "discarded) instead of resuming")
+    _figure_flag(cl)
     cl.set_defaults(func=cmd_close_loop)
 
     tl = sub.add_parser("trim-loop", help="identify a trim-only flight test (J_trim), test the candidate effects on "
@@ -770,6 +780,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")
     d.add_argument("--out", default="demo_out")
     d.add_argument("--restart", action="store_true", help="discard finished points in --out instead of resuming")
+    _figure_flag(d)
     d.set_defaults(func=cmd_demo)
 
     n = sub.add_parser("inspect", help="print the NLP of a config without solving")
@@ -780,6 +791,7 @@ def build_parser() -> argparse.ArgumentParser:
     rl = sub.add_parser("report-linear", help="figures and report of a tri-objective results folder")
     rl.add_argument("config")
     rl.add_argument("--out", required=True, help="results folder written by identify")
+    _figure_flag(rl)
     rl.set_defaults(func=cmd_report_linear)
 
     lz = sub.add_parser("linearize", help="labelled A, B, C, D and the mode table of the float model at trim "
@@ -806,6 +818,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--seed", type=nonneg_int, default=0, help="seed of the Monte Carlo p-values (default 0)")
     g.add_argument("--no-residuals", action="store_true",
                    help="do not save the residuals folder (residuals_<point>/, about 1 MB per 10 maneuvers)")
+    _figure_flag(g)
     g.set_defaults(func=cmd_diagnose)
     trace = "on an error, also print the Python traceback (or set PYOMO_HELI_TRACEBACK=1)"
     p.add_argument("--traceback", action="store_true", help=trace)

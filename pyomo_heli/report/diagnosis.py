@@ -178,13 +178,15 @@ def _fmt(x, d=3):
     return f"{x:.{d}g}" if isinstance(x, (float, np.floating)) else str(x)
 
 
-def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir=None, command: str | None = None
-                           ) -> Path:
+def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir=None, command: str | None = None,
+                           figure_format: str = "png") -> Path:
     """Write the figures and ``diagnosis.md`` into ``out_dir``; return the path of ``diagnosis.md``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    figs = {"diagnosis_trim.png": plot_trim_residuals(res, diag), "diagnosis_spectra.png": plot_residual_spectra(diag),
-            "diagnosis_coherence.png": plot_coherence(diag), "diagnosis_time.png": plot_time_residuals(res, diag)}
+    figs = {f"diagnosis_trim.{figure_format}": plot_trim_residuals(res, diag),
+            f"diagnosis_spectra.{figure_format}": plot_residual_spectra(diag),
+            f"diagnosis_coherence.{figure_format}": plot_coherence(diag),
+            f"diagnosis_time.{figure_format}": plot_time_residuals(res, diag)}
     for name, fig in figs.items():
         fig.savefig(out / name, dpi=90)
     s = diag.settings
@@ -204,7 +206,7 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
         L += ["## Summary per channel", "", "RMS in display units; p = smallest p-value of the channel's tests.", "",
               markdown_table(rows, digits=4), ""]
 
-    L += ["## Trim residuals against airspeed", "", "![trim residuals](diagnosis_trim.png)", ""]
+    L += ["## Trim residuals against airspeed", "", f"![trim residuals](diagnosis_trim.{figure_format})", ""]
     trows = []
     for c, t in diag.trim_shapes.items():
         unit, fac = _unit(c)
@@ -231,15 +233,15 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
         L += [f"Ljung-Box p-values ({what}, at {s['test_rate_hz']:g} Hz; "
               f"white when p > alpha / number of tests of the role, bound {_fmt(w['bound'].min(), 2)} for "
               "identification):", "", markdown_table(piv, digits=2), "",
-              "![time residuals](diagnosis_time.png)", ""]
+              f"![time residuals](diagnosis_time.{figure_format})", ""]
     if diag.spectra:
-        L += ["### Spectra", "", "![spectra](diagnosis_spectra.png)", "",
+        L += ["### Spectra", "", f"![spectra](diagnosis_spectra.{figure_format})", "",
               "Band ratio = mean PSD in 0.1-2 Hz / mean PSD in 2-5 Hz (about 1 for white noise):", ""]
         br = pd.DataFrame({role: sp["band_ratio"] for role, sp in diag.spectra.items()}).T.reset_index(names="role")
         L += [markdown_table(br, digits=3), ""]
     coh = pd.DataFrame(diag.coherence)
     if len(coh):
-        L += ["### Coherence with the inputs", "", "![coherence](diagnosis_coherence.png)", ""]
+        L += ["### Coherence with the inputs", "", f"![coherence](diagnosis_coherence.{figure_format})", ""]
         top = coh.sort_values("peak", ascending=False).head(8)
         L += ["Highest peak coherences (dynamics band):", "",
               markdown_table(top[["maneuver", "role", "output", "input", "peak", "f_peak", "threshold", "significant"]],

@@ -215,7 +215,7 @@ def _save(fig, path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
-def write_report(out_dir, cfg, results_dir=None) -> Path:
+def write_report(out_dir, cfg, results_dir=None, figure_format: str = "png") -> Path:
     """Write figures, tables, metrics and ``report.md`` of the identification in ``results_dir``
     (default: ``out_dir``) into ``out_dir``; return the path of ``report.md``."""
     out = Path(out_dir)
@@ -233,17 +233,17 @@ def write_report(out_dir, cfg, results_dir=None) -> Path:
 
     # --- figures
     fig = plots.plot_pareto_front(result.front, result.utopia, result.nadir, result.chosen, result.direct)
-    _save(fig, out / "pareto_front.png")
+    _save(fig, out / f"pareto_front.{figure_format}")
     curves = {lab: pr.trim_table(CURVE_SPEEDS) for lab, pr in preds.items()}
     fig = plots.plot_trim_vs_speed(trims, curves)
-    _save(fig, out / "trim_vs_speed.png")
+    _save(fig, out / f"trim_vs_speed.{figure_format}")
     fig = plots.plot_validation({mv.name: mv.data for mv in val_mans},
                                 {lab: pr.shown_runs() for lab, pr in preds.items()}, VALIDATION_OUTPUTS,
                                 inputs={mv.name: mv.inputs for mv in val_mans},
                                 titles={mv.name: f"{mv.name} ({mv.trim_speed / KT:.0f} kt)" for mv in val_mans},
                                 notes={mv.name: [f"{lab}: diverged" for lab, pr in preds.items()
                                                  if mv.name in pr.partial] for mv in val_mans})
-    _save(fig, out / "validation.png")
+    _save(fig, out / f"validation.{figure_format}")
 
     # --- tables and metrics
     ptab = parameter_table(result, cfg, truth)
@@ -283,7 +283,7 @@ def write_report(out_dir, cfg, results_dir=None) -> Path:
         L += ["> **Simulation problems** (the affected curves are missing or cut short in the figures, "
               "and left out of the RMS tables):", ">"] + [f"> - {p}" for p in all_problems] + [""]
 
-    L += ["## Pareto front", "", "![Pareto front](pareto_front.png)", "",
+    L += ["## Pareto front", "", f"![Pareto front](pareto_front.{figure_format})", "",
           f"Utopia U (J_time, J_trim) = ({_fmt(result.utopia[0], 10)}, {_fmt(result.utopia[1], 6)}); "
           f"nadir = ({_fmt(result.nadir[0], 10)}, {_fmt(result.nadir[1], 6)}).  ",
           f"Chosen point C: front point {result.chosen.get('index')} "
@@ -317,7 +317,7 @@ def write_report(out_dir, cfg, results_dir=None) -> Path:
 
     L += uncertainty_section(result, results_dir if results_dir is not None else out, cfg.model)
 
-    L += ["## Trim predictions", "", "![Trim vs speed](trim_vs_speed.png)", "",
+    L += ["## Trim predictions", "", f"![Trim vs speed](trim_vs_speed.{figure_format})", "",
           f"RMS of data minus model over the {len(trims)} trim points "
           f"({int(trims['source'].eq('level').sum()) if 'source' in trims else len(trims)} level-flight, the rest "
           f"maneuver start trims) [deg]:", ""]
@@ -335,7 +335,7 @@ def write_report(out_dir, cfg, results_dir=None) -> Path:
     if not val_mans:
         L += ["The dataset has no validation maneuvers.", ""]
     else:
-        L += ["![Validation maneuvers](validation.png)", "",
+        L += [f"![Validation maneuvers](validation.{figure_format})", "",
               "Each model is trimmed at the maneuver's speed and driven by its own trim inputs plus the measured "
               "input increments (as in the identification). RMS of data minus model:", ""]
         rows = []

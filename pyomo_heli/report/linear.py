@@ -403,7 +403,7 @@ def band_errors(responses, curves: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def write_linear_report(out_dir, cfg, warn=None) -> Path:
+def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png") -> Path:
     """Figures and ``report_linear.md`` of a tri-objective results folder; the folder must agree with ``cfg``
     (:func:`pyomo_heli.provenance.check_results_match`; ``warn`` gets its notes on records the folder lacks)."""
     from ..provenance import check_results_match
@@ -422,9 +422,9 @@ def write_linear_report(out_dir, cfg, warn=None) -> Path:
     omega = np.geomspace(0.3, 30, 200)
     curves = {label: model_curves(cfg.model, p, responses, omega) for label, p in sets.items()}
     fig = plot_front_projections(front, result)
-    fig.savefig(out / "front_projections.png", dpi=110)
+    fig.savefig(out / f"front_projections.{figure_format}", dpi=110)
     fig = plot_bode(responses, curves, omega)
-    fig.savefig(out / "bode.png", dpi=110)
+    fig.savefig(out / f"bode.{figure_format}", dpi=110)
     band_curves = {label: [model_curves(cfg.model, p, [r], r.band().omega)[0] for r in responses]
                    for label, p in sets.items()}
     errs = band_errors(responses, band_curves)
@@ -459,7 +459,7 @@ def write_linear_report(out_dir, cfg, warn=None) -> Path:
             f"utopia (J_time, J_trim, J_linear) = {tuple(round(v, 6) for v in result.utopia)}, "
             f"nadir = {tuple(round(v, 6) for v in result.nadir)}", "",
             "## Frequency-response errors in the coherent band", "", markdown_table(errs, 4), "",
-            "![front](front_projections.png)", "", "![bode](bode.png)", "",
+            f"![front](front_projections.{figure_format})", "", f"![bode](bode.{figure_format})", "",
             "## Front", "", markdown_table(shown, 6), ""]
     path = out / "report_linear.md"
     path.write_text("\n".join(text))

@@ -171,7 +171,7 @@ def truth_replay_errors(cfg, doc: dict, val_mans) -> tuple[list[dict], dict] | N
 WIDE = 4
 
 
-def write_loop_report(out, cfg) -> Path:
+def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
     """Figures and ``loop_report.md`` of the loop in ``out`` (``cfg``: the loop's identification config)."""
     out = Path(out)
     doc = load_loop(out)
@@ -184,7 +184,7 @@ def write_loop_report(out, cfg) -> Path:
                                 list(CURVE_SPEEDS) + list(trims["V"]), val_mans) for it in its}
     fig = plots.plot_trim_vs_speed(trims, {lab: p.trim_table(CURVE_SPEEDS) for lab, p in preds.items()},
                                    title="Trim vs speed, before and after")
-    _save(fig, out / "loop_trim_vs_speed.png")
+    _save(fig, out / f"loop_trim_vs_speed.{figure_format}")
     if val_mans:
         fig = plots.plot_validation({mv.name: mv.data for mv in val_mans},
                                     {lab: p.shown_runs() for lab, p in preds.items()}, VALIDATION_OUTPUTS,
@@ -194,9 +194,9 @@ def write_loop_report(out, cfg) -> Path:
         # noisy time histories hardly compress: many records (the bundled flight test has twelve) at a lower
         # resolution keep the figure near 1 MB
         if len(val_mans) <= WIDE:
-            _save(fig, out / "loop_validation.png")
+            _save(fig, out / f"loop_validation.{figure_format}")
         else:
-            fig.savefig(out / "loop_validation.png", dpi=72)
+            fig.savefig(out / f"loop_validation.{figure_format}", dpi=72)
 
     L = ["# Closed-loop report", "", f"- config: `{doc['config']}`", f"- dataset: `{doc['dataset']}`",
          f"- settings: {doc['settings']}", f"- stopped: {doc['stopped']}", ""]
@@ -215,9 +215,9 @@ def write_loop_report(out, cfg) -> Path:
               "one-sided p < 0.01. At the sensor-noise floor the same noise enters both models' residuals and "
               "does not cancel, so small changes of either sign are expected without any change of the model "
               "error.", "", markdown_table(validation_change_table(first, last, val_mans), digits=4), ""]
-    L += ["![Trim vs speed before and after](loop_trim_vs_speed.png)", ""]
+    L += [f"![Trim vs speed before and after](loop_trim_vs_speed.{figure_format})", ""]
     if val_mans:
-        L += ["![Validation before and after](loop_validation.png)", ""]
+        L += [f"![Validation before and after](loop_validation.{figure_format})", ""]
     truth = read_truth(cfg.dataset)
     if truth is not None:
         L += ["## Parameters vs truth", "", "From the dataset's `truth.json` (read only by this report).", "",

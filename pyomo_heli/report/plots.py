@@ -57,6 +57,15 @@ def _styles(labels: Sequence[str], styles: Mapping[str, dict] | None) -> dict:
 
 
 # ---------------------------------------------------------------- Fig. 3
+def _label(ax, text, x, y, offset, arrow: bool = False, color="black") -> None:
+    """A bold point label ``offset`` points away from (x, y), on a white box (and an arrow) so that it
+    never hides a marker or the line."""
+    ax.annotate(text, (float(x), float(y)), textcoords="offset points", xytext=offset, fontsize=13,
+                fontweight="bold", color=color, ha="center", va="center", zorder=7,
+                bbox=dict(boxstyle="round,pad=0.15", facecolor="white", edgecolor="none", alpha=0.85),
+                arrowprops=dict(arrowstyle="-", color=color, lw=0.9, shrinkA=0, shrinkB=6) if arrow else None)
+
+
 def plot_pareto_front(front: pd.DataFrame, utopia: Sequence[float], nadir: Sequence[float], chosen: Mapping | None,
                       direct: Mapping | None = None) -> Figure:
     """The Pareto front (paper Fig. 3): J_trim on x, J_time on y.
@@ -93,24 +102,27 @@ def plot_pareto_front(front: pd.DataFrame, utopia: Sequence[float], nadir: Seque
             row = good[good["kind"] == kind]
             if len(row):
                 xa, ya = tf(row["J_time"].iloc[0], row["J_trim"].iloc[0])
-                ax.annotate(kind, (float(xa), float(ya)), textcoords="offset points", xytext=(8, 6),
-                            fontsize=13, fontweight="bold")
+                _label(ax, kind, xa, ya, (14, 10))
         xu, yu = tf(u_time, u_trim)
         ax.plot(float(xu), float(yu), "*", color="black", markersize=14, label="utopia point U", zorder=4)
-        ax.annotate("U", (float(xu), float(yu)), textcoords="offset points", xytext=(8, 6), fontsize=13,
-                    fontweight="bold")
+        knee = [(float(xu), float(yu))]
         if chosen is not None:
             xc, yc = tf(chosen["J_time"], chosen["J_trim"])
             ax.plot(float(xc), float(yc), "o", markersize=13, markerfacecolor="none", markeredgecolor="tab:orange",
                     markeredgewidth=2.2, label="chosen point C (Eq. 11 on the front)", zorder=5)
-            ax.annotate("C", (float(xc), float(yc)), textcoords="offset points", xytext=(-16, -16), fontsize=13,
-                        fontweight="bold", color="tab:orange")
+            knee.append((float(xc), float(yc)))
         if direct is not None and all(np.isfinite([direct.get("J_time", np.nan), direct.get("J_trim", np.nan)])):
             xd, yd = tf(direct["J_time"], direct["J_trim"])
             lab = "Eq. 11 solved directly" + ("" if direct.get("success", True) else " (solve failed)")
             ax.plot(float(xd), float(yd), "D", color="tab:green", markersize=7, label=lab, zorder=6)
+            knee.append((float(xd), float(yd)))
         ax.grid(True, alpha=0.3)
         ax.margins(0.08)
+        # U and C sit close together at the knee of the front: their labels go up and to the right, on
+        # arrows, clear of the markers (U's to the upper left, C's to the upper right)
+        _label(ax, "U", xu, yu, (-28, 16), arrow=True)
+        if chosen is not None:
+            _label(ax, "C", xc, yc, (30, 26), arrow=True, color="tab:orange")
 
     ax_raw.set_xlabel(r"$J_\mathrm{trim}$ [-]")
     ax_raw.set_ylabel(r"$J_\mathrm{time}$ [-]")
@@ -125,7 +137,8 @@ def plot_pareto_front(front: pd.DataFrame, utopia: Sequence[float], nadir: Seque
         if math.isfinite(r) and r > 0:
             a = np.linspace(0, np.pi / 2, 100)
             ax_n.plot(r * np.cos(a), r * np.sin(a), ":", color="tab:orange", linewidth=1.0)
-            ax_n.text(0.02, 0.02, f"distance of C to U: {r:.3f}", transform=ax_n.transAxes, fontsize=9)
+            ax_n.text(0.97, 0.97, f"distance of C to U: {r:.3f}", transform=ax_n.transAxes, fontsize=9,
+                      ha="right", va="top", bbox=dict(boxstyle="round", facecolor="white", edgecolor="0.7"))
     ax_n.set_aspect("equal", adjustable="datalim")
     return fig
 
@@ -184,12 +197,49 @@ def _ylim(data_vals: list, model_vals: list):
     return lo - pad, hi + pad
 
 
+def theil_inequality(measured, predicted) -> float:
+    """Theil's inequality coefficient of a prediction (0: perfect, 1: worst)::
+
+        TIC = sqrt(mean((y_p - y_m)^2)) / (sqrt(mean(y_p^2)) + sqrt(mean(y_m^2)))
+
+    over the samples where both are finite (the flight-test measure of fit; a TIC below about 0.25-0.3 is
+    usually taken as a good match). Unit-free: the same in SI and display units."""
+    m, p = np.asarray(measured, dtype=float), np.asarray(predicted, dtype=float)
+    ok = np.isfinite(m) & np.isfinite(p)
+    if not ok.any():
+        return float("nan")
+    m, p = m[ok], p[ok]
+    den = math.sqrt(np.mean(p ** 2)) + math.sqrt(np.mean(m ** 2))
+    return float(math.sqrt(np.mean((p - m) ** 2)) / den) if den > 0 else 0.0
+
+
+def fit_metrics(t_data, y_data, t_model, y_model) -> tuple[float, float]:
+    """(RMS of model minus data, TIC) of a simulated output against the measured one, the model taken at the
+    data's sample times within its own time span (a diverged simulation is scored where it exists)."""
+    t_data, y_data = np.asarray(t_data, dtype=float), np.asarray(y_data, dtype=float)
+    t_model, y_model = np.asarray(t_model, dtype=float), np.asarray(y_model, dtype=float)
+    keep = np.isfinite(t_model) & np.isfinite(y_model)
+    if keep.sum() < 2:
+        return float("nan"), float("nan")
+    t_model, y_model = t_model[keep], y_model[keep]
+    inside = (t_data >= t_model[0]) & (t_data <= t_model[-1]) & np.isfinite(y_data)
+    if not inside.any():
+        return float("nan"), float("nan")
+    ym = np.interp(t_data[inside], t_model, y_model)
+    yd = y_data[inside]
+    return float(np.sqrt(np.mean((ym - yd) ** 2))), theil_inequality(yd, ym)
+
+
 def plot_validation(maneuvers: Mapping[str, pd.DataFrame], predictions: Mapping[str, Mapping[str, pd.DataFrame | None]],
                     outputs: Sequence[str] = OUTPUTS,
                     inputs: Mapping[str, Sequence[str]] | None = None, styles: Mapping[str, dict] | None = None,
                     titles: Mapping[str, str] | None = None,
-                    notes: Mapping[str, Sequence[str]] | None = None, column_width: float = 4.8) -> Figure:
+                    notes: Mapping[str, Sequence[str]] | None = None, column_width: float = 4.8,
+                    metrics: bool = True) -> Figure:
     """Measured and predicted time histories of validation maneuvers (paper Fig. 6).
+
+    ``metrics``: annotate every output panel with each model's RMS error (display unit) and Theil
+    inequality coefficient (:func:`fit_metrics`), in the model's colour.
 
     ``maneuvers``: name -> measured DataFrame (SI, column ``t`` and the
     outputs). ``predictions``: model label -> {name -> simulated DataFrame,
@@ -225,6 +275,7 @@ def plot_validation(maneuvers: Mapping[str, pd.DataFrame], predictions: Mapping[
             if row in data:
                 ax.plot(t, shown(row, data[row]), **DATA_STYLE)
                 dvals.append(shown(row, data[row]))
+            k_note = 0
             for lab, runs in predictions.items():
                 sim = runs.get(name)
                 if sim is None or row not in sim:
@@ -232,6 +283,13 @@ def plot_validation(maneuvers: Mapping[str, pd.DataFrame], predictions: Mapping[
                 y = shown(row, sim[row])
                 ax.plot(sim["t"].to_numpy(dtype=float), y, label=lab, **st[lab])
                 mvals.append(y)
+                if metrics and row in data:
+                    rms, tic = fit_metrics(t, shown(row, data[row]), sim["t"].to_numpy(dtype=float), y)
+                    ax.text(0.01, 0.97 - 0.13 * k_note, f"RMS {rms:.3g} {UNITS[row][0]}, TIC {tic:.3f}",
+                            transform=ax.transAxes, ha="left", va="top", fontsize=6.5, color=st[lab].get("color"),
+                            zorder=8, bbox=dict(boxstyle="square,pad=0.1", facecolor="white", edgecolor="none",
+                                                alpha=0.7))
+                    k_note += 1
             lim = _ylim(dvals, mvals)
             if lim is not None:
                 ax.set_ylim(*lim)
@@ -245,5 +303,7 @@ def plot_validation(maneuvers: Mapping[str, pd.DataFrame], predictions: Mapping[
         axes[0, j].set_title(head, fontsize=10, color="firebrick" if remarks else "black")
         axes[-1, j].set_xlabel("time [s]")
     handles = [Line2D([], [], **DATA_STYLE)] + [Line2D([], [], label=lab, **st[lab]) for lab in predictions]
-    fig.legend(handles=handles, loc="outside upper center", ncol=len(handles), fontsize=9)
+    title = "panels: RMS of model - data, TIC = Theil inequality coefficient" if metrics else None
+    fig.legend(handles=handles, loc="outside upper center", ncol=min(len(handles), 2 * ncol), fontsize=9,
+               title=title, title_fontsize=8)
     return fig

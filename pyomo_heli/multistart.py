@@ -100,15 +100,26 @@ class MultistartResult:
                    epsilon=d["epsilon"], seed=d["seed"], rtol=d["rtol"], best=d["best"], info=d["info"])
 
     def __str__(self) -> str:
+        from .units import display_unit
+
         cols = (["start"] + [f"initial_{p}" for p in self.parameters] + self.parameters
                 + ["objective", "status", "iterations", "reached_best"])
+        units = self.info.get("units") or {}  # SI unit per parameter (older folders: none, shown in SI)
+        shown = {p: display_unit(units[p]) if p in units else ("", 1.0) for p in self.parameters}
+        table = self.starts[cols].copy()
+        head = {}
+        for p in self.parameters:
+            for c in (f"initial_{p}", p):
+                table[c] = pd.to_numeric(table[c], errors="coerce") * shown[p][1]
+                head[c] = f"{c} [{shown[p][0]}]" if shown[p][0] not in ("", "-") else c
         lines = [f"multi-start ({self.problem}{'' if self.epsilon is None else f', J_trim <= {self.epsilon:.6g}'}), "
-                 f"seed {self.seed}, parameters in SI units:",
-                 self.starts[cols].to_string(index=False, float_format=lambda x: f"{x:.6g}"), ""]
+                 f"seed {self.seed}, parameters in " + ("the units of the configs:" if units else "SI units:"),
+                 table.rename(columns=head).to_string(index=False, float_format=lambda x: f"{x:.6g}"), ""]
         if self.best is None:
             lines.append("no start converged")
         else:
-            params = ", ".join(f"{p} = {self.best['parameters'][p]:.6g}" for p in self.parameters)
+            params = ", ".join(f"{p} = {self.best['parameters'][p] * shown[p][1]:.6g}"
+                               + (f" {shown[p][0]}" if shown[p][0] not in ("", "-") else "") for p in self.parameters)
             lines.append(f"best objective {self.best['objective']:.10g} (start {self.best['start']}: {params})")
         lines.append(f"reached the best optimum (converged, objective within rtol {self.rtol:g}): "
                      f"{self.n_reached} of {len(self.starts)} starts = {100 * self.share:.0f} %")
@@ -263,6 +274,7 @@ def _run_multistart(cfg, out: Path, starts, seed, problem, epsilon, rtol, restar
                               info={"config": str(cfg.path), "dataset": str(cfg.dataset),
                                     "total_time": time.perf_counter() - t0,
                                     "bounds": {f.name: [f.lower, f.upper] for f in cfg.free},
+                                    "units": {f.name: cfg.model.parameters.spec(f.name).unit for f in cfg.free},
                                     "resumed_starts": resumed})
     result.save(out)
     return result

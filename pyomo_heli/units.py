@@ -6,6 +6,17 @@ FT = 0.3048  # m per foot
 DEG = math.pi / 180.0  # rad per degree
 
 
+#: SI unit of a parameter -> (display unit, factor SI -> display): angles are shown in degrees at the edges
+#: (configs, console, reports), as the parameter table's ``display`` entries say (tests/test_logging.py checks
+#: that the two agree); every other unit is shown as it is
+DISPLAY_UNITS = {"rad": ("deg", 1 / DEG), "rad/m": ("deg/m", 1 / DEG)}
+
+
+def display_unit(si_unit: str) -> tuple[str, float]:
+    """(display unit, factor SI -> display) of a parameter whose SI unit is ``si_unit``."""
+    return DISPLAY_UNITS.get(si_unit, (si_unit, 1.0))
+
+
 def kt_to_ms(v_kt: float) -> float:
     return v_kt * KT
 

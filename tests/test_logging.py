@@ -180,3 +180,28 @@ def test_ipopt_version_is_the_one_casadi_runs(tmp_path):
               "s(x0=0)")
     banner = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True).stdout
     assert f"Ipopt version {doc['ipopt']}" in banner, banner[:500]
+
+
+def test_display_units_agree_with_the_parameter_table():
+    """The units-based display rule (used where only a parameter's SI unit is known: result tables) gives
+    every parameter of the model and of the candidate library the display unit of its own table entry."""
+    from pyomo_heli.diagnosis.candidates import CANDIDATES, make_candidate
+    from pyomo_heli.units import display_unit
+
+    specs = list(bo105().specs()) + [s for n in CANDIDATES for s in make_candidate(n).parameters()]
+    assert any(s.display for s in specs)
+    for s in specs:
+        unit, factor = display_unit(s.unit)
+        want = s.display if s.display is not None else (s.unit, 1.0)
+        assert unit == want[0] and factor == pytest.approx(want[1], rel=1e-15), s.name
+
+
+def test_result_tables_are_printed_in_display_units():
+    from pyomo_heli.pareto.result import IdentificationResult
+
+    r = IdentificationResult.load(ROOT / "docs" / "results" / "case1")
+    text = str(r)
+    assert "theta_twist [deg/m]" in text and "CL_alpha_HT [1/rad]" in text
+    twist = r.chosen["parameters"]["theta_twist"] / DEG
+    line = next(ln for ln in text.splitlines() if ln.startswith("multi-objective (chosen)"))
+    assert f"{twist:.6g}" in line

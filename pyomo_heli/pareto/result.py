@@ -173,10 +173,16 @@ class IdentificationResult:
                    time_domain=time_domain, info=info)
 
     def __str__(self) -> str:
-        cols = ["index", "kind", "epsilon", "J_time", "J_trim"] + self.parameters + ["status", "iterations",
-                                                                                     "wall_time"]
-        lines = ["Pareto front (parameters in SI units):",
-                 self.front[cols].to_string(index=False, float_format=lambda x: f"{x:.6g}"), "",
+        from ..units import display_unit
+
+        shown = {p: display_unit(self.units.get(p, "")) for p in self.parameters}  # as in the configs
+        head = {p: f"{p} [{shown[p][0]}]" if shown[p][0] not in ("", "-") else p for p in self.parameters}
+        table = self.front[["index", "kind", "epsilon", "J_time", "J_trim"] + self.parameters
+                           + ["status", "iterations", "wall_time"]].copy()
+        for p in self.parameters:
+            table[p] = pd.to_numeric(table[p], errors="coerce") * shown[p][1]
+        lines = ["Pareto front (parameters in the units of the configs):",
+                 table.rename(columns=head).to_string(index=False, float_format=lambda x: f"{x:.6g}"), "",
                  f"utopia (J_time, J_trim) = ({self.utopia[0]:.6g}, {self.utopia[1]:.6g}); "
                  f"nadir = ({self.nadir[0]:.6g}, {self.nadir[1]:.6g})"]
         unreliable = self.info.get("unreliable")
@@ -190,8 +196,11 @@ class IdentificationResult:
         rows = [("time domain (A)", self.time_domain), ("multi-objective (chosen)", self.chosen)]
         if self.direct:
             rows.append(("Eq. 11 direct", self.direct))
-        lines.append(f"{'':26s}" + "".join(f"{p:>16s}" for p in self.parameters) + f"{'J_time':>14s}{'J_trim':>12s}")
+        width = max([16] + [len(head[p]) + 2 for p in self.parameters])
+        lines.append(f"{'':26s}" + "".join(f"{head[p]:>{width}s}" for p in self.parameters)
+                     + f"{'J_time':>14s}{'J_trim':>12s}")
         for label, d in rows:
-            lines.append(f"{label:26s}" + "".join(f"{d['parameters'][p]:16.6g}" for p in self.parameters)
+            lines.append(f"{label:26s}" + "".join(f"{d['parameters'][p] * shown[p][1]:{width}.6g}"
+                                                  for p in self.parameters)
                          + f"{d['J_time']:14.6g}{d['J_trim']:12.6g}")
         return "\n".join(lines)

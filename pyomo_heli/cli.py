@@ -274,6 +274,37 @@ def _check_speed_kt(v, option):
         raise UserError(f"{option}: speed {v:g} kt is outside the model's range 0..{MAX_SPEED_KT:g} kt")
 
 
+def _results_folder(folder_of):
+    """Decorate a command that writes into the folder ``folder_of(args)``: its messages go to that folder's
+    pyomo_heli.log and its provenance.json is written (pyomo_heli.log.run_in_folder)."""
+    import functools
+
+    def wrap(cmd):
+        @functools.wraps(cmd)
+        def run(args):
+            from .log import run_in_folder
+
+            folder = folder_of(args)
+            if folder is None:
+                return cmd(args)
+
+            def describe():
+                config = getattr(args, "config", None)
+                try:
+                    from .config import load_identification_config
+
+                    dataset = load_identification_config(config).dataset if config else None
+                except Exception:  # noqa: BLE001 - provenance only; the command reported any bad config
+                    dataset = None
+                return config, [dataset]
+
+            return run_in_folder(folder, describe, cmd, args)
+
+        return run
+
+    return wrap
+
+
 # ---------------------------------------------------------------- commands
 def cmd_trim(args) -> int:
     from .nlp.trim_table import trim_table
@@ -452,6 +483,7 @@ def _data_rate_hz(cfg) -> tuple[float, str]:
     return (min(rates) if rates else math.inf), f"dataset {cfg.dataset} of config {cfg.path}"
 
 
+@_results_folder(lambda a: a.out or a.results_dir)
 def cmd_diagnose(args) -> int:
     from pathlib import Path
 
@@ -529,6 +561,7 @@ def cmd_identify(args) -> int:
     return 0
 
 
+@_results_folder(lambda a: a.out or a.results)
 def cmd_uncertainty(args) -> int:
     import shutil
     from pathlib import Path

@@ -329,11 +329,19 @@ def provenance(config=None, datasets=(), command: str | None = None, folder=None
 
 
 def write_provenance(folder, config=None, datasets=(), command: str | None = None) -> Path:
-    """Write ``folder/provenance.json`` (see :func:`provenance`) and return its path."""
+    """Write ``folder/provenance.json`` (see :func:`provenance`) and return its path; the records of earlier
+    runs into the same folder move to its list ``previous`` (newest first)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / PROVENANCE_FILE
     doc = provenance(config, datasets, command, folder)
+    try:  # a folder written to again (resumed, or standard errors added later) keeps the earlier records
+        old = json.loads(path.read_text()) if path.is_file() else None
+    except (OSError, ValueError):
+        old = None
+    if isinstance(old, dict):
+        earlier = old.pop("previous", [])
+        doc["previous"] = [old] + (earlier if isinstance(earlier, list) else [])
     path.write_text(json.dumps(doc, indent=2) + "\n")
     return path
 
@@ -356,22 +364,34 @@ def results_folder(out: str = "out", describe=None):
             folder = bound.arguments.get(out)
             if folder is None:
                 return fn(*args, **kwargs)
-            ok = False
-            with log_to_folder(folder) as handler:
-                try:
-                    result = fn(*args, **kwargs)
-                    ok = True
-                finally:
-                    # on success, or after a failure once the run has written to the folder (its log is open);
-                    # never into a folder the function refused before starting
-                    if Path(folder).is_dir() and (ok or handler.stream is not None):
-                        config, datasets = describe(bound.arguments) if describe is not None else (None, ())
-                        write_provenance(folder, config, datasets)
-            return result
+            return run_in_folder(folder, lambda: describe(bound.arguments) if describe is not None else (None, ()),
+                                 fn, *args, **kwargs)
 
         return run
 
     return wrap
+
+
+def run_in_folder(folder, describe, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` with the package's messages appended to ``folder/pyomo_heli.log`` and
+    ``folder/provenance.json`` written afterwards (``describe() -> (config, datasets)``): on success, or after
+    a failure once the run has written to the folder (its log is open), never into a folder the function
+    refused before starting."""
+    ok = False
+    t0 = time.perf_counter()
+    with log_to_folder(folder) as handler:
+        try:
+            result = fn(*args, **kwargs)
+            ok = True
+            if Path(folder).is_dir():  # the last line of the folder's log only (not on the console)
+                handler.handle(logger.makeRecord(logger.name, logging.INFO, __file__, 0,
+                                                 f"{_command_line()}: finished in {time.perf_counter() - t0:.1f} s",
+                                                 None, None))
+        finally:
+            if Path(folder).is_dir() and (ok or handler.stream is not None):
+                config, datasets = describe()
+                write_provenance(folder, config, datasets)
+    return result
 
 
 def config_and_dataset(arguments: dict, name: str = "cfg"):

@@ -154,6 +154,12 @@ def test_results_folder_gets_log_and_provenance(tmp_path):
     from importlib.metadata import version
 
     assert doc["pyomo"] == version("pyomo") and doc["casadi"] == version("casadi")
+    assert "finished in" in (out / "pyomo_heli.log").read_text().splitlines()[-1]
+    # a second run into the same folder keeps the first one's record
+    first = doc
+    assert run(out) == 3
+    again = json.loads((out / "provenance.json").read_text())
+    assert again["previous"] == [first] and "previous" not in first
     # a run that fails after it began writing the folder still records what made it
     with pytest.raises(RuntimeError):
         run(tmp_path / "failed", fail=True)

@@ -180,7 +180,12 @@ class MonteCarloResult:
         return self.summary().to_string(index=False, float_format=lambda x: f"{x:.5g}")
 
 
-@results_folder("out", lambda a: (a["problem"].config, []))
+def _config_and_dataset(arguments):
+    spec = arguments["problem"]
+    return spec.config, [load_identification_config(spec.config, json.loads(spec.overrides)).dataset]
+
+
+@results_folder("out", _config_and_dataset)
 def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: dict, trim_sigma: dict,
                     truth: dict, out=None, multi_objective: bool = True, crb: bool = True, workers: int = 2,
                     executor: cf.Executor | None = None, progress=info, scheduler: str | None = None

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from .log import info
+from .log import Progress, format_parameters, info
 from .dataset import load_flight_test
 from .dataset.frequency_response import frequency_responses, save_responses
 from .nlp.identification import build_identification_nlp, identification_data
@@ -69,13 +69,16 @@ def run_tri_identification(cfg, out, progress=info) -> IdentificationResult:
     if front_csv.exists():
         front_csv.unlink()
 
+    # anchors A, B, C, the (points x linear points) grid less A itself, and the direct Eq. 11 solve
+    bar = Progress(cfg.pareto.points * cfg.linear.points + 3, "front points")
+
     def on_point(p):
         rows.append(p.row())
         pd.DataFrame(rows).to_csv(front_csv, index=False, float_format="%.12g")
-        params = " ".join(f"{k}={v:.6g}" for k, v in p.parameters.items())
+        params = format_parameters(p.parameters, cfg.model.parameters)
         progress(f"  point {p.index:>2} {p.kind:<3} ({p.i_trim},{p.i_linear}) J_time={p.J_time:.6g} "
                  f"J_trim={p.J_trim:.6g} J_linear={p.J_linear:.6g} {params} "
-                 f"[{p.status}, {p.iterations} it, {p.wall_time:.1f} s]")
+                 f"[{p.status}, {p.iterations} it, {p.wall_time:.1f} s]" + bar.tick())
 
     t1 = time.perf_counter()
     ps = TriParetoSolver(m, cfg.pareto, cfg.linear.points, on_point=on_point)

@@ -65,3 +65,23 @@ def test_monte_carlo_on_dask_equals_serial(cluster, tmp_path):
     cols = [c for c in serial.estimates.columns if c != "wall_time"]
     pd.testing.assert_frame_equal(dask.estimates[cols], serial.estimates[cols], check_exact=True)
     assert serial.estimates["success"].all()
+
+
+def test_cli_multistart_sends_the_starts_to_a_scheduler(tmp_path):
+    """`pyomo-heli multistart --scheduler ADDRESS`: the same starts on an existing cluster (here one of a
+    thread worker in this process, reached through its scheduler's address) as `--workers 0` here."""
+    from distributed import LocalCluster
+
+    from pyomo_heli.cli import main
+    from pyomo_heli.multistart import MultistartResult
+
+    config = str(CONFIGS / "tiny_case1_noisy.toml")
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        with dask_executor(scheduler=cluster.scheduler_address) as ex:
+            assert run_tasks(_square, [3, 4], ex) == [9, 16]
+        assert main(["multistart", config, "--starts", "2", "--seed", "7", "--out", str(tmp_path / "remote"),
+                     "--scheduler", cluster.scheduler_address]) == 0
+    assert main(["multistart", config, "--starts", "2", "--seed", "7", "--out", str(tmp_path / "here")]) == 0
+    a, b = MultistartResult.load(tmp_path / "remote"), MultistartResult.load(tmp_path / "here")
+    cols = [c for c in a.starts.columns if c != "wall_time"]
+    pd.testing.assert_frame_equal(a.starts[cols], b.starts[cols], check_exact=True)

@@ -23,14 +23,22 @@ ROOT = Path(__file__).resolve().parent.parent
 
 @pytest.fixture(autouse=True)
 def _reset_logger():
+    """Each test starts with no handler on the package logger (an earlier test may have run the command line)
+    and leaves it as it found it."""
+    import pyomo_heli.log as L
+
     log = logging.getLogger("pyomo_heli")
-    level, propagate, handlers = log.level, log.propagate, list(log.handlers)
+    level, propagate, handlers, cli = log.level, log.propagate, list(log.handlers), list(L._cli_handlers)
+    for h in handlers:
+        log.removeHandler(h)
+    L._cli_handlers.clear()
     yield
-    configure_console(0)  # drop the handlers a test installed
+    configure_console(0)
     for h in list(log.handlers):
         log.removeHandler(h)
     for h in handlers:
         log.addHandler(h)
+    L._cli_handlers[:] = cli
     log.setLevel(level)
     log.propagate = propagate
 

@@ -123,7 +123,7 @@ def identify(config, out: str | Path | None = None, *, uncertainty: str = "all",
     A folder holding finished points of the same config is resumed; ``restart`` discards them.
     uncertainty: "all" (standard errors of every front point), "chosen" (A, C and the direct solve) or "none".
     report: also write the figures and report.md, as the command line does.
-    progress: a function taking one line of text (default: the command line's printing).
+    progress: a function taking one line of text (default: the package logger "pyomo_heli", docs/running.md).
     """
     if uncertainty not in ("all", "chosen", "none"):
         raise ValueError(f"uncertainty must be 'all', 'chosen' or 'none', got {uncertainty!r}")

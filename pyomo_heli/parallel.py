@@ -51,7 +51,7 @@ def dask_executor(workers: int = 0, scheduler: str | None = None, paths: Iterabl
         client = Client(scheduler)
     else:
         cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=processes,
-                               dashboard_address=None)
+                               dashboard_address=":0")  # any free port: runs side by side
         client = Client(cluster)
     try:
         paths = [str(p) for p in paths]

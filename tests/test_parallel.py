@@ -76,7 +76,7 @@ def test_cli_multistart_sends_the_starts_to_a_scheduler(tmp_path):
     from pyomo_heli.multistart import MultistartResult
 
     config = str(CONFIGS / "tiny_case1_noisy.toml")
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster:
         with dask_executor(scheduler=cluster.scheduler_address) as ex:
             assert run_tasks(_square, [3, 4], ex) == [9, 16]
         assert main(["multistart", config, "--starts", "2", "--seed", "7", "--out", str(tmp_path / "remote"),

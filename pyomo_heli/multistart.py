@@ -225,25 +225,29 @@ def _run_multistart(cfg, out: Path, starts, seed, problem, epsilon, rtol, restar
                  f"[{row['status']}, {row['iterations']} it, {row['wall_time']:.1f} s]"
                  f"{' (from disk)' if from_disk else ''}" + bar.tick(from_disk))
 
-    todo = []
-    for k in range(starts):
-        guess = draw_start(cfg.free, k, seed)
-        if store.has(f"start{k:03d}"):
-            resumed += 1
-            finished(k, guess, store.record(f"start{k:03d}"), True)
-        else:
-            todo.append(StartTask(cfg, key, k, guess, eps))
+    def pending():
+        """The starts still to solve, each guess drawn when it is reached (memory does not grow with --starts);
+        finished ones are read back on the way."""
+        nonlocal resumed
+        for k in range(starts):
+            guess = draw_start(cfg.free, k, seed)
+            if store.has(f"start{k:03d}"):
+                resumed += 1
+                finished(k, guess, store.record(f"start{k:03d}"), True)
+            else:
+                yield StartTask(cfg, key, k, guess, eps)
+
     if executor is None:
         m, data, _ = build_problem(cfg)
         ps = ParetoSolver(m, cfg.pareto)  # its one solver and the switchable objective; no front is traced
         progress(f"built NLP and solver in {time.perf_counter() - t0:.1f} s")
         initial = Snapshot(m)
-        for t in todo:
+        for t in pending():
             p = _solve_start(m, data, ps, initial, cfg, t.k, t.guess, eps)
             row = _row(t.k, t.guess, p, p.J_time)
             store.save(f"start{t.k:03d}", row, m if p.iterations > 0 else None)
             finished(t.k, t.guess, row, False)
-    elif todo:
+    elif todo := list(pending()):
         from .parallel import run_tasks
 
         progress(f"solving {len(todo)} start(s) on {type(executor).__name__} workers (each builds the NLP once)")

@@ -306,7 +306,7 @@ def provenance(config=None, datasets=(), command: str | None = None, folder=None
     config: the config file (path); datasets: flight-test folders, recorded relative to the config's folder
     (absolute when there is no config). folder: the results folder (the config is recorded relative to it).
     """
-    from . import __version__
+    from ._version import __version__
 
     doc = {
         "pyomo_heli": __version__,

@@ -3,7 +3,8 @@
 The layers, lowest first (a top-level module or subpackage of pyomo_heli per name):
 
 0. vocabulary and process plumbing (standard library only): ``_version``, ``units``, ``channels``,
-   ``tomlfile``, ``resources``, ``interrupts``, ``ioerrors``
+   ``tomlfile``, ``resources``, ``interrupts``, ``ioerrors``, ``log`` (logging, progress, provenance),
+   ``parallel`` (tasks on Dask)
 1. ``physics``: the model's equations
 2. ``simulation``, ``dataset``, ``solvers``: the float model in time, the data files, the NLP solvers
 3. ``nlp``: the Pyomo problem
@@ -34,7 +35,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "pyomo_heli"
 
 LAYERS = [
-    {"_version", "units", "channels", "tomlfile", "resources", "interrupts", "ioerrors"},
+    {"_version", "units", "channels", "tomlfile", "resources", "interrupts", "ioerrors", "log", "parallel"},
     {"physics"},
     {"simulation", "dataset", "solvers"},
     {"nlp"},

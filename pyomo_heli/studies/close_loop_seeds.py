@@ -65,6 +65,15 @@ def run_seed(seed: int, out: Path, config: Path, data_config: Path) -> Path:
     return loop
 
 
+def seed_task(task: tuple):
+    """``run_seed(*task)`` as a task of a Dask worker: (loop folder, 0), or (None, exit status) where the
+    command failed (it has printed why)."""
+    try:
+        return run_seed(*task), 0
+    except SystemExit as exc:
+        return None, int(exc.code) if isinstance(exc.code, int) else 1
+
+
 def evaluate(name: str, loop: Path, config: Path) -> dict:
     """One row of the table: the criteria of issue 5 for the loop in ``loop``."""
     doc = json.loads((loop / "loop.json").read_text())
@@ -156,6 +165,11 @@ def main() -> None:
     ap.add_argument("--config", type=Path, default=ROOT / "studies" / "close_loop.toml")
     ap.add_argument("--data-config", type=Path, default=ROOT / "data" / "bo105_synthetic.toml")
     ap.add_argument("--existing", type=Path, nargs="*", default=[], help="loop folders run before (tabulated only)")
+    ap.add_argument("--workers", type=nonneg_int, default=0,
+                    help="run the seeds on a Dask LocalCluster of this many processes (default 0: one after the "
+                         "other in this process)")
+    ap.add_argument("--scheduler", metavar="ADDRESS", help="run the seeds on the Dask cluster of this scheduler "
+                                                          "(its workers must see --out)")
     a = ap.parse_args()
     for p in a.existing:
         if not (p / "loop.json").is_file():
@@ -167,8 +181,19 @@ def main() -> None:
         in_file(ap, a.data_config, "--data-config")
     out_folder(ap, a.out).mkdir(parents=True, exist_ok=True)
     loops = [(str(p), p) for p in a.existing]
-    for seed in a.seeds:
-        loops.append((f"seed {seed}", run_seed(seed, a.out, a.config, a.data_config)))
+    from pyomo_heli.log import configure_console
+    from pyomo_heli.parallel import dask_executor, run_tasks
+
+    configure_console()
+    tasks = [(seed, a.out.resolve(), a.config.resolve(), a.data_config.resolve()) for seed in a.seeds]
+    # one seed per task: here one after the other (--workers 0), on a LocalCluster of --workers processes, or
+    # on the cluster of --scheduler (whose workers must see --out); a seed's result is the same wherever it ran
+    with dask_executor(a.workers, a.scheduler) as ex:
+        done = run_tasks(seed_task, tasks, ex)
+    for (seed, *_), (loop, code) in zip(tasks, done):
+        if code != 0:
+            raise SystemExit(code)
+        loops.append((f"seed {seed}", loop))
     tab = pd.DataFrame([evaluate(name, loop, a.config) for name, loop in loops])
     tab.to_csv(a.out / "seeds.csv", index=False)
     text = markdown(tab)

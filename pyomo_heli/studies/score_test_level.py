@@ -47,7 +47,7 @@ from pyomo_heli.identify import run_identification
 from pyomo_heli.nlp.identification import identification_data
 
 from . import small_instances as T
-from .args import out_folder, positive_float
+from .args import nonneg_int, out_folder, positive_float
 
 EIV = '\n[objectives]\ninput_errors = ["col", "lon"]\n'
 
@@ -93,6 +93,11 @@ def one_seed(seed: int, identification: str, out: Path, rescore: bool = False, s
         doc["modes"][mode] = att.to_dict()
     f.write_text(json.dumps(doc, indent=1))
     return doc
+
+
+def seed_task(task: tuple) -> dict:
+    """``one_seed(*task)`` as a task of a Dask worker."""
+    return one_seed(*task)
 
 
 def seeds_of(text: str) -> list[int]:
@@ -159,6 +164,11 @@ def main(argv=None) -> int:
     ap.add_argument("--resample-inputs", choices=("sample", "project"), default="sample",
                     help="[data] resample_inputs of the instances (default sample: the committed numbers were "
                          "made so, before project became the config default)")
+    ap.add_argument("--workers", type=nonneg_int, default=0,
+                    help="run the seeds on a Dask LocalCluster of this many processes (default 0: one after the "
+                         "other in this process)")
+    ap.add_argument("--scheduler", metavar="ADDRESS", help="run the seeds on the Dask cluster of this scheduler "
+                                                          "(its workers must see --out)")
     ap.add_argument("--rescore", action="store_true",
                     help="score the finished seeds again at their saved identified points (no identification)")
     a = ap.parse_args(argv)
@@ -169,11 +179,22 @@ def main(argv=None) -> int:
     out = out_folder(ap, a.out) / (a.identification if a.truth == "m0" else f"{a.identification}_wake")
     out.mkdir(parents=True, exist_ok=True)
     docs = []
-    for s in seeds:
-        docs.append(one_seed(s, a.identification, out, a.rescore, a.segment_s, a.truth, a.variance, a.resample_inputs))
-        tops = {m: d["scores"][0] for m, d in docs[-1]["modes"].items()}
-        print(f"seed {s}: " + "; ".join(f"{m} top {r['name']} LM {r['LM']:.3g} (df {r['df']:.3g}, p {r['p_value']:.2g})"
-                                        for m, r in tops.items()), flush=True)
+    from pyomo_heli.log import configure_console
+    from pyomo_heli.parallel import dask_executor, run_tasks
+
+    configure_console()
+
+    def report(task, doc):
+        tops = {m: d["scores"][0] for m, d in doc["modes"].items()}
+        print(f"seed {task[0]}: " + "; ".join(f"{m} top {r['name']} LM {r['LM']:.3g} (df {r['df']:.3g}, "
+                                               f"p {r['p_value']:.2g})" for m, r in tops.items()), flush=True)
+
+    tasks = [(s, a.identification, out.resolve(), a.rescore, a.segment_s, a.truth, a.variance, a.resample_inputs)
+             for s in seeds]
+    # one seed per task: here one after the other (--workers 0), on a LocalCluster or on --scheduler's cluster;
+    # a seed's scores depend only on its seed, so they are the same wherever it ran
+    with dask_executor(a.workers, a.scheduler) as ex:
+        docs = run_tasks(seed_task, tasks, ex, report)
     table = summary(docs)
     table.to_csv(out / f"summary{variant(a.segment_s, a.variance)}.csv",
                  index=False)

@@ -49,6 +49,7 @@ finished point's stored solution and gives the same numbers.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np

@@ -278,7 +278,13 @@ def candidate_names() -> list[str]:
 
 
 def make_candidate(name: str) -> Candidate:
-    """The candidate called ``name``; KeyError naming the known ones (and close matches) otherwise."""
+    """The candidate called ``name`` (a physical effect of :data:`CANDIDATES`, or a term of the generic
+    discrepancy family, :mod:`pyomo_heli.physics.discrepancy`); KeyError naming the known ones (and close
+    matches) otherwise."""
+    from ..physics.discrepancy import generic_term, is_generic
+
+    if is_generic(name):
+        return generic_term(name)
     try:
         return CANDIDATES[name]()
     except KeyError:

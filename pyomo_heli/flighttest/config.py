@@ -19,7 +19,7 @@ from ..physics.parameters import bo105
 from ..simulation.inputs import SHAPES, InputSignal, InputSpecError
 from ..units import DEG, KT, SENSOR_SIGMA_KEYS
 from .sensors import DEFAULT_SIGMA, DEFAULT_VIBRATION, SensorConfig
-from .truth_effects import TRUTH_EFFECTS
+from .truth_effects import all_effects
 
 
 class ConfigError(ValueError):
@@ -215,6 +215,7 @@ def load_config(path: str | Path) -> GeneratorConfig:
             raise ConfigError(f"{w} [truth.parameters]: {k} = {nominal[k]:g} {unit} is outside the plausible range "
                               f"{lo:g}..{hi:g} {unit} of the dataset format (manifest check)")
     effects = {}
+    TRUTH_EFFECTS = all_effects()
     for name, eff in _get(truth, "effects", f"{w} [truth]", dict, {}).items():
         if name not in TRUTH_EFFECTS:
             raise ConfigError(f"{w} [truth.effects]: unknown effect '{name}'; choose from "

@@ -166,8 +166,17 @@ SPEC_STRENGTHS = {
 }
 
 
+def all_effects() -> dict:
+    """Every effect a generator config may name: these and the held-out ones
+    (:mod:`.held_out_effects`, imported here lazily so that importing this module does not load them)."""
+    from .held_out_effects import HELD_OUT_EFFECTS
+
+    return {**TRUTH_EFFECTS, **HELD_OUT_EFFECTS}
+
+
 def make_effect(name: str) -> Extension:
+    effects = all_effects()
     try:
-        return TRUTH_EFFECTS[name]()
+        return effects[name]()
     except KeyError:
-        raise KeyError(f"unknown truth effect {name!r}; choose from {', '.join(sorted(TRUTH_EFFECTS))}") from None
+        raise KeyError(f"unknown truth effect {name!r}; choose from {', '.join(sorted(effects))}") from None

@@ -1,0 +1,195 @@
+"""Truth effects held out from the diagnosis: none of them is in the candidate library.
+
+The closed loop's library (:mod:`pyomo_heli.diagnosis.candidates`) and its generic
+discrepancy family (:mod:`pyomo_heli.physics.discrepancy`) never import this module
+(``tests/test_discovery.py`` checks it). These effects stand in for what a real aircraft
+holds and nobody listed: each has its own dependence on speed, state or time, and plugs
+into M0 through the extension seam (:mod:`pyomo_heli.physics.extensions`) with a strength
+whose zero value gives M0 exactly. Use them in a generator config like the other truth
+effects, e.g. ``[truth.effects.fuselage_download] k_fd = 0.03``.
+
+Conventions: body axes at the CG, x forward, z down, M nose-up; X, Z in N, M in N m.
+A force dZ acting x_p forward of the CG adds the moment dM = -x_p dZ.
+
+Nominal strengths (:data:`HELD_OUT_STRENGTHS`) are chosen so that each effect moves the
+bundled flight test's trims or maneuvers by a few sensor sigmas, as real model errors do.
+"""
+from __future__ import annotations
+
+import math
+
+from ..physics.extensions import Extension
+from ..physics.parameters import ParameterSpec
+
+
+class FuselageDownload(Extension):
+    """H1: rotor wake on the fuselage: a download at low speed that the skewed wake leaves behind.
+
+        f = exp(-(mu / mu_fd)^2)                    (1 in hover, 0.37 at mu = mu_fd)
+        dZ = k_fd T f            [N]   (down, T the rotor thrust)
+        dM = x_fd dZ             [N m] (the download's centroid x_fd aft of the CG: nose-up)
+
+    Strength k_fd [-] (fraction of the thrust); mu_fd = 0.06 (about 25 kt), x_fd = 0.8 m.
+    """
+
+    name = "fuselage_download"
+    strength = "k_fd"
+
+    def parameters(self):
+        return [ParameterSpec("k_fd", 0.0, "-", "held-out truth: fuselage download / thrust in hover", "held out"),
+                ParameterSpec("mu_fd", 0.06, "-", "held-out truth: advance ratio where the download fades", "held out"),
+                ParameterSpec("x_fd", 0.8, "m", "held-out truth: download centroid aft of the CG", "held out")]
+
+    def extra_forces(self, ctx):
+        p, ops = ctx.p, ctx.ops
+        f = ops.exp(-((ctx.flow.mu / p["mu_fd"]) ** 2))
+        dZ = p["k_fd"] * ctx.thrust * f
+        return 0.0, dZ, p["x_fd"] * dZ
+
+
+class DragRise(Extension):
+    """H2: drag rise at high speed (advancing-tip compressibility, hub and blade-root drag).
+
+        dX = -k_dr 0.5 rho f_e V^2 (mu / 0.25)^4     [N]
+
+    Strength k_dr [-]; negligible below about 80 kt, growing as V^6.
+    """
+
+    name = "drag_rise"
+    strength = "k_dr"
+
+    def parameters(self):
+        return [ParameterSpec("k_dr", 0.0, "-", "held-out truth: drag rise factor at mu = 0.25", "held out")]
+
+    def extra_forces(self, ctx):
+        p, x = ctx.p, ctx.x
+        V2 = x["u"] ** 2 + x["w"] ** 2
+        return -p["k_dr"] * 0.5 * p["rho"] * p["f_e"] * V2 * (ctx.flow.mu / 0.25) ** 4, 0.0, 0.0
+
+
+class CantedTailRotor(Extension):
+    """H3: a canted tail rotor: part of the anti-torque thrust lifts the tail (bucket-shaped with speed).
+
+    Main-rotor power, induced + profile + parasite:
+        P = T lambda_i Omega R + P_0 (1 + 4.65 mu^2) + 0.5 rho f_e V^3,
+        P_0 = rho pi R^2 (Omega R)^3 sigma c_d0 / 8,  sigma = N_b c / (pi R),  c_d0 = 0.01
+    Tail-rotor thrust T_tr = P / (Omega l_tr) at l_tr = l_t + 0.9 m behind the CG, its lift k_tr T_tr:
+        dZ = -k_tr T_tr [N],   dM = -l_tr k_tr T_tr = -k_tr P / Omega [N m] (nose-down)
+    Strength k_tr = sin(cant angle) [-].
+    """
+
+    name = "canted_tail_rotor"
+    strength = "k_tr"
+
+    def parameters(self):
+        return [ParameterSpec("k_tr", 0.0, "-", "held-out truth: sine of the tail-rotor cant angle", "held out")]
+
+    def extra_forces(self, ctx):
+        p, ops, x = ctx.p, ctx.ops, ctx.x
+        v_tip = ctx.flow.v_tip
+        sigma = p["Nb"] * p["c"] / (math.pi * p["R"])
+        P0 = p["rho"] * math.pi * p["R"] ** 2 * v_tip**3 * sigma * 0.01 / 8.0
+        V2 = x["u"] ** 2 + x["w"] ** 2 + p["eps_v"] ** 2
+        P = ctx.thrust * x["lambda_i"] * v_tip + P0 * (1 + 4.65 * ctx.flow.mu**2) + 0.5 * p["rho"] * p["f_e"] * V2 * ops.sqrt(V2)
+        l_tr = ctx.l_t + 0.9
+        T_tr = P / (p["Omega"] * l_tr)
+        return 0.0, -p["k_tr"] * T_tr, -l_tr * p["k_tr"] * T_tr
+
+
+class ControlMixing(Extension):
+    """H4: mechanical collective-to-cyclic mixing in the control path.
+
+        theta_1s = lon + k_mx (col - col_ref)     [rad], col_ref = 0.17 rad
+
+    A lon offset that follows the collective's bucket over speed and its steps in maneuvers.
+    Strength k_mx [rad/rad].
+    """
+
+    name = "control_mixing"
+    strength = "k_mx"
+
+    def parameters(self):
+        return [ParameterSpec("k_mx", 0.0, "-", "held-out truth: collective-to-cyclic mixing gain", "held out"),
+                ParameterSpec("col_ref", 0.17, "rad", "held-out truth: collective of zero mixing", "held out")]
+
+    def adjust_controls(self, ctx):
+        ctx.lon = ctx.lon + ctx.p["k_mx"] * (ctx.col - ctx.p["col_ref"])
+
+
+class ActuatorLag(Extension):
+    """H5: first-order lag of the longitudinal swashplate actuator.
+
+        tau_a d(lon_act)/dt = lon - lon_act,   the rotor sees theta_1s = lon_act
+    Nothing in trim; the response to cyclic inputs is delayed. Strength tau_a [s].
+    """
+
+    name = "actuator_lag"
+    strength = "tau_a"
+    states = ("lon_act",)
+
+    def parameters(self):
+        return [ParameterSpec("tau_a", 0.0, "s", "held-out truth: lon actuator time constant", "held out")]
+
+    def adjust_controls(self, ctx):
+        ctx.lon_commanded = ctx.lon
+        ctx.lon = ctx.x["lon_act"]
+
+    def state_equations(self, ctx):
+        return {"lon_act": (ctx.p["tau_a"], ctx.lon_commanded - ctx.x["lon_act"])}
+
+
+class AccelerometerFilter(Extension):
+    """H6: first-order anti-aliasing filter in the normal accelerometer channel.
+
+        tau_nz d(n_zf)/dt = n_z - n_zf,   n_z = -Z/(m g),   the sensor reports n_zf
+    Nothing in trim; n_z transients delayed and smoothed. Strength tau_nz [s].
+    """
+
+    name = "accelerometer_filter"
+    strength = "tau_nz"
+    states = ("nz_filt",)
+
+    def parameters(self):
+        return [ParameterSpec("tau_nz", 0.0, "s", "held-out truth: n_z sensor filter time constant", "held out")]
+
+    def state_equations(self, ctx):
+        n_z = -ctx.forces.Z / (ctx.p["m"] * ctx.p["g"])
+        return {"nz_filt": (ctx.p["tau_nz"], n_z - ctx.x["nz_filt"])}
+
+    def adjust_outputs(self, ctx):
+        ctx.outputs["n_z"] = ctx.x["nz_filt"]
+
+
+class VerticalDrag(Extension):
+    """H7: quadratic vertical drag of fuselage and stabilisers in heave.
+
+        dZ = -k_vd 0.5 rho A_v w sqrt(w^2 + 0.01)  [N],  A_v = 12 m^2 (plan area)
+        dM = -x_v dZ,  x_v = -1.5 m (centre of plan area aft of the CG)
+    Strength k_vd [-] (drag coefficient in heave).
+    """
+
+    name = "vertical_drag"
+    strength = "k_vd"
+
+    def parameters(self):
+        return [ParameterSpec("k_vd", 0.0, "-", "held-out truth: heave drag coefficient of the plan area", "held out")]
+
+    def extra_forces(self, ctx):
+        p, ops, w = ctx.p, ctx.ops, ctx.x["w"]
+        dZ = -p["k_vd"] * 0.5 * p["rho"] * 12.0 * w * ops.sqrt(w**2 + 0.01)
+        return 0.0, dZ, 1.5 * dZ
+
+
+HELD_OUT_EFFECTS = {c.name: c for c in (FuselageDownload, DragRise, CantedTailRotor, ControlMixing, ActuatorLag,
+                                        AccelerometerFilter, VerticalDrag)}
+
+#: nominal strengths of the held-out studies (studies/held_out_effects.py)
+HELD_OUT_STRENGTHS = {
+    "fuselage_download": {"k_fd": 0.03},
+    "drag_rise": {"k_dr": 0.15},
+    "canted_tail_rotor": {"k_tr": 0.1},
+    "control_mixing": {"k_mx": 0.05},
+    "actuator_lag": {"tau_a": 0.06},
+    "accelerometer_filter": {"tau_nz": 0.08},
+    "vertical_drag": {"k_vd": 1.0},
+}

@@ -1,0 +1,151 @@
+"""The generic discrepancy family: force, moment and sensor corrections that name no physics.
+
+Every term is one extension (:mod:`.extensions`) with one coefficient ``c`` whose zero value
+gives M0 exactly; the same object serves the float simulator, the trim blocks and the
+collocation blocks (its hooks only do arithmetic on ``ctx``). Normalised by the weight
+W = m g [N] and, for the moment, the rotor radius R [m]:
+
+    dX = c W phi(x, u)      dZ = c W phi(x, u)      dM = c W R phi(x, u)
+
+with ``phi`` a dimensionless regressor of order one over the envelope (:data:`REGRESSORS`):
+
+    one              1
+    mu, mu2, mu4     mu/0.3, (mu/0.3)^2, (mu/0.3)^4        growth with speed (mu: hub advance ratio)
+    bump00..bump15   exp(-((mu - mu_c)/0.05)^2), mu_c = 0, 0.05, 0.10, 0.15  a low-speed bump (0, 21, 43, 64 kt)
+    alpha            (w / V) / 0.1                          fuselage angle of attack
+    w                w / 5 m/s                              heave velocity
+    q                q / 0.2 rad/s                          pitch rate
+    lam              lambda_i / 0.05                        induced inflow (the wake's strength)
+    col, lon         col / 0.2 rad, lon / 0.05 rad          the measured controls
+
+Sensor side (data compatibility of flight-path reconstruction), per channel:
+
+    TAS_scale        TAS_meas = (1 + c) TAS                 airspeed calibration (position error)
+    nx_scale         n_x,meas = (1 + c) n_x
+    beta0_bias       beta_0,meas = beta_0 + c [rad]
+
+(No time shifts: the outputs' rates are not all available at the seam; no n_x / n_z bias:
+the candidate library already holds those as named sensor effects.)
+
+A term's name is ``d<channel>_<regressor>`` (e.g. ``dM_bump05``), its coefficient
+``c_<channel>_<regressor>``; :func:`generic_term` builds one, :func:`generic_names` lists the
+family. In an identification every coefficient is an ordinary parameter: fixed at zero until
+the structure determination frees it (:mod:`pyomo_heli.diagnosis.discovery`).
+"""
+from __future__ import annotations
+
+from .extensions import Extension
+from .parameters import ParameterSpec
+
+MU_REF = 0.3
+BUMP_WIDTH = 0.05
+BUMP_CENTRES = {"bump00": 0.0, "bump05": 0.05, "bump10": 0.10, "bump15": 0.15}
+
+#: regressor -> (formula shown in reports, function of ctx)
+REGRESSORS = {
+    "one": ("1", lambda ctx: 1.0),
+    "mu": ("mu/0.3", lambda ctx: ctx.flow.mu / MU_REF),
+    "mu2": ("(mu/0.3)^2", lambda ctx: (ctx.flow.mu / MU_REF) ** 2),
+    "mu4": ("(mu/0.3)^4", lambda ctx: (ctx.flow.mu / MU_REF) ** 4),
+    **{k: (f"exp(-((mu-{c:.2f})/0.05)^2)",
+           (lambda c: lambda ctx: ctx.ops.exp(-(((ctx.flow.mu - c) / BUMP_WIDTH) ** 2)))(c))
+       for k, c in BUMP_CENTRES.items()},
+    "alpha": ("(w/V)/0.1", lambda ctx: ctx.x["w"] / ctx.ops.sqrt(ctx.x["u"] ** 2 + ctx.x["w"] ** 2 + ctx.p["eps_v"] ** 2)
+              / 0.1),
+    "w": ("w/(5 m/s)", lambda ctx: ctx.x["w"] / 5.0),
+    "q": ("q/(0.2 rad/s)", lambda ctx: ctx.x["q"] / 0.2),
+    "lam": ("lambda_i/0.05", lambda ctx: ctx.x["lambda_i"] / 0.05),
+    "col": ("col/(0.2 rad)", lambda ctx: ctx.col / 0.2),
+    "lon": ("lon/(0.05 rad)", lambda ctx: ctx.lon / 0.05),
+}
+FORCE_CHANNELS = ("X", "Z", "M")
+#: sensor terms: name -> (output, kind, formula)
+SENSOR_TERMS = {
+    "TAS_scale": ("TAS", "scale", "TAS_meas = (1 + c) TAS"),
+    "nx_scale": ("n_x", "scale", "n_x,meas = (1 + c) n_x"),
+    "beta0_bias": ("beta_0", "bias", "beta_0,meas = beta_0 + c [rad]"),
+}
+#: coefficient bounds and scale: force (X, Z: fraction of W), moment (fraction of W R), sensor
+BOUNDS = {"X": (-0.2, 0.2, 0.005), "Z": (-0.2, 0.2, 0.005), "M": (-0.02, 0.02, 0.001),
+          "scale": (-0.2, 0.2, 0.01), "bias": (-0.05, 0.05, 0.005)}
+
+
+class GenericTerm(Extension):
+    """One term of the generic discrepancy family (module docstring): dX, dZ or dM = c x norm x phi, or a sensor term."""
+
+    score_step = None
+    one_sided = False
+    shape_parameters: tuple[str, ...] = ()
+    generic = True
+
+    def __init__(self, channel: str, regressor: str):
+        if channel in FORCE_CHANNELS:
+            if regressor not in REGRESSORS:
+                raise KeyError(f"unknown regressor {regressor!r}; choose from {', '.join(REGRESSORS)}")
+            self.name = f"d{channel}_{regressor}"
+            self.kind = channel
+        elif channel == "sensor":
+            if regressor not in SENSOR_TERMS:
+                raise KeyError(f"unknown sensor term {regressor!r}; choose from {', '.join(SENSOR_TERMS)}")
+            self.name = regressor
+            self.kind = SENSOR_TERMS[regressor][1]
+        else:
+            raise KeyError(f"unknown discrepancy channel {channel!r}; choose from X, Z, M, sensor")
+        self.channel, self.regressor = channel, regressor
+        self.strength = f"c_{self.name}"
+        self.signature = self.formula()
+
+    def formula(self) -> str:
+        """The term as an equation with the coefficient written c."""
+        if self.channel == "sensor":
+            return SENSOR_TERMS[self.regressor][2]
+        norm = "m g R" if self.channel == "M" else "m g"
+        return f"d{self.channel} = c {norm} {REGRESSORS[self.regressor][0]}"
+
+    def describe(self) -> str:
+        return f"generic discrepancy {self.formula()}"
+
+    def parameters(self):
+        lo, hi, scale = BOUNDS[self.kind]
+        unit = "rad" if self.kind == "bias" else "-"
+        return [ParameterSpec(self.strength, 0.0, unit, f"generic discrepancy coefficient: {self.formula()}",
+                              "discrepancy family", (lo, hi), scale)]
+
+    def value(self, ctx):
+        """The force [N] or moment [N m] this term adds at ``ctx`` (0 for a sensor term)."""
+        if self.channel == "sensor":
+            return 0.0
+        p = ctx.p
+        norm = p["m"] * p["g"] * (p["R"] if self.channel == "M" else 1.0)
+        return p[self.strength] * norm * REGRESSORS[self.regressor][1](ctx)
+
+    def extra_forces(self, ctx):
+        if self.channel == "sensor":
+            return 0.0, 0.0, 0.0
+        d = self.value(ctx)
+        return (d, 0.0, 0.0) if self.channel == "X" else (0.0, d, 0.0) if self.channel == "Z" else (0.0, 0.0, d)
+
+    def adjust_outputs(self, ctx):
+        if self.channel != "sensor":
+            return
+        out, kind, _ = SENSOR_TERMS[self.regressor]
+        c = ctx.p[self.strength]
+        ctx.outputs[out] = ctx.outputs[out] * (1 + c) if kind == "scale" else ctx.outputs[out] + c
+
+
+def generic_names() -> list[str]:
+    """Every term of the family: the force and moment terms, then the sensor terms."""
+    return [f"d{ch}_{r}" for ch in FORCE_CHANNELS for r in REGRESSORS] + list(SENSOR_TERMS)
+
+
+def is_generic(name: str) -> bool:
+    return name in set(generic_names())
+
+
+def generic_term(name: str) -> GenericTerm:
+    """The term called ``name`` (``dM_bump05``, ``TAS_scale``...); KeyError naming the family otherwise."""
+    if name in SENSOR_TERMS:
+        return GenericTerm("sensor", name)
+    if len(name) > 3 and name[0] == "d" and name[1] in FORCE_CHANNELS and name[2] == "_" and name[3:] in REGRESSORS:
+        return GenericTerm(name[1], name[3:])
+    raise KeyError(f"unknown discrepancy term {name!r}; the family is {', '.join(generic_names())}")

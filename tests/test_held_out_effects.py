@@ -1,0 +1,76 @@
+"""The held-out truth effects (pyomo_heli.flighttest.held_out_effects): independent of the diagnosis, M0 at zero
+strength, and each one moves the data the way its equation says."""
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS
+from pyomo_heli.physics.model import HelicopterModel
+from pyomo_heli.simulation.trim import trim_float
+
+ROOT = Path(__file__).resolve().parents[1]
+KT = 0.514444
+
+
+def test_diagnosis_and_close_loop_never_import_the_held_out_effects():
+    """Import every diagnosis module, the close loop (its candidate menu) and the discrepancy family in a fresh
+    interpreter: the held-out module must not be loaded, and no source file there names it."""
+    mods = [p.stem for p in (ROOT / "pyomo_heli" / "diagnosis").glob("*.py") if p.stem != "__init__"]
+    code = ("import sys\n" + "".join(f"import pyomo_heli.diagnosis.{m}\n" for m in mods)
+            + "import pyomo_heli.close_loop, pyomo_heli.physics.discrepancy\n"
+            + "from pyomo_heli.close_loop import loop_settings\n"
+            + "print('held_out' in ' '.join(sys.modules))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert out.stdout.strip() == "False", out.stdout + out.stderr
+    for p in list((ROOT / "pyomo_heli" / "diagnosis").glob("*.py")) + [ROOT / "pyomo_heli" / "close_loop.py",
+                                                                      ROOT / "pyomo_heli" / "physics" / "discrepancy.py"]:
+        assert "held_out" not in p.read_text(), p
+
+
+def test_at_least_six_held_out_effects_none_in_the_library():
+    from pyomo_heli.diagnosis.candidates import CANDIDATES
+
+    assert len(HELD_OUT_EFFECTS) >= 6
+    assert not set(HELD_OUT_EFFECTS) & set(CANDIDATES)
+    assert set(HELD_OUT_STRENGTHS) == set(HELD_OUT_EFFECTS)
+
+
+@pytest.mark.parametrize("name", sorted(HELD_OUT_EFFECTS))
+def test_zero_strength_is_m0(name):
+    m0 = HelicopterModel()
+    eff = HELD_OUT_EFFECTS[name]()
+    m = HelicopterModel(extensions=(eff,))
+    for V in (0.0, 40 * KT, 120 * KT):
+        a, b = trim_float(m0, V), trim_float(m, V)
+        assert (b.col, b.lon, b.theta) == pytest.approx((a.col, a.lon, a.theta), abs=1e-10)
+
+
+def test_the_trim_effects_have_their_documented_speed_shape():
+    """Download: theta up (nose-up moment) in hover, gone by 60 kt; drag rise: theta down growing with speed above
+    80 kt (about V^6 in force: 2.8 times from 100 to 120 kt); canted tail rotor: nose-down at every speed."""
+    m0 = HelicopterModel()
+
+    def d_theta(name, V):
+        m = HelicopterModel(extensions=(HELD_OUT_EFFECTS[name](),)).with_parameters(**HELD_OUT_STRENGTHS[name])
+        return trim_float(m, V * KT).theta - trim_float(m0, V * KT).theta
+
+    assert d_theta("fuselage_download", 0) > 0 and abs(d_theta("fuselage_download", 60)) < 0.05 * d_theta("fuselage_download", 0)
+    assert d_theta("drag_rise", 120) < 2 * d_theta("drag_rise", 100) < 0 and abs(d_theta("drag_rise", 20)) < 1e-4
+    assert all(d_theta("canted_tail_rotor", V) < 0 for V in (0, 60, 120))
+
+
+def test_held_out_effects_are_usable_in_a_generator_config(tmp_path):
+    from pyomo_heli.flighttest.config import ConfigError, load_config
+
+    f = tmp_path / "g.toml"
+    f.write_text('[dataset]\nname = "x"\naircraft = "a"\nseed = 1\n[truth]\nparameters = {}\n'
+                 '[truth.effects.actuator_lag]\ntau_a = 0.06\n[trims]\nspeeds_kt = [20]\n'
+                 '[[maneuvers]]\nname = "m"\nrole = "identification"\nspeed_kt = 20\nchannel = "lon"\n'
+                 'shape = "doublet"\namplitude_deg = 0.5\nstep_s = 1.0\nduration_s = 5\n')
+    assert load_config(f).effects == {"actuator_lag": {"tau_a": 0.06}}
+    f.write_text(f.read_text().replace("tau_a =", "tau_x ="))
+    with pytest.raises(ConfigError, match=r"\[truth.effects.actuator_lag\]: unknown parameter name 'tau_x'"):
+        load_config(f)

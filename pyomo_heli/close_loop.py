@@ -76,6 +76,13 @@ class LoopSettings:
     #: with [objectives] input_errors: the score test eliminates the input errors ("eliminated") or takes the
     #: measured inputs as exact ("measured", the test of the loops before 2026-11-24 evening)
     score_inputs: str = "eliminated"
+    #: structure determination over the physical candidates and the generic discrepancy family, physics named by
+    #: encompassing (pyomo_heli.diagnosis.discovery; docs/discovery.md)
+    discovery: bool = False
+    #: the generic terms offered with ``discovery`` (names of pyomo_heli.physics.discrepancy; default the whole family)
+    generic: list | None = None
+    #: reject a step whose model makes the validation error rise significantly on any output (paired test)
+    validation_rule: bool = True
 
 
 def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
@@ -130,10 +137,22 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
             raise ConfigError(f"{where}: field 'score_inputs' must be \"eliminated\" or \"measured\", got "
                               f"{raw['score_inputs']!r}")
         s.score_inputs = raw["score_inputs"]
-    if "robust" in raw:
-        if not isinstance(raw["robust"], bool):
-            raise ConfigError(f"{where}: field 'robust' must be true or false, got {raw['robust']!r}")
-        s.robust = raw["robust"]
+    for key in ("robust", "discovery", "validation_rule"):
+        if key in raw:
+            if not isinstance(raw[key], bool):
+                raise ConfigError(f"{where}: field '{key}' must be true or false, got {raw[key]!r}")
+            setattr(s, key, raw[key])
+    if "generic" in raw:
+        from .physics.discrepancy import generic_names
+
+        v = raw["generic"]
+        if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
+            raise ConfigError(f"{where}: field 'generic' must be a non-empty list of names")
+        for n in v:
+            if n not in generic_names():
+                raise ConfigError(f"{where}: field 'generic': unknown discrepancy term {n!r}; choose from "
+                                  f"{', '.join(generic_names())}")
+        s.generic = list(v)
     return s
 
 
@@ -155,6 +174,51 @@ def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: f
     free = [dataclasses.replace(f, initial=min(max(chosen[f.name], f.lower), f.upper)) for f in cfg.free]
     free.append(FreeParameter(cand.strength, init, lo, hi, spec.scale or 1.0))
     return dataclasses.replace(cfg, model=model, free=free)
+
+
+def _without(cfg: IdentificationConfig, chosen: dict, name: str) -> IdentificationConfig:
+    """``cfg`` without the loop-added effect ``name`` (backward check); the other free parameters start at ``chosen``."""
+    exts = tuple(e for e in cfg.model.extensions if e.name != name)
+    gone = next(e for e in cfg.model.extensions if e.name == name)
+    model = HelicopterModel(parameters=cfg.model.parameters, extensions=exts).with_parameters(**{gone.strength: 0.0})
+    free = [dataclasses.replace(f, initial=min(max(chosen[f.name], f.lower), f.upper)) for f in cfg.free
+            if f.name != gone.strength]
+    return dataclasses.replace(cfg, model=model, free=free)
+
+
+def validation_check(model0: HelicopterModel, params0: dict, model1: HelicopterModel, params1: dict, val_mans,
+                     alpha: float = 0.01) -> dict:
+    """The validation rule: the paired test (Diebold-Mariano, :mod:`pyomo_heli.diagnosis.validation_change`) of each
+    output's validation error, model 1 against model 0 on the same records. ``rise``: True when any output's error
+    rises significantly (one-sided p < ``alpha``); ``rows``: the test table as records; ``message`` names them."""
+    from .report.loop import validation_change_table
+
+    p0 = predict("before", model0, params0, [], val_mans)
+    p1 = predict("after", model1, params1, [], val_mans)
+    tab = validation_change_table(p0, p1, val_mans, alpha=alpha)
+    rows = tab.to_dict(orient="records")
+    bad = [r for r in rows if r["significant rise"]]
+    msg = ("made the validation error rise significantly on " + ", ".join(
+        f"{r['output']} ({r['change [%]']:+.1f} %, p = {r['p (rise)']:.2g})" for r in bad)) if bad else ""
+    return {"rise": bool(bad), "rows": rows, "message": msg}
+
+
+def backward_check(cfg: IdentificationConfig, record: dict, base_names, alpha: float) -> list[dict]:
+    """Wald test of every loop-added effect's strength but the last added (forward selection's backward check), from
+    the Cramer-Rao standard errors at the diagnosed point; skipped for a strength without one."""
+    from scipy.stats import norm
+
+    se = record.get("standard_errors") or {}
+    added = [e for e in cfg.model.extensions if e.name not in base_names][:-1]
+    rows = []
+    for e in added:
+        s = se.get(e.strength)
+        if not s or s <= 0 or e.strength not in record["parameters"]:
+            continue
+        z = record["parameters"][e.strength] / s
+        p = float(norm.sf(z) if getattr(e, "one_sided", False) else 2 * norm.sf(abs(z)))
+        rows.append({"name": e.name, "strength": e.strength, "z": float(z), "p": p, "significant": p < alpha})
+    return rows
 
 
 def select_shape(cfg: IdentificationConfig, cand, file: Path, alpha: float,
@@ -347,6 +411,8 @@ def _close_loop(cfg, out: Path, settings, progress, restart, ft, id_data, val_ma
     i = 0
     added_shape = None  # the shape rule's record for the candidate added last
     bar = Progress(settings.max_iterations + 1, "loop iterations", at_most=True)
+    models = []  # the model of every finished iteration (the validation rule compares the last two)
+    base_names = [e.name for e in cfg.model.extensions]  # declared by the config: never dropped by the loop
     while True:
         t0 = time.perf_counter()
         names = [e.name for e in cfg.model.extensions]
@@ -375,14 +441,7 @@ def _close_loop(cfg, out: Path, settings, progress, restart, ft, id_data, val_ma
         model = cfg.model.with_parameters(**chosen)
         pool = settings.candidates or list(CANDIDATES)
         left = [n for n in pool if n not in names]
-        att = None
-        if left:
-            att = attr.attribute(model, [f.name for f in cfg.free], id_data, cfg.nlp.time_outputs,
-                                 cfg.nlp.trim_outputs, candidates=left, alpha=settings.alpha, ratio=settings.ratio,
-                                 confound_corr=settings.confound_corr, robust=settings.robust,
-                                 **_score_inputs(cfg, settings))
-            progress(str(att))
-        doc["iterations"].append({
+        record = {
             "iteration": i, "extensions": names, "results_dir": f"iter_{i}",
             "free": [f.name for f in cfg.free], "parameters": chosen,
             "units": {n: cfg.model.parameters.spec(n).unit for n in chosen},
@@ -390,24 +449,76 @@ def _close_loop(cfg, out: Path, settings, progress, restart, ft, id_data, val_ma
             "point": which, "J_time": point["J_time"], "J_trim": point["J_trim"],
             # Cramer-Rao standard errors at the diagnosed point (None: not computed, or at a bound)
             "standard_errors": (point.get("uncertainty") or {}).get("se"),
-            **errs, "attribution": att.to_dict() if att is not None else None,
-            "wall_time": time.perf_counter() - t0})
-        if att is not None and att.decision != "accepted":
-            doc["iterations"][-1]["residual_diagnosis"] = residual_verdict(cfg, chosen, progress)
+            **errs}
+        doc["iterations"].append(record)
+        # the validation rule: a step whose model validates significantly worse on any output is rejected
+        if i > 0 and settings.validation_rule and val_mans:
+            check = validation_check(models[-1], doc["iterations"][-2]["parameters"], cfg.model, chosen, val_mans)
+            record["validation_check"] = check["rows"]
+            if check["rise"]:
+                record["rejected"] = check["message"]
+                doc["final_iteration"] = i - 1
+                doc["stopped"] = (f"step rejected: adding {names[-1]} {check['message']}; the model of iteration "
+                                  f"{i - 1} is kept")
+                write_json(out / LOOP_FILE, doc)
+                progress(f"stopped: {doc['stopped']}")
+                return doc
+        doc["final_iteration"] = i
+        att, add, init = None, None, None
+        models.append(cfg.model)
+        backward = backward_check(cfg, record, base_names, settings.alpha) if settings.discovery else []
+        if backward:
+            record["backward_check"] = backward
+        dropped = [b["name"] for b in backward if not b["significant"]]
+        if dropped and i < settings.max_iterations:
+            record["decision"] = {"decision": "dropped", "message": f"backward check: {dropped[0]} no longer "
+                                  f"significant (Wald p = {next(b['p'] for b in backward if b['name'] == dropped[0]):.2g})"}
+            write_json(out / LOOP_FILE, doc)
+            progress(record["decision"]["message"] + "; removed")
+            cfg = _without(cfg, chosen, dropped[0])
+            added_shape = None
+            i += 1
+            continue
+        if settings.discovery:
+            from .diagnosis.discovery import discovery_step
+
+            step = discovery_step(cfg, model, chosen, id_data, physical=left, generic=settings.generic,
+                                  alpha=settings.alpha, ratio=settings.ratio, confound_corr=settings.confound_corr,
+                                  robust=settings.robust, score_kw=_score_inputs(cfg, settings), progress=progress)
+            att = attr.Attribution.from_dict(step["attribution"])
+            record["attribution"] = step.pop("attribution")
+            record["discovery"] = step
+            add, init = step["added"], step["initial"]
+            decision, message = step["decision"], step["message"]
+            progress(f"discovery: {decision}: {message}")
+        elif left:
+            att = attr.attribute(model, [f.name for f in cfg.free], id_data, cfg.nlp.time_outputs,
+                                 cfg.nlp.trim_outputs, candidates=left, alpha=settings.alpha, ratio=settings.ratio,
+                                 confound_corr=settings.confound_corr, robust=settings.robust,
+                                 **_score_inputs(cfg, settings))
+            progress(str(att))
+            record["attribution"] = att.to_dict()
+            decision, message = att.decision, att.message
+            if att.decision == "accepted":
+                add, init = att.accepted, float(att.accepted_row()["kappa_hat"])
+        else:
+            record["attribution"] = None
+        record["wall_time"] = time.perf_counter() - t0
+        if att is not None and add is None:
+            record["residual_diagnosis"] = residual_verdict(cfg, chosen, progress)
         if att is None:
             doc["stopped"] = "every candidate of the library is in the model"
-        elif att.decision != "accepted":
-            doc["stopped"] = f"nothing accepted ({att.decision}): {att.message}"
+        elif add is None:
+            doc["stopped"] = f"nothing accepted ({decision}): {message}"
         elif i >= settings.max_iterations:
-            doc["stopped"] = (f"iteration limit {settings.max_iterations} reached; {att.accepted} would be added next")
+            doc["stopped"] = f"iteration limit {settings.max_iterations} reached; {add} would be added next"
         write_json(out / LOOP_FILE, doc)
         progress(f"iteration {i} finished" + bar.tick(from_disk=reused))
         if doc["stopped"]:
             progress(f"stopped: {doc['stopped']}")
             return doc
-        row = att.accepted_row()
-        progress(f"adding {att.accepted} with {row['strength']} free (score-test estimate {row['kappa_hat']:.4g})")
-        cfg = _with_candidate(cfg, chosen, att.accepted, float(row["kappa_hat"]))
+        progress(f"adding {add} with {make_candidate(add).strength} free (estimate {init:.4g})")
+        cfg = _with_candidate(cfg, chosen, add, init)
         cand = cfg.model.extensions[-1]
         added_shape = None
         if cand.shape_parameters and settings.shape == "time_domain":

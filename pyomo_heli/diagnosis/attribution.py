@@ -336,6 +336,8 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
         k_like = int(np.argmax(corr_id)) if corr_id else None
         proj[c.name] = bt
         rows.append({"name": c.name, "strength": c.strength, "LM": lm, "df": df, "LM_needed": lm_needed, "p_value": p,
+                     # the white-noise LM (variance F): LM / LM_white is the robust variance's correction factor
+                     "LM_white": g * g / F if F > 0 else 0.0,
                      "kappa_hat": kappa,
                      "kept": F / F_raw if F_raw > 0 else 0.0,
                      "like": list(identified)[k_like] if k_like is not None else "",

@@ -15,6 +15,7 @@ The models are replayed with the float simulator (as the identification report d
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pandas as pd
@@ -55,7 +56,8 @@ def before_after_table(doc: dict) -> pd.DataFrame:
     """One row per iteration: J_time, J_trim, RMS trim per channel [deg] and RMS per output [display units]."""
     rows = []
     for it in doc["iterations"]:
-        r = {"iteration": it["iteration"], "model": "M0" + "".join(f" + {n}" for n in it["extensions"]),
+        r = {"iteration": it["iteration"], "model": "M0" + "".join(f" + {n}" for n in it["extensions"])
+             + (" (rejected)" if it.get("rejected") else ""),
              "J_time": it["J_time"], "J_trim": it["J_trim"]}
         for c in TRIM_CHANNELS:
             v = it["trim_rms"].get(c)
@@ -69,12 +71,19 @@ def before_after_table(doc: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def final_index(doc: dict) -> int:
+    """Position in ``doc['iterations']`` of the model the loop kept (a step rejected by the validation rule is not)."""
+    its = doc["iterations"]
+    k = doc.get("final_iteration")
+    return next((j for j, it in enumerate(its) if it["iteration"] == k), len(its) - 1)
+
+
 def change_table(doc: dict) -> pd.DataFrame:
-    """Relative change of every RMS error from the first to the last iteration [%] (negative = better)."""
+    """Relative change of every RMS error from the first to the kept iteration [%] (negative = better)."""
     tab = before_after_table(doc)
-    if len(tab) < 2:
+    if len(tab) < 2 or final_index(doc) == 0:
         return pd.DataFrame()
-    first, last = tab.iloc[0], tab.iloc[-1]
+    first, last = tab.iloc[0], tab.iloc[final_index(doc)]
     rows = []
     for c in tab.columns[4:]:
         if pd.notna(first[c]) and pd.notna(last[c]) and first[c]:
@@ -205,17 +214,20 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
           "trim over all trim points, `id` = identification maneuvers, `val` = validation maneuvers.", "",
           markdown_table(before_after_table(doc), digits=4), ""]
     ch = change_table(doc)
+    kept = its[final_index(doc)]
     if len(ch):
-        L += [f"Change from iteration 0 to iteration {its[-1]['iteration']}:", "", markdown_table(ch, digits=4), ""]
-    if val_mans and len(its) > 1:
-        first, last = preds[label(its[0])], preds[label(its[-1])]
-        L += [f"Is a change of the validation error a real one? Paired test of iteration {its[-1]['iteration']} "
+        L += [f"Change from iteration 0 to iteration {kept['iteration']} (the model kept):", "",
+              markdown_table(ch, digits=4), ""]
+    if val_mans and len(its) > 1 and kept is not its[0]:
+        first, last = preds[label(its[0])], preds[label(kept)]
+        L += [f"Is a change of the validation error a real one? Paired test of iteration {kept['iteration']} "
               "against iteration 0 on the same records (Diebold-Mariano, squared error, batch means over 1 s "
               "segments; `pyomo_heli/diagnosis/validation_change.py`): a rise counts as significant when its "
               "one-sided p < 0.01. At the sensor-noise floor the same noise enters both models' residuals and "
               "does not cancel, so small changes of either sign are expected without any change of the model "
               "error.", "", markdown_table(validation_change_table(first, last, val_mans), digits=4), ""]
     L += [f"![Trim vs speed before and after](loop_trim_vs_speed.{figure_format})", ""]
+    L += discovery_summary(doc, cfg, out)
     if val_mans:
         L += [f"![Validation before and after](loop_validation.{figure_format})", ""]
     truth = read_truth(cfg.dataset)
@@ -247,10 +259,12 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
                   f"{sh['defaults']}, J_time = {_fmt(sh['A_default']['J_time'], 8)}, and with it free, "
                   f"J_time = {_fmt(sh['A_free']['J_time'], 8)}): **{sh['decision']}**; held at "
                   + ", ".join(f"{n} = {_fmt(v, 5)}" for n, v in sh["values"].items()) + " for the whole front.", ""]
+        L += iteration_checks(it)
         a = it.get("attribution")
         if a is None:
             L += ["No candidate left to score.", ""]
             continue
+        L += discovery_section(it)
         sc = pd.DataFrame(a["scores"])
         # loops written before the df column referred every LM to chi-square(1)
         with_df = "df" in sc
@@ -276,3 +290,115 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
     path = out / "loop_report.md"
     path.write_text("\n".join(L))
     return path
+
+
+# --- structure determination ([loop] discovery, pyomo_heli.diagnosis.discovery) --------------------------------------
+def iteration_checks(it: dict) -> list[str]:
+    """The validation rule's paired test against the previous iteration, the rejection and the backward check."""
+    L = []
+    if it.get("validation_check"):
+        L += [f"Validation rule (paired test against the previous iteration's model; a significant rise rejects the "
+              f"step): **{'rejected: ' + it['rejected'] if it.get('rejected') else 'passed'}**", "",
+              markdown_table(pd.DataFrame(it["validation_check"]), digits=4), ""]
+    if it.get("backward_check"):
+        L += ["Backward check (Wald test of the strengths added before the last one, Cramer-Rao SE):", "",
+              markdown_table(pd.DataFrame(it["backward_check"]), digits=4), ""]
+    if it.get("decision"):
+        L += [f"**{it['decision']['decision']}**: {it['decision']['message']}", ""]
+    return L
+
+
+def discovery_section(it: dict) -> list[str]:
+    """The structure-determination step of one iteration: NLP estimates, encompassing, decision."""
+    d = it.get("discovery")
+    if not d:
+        return []
+    L = [f"Structure determination over a library of {d['library_size']} terms (physical candidates and generic "
+         f"discrepancy terms; the score test below ranks them, the likelihood ratio of the NLP decides at p < "
+         f"{d['level']:.3g}, Bonferroni over the library):", ""]
+    sc = d.get("screen") or {}
+    fits = sc.get("fits", {})
+    if fits:
+        rows = [{"term": f["name"], "form": f["formula"], "estimate": f["estimate"], "SE": f["se"], "LR": f["LR"],
+                 "p": f["p"], "significant": bool(f["p"] < d["level"]), "solve": f["status"]} for f in fits.values()]
+        L += [f"Each term alone in the full NLP (joint likelihood of time series and trims, base J = {sc['J0']:.8g}):",
+              "", markdown_table(pd.DataFrame(rows), digits=4), ""]
+    if d.get("encompassing"):
+        L += ["Encompassing (does the generic term add anything once the physical candidate is fitted?):", "",
+              markdown_table(pd.DataFrame([{k: v for k, v in r.items() if k != "shape"} for r in d["encompassing"]]),
+                             digits=5), ""]
+    L += [f"**Discovery: {d['decision']}** - {d['message']}", ""]
+    return L
+
+
+def discovered_terms(doc: dict) -> list[tuple[dict, dict]]:
+    """(iteration record, fit) of every generic term the loop added and kept."""
+    its = doc["iterations"]
+    kept = its[final_index(doc)]
+    out = []
+    for it in its[:final_index(doc)]:
+        d = it.get("discovery") or {}
+        if d.get("decision") == "discovered" and d.get("added") in kept["extensions"]:
+            out.append((it, d["discovered"]))
+    return out
+
+
+def discovered_curve(model: HelicopterModel, params: dict, term, speeds_kt) -> pd.DataFrame:
+    """The discovered force or moment along the model's level trims: speed [kt], the regressor's state and the value."""
+    from ..simulation.trim import trim_float
+
+    m = model.with_parameters(**params)
+    ext = next(e for e in m.extensions if e.name == term)
+    rows = []
+    for v in speeds_kt:
+        tp = trim_float(m, v * KT)
+        x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}
+        ctx = m.evaluate(x, {"col": tp.col, "lon": tp.lon})
+        rows.append({"V [kt]": v, "mu": float(ctx.flow.mu), "alpha [deg]": float(math.degrees(math.atan2(tp.w, tp.u))),
+                     "lambda_i": tp.lambda_i, "col [deg]": math.degrees(tp.col), "lon [deg]": math.degrees(tp.lon),
+                     "w [m/s]": tp.w, "value": float(ext.value(ctx))})
+    return pd.DataFrame(rows)
+
+
+STATE_OF = {"alpha": "alpha [deg]", "w": "w [m/s]", "lam": "lambda_i", "col": "col [deg]", "lon": "lon [deg]"}
+
+
+def discovery_summary(doc: dict, cfg, out) -> list[str]:
+    """What the loop discovered and kept: the statement, and a figure of the force or moment vs airspeed and vs the
+    state it depends on (``loop_discovered_<term>.png``)."""
+    found = discovered_terms(doc)
+    if not found:
+        return []
+    from matplotlib.figure import Figure
+
+    kept = doc["iterations"][final_index(doc)]
+    model = iteration_model(cfg.model, kept)
+    L = ["## Discovered, not explained by any library effect", ""]
+    for it, fit in found:
+        c, se = kept["parameters"].get(fit["strength"], fit["estimate"]), (kept.get("standard_errors") or {}).get(fit["strength"])
+        se = se if se else fit["se"]
+        unit = "N m" if fit["name"].startswith("dM") else "N"
+        L += [f"- iteration {it['iteration']}: not explained by any library effect; discovered {fit['formula']}, "
+              f"c = {c:.4g} +- {se:.2g} (the kept model's estimate and standard error)", ""]
+        if fit["name"][:2] not in ("dX", "dZ", "dM"):
+            continue
+        tab = discovered_curve(model, kept["parameters"], fit["name"], [0, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120])
+        reg = fit["name"][3:]
+        xcol = STATE_OF.get(reg, "mu")
+        fig = Figure(figsize=(9, 3.6))
+        ax1, ax2 = fig.subplots(1, 2)
+        for ax, xc in ((ax1, "V [kt]"), (ax2, xcol)):
+            ax.plot(tab[xc], tab["value"], "o-", label=f"c = {c:.3g}")
+            ax.fill_between(tab[xc], tab["value"] * (1 - 2 * se / abs(c)) if c else tab["value"],
+                            tab["value"] * (1 + 2 * se / abs(c)) if c else tab["value"], alpha=0.25, label="+- 2 SE")
+            ax.set_xlabel(xc)
+            ax.set_ylabel(f"{fit['name'][:2]} [{unit}]")
+            ax.axhline(0.0, color="k", lw=0.5)
+            ax.grid(alpha=0.3)
+        ax1.legend()
+        fig.suptitle(f"Discovered {fit['formula']} along the level trims")
+        fig.tight_layout()
+        name = f"loop_discovered_{fit['name']}.png"
+        fig.savefig(Path(out) / name, dpi=90)
+        L += [f"![{fit['name']} vs airspeed]({name})", "", markdown_table(tab, digits=4), ""]
+    return L

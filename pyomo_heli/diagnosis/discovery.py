@@ -1,0 +1,304 @@
+"""Structure determination: trace the residual to a missing effect, listed in advance or not.
+
+One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md):
+
+1. **Rank the whole library** by the score test (:func:`pyomo_heli.diagnosis.attribution.attribute`,
+   robust: batch-means variance): the physical candidates (:mod:`.candidates`) and the generic
+   discrepancy family (:mod:`pyomo_heli.physics.discrepancy`: dX, dZ, dM as regressors in speed, state
+   and controls, and sensor scale/bias terms). Cheap (float sensitivities); it only picks which terms
+   the NLP estimates: the best ``SCREEN_GENERIC`` generic terms and ``SCREEN_PHYSICAL`` physical ones.
+2. **Estimate and test in the full NLP** (:func:`nlp_screen`): one identification NLP holds the
+   current model plus the screened terms, their coefficients pinned at zero by equal bounds. It is
+   solved once for the joint negative log-likelihood of time series and trims
+
+       J = J_time + sum_c (N/2) ln(mean_i r_ic^2)     (J_time: output error, Eq. 5-6; r_ic: trim
+                                                       residual of channel c at point i, N points)
+
+   then each term is freed by its bounds alone, solved warm from that solution and pinned again:
+   its estimate, ``LR = 2 (J_0 - J_term)`` and a standard error |c| / sqrt(LR) (the curvature of the
+   profile likelihood). **Significant: p < alpha / L** with L the size of the whole library scored
+   (Bonferroni: the family-wise false-discovery level over the library is alpha, for the best of all
+   L terms, screened or not, since the screen only leaves out terms of lower score).
+3. **Name the physics by encompassing**: a significant physical candidate P is named only when it
+   explains the data as well as the best significant generic term G: with P and G free together,
+   ``LR(G | P) = 2 (J_P - J_PG)`` must not be significant at ``alpha`` (G adds nothing once P is in;
+   tested at alpha without a multiplicity correction, so that a P is named only when even a lenient test
+   finds nothing for G to add). Of several such P, the one of lowest J is named. Otherwise G is kept and
+   reported as *not explained by any library effect*. A significant physical candidate with no
+   significant generic term is taken (the one of lowest J): a physical effect the family cannot describe.
+4. **Nothing significant**: nothing is added; the best generic term's NLP estimate is still reported
+   as the shape of what is left.
+
+The backward check (a term added earlier that is no longer significant once the new one is in) and the
+validation rule (a step that makes validation significantly worse on any output is rejected) are run by
+the loop (:mod:`pyomo_heli.close_loop`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+from scipy import stats
+
+from ..physics.discrepancy import generic_names, is_generic
+from . import attribution as attr
+from .candidates import CANDIDATES, make_candidate
+
+#: generic terms (best by LM) estimated in the NLP at every step
+SCREEN_GENERIC = 3
+#: physical candidates (significant, best by LM) estimated in the NLP for the encompassing test
+SCREEN_PHYSICAL = 3
+
+
+def library(model, physical=None, generic=None) -> list[str]:
+    """The names scored at a step: physical candidates then generic terms, minus those already in ``model``."""
+    have = {e.name for e in model.extensions}
+    phys = list(physical) if physical is not None else list(CANDIDATES)
+    gen = list(generic) if generic is not None else generic_names()
+    return [n for n in phys + gen if n not in have]
+
+
+def _joint_objective(m, data, trim_outputs):
+    """``m.discovery_objective`` = J_time + sum over trim channels c of (N/2) ln(mean_i r_ic^2): the negative
+    log-likelihood of the time series (J_time) and of the trims with one variance per channel, estimated
+    (concentrated out), N trim points. Also ``m.discovery_trim_nll``, its trim part."""
+    import pyomo.environ as pyo
+
+    if m.component("objective") is not None:
+        m.objective.deactivate()
+    nll = 0.0
+    N = len(data.trims)
+    mutable = m.component("trim_meas") is not None
+    for c in trim_outputs or ():
+        res = []
+        for i, (_, row) in enumerate(data.trims.iterrows()):
+            blk = m.trim[data.speed_index(row["V"])]
+            res.append((m.trim_meas[i, c] if mutable else float(row[c])) - getattr(blk, c))
+        nll = nll + 0.5 * N * pyo.log(sum(r**2 for r in res) / N)
+    m.discovery_trim_nll = pyo.Expression(expr=nll)
+    m.discovery_objective = pyo.Objective(expr=m.J_time + m.discovery_trim_nll)
+    return m.discovery_objective
+
+
+def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = True, progress=print) -> dict:
+    """Estimate each of ``terms`` alone, and each pair of ``pairs`` together, in one identification NLP, freed by
+    their bounds (module docstring, step 2).
+
+    ``cfg``: the current identification config (its model and free parameters); ``start``: values of its free
+    parameters to start from (the diagnosed point). Returns ``{"J0", "base", "fits": {name: {...}}, "pairs":
+    {"P+G": {...}}}`` with each fit's estimate, standard error, J, LR against the base, p (chi-square(1)), solve
+    status and parameters.
+    """
+    import pyomo.environ as pyo
+
+    from ..identify import build_problem
+    from ..nlp.parameters import FreeParameter, free_parameter_values
+    from ..pareto.front import _Snapshot
+    from ..physics.model import HelicopterModel
+    from ..solvers import SolverError, make_solver
+
+    t0 = time.perf_counter()
+    exts = [make_candidate(n) for n in terms]
+    model = HelicopterModel(parameters=cfg.model.parameters, extensions=tuple(cfg.model.extensions) + tuple(exts))
+    free = [dataclasses.replace(f, initial=min(max(start.get(f.name, f.initial), f.lower), f.upper)) for f in cfg.free]
+    own = {}  # term -> its parameters in the NLP (strength first, then shape parameters)
+    for e in exts:
+        names = [e.strength] + (list(e.shape_parameters) if shape_free else [])
+        own[e.name] = names
+        for n in names:
+            spec = model.parameters.spec(n)
+            lo, hi = spec.bounds
+            free.append(FreeParameter(n, min(max(spec.value, lo), hi), lo, hi, spec.scale or 1.0))
+    cfg_s = dataclasses.replace(cfg, model=model, free=free)
+    m, data, _ = build_problem(cfg_s)
+    _joint_objective(m, data, cfg.nlp.trim_outputs)
+    solver = make_solver(m, cfg.pareto.solver, cfg.pareto.solver_options)
+    by = {f.name: f for f in free}
+    ext_by = {e.name: e for e in exts}
+
+    def pin(n, free_it: bool):
+        f = by[n]
+        s = m.theta_scale[n]
+        if free_it:
+            m.theta_s[n].setlb(f.lower / s)
+            m.theta_s[n].setub(f.upper / s)
+        else:
+            v = model.parameters[n] / s
+            m.theta_s[n].setlb(v)
+            m.theta_s[n].setub(v)
+            m.theta_s[n].set_value(v)
+
+    def solve(ws):
+        try:
+            r = solver.solve(warm_start=ws)
+            return r.success, r.status
+        except SolverError as exc:
+            return False, f"{type(exc).__name__}: {exc}"
+
+    for names in own.values():
+        for n in names:
+            pin(n, False)
+    ok, status = solve("none")
+    J0 = float(pyo.value(m.discovery_objective))
+    J0_tr = float(pyo.value(m.discovery_trim_nll))
+    base = free_parameter_values(m)
+    snap = _Snapshot(m)
+    progress(f"    NLP screen: base J = {J0:.6g} ({status})")
+
+    def fit(group):
+        for name in group:
+            for n in own[name]:
+                pin(n, True)
+            e = ext_by[name]
+            if getattr(e, "one_sided", False):  # start a one-sided strength inside its bounds
+                f = by[e.strength]
+                m.theta_s[e.strength].set_value((f.lower + 0.05 * (f.upper - f.lower)) / m.theta_scale[e.strength])
+        ok_k, status_k = solve("primal")
+        J = float(pyo.value(m.discovery_objective))
+        J_tr = float(pyo.value(m.discovery_trim_nll))
+        vals = free_parameter_values(m)
+        lr = max(2.0 * (J0 - J), 0.0) if ok and ok_k else float("nan")
+        rows = {}
+        for name in group:
+            e = ext_by[name]
+            c = vals[e.strength]
+            rows[name] = {"name": name, "strength": e.strength, "generic": bool(getattr(e, "generic", False)),
+                          "formula": e.formula() if hasattr(e, "formula") else e.describe(), "estimate": c,
+                          "shape": {n: vals[n] for n in own[name][1:]}}
+        res = {"J": J, "LR": lr, "LR_trim": 2.0 * (J0_tr - J_tr), "LR_time": 2.0 * (J0 - J0_tr - J + J_tr), "p": float(stats.chi2.sf(lr, len(group))) if lr == lr else float("nan"),
+               "success": bool(ok_k), "status": status_k, "terms": rows,
+               "parameters": {f.name: vals[f.name] for f in cfg.free}}
+        progress(f"    NLP screen: {'+'.join(group)}: "
+                 + ", ".join(f"{r['strength']} = {r['estimate']:.4g}" for r in rows.values())
+                 + f", J = {J:.6g}, LR = {lr:.4g} (time {res['LR_time']:.3g}, trim {res['LR_trim']:.3g}; {status_k})")
+        for name in group:
+            for n in own[name]:
+                pin(n, False)
+        snap.restore()
+        return res
+
+    fits = {}
+    for name in terms:
+        r = fit([name])
+        one = r.pop("terms")[name]
+        # standard error from the profile likelihood's curvature: LR = (c / se)^2
+        one["se"] = abs(one["estimate"]) / math.sqrt(r["LR"]) if r["LR"] == r["LR"] and r["LR"] > 0 else float("nan")
+        fits[name] = {**one, **r}
+    if callable(pairs):
+        pairs = pairs(fits)
+    both = {f"{a}+{b}": fit([a, b]) for a, b in pairs}
+    return {"J0": J0, "base_success": bool(ok), "base_status": status, "base": base, "fits": fits, "pairs": both,
+            "wall_time": time.perf_counter() - t0}
+
+
+def describe_fit(fit: dict) -> str:
+    return (f"{fit['formula']}, c = {fit['estimate']:.4g} +- {fit['se']:.2g} (NLP estimate; LR {fit['LR']:.3g})")
+
+
+def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=attr.ALPHA,
+                   ratio=attr.RATIO, confound_corr=attr.CONFOUND_CORR, robust=True, score_kw=None,
+                   progress=print) -> dict:
+    """One structure-determination step (module docstring). ``model``: the current model at its estimate;
+    ``start``: the free parameters' values. Returns a plain dict: ``decision`` (named | discovered | accepted |
+    none), ``added`` (name or None), ``initial`` (its strength's start value), ``attribution`` (the score table
+    over the whole library, used to rank), ``screen`` (NLP estimates and likelihood ratios), ``encompassing`` (one
+    row per physical candidate tested), ``level`` (alpha / library size), ``message``."""
+    score_kw = dict(score_kw or {})
+    identified = [f.name for f in cfg.free]
+    names = library(model, physical, generic)
+    att = attr.attribute(model, identified, data, cfg.nlp.time_outputs, cfg.nlp.trim_outputs, candidates=names,
+                         alpha=alpha, ratio=ratio, confound_corr=confound_corr, robust=robust, **score_kw)
+    progress(str(att))
+    sc = att.scores
+    ranked = [n for n in sc["name"] if not (sc.set_index("name").loc[n, "p_value"] >= 1.0)]  # wrong-sign one-sided out
+    gen_screen = [n for n in ranked if is_generic(n)][:SCREEN_GENERIC]
+    phys_screen = [n for n in ranked if not is_generic(n)][:SCREEN_PHYSICAL]
+    level = alpha / max(len(names), 1)  # Bonferroni over the whole library: the family-wise level is alpha
+    out = {"library_size": len(names), "level": level, "attribution": att.to_dict(), "encompassing": [],
+           "added": None, "initial": None}
+
+    def pairs_of(fits):
+        """(P, G) for every significant physical candidate and the best generic term, when that one is significant."""
+        g = _best(fits, True)
+        for n, f in fits.items():  # the corrected p-values (the pairs are asked for before they are set below)
+            f.setdefault("p_LR", f["p"])
+            f["p"] = robust_p(f["LR"], sc.set_index("name").loc[n], getattr(make_candidate(n), "one_sided", False))[0]
+        g = _best(fits, True)
+        if g is None or not g["p"] < level:
+            return []
+        return [(n, g["name"]) for n in phys_screen if fits[n]["success"] and fits[n]["p"] < level]
+
+    screen = nlp_screen(cfg, start, gen_screen + phys_screen, pairs=pairs_of, progress=progress)
+    out["screen"] = screen
+    fits = screen["fits"]
+    rows_by = sc.set_index("name")
+    for n, f in fits.items():
+        f["p"], f["LR_robust"], f["df"] = robust_p(f["LR"], rows_by.loc[n], getattr(make_candidate(n), "one_sided", False))
+        # standard error from the corrected profile likelihood's curvature: LR_robust = (c / se)^2
+        f["se"] = abs(f["estimate"]) / math.sqrt(f["LR_robust"]) if f["LR_robust"] > 0 else float("nan")
+    G, P = _best(fits, True), _best(fits, False)
+    g_sig = G is not None and G["p"] < level
+    p_sig = [f for f in fits.values() if not f["generic"] and f["success"] and f["p"] < level]
+    if not g_sig and not p_sig:
+        out.update(decision="none", best_generic=G,
+                   message=f"nothing significant over the whole library of {len(names)} terms (likelihood ratio, "
+                           f"Bonferroni: p < {level:.2g})"
+                           + (f"; best generic description of what is left: {describe_fit(G)}, p = {G['p']:.2g}"
+                              if G else ""))
+        return out
+    if not g_sig:
+        best = min(p_sig, key=lambda f: f["J"])
+        out.update(decision="accepted", added=best["name"], initial=float(best["estimate"]),
+                   message=f"{best['name']} significant (LR {best['LR']:.3g}, p = {best['p']:.2g} < {level:.2g}) and no "
+                           f"generic term is (best {G['name'] if G else '-'}: p = {G['p'] if G else float('nan'):.2g}): "
+                           "a physical effect the generic family cannot describe")
+        return out
+    rows = []
+    for pf in p_sig:
+        pair = screen["pairs"].get(f"{pf['name']}+{G['name']}")
+        row = {"candidate": pf["name"], "J_P": pf["J"], "J_G": G["J"], "LR_P": pf["LR"], "estimate": pf["estimate"],
+               "shape": pf["shape"]}
+        if pair and pair["success"]:
+            lr = max(2.0 * (pf["J"] - pair["J"]), 0.0)
+            p = float(stats.chi2.sf(lr, 1))
+            row.update(J_PG=pair["J"], LR_G_given_P=lr, p_G_given_P=p, encompasses=bool(p >= alpha))
+        else:
+            row.update(encompasses=False, note="joint solve failed")
+        rows.append(row)
+    out["encompassing"] = rows
+    named = [r for r in rows if r["encompasses"]]
+    if named:
+        best = min(named, key=lambda r: r["J_P"])
+        out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
+                   message=f"{best['candidate']} encompasses the discovered {G['name']} ({G['formula']}): with "
+                           f"{best['candidate']} fitted, {G['name']} adds nothing (LR {best['LR_G_given_P']:.3g}, "
+                           f"p = {best['p_G_given_P']:.2g} >= {alpha:g}); named {best['candidate']}")
+    else:
+        tested = ", ".join(f"{r['candidate']} (p of {G['name']} given it {r.get('p_G_given_P', float('nan')):.2g})"
+                           for r in rows)
+        out.update(decision="discovered", added=G["name"], initial=float(G["estimate"]), discovered=G,
+                   message="not explained by any library effect" + (f" (tested: {tested})" if rows else "")
+                           + f"; discovered {describe_fit(G)}, p = {G['p']:.2g} < {level:.2g}")
+    return out
+
+
+def robust_p(lr: float, row, one_sided: bool = False) -> tuple[float, float, float]:
+    """The NLP's likelihood ratio corrected for coloured residuals: ``LR x LM / LM_white`` (the score test's robust
+    over white-noise statistic: the white-noise variance of the score over its batch-means estimate, capped at 1 so
+    the correction never makes the test more liberal), referred to F(1, df) with the score test's df (chi-square(1)
+    when df is infinite). Returns (p, corrected LR, df)."""
+    if lr != lr:
+        return float("nan"), float("nan"), float("nan")
+    lm, lm_w, df = float(row["LM"]), float(row.get("LM_white", row["LM"])), float(row["df"])
+    factor = min(1.0, lm / lm_w) if lm_w > 0 else 1.0
+    adj = lr * factor
+    ref = stats.f(1, df) if np.isfinite(df) else stats.chi2(1)
+    p = float(ref.sf(adj))
+    return (p / 2 if one_sided else p), adj, df
+
+
+def _best(fits: dict, generic: bool):
+    ok = [f for f in fits.values() if f["generic"] == generic and f["success"] and f["LR"] == f["LR"]]
+    return max(ok, key=lambda f: f["LR"]) if ok else None

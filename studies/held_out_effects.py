@@ -1,0 +1,216 @@
+"""Structure determination on flight tests whose undeclared effect is held out of the library (issue 27). A study.
+
+    python studies/held_out_effects.py --seeds 3 --out results/held_out \
+        [--effects fuselage_download drag_rise ...] [--config studies/held_out_discovery.toml] \
+        [--data-config data/bo105_synthetic.toml]
+
+For every held-out effect (pyomo_heli/flighttest/held_out_effects.py, at its nominal strength) and every seed
+(20261122 + k, k = 0..SEEDS-1): the bundled flight test's generator config with its truth effect replaced by the
+held-out one (same maneuvers, trims and noise levels) -> ``OUT/<effect>_<seed>/data``; the closed loop with
+``[loop] discovery = true`` (CONFIG) -> ``OUT/<effect>_<seed>/loop``. A finished loop is not rerun.
+``--effects none`` is M0 plus noise only.
+
+Written: ``OUT/held_out.csv`` and ``OUT/held_out.md``, one row per effect and seed: truth, verdict, what was added,
+pooled trim / identification / validation RMS of iteration 0 and of the kept model, a significant validation rise,
+parameter errors against truth before and after, wrong acceptance (a physical library candidate kept although the
+truth holds none), and for a discovered or described generic term whether its shape matches the truth term (sign
+and speed dependence of the same force or moment along the truth's level trims; n/a when the truth adds no
+steady force or moment). Evaluation only: this script reads truth.json and the held-out module; the loop does not.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _study_args import in_file, out_folder, positive_int  # noqa: E402
+
+from pyomo_heli.cli import main as cli_main  # noqa: E402
+from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+PARAMETERS = ("theta_twist", "CL_alpha_HT", "Iyy")
+TRIM = ("col", "lon", "theta")
+OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
+SPEEDS_KT = (0, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120)
+
+
+def data_config(template: str, effect: str, seed: int, strengths: dict | None = None) -> str:
+    """The generator config ``template`` (TOML text) with its [truth.effects.*] tables replaced by ``effect`` and its
+    seed by ``seed`` (``effect`` "none": no effect)."""
+    text = re.sub(r"\n\[truth\.effects\.[^\]]+\][^\[]*", "\n", template)
+    text = re.sub(r"(?m)^seed = \d+", f"seed = {seed}", text)
+    text = text.replace("M0 + wake on tail", f"M0 + {effect} (held out)" if effect != "none" else "M0 only")
+    if effect != "none":
+        vals = (strengths or HELD_OUT_STRENGTHS)[effect]
+        block = f"[truth.effects.{effect}]\n" + "".join(f"{k} = {v!r}\n" for k, v in vals.items()) + "\n"
+        text = text.replace("\n[sensors]", "\n" + block + "[sensors]", 1)
+    return text
+
+
+def run_case(effect: str, seed: int, out: Path, config: Path, template: str) -> Path:
+    case = out / f"{effect}_{seed}"
+    data, loop = case / "data", case / "loop"
+    if not (data / "truth.json").is_file():
+        case.mkdir(parents=True, exist_ok=True)
+        (case / "gen.toml").write_text(data_config(template, effect, seed))
+        if cli_main(["generate-data", "--config", str(case / "gen.toml"), "--out", str(data)]) != 0:
+            raise SystemExit(2)
+    if not (loop / "loop.json").is_file() or not json.loads((loop / "loop.json").read_text()).get("stopped"):
+        t0 = time.perf_counter()
+        code = cli_main(["close-loop", str(config), "--dataset", str(data), "--out", str(loop)])
+        if code != 0:
+            raise SystemExit(code)
+        print(f"{effect} {seed}: loop done in {time.perf_counter() - t0:.0f} s", flush=True)
+    return loop
+
+
+def truth_curve(effect: str, channel: str) -> np.ndarray | None:
+    """The truth effect's steady force (X, Z) or moment (M) along the truth's level trims; None if it adds none."""
+    from pyomo_heli.physics.model import HelicopterModel
+    from pyomo_heli.simulation.trim import trim_float
+    from pyomo_heli.units import KT
+
+    if effect == "none":
+        return None
+    e = HELD_OUT_EFFECTS[effect]()
+    m = HelicopterModel(extensions=(e,)).with_parameters(**HELD_OUT_STRENGTHS[effect])
+    vals = []
+    for v in SPEEDS_KT:
+        tp = trim_float(m, v * KT)
+        x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}
+        ctx = m.evaluate(x, {"col": tp.col, "lon": tp.lon})
+        d = dict(zip("XZM", (float(np.asarray(f)) for f in e.extra_forces(ctx))))
+        vals.append(d[channel])
+    vals = np.array(vals)
+    return None if not np.any(np.abs(vals) > 1e-9) else vals
+
+
+def shape_match(effect: str, fit: dict | None, kept_model=None, params=None) -> str:
+    """Does a generic term's force or moment along the level trims match the truth's in sign and speed dependence?
+    'yes' when the correlation over speed is > 0.7 and the values at the speed of the truth's largest |value| agree
+    in sign; 'no' otherwise; 'n/a' without a force/moment term or a truth force in that channel."""
+    from pyomo_heli.physics.discrepancy import REGRESSORS, generic_term
+    from pyomo_heli.physics.model import HelicopterModel
+    from pyomo_heli.simulation.trim import trim_float
+    from pyomo_heli.units import KT
+
+    if not fit or fit["name"][:2] not in ("dX", "dZ", "dM"):
+        return "n/a"
+    ch = fit["name"][1]
+    truth = truth_curve(effect, ch)
+    if truth is None:
+        return "n/a"
+    t = generic_term(fit["name"])
+    m = HelicopterModel(extensions=(t,)).with_parameters(**{t.strength: fit["estimate"]})
+    vals = []
+    for v in SPEEDS_KT:
+        tp = trim_float(m, v * KT)
+        x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i}
+        vals.append(float(t.value(m.evaluate(x, {"col": tp.col, "lon": tp.lon}))))
+    vals = np.array(vals)
+    k = int(np.argmax(np.abs(truth)))
+    corr = float(np.corrcoef(truth, vals)[0, 1]) if np.std(vals) > 0 and np.std(truth) > 0 else float(np.sign(truth[k] * vals[k]))
+    return "yes" if corr > 0.7 and np.sign(vals[k]) == np.sign(truth[k]) else f"no (corr {corr:+.2f})"
+
+
+def evaluate(effect: str, seed: int, loop: Path) -> dict:
+    from pyomo_heli.diagnosis.candidates import CANDIDATES
+    from pyomo_heli.report.identification import read_truth
+    from pyomo_heli.report.loop import final_index
+
+    doc = json.loads((loop / "loop.json").read_text())
+    its = doc["iterations"]
+    i0, ik = its[0], its[final_index(doc)]
+    truth = read_truth(Path(doc["dataset"]))
+    physical = [n for n in ik["extensions"] if n in CANDIDATES]
+    last_disc = next((it.get("discovery") for it in reversed(its) if it.get("discovery")), None) or {}
+    decisions = [f"{(it.get('discovery') or {}).get('decision', '-')}"
+                 + (f" {it['discovery']['added']}" if (it.get("discovery") or {}).get("added") else "") for it in its]
+    rejected = [it["rejected"] for it in its if it.get("rejected")]
+    row = {"truth": effect, "seed": seed, "verdict": "; ".join(decisions) + ("; step rejected" if rejected else ""),
+           "added (kept)": "+".join(ik["extensions"]) or "-",
+           "final residual": (its[-1].get("residual_diagnosis") or {}).get("status", "-")}
+    pooled = lambda d, keys: float(np.sqrt(np.mean([d[c] ** 2 for c in keys if c in d])))  # noqa: E731
+    row["trim RMS before [deg]"] = np.degrees(pooled(i0["trim_rms"], TRIM))
+    row["trim RMS after [deg]"] = np.degrees(pooled(ik["trim_rms"], TRIM))
+    row["trim change %"] = 100 * (row["trim RMS after [deg]"] / row["trim RMS before [deg]"] - 1)
+    for key, lab in (("identification_rms", "id"), ("validation_rms", "val")):
+        for o in OUTPUTS:
+            a, b = (i0.get(key) or {}).get(o), (ik.get(key) or {}).get(o)
+            if a and b:
+                row[f"{lab} {o} change %"] = 100 * (b / a - 1)
+    sig_rise = [r["output"] for it in its[1:final_index(doc) + 1] for r in (it.get("validation_check") or [])
+                if r["significant rise"]]
+    row["significant val rise (kept steps)"] = ",".join(sig_rise) or "none"
+    for n in PARAMETERS:
+        if truth and n in truth:
+            row[f"{n} err0 %"] = 100 * (i0["parameters"][n] - truth[n]) / abs(truth[n])
+            row[f"{n} err1 %"] = 100 * (ik["parameters"][n] - truth[n]) / abs(truth[n])
+    row["wrong acceptance"] = bool(physical)
+    disc = next(((it["discovery"].get("discovered")) for it in its[:final_index(doc)]
+                 if (it.get("discovery") or {}).get("decision") == "discovered"), None)
+    described = disc or last_disc.get("best_generic")
+    row["generic term"] = (f"{described['name']}: c = {described['estimate']:.3g} +- {described['se']:.2g}"
+                           if described else "-")
+    row["shape matches truth"] = shape_match(effect, described)
+    row["criterion met"] = (not row["wrong acceptance"] and not sig_rise
+                            and ((disc is not None and row["trim change %"] <= -50.0)
+                                 or row["shape matches truth"] == "yes"))
+    return row
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=positive_int, default=3, help="noise seeds per effect (20261122 + k)")
+    ap.add_argument("--effects", nargs="+", default=list(HELD_OUT_EFFECTS),
+                    help=f"held-out effects (or none): {', '.join(HELD_OUT_EFFECTS)}")
+    ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
+    ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
+    ap.add_argument("--out", required=True)
+    a = ap.parse_args(argv)
+    out = out_folder(ap, a.out)
+    config, gen = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
+    bad = [e for e in a.effects if e != "none" and e not in HELD_OUT_EFFECTS]
+    if bad:
+        ap.error(f"--effects: unknown held-out effect(s) {bad}; choose from {', '.join(HELD_OUT_EFFECTS)} or none")
+    template = gen.read_text()
+    rows = []
+    for effect in a.effects:
+        for k in range(a.seeds):
+            seed = 20261122 + k
+            loop = run_case(effect, seed, out, config, template)
+            rows.append(evaluate(effect, seed, loop))
+            tab = pd.DataFrame(rows)
+            tab.to_csv(out / "held_out.csv", index=False)
+            (out / "held_out.md").write_text(markdown(tab))
+    print((out / "held_out.md").read_text())
+    return 0
+
+
+def markdown(tab: pd.DataFrame) -> str:
+    cols = [c for c in ("truth", "seed", "verdict", "added (kept)", "generic term", "shape matches truth",
+                        "trim RMS before [deg]", "trim RMS after [deg]", "trim change %",
+                        "significant val rise (kept steps)", "wrong acceptance", "criterion met",
+                        "theta_twist err0 %", "theta_twist err1 %", "CL_alpha_HT err0 %", "CL_alpha_HT err1 %",
+                        "Iyy err0 %", "Iyy err1 %") if c in tab]
+
+    def fmt(v):
+        return f"{v:+.3g}" if isinstance(v, float) else str(v)
+
+    L = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    L += ["| " + " | ".join(fmt(v) for v in r) + " |" for r in tab[cols].itertuples(index=False)]
+    L += ["", f"wrong acceptances: {int(tab['wrong acceptance'].sum())} of {len(tab)}; "
+              f"criterion met: {int(tab['criterion met'].sum())} of {len(tab)}", ""]
+    return "\n".join(L)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -16,9 +16,14 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
 
    then each term is freed by its bounds alone, solved warm from that solution and pinned again:
    its estimate, ``LR = 2 (J_0 - J_term)`` and a standard error |c| / sqrt(LR) (the curvature of the
-   profile likelihood). **Significant: p < alpha / L** with L the size of the whole library scored
-   (Bonferroni: the family-wise false-discovery level over the library is alpha, for the best of all
-   L terms, screened or not, since the screen only leaves out terms of lower score).
+   profile likelihood). The LR is corrected for coloured residuals (:func:`robust_p`: times the score
+   test's robust-over-white ratio, capped at 1, referred to F(1, df)). **Significant: p < alpha / L**
+   with L the size of the whole library scored (Bonferroni: by the union bound the chance of any false
+   discovery over the library is at most alpha, whichever terms the screen passes on). This p is the
+   corrected LR's when the NLP models the measured inputs' noise (``[objectives] input_errors``); in
+   output error it is the robust score test's own (there the time residuals carry a constant input
+   offset per maneuver that the score test projects off and the NLP does not: on M0 + noise the LR
+   found a constant dM at p = 2e-5, docs/discovery.md).
 3. **Name the physics by encompassing**: a significant physical candidate P is named only when it
    explains the data as well as the best significant generic term G: with P and G free together,
    ``LR(G | P) = 2 (J_P - J_PG)`` must not be significant at ``alpha`` (G adds nothing once P is in;
@@ -194,7 +199,8 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
 
 
 def describe_fit(fit: dict) -> str:
-    return (f"{fit['formula']}, c = {fit['estimate']:.4g} +- {fit['se']:.2g} (NLP estimate; LR {fit['LR']:.3g})")
+    lr = f"LR {fit['LR']:.3g}" + (f", corrected {fit['LR_robust']:.3g} on df {fit['df']:.3g}" if "LR_robust" in fit else "")
+    return f"{fit['formula']}, c = {fit['estimate']:.4g} +- {fit['se']:.2g} (NLP estimate; {lr})"
 
 
 def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=attr.ALPHA,
@@ -222,9 +228,10 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
     def pairs_of(fits):
         """(P, G) for every significant physical candidate and the best generic term, when that one is significant."""
         g = _best(fits, True)
-        for n, f in fits.items():  # the corrected p-values (the pairs are asked for before they are set below)
+        for n, f in fits.items():  # the deciding p-values (the pairs are asked for before they are set below)
             f.setdefault("p_LR", f["p"])
-            f["p"] = robust_p(f["LR"], sc.set_index("name").loc[n], getattr(make_candidate(n), "one_sided", False))[0]
+            f["p"] = (robust_p(f["LR"], sc.set_index("name").loc[n], getattr(make_candidate(n), "one_sided", False))[0]
+                      if cfg.nlp.input_errors else float(sc.set_index("name").loc[n, "p_value"]))
         g = _best(fits, True)
         if g is None or not g["p"] < level:
             return []
@@ -234,8 +241,14 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
     out["screen"] = screen
     fits = screen["fits"]
     rows_by = sc.set_index("name")
+    # the criterion: the corrected LR when the likelihood models the measured inputs' noise (errors in variables);
+    # in output error the score test's own p (docs/discovery.md, "Which test decides")
+    criterion = "likelihood ratio" if cfg.nlp.input_errors else "score test"
+    out["criterion"] = criterion
     for n, f in fits.items():
         f["p"], f["LR_robust"], f["df"] = robust_p(f["LR"], rows_by.loc[n], getattr(make_candidate(n), "one_sided", False))
+        if criterion == "score test":
+            f["p_robust_LR"], f["p"] = f["p"], float(rows_by.loc[n, "p_value"])
         # standard error from the corrected profile likelihood's curvature: LR_robust = (c / se)^2
         f["se"] = abs(f["estimate"]) / math.sqrt(f["LR_robust"]) if f["LR_robust"] > 0 else float("nan")
     G, P = _best(fits, True), _best(fits, False)
@@ -243,7 +256,7 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
     p_sig = [f for f in fits.values() if not f["generic"] and f["success"] and f["p"] < level]
     if not g_sig and not p_sig:
         out.update(decision="none", best_generic=G,
-                   message=f"nothing significant over the whole library of {len(names)} terms (likelihood ratio, "
+                   message=f"nothing significant over the whole library of {len(names)} terms ({criterion}, "
                            f"Bonferroni: p < {level:.2g})"
                            + (f"; best generic description of what is left: {describe_fit(G)}, p = {G['p']:.2g}"
                               if G else ""))

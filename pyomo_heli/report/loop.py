@@ -250,8 +250,11 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
     L += ["## Iterations", ""]
     for it in its:
         L += [f"### {label(it)}", "", f"Results: `{it['results_dir']}/` (front, report). "
-              f"Parameters at the diagnosed point ({it.get('point', 'closest front point')}, SI): "
-              + ", ".join(f"{k} = {_fmt(v, 6)}" for k, v in it["parameters"].items())
+              f"Parameters at the diagnosed point ({it.get('point', 'closest front point')}, SI, +- Cramer-Rao SE "
+              "where computed): "
+              + ", ".join(f"{k} = {_fmt(v, 6)}" + (f" +- {_fmt((it.get('standard_errors') or {})[k], 2)}"
+                                                   if (it.get("standard_errors") or {}).get(k) else "")
+                          for k, v in it["parameters"].items())
               + f"; J_time = {_fmt(it['J_time'], 8)}, J_trim = {_fmt(it['J_trim'], 5)}.", ""]
         sh = it.get("shape_selection")
         if sh:

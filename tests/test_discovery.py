@@ -1,0 +1,131 @@
+"""Structure determination ([loop] discovery = true, pyomo_heli.diagnosis.discovery) on small generated flight tests.
+
+The undeclared effects come from pyomo_heli.flighttest.held_out_effects, which the diagnosis never imports
+(tests/test_held_out_effects.py). Small instances as in tests/test_close_loop.py (two 6 s maneuvers at 20 and
+80 kt, eleven trims, a 2-point front), the measured inputs' errors estimated, and a short generic library so
+that one loop takes about a minute or two.
+"""
+import json
+
+import numpy as np
+import pytest
+
+from pyomo_heli.cli import main
+from pyomo_heli.close_loop import validation_check
+from pyomo_heli.config import load_identification_config
+from pyomo_heli.dataset import load_flight_test
+from pyomo_heli.diagnosis.candidates import CANDIDATES
+from pyomo_heli.nlp.identification import prepare_data
+from pyomo_heli.physics.model import HelicopterModel
+
+from test_close_loop import WAKE_MANEUVERS, make_case, _pooled_trim
+
+#: a short generic library for the small instances: moment and force terms over speed, and a sensor term
+GENERIC = ["dM_one", "dM_mu2", "dM_bump00", "dM_bump05", "dM_bump10", "dX_mu4", "dZ_one", "dZ_bump00", "TAS_scale"]
+
+
+def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iterations: int = 0):
+    loop = ('\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\ndiscovery = true\nuncertainty = "none"\n'
+            f"max_iterations = {max_iterations}\ngeneric = {json.dumps(GENERIC)}\n{extra}")
+    cfg = make_case(tmp_path, effect_table, seed=seed, points=2, loop=loop, maneuvers=WAKE_MANEUVERS,
+                    input_reference_s=1.9)
+    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
+    return cfg, json.loads((tmp_path / "loop" / "loop.json").read_text())
+
+
+def test_noise_only_nothing_is_accepted(tmp_path):
+    """M0 plus sensor noise: no term of the library (10 physical + 9 generic) is significant, nothing is added."""
+    cfg, doc = _loop(tmp_path, "", seed=21)
+    its = doc["iterations"]
+    print(its[0]["discovery"]["message"])
+    assert len(its) == 1 and its[0]["extensions"] == []
+    assert its[0]["discovery"]["criterion"] == "likelihood ratio"  # input errors estimated: the NLP's LR decides
+    assert its[0]["discovery"]["decision"] == "none"
+    assert doc["stopped"].startswith("nothing accepted (none)")
+    assert its[0]["discovery"]["library_size"] == len(CANDIDATES) + len(GENERIC)
+    report = (tmp_path / "loop" / "loop_report.md").read_text()
+    assert "Structure determination over a library of 19 terms" in report
+
+
+def test_held_out_fuselage_download_is_discovered_with_its_shape(tmp_path):
+    """Truth: M0 + a download on the fuselage at low speed (held out). No physical candidate may be named; the
+    discovered (or, if not significant, the described) generic term must have the truth's sign and speed shape: a
+    nose-up moment or a download that is largest at low speed and gone by 60 kt."""
+    cfg, doc = _loop(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, max_iterations=1)
+    its = doc["iterations"]
+    d = its[0]["discovery"]
+    print(d["message"])
+    kept = its[doc["final_iteration"]]
+    assert not [n for n in kept["extensions"] if n in CANDIDATES], kept["extensions"]  # no wrong acceptance
+    fit = d.get("discovered") or d.get("best_generic")
+    assert fit is not None
+    # truth: dZ = +k T f(mu) (down) and dM = +0.8 dZ (nose-up), f = exp(-(mu/0.06)^2)
+    assert fit["name"] in ("dM_bump00", "dM_bump05", "dZ_bump00", "dZ_one") and fit["estimate"] > 0
+    if d["decision"] == "discovered":
+        assert "not explained by any library effect" in d["message"]
+        assert kept["extensions"] == [fit["name"]]
+        # the validation rule ran on the step and passed, and the trim error did not rise
+        assert its[1]["validation_check"] and not its[1].get("rejected")
+        assert _pooled_trim(kept["trim_rms"]) < _pooled_trim(its[0]["trim_rms"])
+        report = (tmp_path / "loop" / "loop_report.md").read_text()
+        assert "## Discovered, not explained by any library effect" in report
+        assert (tmp_path / "loop" / f"loop_discovered_{fit['name']}.png").is_file()
+
+
+@pytest.mark.slow
+def test_held_out_drag_rise_gives_no_wrong_acceptance(tmp_path):
+    """Truth: M0 + a drag rise above 80 kt (held out): whatever the loop decides, no library effect is kept."""
+    cfg, doc = _loop(tmp_path, "[truth.effects.drag_rise]\nk_dr = 0.15\n", seed=6)
+    kept = doc["iterations"][doc["final_iteration"]]
+    print([it.get("discovery", {}).get("message") for it in doc["iterations"]])
+    assert not [n for n in kept["extensions"] if n in CANDIDATES], kept["extensions"]
+
+
+def test_validation_rule_flags_a_worse_model_and_passes_a_better_one():
+    """close_loop.validation_check on the committed small M0 flight test: a model with a 40 % Iyy error against the
+    truth model is a significant rise in the other direction and none in this one."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent
+    cfg = load_identification_config(root / "configs" / "m0_noise_small.toml")
+    val = list(prepare_data(load_flight_test(cfg.dataset), ["londoublet_80kt_val"]).maneuvers)
+    m0 = HelicopterModel()
+    good = {"Iyy": m0.parameters["Iyy"]}
+    bad = {"Iyy": 0.6 * m0.parameters["Iyy"], "theta_twist": 1.4 * m0.parameters["theta_twist"]}
+    worse = validation_check(m0, good, m0, bad, val)
+    better = validation_check(m0, bad, m0, good, val)
+    print(worse["message"])
+    assert worse["rise"] and "rise significantly" in worse["message"]
+    assert not better["rise"] and better["message"] == ""
+    assert {r["output"] for r in worse["rows"]} >= {"q", "theta", "n_z"}
+
+
+@pytest.mark.parametrize("loop, message", [
+    ('discovery = "yes"', "[loop]: field 'discovery' must be true or false"),
+    ('generic = ["dM_bump99"]', "[loop]: field 'generic': unknown discrepancy term 'dM_bump99'"),
+    ("generic = []", "[loop]: field 'generic' must be a non-empty list of names"),
+    ("validation_rule = 1", "[loop]: field 'validation_rule' must be true or false"),
+])
+def test_bad_discovery_fields_are_one_line_exit_2(tmp_path, capsys, loop, message):
+    from pathlib import Path
+
+    cfgf = tmp_path / "c.toml"
+    data = Path(__file__).resolve().parent.parent / "data" / "bo105_synthetic"
+    cfgf.write_text(f'[data]\ndataset = "{data}"\n\n[parameters.Iyy]\ninitial = 5000.0\n\n[loop]\n{loop}\n')
+    assert main(["close-loop", str(cfgf), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+
+
+def test_robust_p_never_more_liberal_than_the_plain_likelihood_ratio():
+    """The LR correction: factor LM/LM_white capped at 1 and an F(1, df) reference, so p >= the chi-square(1) p."""
+    from scipy import stats
+
+    from pyomo_heli.diagnosis.discovery import robust_p
+
+    for lm, lmw, df in ((5.0, 20.0, 6.0), (30.0, 10.0, 40.0), (10.0, 10.0, float("inf"))):
+        p, adj, _ = robust_p(25.0, {"LM": lm, "LM_white": lmw, "df": df})
+        assert p >= stats.chi2.sf(25.0, 1) and adj <= 25.0
+    p, adj, _ = robust_p(25.0, {"LM": 10.0, "LM_white": 10.0, "df": float("inf")})
+    assert p == pytest.approx(stats.chi2.sf(25.0, 1)) and adj == 25.0
+    assert np.isnan(robust_p(float("nan"), {"LM": 1.0, "LM_white": 1.0, "df": 3.0})[0])

@@ -161,9 +161,14 @@ def evaluate(effect: str, seed: int, loop: Path) -> dict:
     row["generic term"] = (f"{described['name']}: c = {described['estimate']:.3g} +- {described['se']:.2g}"
                            if described else "-")
     row["shape matches truth"] = shape_match(effect, described)
+    # "unexplained": the step said so (best generic term significant on its own) or the residual analysis did
+    alpha = doc["settings"].get("alpha", 0.01)
+    best = last_disc.get("best_generic") or {}
+    row["unexplained verdict"] = (bool(last_disc.get("unexplained")) or best.get("p", 1.0) < alpha
+                                  or row["final residual"] == "unexplained residual")
     row["criterion met"] = (not row["wrong acceptance"] and not sig_rise
                             and ((disc is not None and row["trim change %"] <= -50.0)
-                                 or row["shape matches truth"] == "yes"))
+                                 or (row["unexplained verdict"] and row["shape matches truth"] == "yes")))
     return row
 
 
@@ -198,7 +203,7 @@ def main(argv=None) -> int:
 def markdown(tab: pd.DataFrame) -> str:
     cols = [c for c in ("truth", "seed", "verdict", "added (kept)", "generic term", "shape matches truth",
                         "trim RMS before [deg]", "trim RMS after [deg]", "trim change %",
-                        "significant val rise (kept steps)", "wrong acceptance", "criterion met",
+                        "significant val rise (kept steps)", "unexplained verdict", "wrong acceptance", "criterion met",
                         "theta_twist err0 %", "theta_twist err1 %", "CL_alpha_HT err0 %", "CL_alpha_HT err1 %",
                         "Iyy err0 %", "Iyy err1 %") if c in tab]
 

@@ -255,9 +255,13 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
     g_sig = G is not None and G["p"] < level
     p_sig = [f for f in fits.values() if not f["generic"] and f["success"] and f["p"] < level]
     if not g_sig and not p_sig:
-        out.update(decision="none", best_generic=G,
+        # "unexplained": the best generic term is significant on its own (p < alpha) but not over the library
+        unexplained = G is not None and G["p"] < alpha
+        out.update(decision="none", best_generic=G, unexplained=bool(unexplained),
                    message=f"nothing significant over the whole library of {len(names)} terms ({criterion}, "
                            f"Bonferroni: p < {level:.2g})"
+                           + ("; unexplained residual (its best generic term is significant on its own, "
+                              f"p = {G['p']:.2g} < {alpha:g}, not over the library)" if unexplained else "")
                            + (f"; best generic description of what is left: {describe_fit(G)}, p = {G['p']:.2g}"
                               if G else ""))
         return out

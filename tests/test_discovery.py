@@ -146,3 +146,27 @@ def test_robust_p_never_more_liberal_than_the_plain_likelihood_ratio():
     p, adj, _ = robust_p(25.0, {"LM": 10.0, "LM_white": 10.0, "df": float("inf")})
     assert p == pytest.approx(stats.chi2.sf(25.0, 1)) and adj == 25.0
     assert np.isnan(robust_p(float("nan"), {"LM": 1.0, "LM_white": 1.0, "df": 3.0})[0])
+
+
+@pytest.mark.slow
+def test_bundled_flight_test_names_the_wake_through_encompassing(tmp_path):
+    """Full size (slow, `pytest --runslow -k bundled_flight_test_names`): the bundled flight test with discovery
+    (studies/held_out_discovery.toml, = studies/close_loop_eiv.toml + discovery): the wake candidate is named first
+    through encompassing, the pooled trim error falls by at least 50 % and twist, CL_alpha_HT and Iyy end within 5 %
+    of truth (issue 5's criteria)."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    assert main(["close-loop", str(root / "studies" / "held_out_discovery.toml"), "--dataset",
+                 str(root / "data" / "bo105_synthetic"), "--out", str(tmp_path / "loop")]) == 0
+    doc = json.loads((tmp_path / "loop" / "loop.json").read_text())
+    its = doc["iterations"]
+    d = its[0]["discovery"]
+    assert d["decision"] == "named" and d["added"] == "rotor_wake_on_tail", d["message"]
+    kept = its[doc["final_iteration"]]
+    assert "rotor_wake_on_tail" in kept["extensions"]
+    assert not [n for n in kept["extensions"] if n in CANDIDATES and n != "rotor_wake_on_tail"]
+    assert _pooled_trim(kept["trim_rms"]) <= 0.5 * _pooled_trim(its[0]["trim_rms"])
+    truth = json.loads((root / "data" / "bo105_synthetic" / "truth.json").read_text())["parameters"]
+    for n in ("theta_twist", "CL_alpha_HT", "Iyy"):
+        assert kept["parameters"][n] == pytest.approx(truth[n], rel=0.05), n

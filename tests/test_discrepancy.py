@@ -21,7 +21,7 @@ def test_family_names_round_trip_and_bad_name_is_clear():
         generic_term("dM_bump99")
 
 
-@pytest.mark.parametrize("name", ["dM_bump05", "dX_mu4", "dZ_lam", "TAS_scale"])
+@pytest.mark.parametrize("name", ["dM_bump05", "dX_mu4", "dZ_lam", "TAS_scale", "lon_delay"])
 def test_zero_is_m0_in_float_and_pyomo_trims(name):
     t = generic_term(name)
     a, b = trim_float(HelicopterModel(), 30 * KT), trim_float(HelicopterModel(extensions=[t]), 30 * KT)
@@ -59,3 +59,19 @@ def test_sensor_scale_term_scales_the_output():
     x = {"u": f.u, "w": f.w, "q": 0.0, "theta": f.theta, "lambda_i": f.lambda_i}
     a = HelicopterModel().outputs(x, {"col": f.col, "lon": f.lon})["TAS"]
     assert m.outputs(x, {"col": f.col, "lon": f.lon})["TAS"] == pytest.approx(1.03 * a, rel=1e-12)
+
+
+def test_input_time_shift_lags_the_response_and_leaves_the_trim():
+    """lon_delay: c d(lon_d)/dt = lon - lon_d. Trim unchanged; after a lon step the rotor's cyclic follows
+    1 - exp(-t/c), so the pitch rate responds later than M0's (smaller q early on, same sign)."""
+    from pyomo_heli.simulation.inputs import InputSignal
+    from pyomo_heli.simulation.integrate import simulate
+
+    t_ = np.linspace(0.0, 2.0, 101)
+    m = HelicopterModel(extensions=[generic_term("lon_delay")]).with_parameters(c_lon_delay=0.1)
+    a, b = trim_float(HelicopterModel(), 40 * KT), trim_float(m, 40 * KT)
+    assert b.lon == pytest.approx(a.lon, abs=1e-12) and b.extra_states["lon_delayed"] == pytest.approx(a.lon, abs=1e-12)
+    sig = {"lon": InputSignal("lon", "step", 0.5 * DEG, 1.0, t_start=0.5, ramp=0.0)}
+    q0, q1 = (simulate(mm, tp, t_, sig, max_step=0.01)["q"].to_numpy() for mm, tp in ((HelicopterModel(), a), (m, b)))
+    k = np.searchsorted(t_, 0.6)  # 0.1 s after the step: the delayed rotor has seen 63 % of it
+    assert abs(q1[k]) < 0.8 * abs(q0[k]) and np.sign(q1[k]) == np.sign(q0[k])

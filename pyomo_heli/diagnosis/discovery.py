@@ -28,7 +28,9 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
    explains the data as well as the best significant generic term G: with P and G free together,
    ``LR(G | P) = 2 (J_P - J_PG)`` must not be significant at ``alpha`` (G adds nothing once P is in;
    tested at alpha without a multiplicity correction, so that a P is named only when even a lenient test
-   finds nothing for G to add). Of several such P, the one of lowest J is named. Otherwise G is kept and
+   finds nothing for G to add), and P must add something G does not, ``LR(P | G) = 2 (J_G - J_PG)``
+   significant at ``alpha``: when neither adds to the other the two are equivalent on these data, and
+   the data cannot name the physics. Of several such P, the one of lowest J is named. Otherwise G is kept and
    reported as *not explained by any library effect*. A significant physical candidate with no
    significant generic term is taken (the one of lowest J): a physical effect the family cannot describe.
 4. **Nothing significant**: nothing is added; the best generic term's NLP estimate is still reported
@@ -280,7 +282,12 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
         if pair and pair["success"]:
             lr = max(2.0 * (pf["J"] - pair["J"]), 0.0)
             p = float(stats.chi2.sf(lr, 1))
-            row.update(J_PG=pair["J"], LR_G_given_P=lr, p_G_given_P=p, encompasses=bool(p >= alpha))
+            # and the other way: does P add anything once G is in? If not, the two are equivalent on these data
+            # and the physics cannot be named from them
+            lr_pg = max(2.0 * (G["J"] - pair["J"]), 0.0)
+            p_pg = float(stats.chi2.sf(lr_pg, 1))
+            row.update(J_PG=pair["J"], LR_G_given_P=lr, p_G_given_P=p, LR_P_given_G=lr_pg, p_P_given_G=p_pg,
+                       equivalent=bool(p >= alpha and p_pg >= alpha), encompasses=bool(p >= alpha and p_pg < alpha))
         else:
             row.update(encompasses=False, note="joint solve failed")
         rows.append(row)
@@ -293,8 +300,9 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
                            f"{best['candidate']} fitted, {G['name']} adds nothing (LR {best['LR_G_given_P']:.3g}, "
                            f"p = {best['p_G_given_P']:.2g} >= {alpha:g}); named {best['candidate']}")
     else:
-        tested = ", ".join(f"{r['candidate']} (p of {G['name']} given it {r.get('p_G_given_P', float('nan')):.2g})"
-                           for r in rows)
+        tested = ", ".join(f"{r['candidate']} (p of {G['name']} given it {r.get('p_G_given_P', float('nan')):.2g}, "
+                           f"of it given {G['name']} {r.get('p_P_given_G', float('nan')):.2g}"
+                           + ("; equivalent on these data" if r.get("equivalent") else "") + ")" for r in rows)
         out.update(decision="discovered", added=G["name"], initial=float(G["estimate"]), discovered=G,
                    message="not explained by any library effect" + (f" (tested: {tested})" if rows else "")
                            + f"; discovered {describe_fit(G)}, p = {G['p']:.2g} < {level:.2g}")

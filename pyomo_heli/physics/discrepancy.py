@@ -23,9 +23,11 @@ Sensor side (data compatibility of flight-path reconstruction), per channel:
     TAS_scale        TAS_meas = (1 + c) TAS                 airspeed calibration (position error)
     nx_scale         n_x,meas = (1 + c) n_x
     beta0_bias       beta_0,meas = beta_0 + c [rad]
+    lon_delay,       c d(u_d)/dt = u - u_d, the rotor sees u_d: a time shift c [s] of the measured
+      col_delay      control (first order), a lag state added only when c is not zero
 
-(No time shifts: the outputs' rates are not all available at the seam; no n_x / n_z bias:
-the candidate library already holds those as named sensor effects.)
+(No time shifts of the outputs: their rates are not all available at the seam; no n_x / n_z
+bias: the candidate library already holds those as named sensor effects.)
 
 A term's name is ``d<channel>_<regressor>`` (e.g. ``dM_bump05``), its coefficient
 ``c_<channel>_<regressor>``; :func:`generic_term` builds one, :func:`generic_names` lists the
@@ -59,15 +61,17 @@ REGRESSORS = {
     "lon": ("lon/(0.05 rad)", lambda ctx: ctx.lon / 0.05),
 }
 FORCE_CHANNELS = ("X", "Z", "M")
-#: sensor terms: name -> (output, kind, formula)
+#: sensor terms: name -> (output or input, kind, formula)
 SENSOR_TERMS = {
     "TAS_scale": ("TAS", "scale", "TAS_meas = (1 + c) TAS"),
     "nx_scale": ("n_x", "scale", "n_x,meas = (1 + c) n_x"),
     "beta0_bias": ("beta_0", "bias", "beta_0,meas = beta_0 + c [rad]"),
+    "lon_delay": ("lon", "delay", "c d(lon_d)/dt = lon - lon_d, the rotor sees lon_d (input time shift c [s])"),
+    "col_delay": ("col", "delay", "c d(col_d)/dt = col - col_d, the rotor sees col_d (input time shift c [s])"),
 }
 #: coefficient bounds and scale: force (X, Z: fraction of W), moment (fraction of W R), sensor
 BOUNDS = {"X": (-0.2, 0.2, 0.005), "Z": (-0.2, 0.2, 0.005), "M": (-0.02, 0.02, 0.001),
-          "scale": (-0.2, 0.2, 0.01), "bias": (-0.05, 0.05, 0.005)}
+          "scale": (-0.2, 0.2, 0.01), "bias": (-0.05, 0.05, 0.005), "delay": (0.0, 0.3, 0.05)}
 
 
 class GenericTerm(Extension):
@@ -89,6 +93,10 @@ class GenericTerm(Extension):
                 raise KeyError(f"unknown sensor term {regressor!r}; choose from {', '.join(SENSOR_TERMS)}")
             self.name = regressor
             self.kind = SENSOR_TERMS[regressor][1]
+            if self.kind == "delay":  # a lag state; one-sided; the score test's secant step as for a time constant
+                self.states = (f"{SENSOR_TERMS[regressor][0]}_delayed",)
+                self.one_sided = True
+                self.score_step = 0.02
         else:
             raise KeyError(f"unknown discrepancy channel {channel!r}; choose from X, Z, M, sensor")
         self.channel, self.regressor = channel, regressor
@@ -107,7 +115,7 @@ class GenericTerm(Extension):
 
     def parameters(self):
         lo, hi, scale = BOUNDS[self.kind]
-        unit = "rad" if self.kind == "bias" else "-"
+        unit = {"bias": "rad", "delay": "s"}.get(self.kind, "-")
         return [ParameterSpec(self.strength, 0.0, unit, f"generic discrepancy coefficient: {self.formula()}",
                               "discrepancy family", (lo, hi), scale)]
 
@@ -125,8 +133,21 @@ class GenericTerm(Extension):
         d = self.value(ctx)
         return (d, 0.0, 0.0) if self.channel == "X" else (0.0, d, 0.0) if self.channel == "Z" else (0.0, 0.0, d)
 
+    def adjust_controls(self, ctx):
+        if self.kind != "delay":
+            return
+        inp = SENSOR_TERMS[self.regressor][0]
+        setattr(ctx, f"{inp}_commanded", getattr(ctx, inp))
+        setattr(ctx, inp, ctx.x[self.states[0]])
+
+    def state_equations(self, ctx):
+        if self.kind != "delay":
+            return {}
+        inp = SENSOR_TERMS[self.regressor][0]
+        return {self.states[0]: (ctx.p[self.strength], getattr(ctx, f"{inp}_commanded") - ctx.x[self.states[0]])}
+
     def adjust_outputs(self, ctx):
-        if self.channel != "sensor":
+        if self.channel != "sensor" or self.kind == "delay":
             return
         out, kind, _ = SENSOR_TERMS[self.regressor]
         c = ctx.p[self.strength]

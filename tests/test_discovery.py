@@ -77,7 +77,6 @@ def test_held_out_fuselage_download_is_discovered_with_its_shape(tmp_path, itera
         assert (tmp_path / "loop" / f"loop_discovered_{fit['name']}.png").is_file()
 
 
-@pytest.mark.slow
 def test_wake_on_tail_is_still_named_through_encompassing(tmp_path):
     """The small wake instance of tests/test_close_loop.py with discovery: the wake candidate is named, because with
     it fitted the best generic term adds nothing (encompassing)."""
@@ -90,6 +89,7 @@ def test_wake_on_tail_is_still_named_through_encompassing(tmp_path):
     assert doc["stopped"].startswith("iteration limit 0 reached; rotor_wake_on_tail would be added next")
 
 
+@pytest.mark.slow
 def test_held_out_drag_rise_gives_no_wrong_acceptance(tmp_path):
     """Truth: M0 + a drag rise above 80 kt (held out): whatever the loop decides, no library effect is kept."""
     cfg, doc = _loop(tmp_path, "[truth.effects.drag_rise]\nk_dr = 0.15\n", seed=6)

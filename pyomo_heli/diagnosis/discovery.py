@@ -32,7 +32,8 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
    significant at ``alpha``: when neither adds to the other the two are equivalent on these data, and
    the data cannot name the physics. Of several such P, the one of lowest J is named. Otherwise G is kept and
    reported as *not explained by any library effect*. A significant physical candidate with no
-   significant generic term is taken (the one of lowest J): a physical effect the family cannot describe.
+   significant generic term is tested against the best generic term all the same: named if it
+   encompasses it, taken (lowest J) if the two are equivalent, nothing added otherwise ("ambiguous").
 4. **Nothing significant**: nothing is added; the best generic term's NLP estimate is still reported
    as the shape of what is left.
 
@@ -235,8 +236,9 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
             f["p"] = (robust_p(f["LR"], sc.set_index("name").loc[n], getattr(make_candidate(n), "one_sided", False))[0]
                       if cfg.nlp.input_errors else float(sc.set_index("name").loc[n, "p_value"]))
         g = _best(fits, True)
-        if g is None or not g["p"] < level:
+        if g is None:
             return []
+        # every significant physical candidate against the best generic term (significant or not)
         return [(n, g["name"]) for n in phys_screen if fits[n]["success"] and fits[n]["p"] < level]
 
     screen = nlp_screen(cfg, start, gen_screen + phys_screen, pairs=pairs_of, progress=progress)
@@ -267,13 +269,6 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
                            + (f"; best generic description of what is left: {describe_fit(G)}, p = {G['p']:.2g}"
                               if G else ""))
         return out
-    if not g_sig:
-        best = min(p_sig, key=lambda f: f["J"])
-        out.update(decision="accepted", added=best["name"], initial=float(best["estimate"]),
-                   message=f"{best['name']} significant (LR {best['LR']:.3g}, p = {best['p']:.2g} < {level:.2g}) and no "
-                           f"generic term is (best {G['name'] if G else '-'}: p = {G['p'] if G else float('nan'):.2g}): "
-                           "a physical effect the generic family cannot describe")
-        return out
     rows = []
     for pf in p_sig:
         pair = screen["pairs"].get(f"{pf['name']}+{G['name']}")
@@ -293,6 +288,28 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
         rows.append(row)
     out["encompassing"] = rows
     named = [r for r in rows if r["encompasses"]]
+    if not g_sig:
+        # physical candidates significant, no generic term: named when one encompasses the best generic term too
+        if named:
+            best = min(named, key=lambda r: r["J_P"])
+            out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
+                       message=f"{best['candidate']} significant (p < {level:.2g}) and encompasses the best generic "
+                               f"term {G['name']} (not significant itself, p = {G['p']:.2g}): with {best['candidate']} "
+                               f"fitted, {G['name']} adds nothing (p = {best['p_G_given_P']:.2g} >= {alpha:g}), and it "
+                               f"adds to {G['name']} (p = {best['p_P_given_G']:.2g}); named {best['candidate']}")
+            return out
+        equivalent = [r for r in rows if r.get("equivalent")]
+        if equivalent or G is None:
+            best = min(p_sig, key=lambda f: f["J"])
+            out.update(decision="accepted", added=best["name"], initial=float(best["estimate"]),
+                       message=f"{best['name']} significant (LR {best['LR']:.3g}, p = {best['p']:.2g} < {level:.2g}); "
+                               "no generic term is" + (f" (the best, {G['name']}, p = {G['p']:.2g}, is equivalent to it "
+                                                       "on these data)" if G else "") + ": taken by the library")
+            return out
+        out.update(decision="ambiguous", message="physical candidates significant ("
+                   + ", ".join(f["name"] for f in p_sig) + f") but the best generic term {G['name']} adds to each of "
+                   "them: none added")
+        return out
     if named:
         best = min(named, key=lambda r: r["J_P"])
         out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),

@@ -50,7 +50,7 @@ from . import interrupts
 from .config import ConfigError, IdentificationConfig, config_of_result  # noqa: F401 - re-exported
 from .dataset import load_flight_test
 from .diagnosis import attribution as attr
-from .diagnosis.candidates import CANDIDATES, model_with_candidates
+from .diagnosis.candidates import CANDIDATES, make_candidate, model_with_candidates
 from .log import Progress, config_and_dataset, info, results_folder
 from .identify import build_problem, identification_fingerprint, run_identification, shape_values
 from .nlp.identification import identification_data, prepare_data

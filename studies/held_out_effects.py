@@ -30,10 +30,10 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _study_args import in_file, out_folder, positive_int  # noqa: E402
+from _study_args import in_file, out_folder, positive_int
 
-from pyomo_heli.cli import main as cli_main  # noqa: E402
-from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS  # noqa: E402
+from pyomo_heli.cli import main as cli_main
+from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS
 
 ROOT = Path(__file__).resolve().parent.parent
 PARAMETERS = ("theta_twist", "CL_alpha_HT", "Iyy")
@@ -97,7 +97,7 @@ def shape_match(effect: str, fit: dict | None, kept_model=None, params=None) -> 
     """Does a generic term's force or moment along the level trims match the truth's in sign and speed dependence?
     'yes' when the correlation over speed is > 0.7 and the values at the speed of the truth's largest |value| agree
     in sign; 'no' otherwise; 'n/a' without a force/moment term or a truth force in that channel."""
-    from pyomo_heli.physics.discrepancy import REGRESSORS, generic_term
+    from pyomo_heli.physics.discrepancy import generic_term
     from pyomo_heli.physics.model import HelicopterModel
     from pyomo_heli.simulation.trim import trim_float
     from pyomo_heli.units import KT
@@ -138,7 +138,7 @@ def evaluate(effect: str, seed: int, loop: Path) -> dict:
     row = {"truth": effect, "seed": seed, "verdict": "; ".join(decisions) + ("; step rejected" if rejected else ""),
            "added (kept)": "+".join(ik["extensions"]) or "-",
            "final residual": (its[-1].get("residual_diagnosis") or {}).get("status", "-")}
-    pooled = lambda d, keys: float(np.sqrt(np.mean([d[c] ** 2 for c in keys if c in d])))  # noqa: E731
+    pooled = lambda d, keys: float(np.sqrt(np.mean([d[c] ** 2 for c in keys if c in d])))
     row["trim RMS before [deg]"] = np.degrees(pooled(i0["trim_rms"], TRIM))
     row["trim RMS after [deg]"] = np.degrees(pooled(ik["trim_rms"], TRIM))
     row["trim change %"] = 100 * (row["trim RMS after [deg]"] / row["trim RMS before [deg]"] - 1)

@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pytest
+from test_close_loop import WAKE_MANEUVERS, _pooled_trim, make_case
 
 from pyomo_heli.cli import main
 from pyomo_heli.close_loop import validation_check
@@ -17,8 +18,6 @@ from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.candidates import CANDIDATES
 from pyomo_heli.nlp.identification import prepare_data
 from pyomo_heli.physics.model import HelicopterModel
-
-from test_close_loop import WAKE_MANEUVERS, make_case, _pooled_trim
 
 #: a short generic library for the small instances: moment and force terms over speed, and a sensor term
 GENERIC = ["dM_one", "dM_mu2", "dM_bump00", "dM_bump05", "dM_bump10", "dX_mu4", "dZ_one", "dZ_bump00", "TAS_scale"]
@@ -35,7 +34,7 @@ def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iteration
 
 def test_noise_only_nothing_is_accepted(tmp_path):
     """M0 plus sensor noise: no term of the library (10 physical + 9 generic) is significant, nothing is added."""
-    cfg, doc = _loop(tmp_path, "", seed=21)
+    _cfg, doc = _loop(tmp_path, "", seed=21)
     its = doc["iterations"]
     print(its[0]["discovery"]["message"])
     assert len(its) == 1 and its[0]["extensions"] == []
@@ -54,7 +53,7 @@ def test_held_out_fuselage_download_is_discovered_with_its_shape(tmp_path, itera
     generic term must have the truth's sign and speed shape: a nose-up moment or a download that is largest at low
     speed and gone by 60 kt. With one more iteration (slow) the term is added, re-identified, checked by the
     validation rule and drawn in the report."""
-    cfg, doc = _loop(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, max_iterations=iterations)
+    _cfg, doc = _loop(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, max_iterations=iterations)
     its = doc["iterations"]
     d = its[0]["discovery"]
     print(d["message"])
@@ -80,7 +79,7 @@ def test_held_out_fuselage_download_is_discovered_with_its_shape(tmp_path, itera
 def test_wake_on_tail_is_still_named_through_encompassing(tmp_path):
     """The small wake instance of tests/test_close_loop.py with discovery: the wake candidate is named, because with
     it fitted the best generic term adds nothing (encompassing)."""
-    cfg, doc = _loop(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25)
+    _cfg, doc = _loop(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25)
     d = doc["iterations"][0]["discovery"]
     print(d["message"])
     assert d["decision"] == "named" and d["added"] == "rotor_wake_on_tail"
@@ -92,7 +91,7 @@ def test_wake_on_tail_is_still_named_through_encompassing(tmp_path):
 @pytest.mark.slow
 def test_held_out_drag_rise_gives_no_wrong_acceptance(tmp_path):
     """Truth: M0 + a drag rise above 80 kt (held out): whatever the loop decides, no library effect is kept."""
-    cfg, doc = _loop(tmp_path, "[truth.effects.drag_rise]\nk_dr = 0.15\n", seed=6)
+    _cfg, doc = _loop(tmp_path, "[truth.effects.drag_rise]\nk_dr = 0.15\n", seed=6)
     kept = doc["iterations"][doc["final_iteration"]]
     print([it.get("discovery", {}).get("message") for it in doc["iterations"]])
     assert not [n for n in kept["extensions"] if n in CANDIDATES], kept["extensions"]

@@ -4,7 +4,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS

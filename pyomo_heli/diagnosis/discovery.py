@@ -175,7 +175,7 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
             rows[name] = {"name": name, "strength": e.strength, "generic": bool(getattr(e, "generic", False)),
                           "formula": e.formula() if hasattr(e, "formula") else e.describe(), "estimate": c,
                           "shape": {n: vals[n] for n in own[name][1:]}}
-        res = {"J": J, "LR": lr, "LR_trim": 2.0 * (J0_tr - J_tr), "LR_time": 2.0 * (J0 - J0_tr - J + J_tr), "p": float(stats.chi2.sf(lr, len(group))) if lr == lr else float("nan"),
+        res = {"J": J, "LR": lr, "LR_trim": 2.0 * (J0_tr - J_tr), "LR_time": 2.0 * (J0 - J0_tr - J + J_tr), "p": float(stats.chi2.sf(lr, len(group))) if not math.isnan(lr) else float("nan"),
                "success": bool(ok_k), "status": status_k, "terms": rows,
                "parameters": {f.name: vals[f.name] for f in cfg.free}}
         progress(f"    NLP screen: {'+'.join(group)}: "
@@ -192,7 +192,7 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
         r = fit([name])
         one = r.pop("terms")[name]
         # standard error from the profile likelihood's curvature: LR = (c / se)^2
-        one["se"] = abs(one["estimate"]) / math.sqrt(r["LR"]) if r["LR"] == r["LR"] and r["LR"] > 0 else float("nan")
+        one["se"] = abs(one["estimate"]) / math.sqrt(r["LR"]) if not math.isnan(r["LR"]) and r["LR"] > 0 else float("nan")
         fits[name] = {**one, **r}
     if callable(pairs):
         pairs = pairs(fits)
@@ -255,7 +255,7 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
             f["p_robust_LR"], f["p"] = f["p"], float(rows_by.loc[n, "p_value"])
         # standard error from the corrected profile likelihood's curvature: LR_robust = (c / se)^2
         f["se"] = abs(f["estimate"]) / math.sqrt(f["LR_robust"]) if f["LR_robust"] > 0 else float("nan")
-    G, P = _best(fits, True), _best(fits, False)
+    G = _best(fits, True)
     g_sig = G is not None and G["p"] < level
     p_sig = [f for f in fits.values() if not f["generic"] and f["success"] and f["p"] < level]
     if not g_sig and not p_sig:
@@ -331,7 +331,7 @@ def robust_p(lr: float, row, one_sided: bool = False) -> tuple[float, float, flo
     over white-noise statistic: the white-noise variance of the score over its batch-means estimate, capped at 1 so
     the correction never makes the test more liberal), referred to F(1, df) with the score test's df (chi-square(1)
     when df is infinite). Returns (p, corrected LR, df)."""
-    if lr != lr:
+    if math.isnan(lr):
         return float("nan"), float("nan"), float("nan")
     lm, lm_w, df = float(row["LM"]), float(row.get("LM_white", row["LM"])), float(row["df"])
     factor = min(1.0, lm / lm_w) if lm_w > 0 else 1.0
@@ -342,5 +342,5 @@ def robust_p(lr: float, row, one_sided: bool = False) -> tuple[float, float, flo
 
 
 def _best(fits: dict, generic: bool):
-    ok = [f for f in fits.values() if f["generic"] == generic and f["success"] and f["LR"] == f["LR"]]
+    ok = [f for f in fits.values() if f["generic"] == generic and f["success"] and not math.isnan(f["LR"])]
     return max(ok, key=lambda f: f["LR"]) if ok else None

@@ -43,15 +43,18 @@ MU_REF = 0.3
 BUMP_WIDTH = 0.05
 BUMP_CENTRES = {"bump00": 0.0, "bump05": 0.05, "bump10": 0.10, "bump15": 0.15}
 
+def _bump(centre: float):
+    """exp(-((mu - centre)/BUMP_WIDTH)^2) as a function of ctx."""
+    return lambda ctx: ctx.ops.exp(-(((ctx.flow.mu - centre) / BUMP_WIDTH) ** 2))
+
+
 #: regressor -> (formula shown in reports, function of ctx)
 REGRESSORS = {
     "one": ("1", lambda ctx: 1.0),
     "mu": ("mu/0.3", lambda ctx: ctx.flow.mu / MU_REF),
     "mu2": ("(mu/0.3)^2", lambda ctx: (ctx.flow.mu / MU_REF) ** 2),
     "mu4": ("(mu/0.3)^4", lambda ctx: (ctx.flow.mu / MU_REF) ** 4),
-    **{k: (f"exp(-((mu-{c:.2f})/0.05)^2)",
-           (lambda c: lambda ctx: ctx.ops.exp(-(((ctx.flow.mu - c) / BUMP_WIDTH) ** 2)))(c))
-       for k, c in BUMP_CENTRES.items()},
+    **{k: (f"exp(-((mu-{c:.2f})/0.05)^2)", _bump(c)) for k, c in BUMP_CENTRES.items()},
     "alpha": ("(w/V)/0.1", lambda ctx: ctx.x["w"] / ctx.ops.sqrt(ctx.x["u"] ** 2 + ctx.x["w"] ** 2 + ctx.p["eps_v"] ** 2)
               / 0.1),
     "w": ("w/(5 m/s)", lambda ctx: ctx.x["w"] / 5.0),

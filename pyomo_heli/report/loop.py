@@ -26,9 +26,18 @@ from ..nlp.identification import prepare_data
 from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
-from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
-                             read_truth, read_truth_effects, validation_rms)
-
+from .identification import (
+    CURVE_SPEEDS,
+    TRIM_CHANNELS,
+    VALIDATION_OUTPUTS,
+    _fmt,
+    _save,
+    markdown_table,
+    predict,
+    read_truth,
+    read_truth_effects,
+    validation_rms,
+)
 
 #: the closed loop's record in its results folder (written by :mod:`pyomo_heli.close_loop`)
 LOOP_FILE = "loop.json"

@@ -177,7 +177,8 @@ def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: f
 
 
 def _without(cfg: IdentificationConfig, chosen: dict, name: str) -> IdentificationConfig:
-    """``cfg`` without the loop-added effect ``name`` (backward check); the other free parameters start at ``chosen``."""
+    """``cfg`` without the loop-added effect ``name`` (backward check); the other free parameters start at
+    ``chosen``."""
     exts = tuple(e for e in cfg.model.extensions if e.name != name)
     gone = next(e for e in cfg.model.extensions if e.name == name)
     model = HelicopterModel(parameters=cfg.model.parameters, extensions=exts).with_parameters(**{gone.strength: 0.0})
@@ -471,8 +472,9 @@ def _close_loop(cfg, out: Path, settings, progress, restart, ft, id_data, val_ma
             record["backward_check"] = backward
         dropped = [b["name"] for b in backward if not b["significant"]]
         if dropped and i < settings.max_iterations:
+            p_drop = next(b["p"] for b in backward if b["name"] == dropped[0])
             record["decision"] = {"decision": "dropped", "message": f"backward check: {dropped[0]} no longer "
-                                  f"significant (Wald p = {next(b['p'] for b in backward if b['name'] == dropped[0]):.2g})"}
+                                  f"significant (Wald p = {p_drop:.2g})"}
             write_json(out / LOOP_FILE, doc)
             progress(record["decision"]["message"] + "; removed")
             cfg = _without(cfg, chosen, dropped[0])

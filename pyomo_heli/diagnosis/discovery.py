@@ -175,7 +175,8 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
             rows[name] = {"name": name, "strength": e.strength, "generic": bool(getattr(e, "generic", False)),
                           "formula": e.formula() if hasattr(e, "formula") else e.describe(), "estimate": c,
                           "shape": {n: vals[n] for n in own[name][1:]}}
-        res = {"J": J, "LR": lr, "LR_trim": 2.0 * (J0_tr - J_tr), "LR_time": 2.0 * (J0 - J0_tr - J + J_tr), "p": float(stats.chi2.sf(lr, len(group))) if not math.isnan(lr) else float("nan"),
+        res = {"J": J, "LR": lr, "LR_trim": 2.0 * (J0_tr - J_tr), "LR_time": 2.0 * (J0 - J0_tr - J + J_tr),
+               "p": float(stats.chi2.sf(lr, len(group))) if not math.isnan(lr) else float("nan"),
                "success": bool(ok_k), "status": status_k, "terms": rows,
                "parameters": {f.name: vals[f.name] for f in cfg.free}}
         progress(f"    NLP screen: {'+'.join(group)}: "
@@ -192,7 +193,8 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
         r = fit([name])
         one = r.pop("terms")[name]
         # standard error from the profile likelihood's curvature: LR = (c / se)^2
-        one["se"] = abs(one["estimate"]) / math.sqrt(r["LR"]) if not math.isnan(r["LR"]) and r["LR"] > 0 else float("nan")
+        ok_lr = not math.isnan(r["LR"]) and r["LR"] > 0
+        one["se"] = abs(one["estimate"]) / math.sqrt(r["LR"]) if ok_lr else float("nan")
         fits[name] = {**one, **r}
     if callable(pairs):
         pairs = pairs(fits)
@@ -202,7 +204,9 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
 
 
 def describe_fit(fit: dict) -> str:
-    lr = f"LR {fit['LR']:.3g}" + (f", corrected {fit['LR_robust']:.3g} on df {fit['df']:.3g}" if "LR_robust" in fit else "")
+    lr = f"LR {fit['LR']:.3g}"
+    if "LR_robust" in fit:
+        lr += f", corrected {fit['LR_robust']:.3g} on df {fit['df']:.3g}"
     return f"{fit['formula']}, c = {fit['estimate']:.4g} +- {fit['se']:.2g} (NLP estimate; {lr})"
 
 
@@ -250,7 +254,8 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
     criterion = "likelihood ratio" if cfg.nlp.input_errors else "score test"
     out["criterion"] = criterion
     for n, f in fits.items():
-        f["p"], f["LR_robust"], f["df"] = robust_p(f["LR"], rows_by.loc[n], getattr(make_candidate(n), "one_sided", False))
+        one_sided = getattr(make_candidate(n), "one_sided", False)
+        f["p"], f["LR_robust"], f["df"] = robust_p(f["LR"], rows_by.loc[n], one_sided)
         if criterion == "score test":
             f["p_robust_LR"], f["p"] = f["p"], float(rows_by.loc[n, "p_value"])
         # standard error from the corrected profile likelihood's curvature: LR_robust = (c / se)^2
@@ -303,7 +308,8 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
             best = min(p_sig, key=lambda f: f["J"])
             out.update(decision="accepted", added=best["name"], initial=float(best["estimate"]),
                        message=f"{best['name']} significant (LR {best['LR']:.3g}, p = {best['p']:.2g} < {level:.2g}); "
-                               "no generic term is" + (f" (the best, {G['name']}, p = {G['p']:.2g}, is equivalent to it "
+                               "no generic term is"
+                               + (f" (the best, {G['name']}, p = {G['p']:.2g}, is equivalent to it "
                                                        "on these data)" if G else "") + ": taken by the library")
             return out
         out.update(decision="ambiguous", message="physical candidates significant ("

@@ -90,7 +90,8 @@ class CantedTailRotor(Extension):
         sigma = p["Nb"] * p["c"] / (math.pi * p["R"])
         P0 = p["rho"] * math.pi * p["R"] ** 2 * v_tip**3 * sigma * 0.01 / 8.0
         V2 = x["u"] ** 2 + x["w"] ** 2 + p["eps_v"] ** 2
-        P = ctx.thrust * x["lambda_i"] * v_tip + P0 * (1 + 4.65 * ctx.flow.mu**2) + 0.5 * p["rho"] * p["f_e"] * V2 * ops.sqrt(V2)
+        P = (ctx.thrust * x["lambda_i"] * v_tip + P0 * (1 + 4.65 * ctx.flow.mu**2)
+             + 0.5 * p["rho"] * p["f_e"] * V2 * ops.sqrt(V2))
         l_tr = ctx.l_t + 0.9
         T_tr = P / (p["Omega"] * l_tr)
         return 0.0, -p["k_tr"] * T_tr, -l_tr * p["k_tr"] * T_tr

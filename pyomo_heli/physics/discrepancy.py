@@ -55,7 +55,8 @@ REGRESSORS = {
     "mu2": ("(mu/0.3)^2", lambda ctx: (ctx.flow.mu / MU_REF) ** 2),
     "mu4": ("(mu/0.3)^4", lambda ctx: (ctx.flow.mu / MU_REF) ** 4),
     **{k: (f"exp(-((mu-{c:.2f})/0.05)^2)", _bump(c)) for k, c in BUMP_CENTRES.items()},
-    "alpha": ("(w/V)/0.1", lambda ctx: ctx.x["w"] / ctx.ops.sqrt(ctx.x["u"] ** 2 + ctx.x["w"] ** 2 + ctx.p["eps_v"] ** 2)
+    "alpha": ("(w/V)/0.1",
+              lambda ctx: ctx.x["w"] / ctx.ops.sqrt(ctx.x["u"] ** 2 + ctx.x["w"] ** 2 + ctx.p["eps_v"] ** 2)
               / 0.1),
     "w": ("w/(5 m/s)", lambda ctx: ctx.x["w"] / 5.0),
     "q": ("q/(0.2 rad/s)", lambda ctx: ctx.x["q"] / 0.2),
@@ -78,7 +79,8 @@ BOUNDS = {"X": (-0.2, 0.2, 0.005), "Z": (-0.2, 0.2, 0.005), "M": (-0.02, 0.02, 0
 
 
 class GenericTerm(Extension):
-    """One term of the generic discrepancy family (module docstring): dX, dZ or dM = c x norm x phi, or a sensor term."""
+    """One term of the generic discrepancy family (module docstring): dX, dZ or dM = c x norm x phi, or a
+    data-compatibility term."""
 
     score_step = None
     one_sided = False

@@ -26,18 +26,9 @@ from ..nlp.identification import prepare_data
 from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
-from .identification import (
-    CURVE_SPEEDS,
-    TRIM_CHANNELS,
-    VALIDATION_OUTPUTS,
-    _fmt,
-    _save,
-    markdown_table,
-    predict,
-    read_truth,
-    read_truth_effects,
-    validation_rms,
-)
+from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
+                             read_truth, read_truth_effects, validation_rms)
+
 
 #: the closed loop's record in its results folder (written by :mod:`pyomo_heli.close_loop`)
 LOOP_FILE = "loop.json"
@@ -387,14 +378,15 @@ def discovery_summary(doc: dict, cfg, out) -> list[str]:
     model = iteration_model(cfg.model, kept)
     L = ["## Discovered, not explained by any library effect", ""]
     for it, fit in found:
-        c, se = kept["parameters"].get(fit["strength"], fit["estimate"]), (kept.get("standard_errors") or {}).get(fit["strength"])
+        c = kept["parameters"].get(fit["strength"], fit["estimate"])
+        se = (kept.get("standard_errors") or {}).get(fit["strength"])
         se = se if se else fit["se"]
         unit = "N m" if fit["name"].startswith("dM") else "N"
         L += [f"- iteration {it['iteration']}: not explained by any library effect; discovered {fit['formula']}, "
               f"c = {c:.4g} +- {se:.2g} (the kept model's estimate and standard error)", ""]
         if fit["name"][:2] not in ("dX", "dZ", "dM"):
             continue
-        tab = discovered_curve(model, kept["parameters"], fit["name"], [0, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120])
+        tab = discovered_curve(model, kept["parameters"], fit["name"], list(range(0, 121, 10)))
         reg = fit["name"][3:]
         xcol = STATE_OF.get(reg, "mu")
         fig = Figure(figsize=(9, 3.6))

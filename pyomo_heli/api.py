@@ -73,7 +73,7 @@ class Results:
 
         model = HelicopterModel()
         if name not in model.parameters:
-            from .close_loop import model_with_candidates
+            from .workflows.close_loop import model_with_candidates
 
             model = model_with_candidates(model, self.result.info.get("extensions", []))
         spec = model.parameters.spec(name)
@@ -127,7 +127,7 @@ def identify(config, out: str | Path | None = None, *, uncertainty: str = "all",
     """
     if uncertainty not in ("all", "chosen", "none"):
         raise ValueError(f"uncertainty must be 'all', 'chosen' or 'none', got {uncertainty!r}")
-    from .identify import run_identification
+    from .workflows.identify import run_identification
 
     cfg = load_config(config)
     if "linear" in cfg.objectives:

@@ -81,7 +81,7 @@ def positive_int(text: str) -> int:
 
 
 def _starts(text: str) -> int:
-    from .multistart import MAX_STARTS
+    from .workflows.multistart import MAX_STARTS
 
     v = _integer(text)
     if not 1 <= v <= MAX_STARTS:
@@ -412,7 +412,7 @@ def cmd_check_data(args) -> int:
 
 
 def cmd_close_loop(args) -> int:
-    from .close_loop import close_loop, loop_settings
+    from .workflows.close_loop import close_loop, loop_settings
     from .config import load_identification_config
     from .report.loop import write_loop_report
 
@@ -437,7 +437,7 @@ def cmd_close_loop(args) -> int:
         if args.max_iterations < 0:
             raise UserError("option --max-iterations must be >= 0")
         settings.max_iterations = args.max_iterations
-    from .close_loop import IdentificationFailed
+    from .workflows.close_loop import IdentificationFailed
 
     try:
         doc = close_loop(cfg, args.out, settings, restart=args.restart)
@@ -451,8 +451,8 @@ def cmd_close_loop(args) -> int:
 
 
 def cmd_trim_loop(args) -> int:
-    """Trim-only closed loop (pyomo_heli.trim_loop): report, figures and trim_loop.json in --out."""
-    from .trim_loop import TrimIdentificationFailed, load_trim_loop_config, run_trim_loop, write_trim_report
+    """Trim-only closed loop (pyomo_heli.workflows.trim_loop): report, figures and trim_loop.json in --out."""
+    from .workflows.trim_loop import TrimIdentificationFailed, load_trim_loop_config, run_trim_loop, write_trim_report
 
     _check_out_dir(args.out)
     cfg = load_trim_loop_config(args.config)
@@ -527,7 +527,7 @@ def cmd_diagnose(args) -> int:
 
 def cmd_identify(args) -> int:
     from .config import load_identification_config
-    from .identify import run_identification
+    from .workflows.identify import run_identification
 
     overrides = {"pareto": {"cold_check": True}} if getattr(args, "cold_check", False) else None
     _check_out_dir(args.out)
@@ -604,7 +604,7 @@ def cmd_uncertainty(args) -> int:
 
 def cmd_multistart(args) -> int:
     from .config import load_identification_config
-    from .multistart import run_multistart
+    from .workflows.multistart import run_multistart
 
     _check_out_dir(args.out)
     _check_out_not_foreign(args.out, "multi-start")

@@ -6,8 +6,8 @@ solve returns ``NonIpopt_Exception_Thrown``, which looks like an ordinary
 failed solve. A sweep would then store the interrupted iterate as a point and
 go on.
 
-Within :func:`guard` (the command line, :func:`~pyomo_heli.identify.run_identification`,
-:func:`~pyomo_heli.multistart.run_multistart`, :func:`~pyomo_heli.close_loop.close_loop`
+Within :func:`guard` (the command line, :func:`~pyomo_heli.workflows.identify.run_identification`,
+:func:`~pyomo_heli.workflows.multistart.run_multistart`, :func:`~pyomo_heli.workflows.close_loop.close_loop`
 and every solve of :class:`~pyomo_heli.solvers.casadi_ipopt.CasadiIpoptSolver`),
 SIGINT and SIGTERM are recorded and raise :class:`Interrupted` where Python
 code runs. A solver that returns after an interrupt raises it as well

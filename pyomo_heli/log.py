@@ -256,7 +256,8 @@ def ipopt_version() -> str | None:
         import casadi
 
         folder = Path(casadi.__file__).parent
-        libs = sorted(folder.glob("libipopt.so*")) + sorted(folder.glob("libipopt*.dylib")) + sorted(folder.glob("*ipopt*.dll"))
+        libs = (sorted(folder.glob("libipopt.so*")) + sorted(folder.glob("libipopt*.dylib"))
+                + sorted(folder.glob("*ipopt*.dll")))
         for lib in libs:
             try:
                 dll = ctypes.CDLL(str(lib))

@@ -117,7 +117,10 @@ def shape_match(effect: str, fit: dict | None, kept_model=None, params=None) -> 
         vals.append(float(t.value(m.evaluate(x, {"col": tp.col, "lon": tp.lon}))))
     vals = np.array(vals)
     k = int(np.argmax(np.abs(truth)))
-    corr = float(np.corrcoef(truth, vals)[0, 1]) if np.std(vals) > 0 and np.std(truth) > 0 else float(np.sign(truth[k] * vals[k]))
+    if np.std(vals) > 0 and np.std(truth) > 0:
+        corr = float(np.corrcoef(truth, vals)[0, 1])
+    else:
+        corr = float(np.sign(truth[k] * vals[k]))
     return "yes" if corr > 0.7 and np.sign(vals[k]) == np.sign(truth[k]) else f"no (corr {corr:+.2f})"
 
 
@@ -138,7 +141,9 @@ def evaluate(effect: str, seed: int, loop: Path) -> dict:
     row = {"truth": effect, "seed": seed, "verdict": "; ".join(decisions) + ("; step rejected" if rejected else ""),
            "added (kept)": "+".join(ik["extensions"]) or "-",
            "final residual": (its[-1].get("residual_diagnosis") or {}).get("status", "-")}
-    pooled = lambda d, keys: float(np.sqrt(np.mean([d[c] ** 2 for c in keys if c in d])))
+    def pooled(d, keys):
+        return float(np.sqrt(np.mean([d[c] ** 2 for c in keys if c in d])))
+
     row["trim RMS before [deg]"] = np.degrees(pooled(i0["trim_rms"], TRIM))
     row["trim RMS after [deg]"] = np.degrees(pooled(ik["trim_rms"], TRIM))
     row["trim change %"] = 100 * (row["trim RMS after [deg]"] / row["trim RMS before [deg]"] - 1)

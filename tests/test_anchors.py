@@ -13,7 +13,7 @@ import pytest
 
 from pyomo_heli.cli import main
 from pyomo_heli.config import load_identification_config
-from pyomo_heli.identify import run_identification
+from pyomo_heli.workflows.identify import run_identification
 from pyomo_heli.pareto.front import ParetoSolver
 from pyomo_heli.pareto.result import IdentificationResult
 

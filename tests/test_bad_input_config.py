@@ -139,7 +139,7 @@ def test_cli_param_outside_its_domain_is_exit_2(param, capsys):
 
 
 def test_close_loop_candidates_named_twice(tmp_path):
-    from pyomo_heli.close_loop import loop_settings
+    from pyomo_heli.workflows.close_loop import loop_settings
 
     cfg = load_identification_config(write(tmp_path, extra='[loop]\ncandidates = ["cg_offset", "cg_offset"]'))
     with pytest.raises(ConfigError, match=r"\[loop\]: field 'candidates' names \['cg_offset'\] more than once"):

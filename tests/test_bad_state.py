@@ -153,7 +153,7 @@ def test_points_without_checkpoint_are_refused(tmp_path):
 
 
 def test_damaged_checkpoint_of_a_close_loop_iteration_is_named(config, reference, tmp_path):
-    from pyomo_heli.close_loop import _finished
+    from pyomo_heli.workflows.close_loop import _finished
     from pyomo_heli.config import load_identification_config
 
     folder = _copy(reference, tmp_path, "iter_0")
@@ -211,7 +211,7 @@ def test_close_loop_and_multistart_refuse_an_identify_folder(config, reference, 
 def test_close_loop_marks_its_folder_and_resumes_into_it(config, tmp_path, monkeypatch):
     """close_loop writes checkpoint.json {"what": "close-loop"} before the first identification (so a killed
     loop is recognised too), and accepts its own folder again."""
-    import pyomo_heli.close_loop as cl
+    import pyomo_heli.workflows.close_loop as cl
     from pyomo_heli.config import load_identification_config
 
     class Stop(Exception):

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pyomo_heli.benchmark import (compute_ratios, growth_exponent, parameter_difference, repeat_maneuvers,
+from pyomo_heli.workflows.benchmark import (compute_ratios, growth_exponent, parameter_difference, repeat_maneuvers,
                                   solve_breakdown)
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -15,7 +15,7 @@ from pyomo_heli.cli import main
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.attribution import attribute
-from pyomo_heli.identify import run_identification
+from pyomo_heli.workflows.identify import run_identification
 from pyomo_heli.nlp.identification import prepare_data, identification_data
 from pyomo_heli.studies.small_instances import FREE, MANEUVERS, WAKE_MANEUVERS, make_case  # noqa: F401
 
@@ -54,7 +54,7 @@ def test_m0_with_noise_accepts_nothing_with_input_errors(tmp_path, seed):
     # and the residual analysis the loop ends with tests whiteness on the innovations (the input noise taken
     # out): white on every record. (Its trim shape test is a separate matter: on seed 41 the col trim
     # residual of this 2-point front's chosen point has a V^2-plus-bump shape.)
-    from pyomo_heli.close_loop import residual_verdict
+    from pyomo_heli.workflows.close_loop import residual_verdict
     from pyomo_heli.pareto.result import IdentificationResult
 
     verdict = residual_verdict(cfg, IdentificationResult.load(tmp_path / "out").chosen["parameters"], print)
@@ -199,7 +199,7 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
     cfg.path.write_text(text)  # back to the config the loop ran with
     # an iteration's folder is usable with its config alone: the rebuilt model (candidate, shape held) replays to the
     # same trim errors as the loop recorded, and `pyomo-heli uncertainty` gives the added strength a standard error
-    from pyomo_heli.close_loop import config_of_result, errors_of
+    from pyomo_heli.workflows.close_loop import config_of_result, errors_of
     from pyomo_heli.pareto.result import IdentificationResult
 
     res1 = IdentificationResult.load(tmp_path / "loop" / "iter_1")
@@ -281,7 +281,7 @@ def test_bad_loop_table_is_one_line_exit_2(tmp_path, capsys, loop, message):
 def test_an_older_form_of_a_candidate_is_not_reused():
     """The loop reuses a finished identification only for the same effect forms (source hash) and input reference."""
     from pyomo_heli.diagnosis.candidates import RotorWakeOnTail, make_candidate
-    from pyomo_heli.identify import extension_forms
+    from pyomo_heli.workflows.identify import extension_forms
 
     class OlderWake(RotorWakeOnTail):
         def tail_downwash(self, ctx):
@@ -310,7 +310,7 @@ def test_shape_rule_finds_a_known_profile_order_and_keeps_a_right_default(tmp_pa
     is near 3; with the default profile in the data (n_wt = 6) the test keeps the default. The decision is
     written to disk and a second call with the same config reads it back.
     """
-    from pyomo_heli.close_loop import _with_candidate, select_shape
+    from pyomo_heli.workflows.close_loop import _with_candidate, select_shape
     from pyomo_heli.diagnosis.candidates import RotorWakeOnTail
     from pyomo_heli.flighttest import truth_effects
 
@@ -341,7 +341,7 @@ def test_a_shape_parameter_without_bounds_is_a_clear_error(tmp_path):
     """select_shape refuses a candidate whose shape parameter has no bounds, naming candidate and parameter."""
     import dataclasses
 
-    from pyomo_heli.close_loop import ConfigError, _with_candidate, select_shape
+    from pyomo_heli.workflows.close_loop import ConfigError, _with_candidate, select_shape
     from pyomo_heli.diagnosis.candidates import RotorWakeOnTail
     from pyomo_heli.physics.model import HelicopterModel
     from pyomo_heli.physics.parameters import ParameterSpec
@@ -366,7 +366,7 @@ def test_config_of_result_rebuilds_a_loop_iteration_or_names_the_mismatch():
     from pathlib import Path
     from types import SimpleNamespace
 
-    from pyomo_heli.close_loop import ConfigError, config_of_result
+    from pyomo_heli.workflows.close_loop import ConfigError, config_of_result
 
     cfg = load_identification_config(Path(__file__).resolve().parent / "configs" / "close_loop.toml")
     base = ["theta_twist", "CL_alpha_HT", "Iyy"]
@@ -428,8 +428,8 @@ def test_a_finished_iteration_is_reused_only_under_the_same_fingerprint(tmp_path
     import shutil
     from pathlib import Path
 
-    from pyomo_heli.close_loop import _finished
-    from pyomo_heli.identify import identification_fingerprint
+    from pyomo_heli.workflows.close_loop import _finished
+    from pyomo_heli.workflows.identify import identification_fingerprint
 
     root = Path(__file__).resolve().parent
     cfg = load_identification_config(root / "configs" / "m0_noise_small.toml")

@@ -12,7 +12,7 @@ import pytest
 from test_close_loop import WAKE_MANEUVERS, _pooled_trim, make_case
 
 from pyomo_heli.cli import main
-from pyomo_heli.close_loop import validation_check
+from pyomo_heli.workflows.close_loop import validation_check
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.candidates import CANDIDATES

@@ -47,7 +47,8 @@ def test_a_moment_term_is_the_same_in_float_and_pyomo_and_equals_its_equation():
     ctx = m.evaluate(x, {"col": f.col, "lon": f.lon})
     p = m.parameters
     mu = ctx.flow.mu
-    assert t.value(ctx) == pytest.approx(0.002 * p["m"] * p["g"] * p["R"] * np.exp(-((mu - 0.05) / 0.05) ** 2), rel=1e-12)
+    expected = 0.002 * p["m"] * p["g"] * p["R"] * np.exp(-((mu - 0.05) / 0.05) ** 2)
+    assert t.value(ctx) == pytest.approx(expected, rel=1e-12)
     ctx0 = HelicopterModel().evaluate(x, {"col": f.col, "lon": f.lon})
     assert ctx.forces.M - ctx0.forces.M == pytest.approx(t.value(ctx), rel=1e-9)
 

@@ -16,7 +16,7 @@ import pytest
 
 from pyomo_heli.config import ConfigError, load_identification_config
 from pyomo_heli.dataset import load_flight_test
-from pyomo_heli.identify import run_identification
+from pyomo_heli.workflows.identify import run_identification
 from pyomo_heli.nlp.identification import prepare_data
 from pyomo_heli.nlp.single_shooting import fit_single_shooting
 from pyomo_heli.pareto.result import IdentificationResult

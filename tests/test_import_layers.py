@@ -17,7 +17,7 @@ The layers, lowest first (a top-level module or subpackage of pyomo_heli per nam
 8. ``flighttest``: the synthetic flight-test generator, with the truth effects; nothing of the
    analysis below may import it (the truth must not reach the identification or the diagnosis)
 9. ``report``: figures and tables of results; it formats, it runs nothing above it
-10. workflows: ``identify``, ``identify_linear``, ``close_loop``, ``trim_loop``, ``multistart``, ``benchmark``
+10. ``workflows``: ``identify``, ``identify_linear``, ``close_loop``, ``trim_loop``, ``multistart``, ``benchmark``
 11. the front doors: ``cli``, ``__main__``, the Python ``api`` and the package's ``__init__`` (it
     re-exports the API and registers the Pyomo solver plugin)
 12. ``studies``: the reusable studies run by ``studies/*.py`` (they drive the command line and the workflows)
@@ -45,7 +45,7 @@ LAYERS = [
     {"uncertainty"},
     {"flighttest"},
     {"report"},
-    {"identify", "identify_linear", "close_loop", "trim_loop", "multistart", "benchmark"},
+    {"workflows"},
     {"cli", "__main__", "api", ""},
     {"studies"},
 ]
@@ -129,8 +129,10 @@ def test_imports_point_down():
 
 
 @pytest.mark.parametrize("source, expected", [
-    ("from ..identify import build_problem\n", ["pyomo_heli.identify"]),  # a relative import, resolved
-    ("def f():\n    from pyomo_heli.close_loop import load_loop\n", ["pyomo_heli.close_loop"]),  # in a function
+    # a relative import, resolved
+    ("from ..workflows.identify import build_problem\n", ["pyomo_heli.workflows.identify"]),
+    ("def f():\n    from pyomo_heli.workflows.close_loop import load_loop\n",
+     ["pyomo_heli.workflows.close_loop"]),  # in a function
     ("from .. import report\n", ["pyomo_heli.report"]),  # a subpackage named in the import list
     ("from .. import __version__\n", ["pyomo_heli"]),  # a name of the package itself
     ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from ..config import X\n", []),  # annotation only

@@ -17,7 +17,7 @@ import pytest
 from pyomo_heli.config import ConfigError, load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.flighttest.sensors import DEFAULT_SIGMA
-from pyomo_heli.identify import build_problem
+from pyomo_heli.workflows.identify import build_problem
 from pyomo_heli.nlp.identification import NLPOptions, prepare_data, identification_data
 from pyomo_heli.nlp.objectives import lead_in_sigma
 from pyomo_heli.nlp.parameters import free_parameter_values

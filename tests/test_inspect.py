@@ -71,7 +71,7 @@ def report(cli_run, short_cfg):  # cli_run first: the CLI works while this build
 def test_dof_matches_idaes_and_free_parameters(report, short_cfg):
     from idaes.core.util.model_statistics import degrees_of_freedom
 
-    from pyomo_heli.identify import build_problem
+    from pyomo_heli.workflows.identify import build_problem
 
     free, eq, dof, dof_idaes_reported, verdict = _dof_line(report)
     m, _, _ = build_problem(short_cfg)

@@ -13,7 +13,7 @@ import pytest
 
 from pyomo_heli import __version__
 from pyomo_heli.cli import main
-from pyomo_heli.log import (Progress, configure_console, format_parameters, get_logger, log_to_folder, provenance,
+from pyomo_heli.log import (Progress, configure_console, format_parameters, get_logger, provenance,
                             results_folder, write_provenance)
 from pyomo_heli.physics.parameters import bo105
 from pyomo_heli.units import DEG
@@ -185,10 +185,7 @@ def test_git_commit_is_recorded_in_a_checkout(tmp_path):
 
 def test_ipopt_version_is_the_one_casadi_runs(tmp_path):
     """The recorded Ipopt version is the banner version of a real casadi Ipopt solve."""
-    import casadi
-
     doc = json.loads(write_provenance(tmp_path).read_text())
-    x = casadi.SX.sym("x")
     script = ("import casadi; x = casadi.SX.sym('x');"
               "s = casadi.nlpsol('s', 'ipopt', {'x': x, 'f': (x - 1) ** 2}, {'ipopt.print_level': 5});"
               "s(x0=0)")

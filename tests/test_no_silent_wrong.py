@@ -268,7 +268,7 @@ def test_a_folder_without_the_records_is_checked_for_what_it_has(checkout):
 def test_close_loop_does_not_reuse_an_iteration_fitted_to_other_data(checkout):
     """A finished identification without checkpoint.json (a copy, as under docs/results) on edited data is
     identified again, not reused."""
-    from pyomo_heli.close_loop import _finished
+    from pyomo_heli.workflows.close_loop import _finished
     from pyomo_heli.config import load_identification_config
 
     (checkout / "res" / "checkpoint.json").unlink()

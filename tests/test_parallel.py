@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from pyomo_heli.config import load_identification_config
-from pyomo_heli.multistart import run_multistart
+from pyomo_heli.workflows.multistart import run_multistart
 from pyomo_heli.parallel import dask_executor, run_tasks
 from pyomo_heli.physics.parameters import bo105
 from pyomo_heli.uncertainty.monte_carlo import ProblemSpec, run_monte_carlo
@@ -58,7 +58,8 @@ def test_multistart_on_dask_equals_serial(cluster, tmp_path):
 
 def test_monte_carlo_on_dask_equals_serial(cluster, tmp_path):
     spec = ProblemSpec.make(CONFIGS / "mc_time_small.toml")
-    kw = dict(truth=dict(bo105()), multi_objective=False, sigma={"q": 0.002, "theta": 0.002, "n_x": 0.01, "n_z": 0.01, "TAS": 0.3}, trim_sigma={}, crb=False,
+    sigma = {"q": 0.002, "theta": 0.002, "n_x": 0.01, "n_z": 0.01, "TAS": 0.3}
+    kw = dict(truth=dict(bo105()), multi_objective=False, sigma=sigma, trim_sigma={}, crb=False,
               **QUIET)
     serial = run_monte_carlo(spec, 2, seed=11, out=tmp_path / "serial", workers=0, **kw)
     dask = run_monte_carlo(spec, 2, seed=11, out=tmp_path / "dask", executor=cluster, **kw)
@@ -73,7 +74,7 @@ def test_cli_multistart_sends_the_starts_to_a_scheduler(tmp_path):
     from distributed import LocalCluster
 
     from pyomo_heli.cli import main
-    from pyomo_heli.multistart import MultistartResult
+    from pyomo_heli.workflows.multistart import MultistartResult
 
     config = str(CONFIGS / "tiny_case1_noisy.toml")
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster:

@@ -15,7 +15,7 @@ import pytest
 import scipy.sparse as sp
 
 from pyomo_heli.config import load_identification_config
-from pyomo_heli.identify import build_problem
+from pyomo_heli.workflows.identify import build_problem
 from pyomo_heli.nlp.parameters import free_parameter_values
 from pyomo_heli.pareto.front import ParetoSolver
 from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver, CasadiSettings

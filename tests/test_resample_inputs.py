@@ -13,7 +13,7 @@ import pytest
 
 from pyomo_heli.config import ConfigError, load_identification_config
 from pyomo_heli.dataset import load_flight_test
-from pyomo_heli.identify import build_problem
+from pyomo_heli.workflows.identify import build_problem
 from pyomo_heli.nlp.identification import identification_data, prepare_data, project_inputs
 from pyomo_heli.nlp.parameters import free_parameter_values
 from pyomo_heli.pareto.front import ParetoSolver
@@ -72,7 +72,7 @@ def test_default_is_project_and_the_fingerprint_keys_on_the_resolved_value():
     """The default is ``project``; a store is resumed by the value ``resample_inputs`` resolves to: a config
     that says ``sample`` resumes the stores made before the key existed (when picking was the default), one
     without the key does not; ``[diagnosis]`` does not enter."""
-    from pyomo_heli.identify import identification_fingerprint
+    from pyomo_heli.workflows.identify import identification_fingerprint
     from pyomo_heli.pareto.store import fingerprint
 
     case1 = Path(__file__).resolve().parent / "configs" / "case1.toml"

@@ -19,8 +19,8 @@ import pandas as pd
 import pytest
 
 from pyomo_heli.config import load_identification_config
-from pyomo_heli.identify import build_problem, run_identification
-from pyomo_heli.multistart import MultistartResult, draw_starts, run_multistart
+from pyomo_heli.workflows.identify import build_problem, run_identification
+from pyomo_heli.workflows.multistart import MultistartResult, draw_starts, run_multistart
 from pyomo_heli.nlp.identification import initialise_at
 from pyomo_heli.pareto.front import ParetoSolver, _Snapshot
 from pyomo_heli.pareto.store import PointStore, StoreMismatchError

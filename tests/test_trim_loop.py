@@ -18,7 +18,7 @@ from pyomo_heli.nlp.parameters import FreeParameter
 from pyomo_heli.physics.conventions import THETA_DATUM, TrimOutputDatum, recorded_trim
 from pyomo_heli.physics.model import HelicopterModel
 from pyomo_heli.simulation.trim import trim_sweep
-from pyomo_heli.trim_loop import (
+from pyomo_heli.workflows.trim_loop import (
     TrimLoopConfig,
     TrimLoopError,
     load_trim_loop_config,

@@ -36,7 +36,7 @@ class Candidate(Extension):
     signature: str = ""
     #: shape parameters (not the strength): at their defaults the candidate has its documented form; the
     #: closed loop may free them at the time-domain anchor only, with a likelihood-ratio test against the
-    #: defaults, and then holds them for the whole front (pyomo_heli.close_loop.select_shape)
+    #: defaults, and then holds them for the whole front (pyomo_heli.workflows.close_loop.select_shape)
     shape_parameters: tuple[str, ...] = ()
 
 

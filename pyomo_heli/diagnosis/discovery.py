@@ -39,7 +39,7 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
 
 The backward check (a term added earlier that is no longer significant once the new one is in) and the
 validation rule (a step that makes validation significantly worse on any output is rejected) are run by
-the loop (:mod:`pyomo_heli.close_loop`).
+the loop (:mod:`pyomo_heli.workflows.close_loop`).
 """
 from __future__ import annotations
 
@@ -101,7 +101,7 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
     """
     import pyomo.environ as pyo
 
-    from ..identify import build_problem
+    from ..workflows.identify import build_problem
     from ..nlp.parameters import FreeParameter, free_parameter_values
     from ..pareto.front import _Snapshot
     from ..physics.model import HelicopterModel

@@ -274,7 +274,7 @@ def write_report(out_dir, cfg, results_dir=None, figure_format: str = "png") -> 
           f"(NLP build {_fmt(info.get('build_time'), 3)} s, solver setup {_fmt(info.get('solver_setup_time'), 3)} s)",
           "- models compared below: **time-domain (A)** = the J_time anchor (classic output error), "
           "**multi-objective (C)** = the front point closest to the utopia point (Eq. 11)", ""]
-    if info.get("unreliable"):  # an anchor did not converge (pyomo_heli.identify): say so before any number
+    if info.get("unreliable"):  # an anchor did not converge (pyomo_heli.workflows.identify): say so before any number
         u = info["unreliable"]
         L += [f"> **UNRELIABLE**: {u.get('reason')}. The {', '.join(u.get('quantities', []))} depend on the "
               "anchors and are not to be trusted (chosen.json `info.unreliable`).", ""]

@@ -1,6 +1,6 @@
 """The report of a closed loop: the error before and after each added effect.
 
-:func:`write_loop_report` reads ``loop.json`` (see :mod:`pyomo_heli.close_loop`)
+:func:`write_loop_report` reads ``loop.json`` (see :mod:`pyomo_heli.workflows.close_loop`)
 and writes next to it:
 
 - ``loop_trim_vs_speed.png``  trim col, lon, theta vs speed: data and the model of every iteration
@@ -30,7 +30,7 @@ from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _f
                              read_truth, read_truth_effects, validation_rms)
 
 
-#: the closed loop's record in its results folder (written by :mod:`pyomo_heli.close_loop`)
+#: the closed loop's record in its results folder (written by :mod:`pyomo_heli.workflows.close_loop`)
 LOOP_FILE = "loop.json"
 
 

@@ -1,4 +1,4 @@
-"""Rerunnable performance benchmark (see docs/performance.md and pyomo_heli/benchmark.py).
+"""Rerunnable performance benchmark (see docs/performance.md and pyomo_heli/workflows/benchmark.py).
 
     python studies/benchmark.py                               # Case 1 config, front + single shooting, size 1x
     python studies/benchmark.py --shooting solve_ivp          # classic shooting over scipy solve_ivp (slow)
@@ -21,7 +21,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, tests/configs/
 
-from pyomo_heli.benchmark import BenchmarkSettings, format_tables, run_benchmark  # noqa: E402
+from pyomo_heli.workflows.benchmark import BenchmarkSettings, format_tables, run_benchmark  # noqa: E402
 from pyomo_heli.config import ConfigError  # noqa: E402
 
 #: --quick: a tiny instance (two maneuvers cut to 1 s, 3 front points, sizes 1x and 2x) and no single

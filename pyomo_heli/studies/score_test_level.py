@@ -43,7 +43,7 @@ from scipy import stats
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.diagnosis.attribution import SEGMENT_S, Attribution, attribute
 from pyomo_heli.diagnosis.candidates import make_candidate
-from pyomo_heli.identify import run_identification
+from pyomo_heli.workflows.identify import run_identification
 from pyomo_heli.nlp.identification import identification_data
 
 from . import small_instances as T

@@ -9,7 +9,7 @@ is M0 at f_e = 1.4 m^2, x_h = 0.02 m (``--truth m0``: nothing missing, every can
 or that plus the truth simulator's wake-on-tail effect E1, K_lamT = 1.5 (``--truth wake``, written
 independently of the candidates). It identifies f_e, x_h, a and the datum from the nominal table (nothing
 held out) and prints, per seed, the score test's decision and every testable candidate's p-value
-(:func:`pyomo_heli.trim_loop.score_trims`, level 0.01 over the testable candidates), then the fraction of
+(:func:`pyomo_heli.workflows.trim_loop.score_trims`, level 0.01 over the testable candidates), then the fraction of
 p-values below 0.05 and 0.01 and the count of seeds with an acceptance.
 """
 from __future__ import annotations
@@ -29,7 +29,7 @@ from pyomo_heli.flighttest.truth_effects import make_effect
 from pyomo_heli.nlp.parameters import FreeParameter
 from pyomo_heli.physics.conventions import TrimOutputDatum
 from pyomo_heli.physics.model import HelicopterModel
-from pyomo_heli.trim_loop import TrimLoopConfig, predict, run_trim_loop
+from pyomo_heli.workflows.trim_loop import TrimLoopConfig, predict, run_trim_loop
 
 from .args import positive_float
 

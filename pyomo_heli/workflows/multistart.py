@@ -31,15 +31,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .config import IdentificationConfig
+from ..config import IdentificationConfig
 from .identify import build_problem
-from .log import Progress, config_and_dataset, format_parameters, info, results_folder
-from .nlp.identification import initialise_at
-from .pareto.front import FrontPoint, ParetoSolver
-from .pareto.result import write_csv, write_json
-from . import interrupts
-from .pareto.snapshot import Snapshot
-from .pareto.store import FolderLock, PointStore, claim_folder, fingerprint, variable_values
+from ..log import Progress, config_and_dataset, format_parameters, info, results_folder
+from ..nlp.identification import initialise_at
+from ..pareto.front import FrontPoint, ParetoSolver
+from ..pareto.result import write_csv, write_json
+from .. import interrupts
+from ..pareto.snapshot import Snapshot
+from ..pareto.store import FolderLock, PointStore, claim_folder, fingerprint, variable_values
 
 PROBLEMS = ("time", "epsilon")
 
@@ -100,7 +100,7 @@ class MultistartResult:
                    epsilon=d["epsilon"], seed=d["seed"], rtol=d["rtol"], best=d["best"], info=d["info"])
 
     def __str__(self) -> str:
-        from .units import display_unit
+        from ..units import display_unit
 
         cols = (["start"] + [f"initial_{p}" for p in self.parameters] + self.parameters
                 + ["objective", "status", "iterations", "reached_best"])
@@ -248,7 +248,7 @@ def _run_multistart(cfg, out: Path, starts, seed, problem, epsilon, rtol, restar
             store.save(f"start{t.k:03d}", row, m if p.iterations > 0 else None)
             finished(t.k, t.guess, row, False)
     elif todo := list(pending()):
-        from .parallel import run_tasks
+        from ..parallel import run_tasks
 
         progress(f"solving {len(todo)} start(s) on {type(executor).__name__} workers (each builds the NLP once)")
 

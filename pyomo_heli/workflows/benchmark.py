@@ -30,12 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .log import info
-from .config import load_identification_config
-from .dataset import load_flight_test
-from .nlp.identification import IdentificationData, build_identification_nlp, prepare_data
-from .nlp.single_shooting import fit_single_shooting
-from .pareto.front import ParetoSolver
+from ..log import info
+from ..config import load_identification_config
+from ..dataset import load_flight_test
+from ..nlp.identification import IdentificationData, build_identification_nlp, prepare_data
+from ..nlp.single_shooting import fit_single_shooting
+from ..pareto.front import ParetoSolver
 
 #: the issue's targets: (ratio key, limit, "max" = value must be at most the limit, "min" = at least)
 TARGETS = {

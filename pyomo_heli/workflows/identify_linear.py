@@ -1,6 +1,6 @@
 """Tri-objective identification run: data -> frequency responses -> NLP with J_linear -> 2-D front.
 
-Called by :func:`pyomo_heli.identify.run_identification` when a config's
+Called by :func:`pyomo_heli.workflows.identify.run_identification` when a config's
 ``[objectives] use`` includes "linear". Files written into ``out`` (each front
 point as soon as it is solved):
 
@@ -21,13 +21,13 @@ from pathlib import Path
 
 import pandas as pd
 
-from .log import Progress, format_parameters, info
-from .dataset import load_flight_test
-from .dataset.frequency_response import frequency_responses, save_responses
-from .nlp.identification import build_identification_nlp, identification_data
-from .pareto.result import IdentificationResult
-from .pareto.tri_front import TriParetoSolver, utopia_distance_n
-from .provenance import provenance_info
+from ..log import Progress, format_parameters, info
+from ..dataset import load_flight_test
+from ..dataset.frequency_response import frequency_responses, save_responses
+from ..nlp.identification import build_identification_nlp, identification_data
+from ..pareto.result import IdentificationResult
+from ..pareto.tri_front import TriParetoSolver, utopia_distance_n
+from ..provenance import provenance_info
 
 
 def _point_dict(p) -> dict:

@@ -38,13 +38,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .dataset import load_flight_test
-from .dataset.schema import KT, TRIM_CHANNELS, TrimConventions
-from .nlp.parameters import FreeParameter
-from .physics.conventions import THETA_DATUM, TrimOutputDatum, recorded_trim
-from .physics.model import HelicopterModel
-from .physics.parameters import DEG
-from .simulation.trim import trim_sweep
+from ..dataset import load_flight_test
+from ..dataset.schema import KT, TRIM_CHANNELS, TrimConventions
+from ..nlp.parameters import FreeParameter
+from ..physics.conventions import THETA_DATUM, TrimOutputDatum, recorded_trim
+from ..physics.model import HelicopterModel
+from ..physics.parameters import DEG
+from ..simulation.trim import trim_sweep
 
 RESULT_FILE = "trim_loop.json"
 REPORT_FILE = "report.md"
@@ -80,10 +80,10 @@ class TrimLoopConfig:
 
 
 def load_trim_loop_config(path) -> TrimLoopConfig:
-    from .config import _finite, _need, _only, _unit_factor
-    from .diagnosis.attribution import ALPHA, CONFOUND_CORR, RATIO
-    from .diagnosis.candidates import CANDIDATES
-    from .tomlfile import read_toml
+    from ..config import _finite, _need, _only, _unit_factor
+    from ..diagnosis.attribution import ALPHA, CONFOUND_CORR, RATIO
+    from ..diagnosis.candidates import CANDIDATES
+    from ..tomlfile import read_toml
 
     path = Path(path)
     raw = read_toml(path, TrimLoopError)
@@ -159,7 +159,7 @@ def load_trim_loop_config(path) -> TrimLoopConfig:
     _only(sol, ("name", "options"), f"{f} [solver]")
     solver = _need(sol, "name", f"{f} [solver]", str, "casadi-ipopt")
     options = dict(_need(sol, "options", f"{f} [solver]", dict, {}))
-    from .solvers import SOLVER_NAMES, validate_solver_options
+    from ..solvers import SOLVER_NAMES, validate_solver_options
 
     if solver not in SOLVER_NAMES:
         raise TrimLoopError(f"{f} [solver]: field 'name': unknown solver {solver!r}; "
@@ -228,9 +228,9 @@ def build_trim_nlp(model: HelicopterModel, free, pts: pd.DataFrame, conventions)
     """The trim-only identification NLP: trim blocks per distinct speed, J_trim over ``pts`` as objective."""
     import pyomo.environ as pyo
 
-    from .nlp.objectives import add_trim_objective
-    from .nlp.parameters import add_parameters
-    from .nlp.trim_block import build_trim_block
+    from ..nlp.objectives import add_trim_objective
+    from ..nlp.parameters import add_parameters
+    from ..nlp.trim_block import build_trim_block
 
     m = pyo.ConcreteModel(name="trim_identification")
     pmap = add_parameters(m, model.parameters, free)
@@ -258,8 +258,8 @@ def identify_trims(model: HelicopterModel, free, pts: pd.DataFrame, conventions,
     """Minimise J_trim over the free parameters; returns (values SI, solve info). RuntimeError on failure."""
     import pyomo.environ as pyo
 
-    from .nlp.parameters import free_parameter_values
-    from .solvers import make_solver
+    from ..nlp.parameters import free_parameter_values
+    from ..solvers import make_solver
 
     m = build_trim_nlp(model, free, pts, conventions)
     res = make_solver(m, solver, options).solve(warm_start="none")
@@ -319,7 +319,7 @@ def score_trims(model: HelicopterModel, conventions, pts: pd.DataFrame, identifi
     """
     from scipy import stats
 
-    from .diagnosis.candidates import CANDIDATES, make_candidate
+    from ..diagnosis.candidates import CANDIDATES, make_candidate
 
     have = {e.name for e in model.extensions}
     names = [n for n in (candidates or list(CANDIDATES)) if n not in have]
@@ -453,7 +453,7 @@ def rms_by(pts: pd.DataFrame, e_deg: np.ndarray) -> dict:
 # ---------------------------------------------------------------- the loop
 def _load(cfg: TrimLoopConfig):
     """The config's dataset; its problems as one line naming each file and row or field."""
-    from .dataset import DatasetError
+    from ..dataset import DatasetError
 
     try:
         return load_flight_test(cfg.dataset)
@@ -472,8 +472,8 @@ def _model_of(cfg: TrimLoopConfig, ft, extensions=(), values: dict | None = None
 
 def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
     """Identify, test the candidates, add the accepted one, repeat; write ``out/trim_loop.json``."""
-    from .dataset.reader import check_model_matches_manifest
-    from .diagnosis.candidates import make_candidate
+    from ..dataset.reader import check_model_matches_manifest
+    from ..diagnosis.candidates import make_candidate
 
     ft = _load(cfg)
     out = Path(out)
@@ -599,7 +599,7 @@ def _plain(v):
 # ---------------------------------------------------------------- report and figures
 def dense_curves(cfg: TrimLoopConfig, doc: dict, which: int | None) -> dict:
     """Model trim curves [deg] on a speed grid: initial guess (which None) or iteration ``which``'s estimate."""
-    from .diagnosis.candidates import make_candidate
+    from ..diagnosis.candidates import make_candidate
 
     ft = _load(cfg)
     kt = np.linspace(0.0, max(doc["points"]["speed_kt"]) + 5.0, 45)

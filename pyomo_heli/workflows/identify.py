@@ -12,15 +12,15 @@ from pathlib import Path
 
 import pandas as pd
 
-from .config import IdentificationConfig
-from .log import Progress, config_and_dataset, format_parameters, info, results_folder
-from .nlp.identification import build_problem
-from .physics.extensions import extension_forms  # noqa: F401 - re-exported
-from .pareto.front import ParetoSolver, utopia_distance
-from .pareto.result import IdentificationResult, write_csv
-from . import interrupts
-from .pareto.store import FolderLock, PointStore, claim_folder, fingerprint
-from .provenance import provenance_info
+from ..config import IdentificationConfig
+from ..log import Progress, config_and_dataset, format_parameters, info, results_folder
+from ..nlp.identification import build_problem
+from ..physics.extensions import extension_forms  # noqa: F401 - re-exported
+from ..pareto.front import ParetoSolver, utopia_distance
+from ..pareto.result import IdentificationResult, write_csv
+from .. import interrupts
+from ..pareto.store import FolderLock, PointStore, claim_folder, fingerprint
+from ..provenance import provenance_info
 
 
 #: what the anchors define: unreliable when one of them did not converge (chosen.json info.unreliable)
@@ -173,7 +173,7 @@ def _run_identification(cfg, out: Path, progress, restart, uncertainty) -> Ident
               **provenance_info(cfg)})  # the config by content, the data's hash, the model: checked by readers
     result.save(out)
     if uncertainty and uncertainty != "none" and result.chosen is not None:
-        from .uncertainty.front import add_uncertainty
+        from ..uncertainty.front import add_uncertainty
 
         t2 = time.perf_counter()
         add_uncertainty(result, cfg, data, out, progress, points="chosen" if uncertainty == "chosen" else "all")

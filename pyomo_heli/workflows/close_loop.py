@@ -3,7 +3,7 @@
 ``close_loop(cfg, out)`` runs, for iteration i = 0, 1, ...:
 
 1. the whole identification (Pareto front, utopia choice) with the current
-   model (:func:`pyomo_heli.identify.run_identification`) into ``out/iter_i``;
+   model (:func:`pyomo_heli.workflows.identify.run_identification`) into ``out/iter_i``;
 2. the errors of the model at the diagnosed point (``[loop] point``): RMS of data minus model per output on the
    identification and the validation maneuvers and per trim channel
    (float-model replay of :mod:`pyomo_heli.report.identification`);
@@ -46,20 +46,20 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import interrupts
-from .config import ConfigError, IdentificationConfig, config_of_result  # noqa: F401 - re-exported
-from .dataset import load_flight_test
-from .diagnosis import attribution as attr
-from .diagnosis.candidates import CANDIDATES, make_candidate, model_with_candidates
-from .log import Progress, config_and_dataset, info, results_folder
+from .. import interrupts
+from ..config import ConfigError, IdentificationConfig, config_of_result  # noqa: F401 - re-exported
+from ..dataset import load_flight_test
+from ..diagnosis import attribution as attr
+from ..diagnosis.candidates import CANDIDATES, make_candidate, model_with_candidates
+from ..log import Progress, config_and_dataset, info, results_folder
 from .identify import build_problem, identification_fingerprint, run_identification, shape_values
-from .nlp.identification import identification_data, prepare_data
-from .nlp.parameters import FreeParameter
-from .pareto.result import write_json
-from .pareto.store import FolderLock, claim_folder, read_checkpoint, write_checkpoint
-from .physics.model import HelicopterModel
-from .report.identification import CURVE_SPEEDS, predict, trim_rms, validation_rms
-from .report.loop import LOOP_FILE, load_loop  # noqa: F401 - load_loop re-exported (studies)
+from ..nlp.identification import identification_data, prepare_data
+from ..nlp.parameters import FreeParameter
+from ..pareto.result import write_json
+from ..pareto.store import FolderLock, claim_folder, read_checkpoint, write_checkpoint
+from ..physics.model import HelicopterModel
+from ..report.identification import CURVE_SPEEDS, predict, trim_rms, validation_rms
+from ..report.loop import LOOP_FILE, load_loop  # noqa: F401 - load_loop re-exported (studies)
 
 
 @dataclass
@@ -143,7 +143,7 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
                 raise ConfigError(f"{where}: field '{key}' must be true or false, got {raw[key]!r}")
             setattr(s, key, raw[key])
     if "generic" in raw:
-        from .physics.discrepancy import generic_names
+        from ..physics.discrepancy import generic_names
 
         v = raw["generic"]
         if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
@@ -192,7 +192,7 @@ def validation_check(model0: HelicopterModel, params0: dict, model1: HelicopterM
     """The validation rule: the paired test (Diebold-Mariano, :mod:`pyomo_heli.diagnosis.validation_change`) of each
     output's validation error, model 1 against model 0 on the same records. ``rise``: True when any output's error
     rises significantly (one-sided p < ``alpha``); ``rows``: the test table as records; ``message`` names them."""
-    from .report.loop import validation_change_table
+    from ..report.loop import validation_change_table
 
     p0 = predict("before", model0, params0, [], val_mans)
     p1 = predict("after", model1, params1, [], val_mans)
@@ -240,7 +240,7 @@ def select_shape(cfg: IdentificationConfig, cand, file: Path, alpha: float,
     """
     from scipy.stats import chi2
 
-    from .pareto.front import ParetoSolver
+    from ..pareto.front import ParetoSolver
 
     names = list(cand.shape_parameters)
     specs = {n: cfg.model.parameters.spec(n) for n in names}
@@ -323,7 +323,7 @@ def _finished(cfg: IdentificationConfig, folder: Path):
 
     Lets a loop that was stopped resume without redoing finished fronts (nothing finished is lost).
     """
-    from .pareto.result import IdentificationResult
+    from ..pareto.result import IdentificationResult
 
     if not (folder / "chosen.json").is_file():
         return None
@@ -348,7 +348,7 @@ def _finished(cfg: IdentificationConfig, folder: Path):
             and Path(res.info.get("dataset", "")).resolve() == Path(cfg.dataset).resolve()
             and len(res.front) == cfg.pareto.points)
     if same:  # and the recorded maneuvers, dataset content and model (folders that record them)
-        from .provenance import ResultsMismatchError, check_results_match
+        from ..provenance import ResultsMismatchError, check_results_match
 
         try:
             check_results_match(cfg, res, folder, warn=lambda msg: None)
@@ -364,8 +364,8 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
     coherence) on the chosen parameters. A failure is reported, not raised (the loop's results stand).
     """
     try:
-        from .diagnosis.analysis import diagnose
-        from .diagnosis.residuals import compute_residuals
+        from ..diagnosis.analysis import diagnose
+        from ..diagnosis.residuals import compute_residuals
 
         d = diagnose(compute_residuals(cfg, chosen, label="chosen"))
     except Exception as exc:  # noqa: BLE001 - the verdict is an addition to finished results
@@ -482,7 +482,7 @@ def _close_loop(cfg, out: Path, settings, progress, restart, ft, id_data, val_ma
             i += 1
             continue
         if settings.discovery:
-            from .diagnosis.discovery import discovery_step
+            from ..diagnosis.discovery import discovery_step
 
             step = discovery_step(cfg, model, chosen, id_data, physical=left, generic=settings.generic,
                                   alpha=settings.alpha, ratio=settings.ratio, confound_corr=settings.confound_corr,

@@ -1,0 +1,6 @@
+"""Workflows: the orchestrators above the machinery (the layer just below the command line and the API).
+
+``identify`` (Pareto front, Eq. 11 choice), ``identify_linear`` (three objectives), ``close_loop`` (residual ->
+effect -> re-identify), ``trim_loop`` (trim-only flight tests), ``multistart`` and ``benchmark``. They import
+everything below them; nothing below imports them (tests/test_import_layers.py).
+"""

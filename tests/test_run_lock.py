@@ -86,7 +86,7 @@ def test_no_point_is_stored_once_an_interrupt_arrived(tmp_path):
 
 
 def test_starts_bounded_and_drawn_one_at_a_time(tmp_path, monkeypatch, capsys):
-    from pyomo_heli import multistart
+    from pyomo_heli.workflows import multistart
     from pyomo_heli.config import load_identification_config
 
     assert main(["multistart", str(TINY), "--starts", "10000000", "--out", str(tmp_path / "m")]) == 2

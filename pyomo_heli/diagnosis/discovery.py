@@ -101,9 +101,9 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
     """
     import pyomo.environ as pyo
 
-    from ..workflows.identify import build_problem
+    from ..nlp.identification import build_problem
     from ..nlp.parameters import FreeParameter, free_parameter_values
-    from ..pareto.front import _Snapshot
+    from ..pareto.snapshot import Snapshot
     from ..physics.model import HelicopterModel
     from ..solvers import SolverError, make_solver
 
@@ -152,7 +152,7 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
     J0 = float(pyo.value(m.discovery_objective))
     J0_tr = float(pyo.value(m.discovery_trim_nll))
     base = free_parameter_values(m)
-    snap = _Snapshot(m)
+    snap = Snapshot(m)
     progress(f"    NLP screen: base J = {J0:.6g} ({status})")
 
     def fit(group):

@@ -165,17 +165,24 @@ def _check_out_not_foreign(path, kind: str, option: str = "--out") -> None:
                         f"({_names(others)}); choose a new or empty folder")
 
 
+def _out_contents(out, results_dir) -> tuple[Path, list]:
+    """An ``--out`` of a command that reads ``results_dir``: its visible files (none when it is new, empty or the
+    results folder itself); a flight-test folder is refused."""
+    p = Path(out)
+    if not p.is_dir() or p.resolve() == Path(results_dir).resolve():
+        return p, []
+    present = _visible(p)
+    if present and (p / "manifest.json").is_file():
+        raise UserError(f"option --out: {out} is a flight-test folder (manifest.json); choose another --out")
+    return p, present
+
+
 def _check_diagnosis_out(out, results_dir) -> None:
     """``diagnose --out``: a new or empty folder, the results folder itself, or a folder holding a diagnosis (rerun);
     never another results folder (its diagnosis would be replaced by one of other results) or other files."""
-    p = Path(out)
-    if not p.is_dir() or p.resolve() == Path(results_dir).resolve():
-        return
-    present = _visible(p)
+    p, present = _out_contents(out, results_dir)
     if not present:
         return
-    if (p / "manifest.json").is_file():
-        raise UserError(f"option --out: {out} is a flight-test folder (manifest.json); choose another --out")
     if (p / "chosen.json").is_file() or (p / "loop.json").is_file() or (p / "starts.csv").is_file():
         raise UserError(f"option --out: {out} is another results folder ({_names(present)}); its own diagnosis "
                         f"would be replaced by one of {results_dir}: choose another --out (default: {results_dir})")
@@ -187,14 +194,9 @@ def _check_diagnosis_out(out, results_dir) -> None:
 def _check_copy_out(out, results_dir) -> None:
     """``uncertainty --out``: a new or empty folder, the results folder, or an earlier copy of the same results
     (same anchor A and chosen point); never another results folder or other files."""
-    p = Path(out)
-    if not p.is_dir() or p.resolve() == Path(results_dir).resolve():
-        return
-    present = _visible(p)
+    p, present = _out_contents(out, results_dir)
     if not present:
         return
-    if (p / "manifest.json").is_file():
-        raise UserError(f"option --out: {out} is a flight-test folder (manifest.json); choose another --out")
 
     def key(folder):
         try:

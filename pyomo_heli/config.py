@@ -278,7 +278,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
                      noise_sigma=noise_sigma)
 
     par = raw.get("pareto", {})
-    _only(par, ("points", "spacing", "warm_start", "cold_check", "predictor"), f"{f} [pareto]")
+    _only(par, ("points", "spacing", "warm_start", "cold_check", "predictor", "max_iter", "nadir"), f"{f} [pareto]")
     sol = raw.get("solver", {})
     unknown = sorted(set(sol) - {"name", "options", "point_rows"})
     if unknown:
@@ -300,21 +300,31 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
             raise ConfigError(f"{f} [solver]: field 'point_rows' applies to casadi-ipopt only (the AMPL solvers "
                               f"read every row from the NL file anyway)")
         solver_options["point_rows"] = False
-    points = _need(par, "points", f"{f} [pareto]", int, 11)
-    if not 2 <= points <= 1000:
-        raise ConfigError(f"{f} [pareto]: field 'points': the epsilon grid needs 2 (the anchors) to 1000 points, "
-                          f"got {points}")
+    points = _need(par, "points", f"{f} [pareto]", (int, list), 11)
+    counts = points if isinstance(points, list) else [points]
+    if not counts or not all(isinstance(n, int) and not isinstance(n, bool) and 2 <= n <= 1000 for n in counts):
+        raise ConfigError(f"{f} [pareto]: field 'points': the epsilon grid needs 2 (the anchors) to 1000 points "
+                          f"per bounded objective, got {points}")
+    max_iter = _need(par, "max_iter", f"{f} [pareto]", int, None)
+    if max_iter is not None and max_iter < 1:
+        raise ConfigError(f"{f} [pareto]: field 'max_iter' must be a positive integer, got {max_iter}")
     try:
         pareto = ParetoSettings(points=points, spacing=_need(par, "spacing", f"{f} [pareto]", str, "geometric"),
                                 warm_start=_need(par, "warm_start", f"{f} [pareto]", str, "continuation"),
                                 cold_check=bool(_need(par, "cold_check", f"{f} [pareto]", bool, False)),
                                 predictor=_need(par, "predictor", f"{f} [pareto]", str, "secant"),
+                                max_iter=max_iter, nadir=_need(par, "nadir", f"{f} [pareto]", str, "payoff"),
                                 solver=solver, solver_options=solver_options)
     except ConfigError:
         raise
     except ValueError as exc:
         raise ConfigError(f"{f} [pareto]: {exc}") from None
     use, linear = _objectives_use(raw, f)
+    if isinstance(points, list) and len(points) != len(use) - 1:
+        raise ConfigError(f"{f} [pareto]: field 'points': a list gives one count per bounded objective "
+                          f"({len(use) - 1} with [objectives] use = {list(use)}), got {points}")
+    if isinstance(points, list) and "points" in raw.get("linear", {}):
+        raise ConfigError(f"{f} [linear]: field 'points': the grid is [pareto] points = {points}; give it once")
     diagnosis = _diagnosis(raw, f, in_ref)
     return IdentificationConfig(path=path, dataset=ds, maneuvers=mans, validation=val,
                                 resample_hz=float(resample) if resample else None,

@@ -49,16 +49,16 @@ finished point's stored solution and gives the same numbers.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-import pyomo.environ as pyo
 
 from .. import interrupts
 from ..log import get_logger
-from ..nlp.parameters import free_parameter_values
-from ..solvers import MULTIPLIER_MODES, SolverError, make_solver, scale_multipliers
+from ..solvers import MULTIPLIER_MODES, scale_multipliers
+from .epsilon import (FRONT_STEP_OPTIONS, INFEASIBLE, LEAVE_ANCHOR_OPTIONS, NADIR_RULES, EpsilonConstraintSolver,  # noqa: F401
+                      pin_objective_settings, solve_with_fallback, utopia_distance_n, _value)
+from .epsilon import epsilon_grid as _grid
 from .snapshot import Snapshot as _Snapshot
 
 
@@ -104,8 +104,17 @@ class ParetoSettings:
     solver_options: dict = field(default_factory=dict)
     cold_check: bool = False  # also solve every interior point cold, to measure what warm starts save
     predictor: str = "secant"  # start of interior point k>=3: "secant" extrapolation of points k-1, k-2, or "none"
+    max_iter: int | None = None  # Ipopt iteration cap of each front point's solve (grid, solve_at); None: the solver's
+    nadir: str = "payoff"  # nadir of Eq. 11: "payoff" (anchors) or "nondominated" (front points), pareto.epsilon
+    grid: tuple | None = None  # points per bounded objective (tri-objective: (J_trim, J_linear)); from points = [n, m]
 
     def __post_init__(self):
+        if isinstance(self.points, (list, tuple)):
+            if not self.points or not all(isinstance(n, int) and not isinstance(n, bool) for n in self.points):
+                raise ValueError(f"pareto.points must be an integer or a list of integers, got {self.points!r}")
+            self.grid, self.points = tuple(self.points), self.points[0]
+        if self.grid is not None and any(n < 2 for n in self.grid):
+            raise ValueError(f"pareto.points: every axis needs at least 2 points, got {list(self.grid)}")
         if self.points < 2:
             raise ValueError(f"pareto.points must be at least 2 (the two anchors), got {self.points}")
         if self.spacing not in ("geometric", "linear"):
@@ -114,131 +123,66 @@ class ParetoSettings:
             raise ValueError(f"pareto.warm_start must be one of {', '.join(WARM_STARTS)}, got {self.warm_start!r}")
         if self.predictor not in PREDICTORS:
             raise ValueError(f"pareto.predictor must be one of {', '.join(PREDICTORS)}, got {self.predictor!r}")
+        if self.nadir not in NADIR_RULES:
+            raise ValueError(f"pareto.nadir must be one of {', '.join(NADIR_RULES)}, got {self.nadir!r}")
+        if self.max_iter is not None and (isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int)
+                                          or self.max_iter < 1):
+            raise ValueError(f"pareto.max_iter must be a positive integer, got {self.max_iter!r}")
 
 
 def epsilon_grid(j_trim_a: float, j_trim_b: float, points: int, spacing: str = "geometric") -> np.ndarray:
     """Bounds from J_trim(A) (inactive) down to J_trim(B), ``points`` values, both ends included."""
-    if j_trim_b <= 0 or spacing == "linear":
-        return np.linspace(j_trim_a, j_trim_b, points)
-    return np.geomspace(j_trim_a, j_trim_b, points)
+    return _grid(j_trim_a, j_trim_b, points, spacing)
 
 
 def utopia_distance(j_time, j_trim, utopia, nadir) -> np.ndarray:
-    """Eq. 11: normalised distance to the utopia point."""
-    jt = (np.asarray(j_time, float) - utopia[0]) / (nadir[0] - utopia[0])
-    jr = (np.asarray(j_trim, float) - utopia[1]) / (nadir[1] - utopia[1])
-    return np.sqrt(jt**2 + jr**2)
+    """Eq. 11 for (J_time, J_trim): :func:`.epsilon.utopia_distance_n` of the two columns."""
+    shape = np.shape(np.asarray(j_time, float))
+    J = np.column_stack([np.ravel(np.asarray(j_time, float)), np.ravel(np.asarray(j_trim, float))])
+    return utopia_distance_n(J, utopia, nadir).reshape(shape)
 
 
-#: Options of a step that starts from anchor A (the first interior point, or the next one while
-#: every earlier one failed). There the active set changes (the epsilon bound becomes
-#: active, a parameter at its bound in A may leave it), and the small bound pushes of a warm start
-#: pin the iterate: with 1e-6 that step took 20 Ipopt iterations, with Ipopt's default 1e-3 four,
-#: while the later steps take 3 with 1e-6 and 5 with 1e-3 (Case 1, full size, docs/performance.md).
-LEAVE_ANCHOR_OPTIONS = {"warm_start_bound_push": 1e-3, "warm_start_mult_bound_push": 1e-3}
+class ParetoSolver(EpsilonConstraintSolver):
+    """Anchors, front and choice of (J_time, J_trim) on one identification NLP built by nlp.identification.
 
-#: Options of the later steps with ``"continuation"``: the start is (nearly) the solution, on the same
-#: active set, so it is left where it is: bound and slack pushes 1e-8 instead of 1e-6 (primal) and 1e-3
-#: (fractions and slacks). Case 1, full size, with the secant predictor: 29 -> 25 iterations over the
-#: 9 interior points, the same front (studies/warm_start_study.py, docs/performance.md).
-FRONT_STEP_OPTIONS = {"warm_start_bound_push": 1e-8, "warm_start_mult_bound_push": 1e-8,
-                      "warm_start_slack_bound_push": 1e-8, "warm_start_bound_frac": 1e-8,
-                      "warm_start_slack_bound_frac": 1e-8}
-
-
-def solve_with_fallback(solve, mode: str, start: _Snapshot):
-    """``solve(mode)``; if a multiplier warm start fails, once more from ``start`` with ``solve("primal")``.
-
-    A warm start from a neighbouring solution can mislead the barrier method
-    (see ../shared/research/solvers.md: a full warm start stalled on a 50k
-    problem); the primal re-solve is the robust fallback. The returned point's
-    iterations and wall time include both attempts, and its ``warm_start``
-    says what happened.
+    The two-objective use of :class:`~.epsilon.EpsilonConstraintSolver`: its own anchors (with the
+    retries of a failed anchor and the store), its 1-D front with the secant predictor, and the
+    Eq. 11 choice; :meth:`solve_at` (inherited) solves one more point at a J_trim bound.
     """
-    p = solve(mode)
-    if p.success or mode not in MULTIPLIER_MODES:
-        return p
-    start.restore()
-    retry = solve("primal")
-    retry.iterations += max(p.iterations, 0)
-    retry.wall_time += p.wall_time
-    retry.setup_time += p.setup_time
-    retry.warm_start = f"{mode} ({p.status}), then primal"
-    return retry
 
-
-def pin_objective_settings(m, **values) -> None:
-    """Pin every objective setting of ``m.objective_settings`` (unnamed ones to 0) by equal bounds."""
-    w = m.objective_settings
-    for k in w:
-        v = float(values.get(k, 0.0))
-        w[k].setlb(v)
-        w[k].setub(v)
-        w[k].set_value(v)
-
-
-class ParetoSolver:
-    """Anchors, front and choice on one identification NLP built by nlp.identification."""
+    point_class = FrontPoint
 
     def __init__(self, m, settings: ParetoSettings | None = None, on_point=None, store=None):
-        self.m = m
-        self.settings = settings or ParetoSettings()
-        self.on_point = on_point or (lambda p: None)
-        self.store = store  # a PointStore: finished points to disk, resume from them
-        self.s_time = max(abs(pyo.value(m.J_time)), 1.0)
-        self.s_trim = max(pyo.value(m.J_trim), 1e-12)
-        m.del_component("eps_con")
-        m.eps_con = pyo.Constraint(expr=m.J_trim / self.s_trim <= m.eps_trim)
-        names = ("w_time", "w_trim", "w_utopia", "U_time", "U_trim", "r_time", "r_trim")
-        m.objective_settings = pyo.Var(names, initialize=0.0)
-        w = m.objective_settings
-        utopia = ((m.J_time - w["U_time"]) * w["r_time"]) ** 2 + ((m.J_trim - w["U_trim"]) * w["r_trim"]) ** 2
-        if m.component("objective") is not None:
-            m.objective.deactivate()
-        m.selected_objective = pyo.Objective(expr=w["w_time"] * m.J_time + w["w_trim"] * m.J_trim
-                                             + w["w_utopia"] * utopia)
-        self._pin(w_time=1.0 / self.s_time)
-        self._snap_initial = _Snapshot(m)
-        log = get_logger("pareto")
-        log.info(f"setting up solver {self.settings.solver} (NL file, casadi functions; the first solve adds the "
-                 f"derivatives): up to minutes on a full-size problem")
-        t0 = time.perf_counter()
-        self.solver = make_solver(m, self.settings.solver, self.settings.solver_options)
-        log.debug(f"solver object made in {time.perf_counter() - t0:.1f} s")
+        super().__init__(m, ("time", "trim"), settings or ParetoSettings(), on_point, store)
+        self.s_time, self.s_trim = self.scale["time"], self.scale["trim"]
+        self._snap_initial = self.initial_guess
         self.points: list[FrontPoint] = []
 
     def _pin(self, **values):
-        pin_objective_settings(self.m, **values)
+        self.pin(**values)
 
     def _set_objective(self, kind: str, scale: float | None = None, utopia=None, nadir=None):
-        if kind == "time":
-            self._pin(w_time=1.0 / (scale or self.s_time))
-        elif kind == "trim":
-            self._pin(w_trim=1.0 / (scale or self.s_trim))
-        else:
-            self._pin(w_utopia=1.0, U_time=utopia[0], U_trim=utopia[1], r_time=1.0 / (nadir[0] - utopia[0]),
-                      r_trim=1.0 / (nadir[1] - utopia[1]))
+        self.set_objective(kind, scale, utopia, nadir)
         return self.solver
 
     def _solve(self, kind, index, point_kind, epsilon, warm_start, options=None, **obj):
-        solver = self._set_objective(kind, **obj)
-        self.m.eps_trim = (epsilon / self.s_trim) if math.isfinite(epsilon) else 1e20
-        try:
-            res = solver.solve(warm_start=warm_start, options=options)
-            success, status, iterations, wall, setup = (res.success, res.status, res.iterations, res.wall_time,
-                                                        res.setup_time)
-        except SolverError as exc:  # no solution at all: record it, the sweep goes on
-            success, status, iterations, wall, setup = False, f"{type(exc).__name__}: {exc}", -1, 0.0, 0.0
-        p = FrontPoint(index=index, kind=point_kind, epsilon=epsilon, J_time=_value(self.m.J_time),
-                       J_trim=_value(self.m.J_trim), parameters=free_parameter_values(self.m),
-                       success=success, status=status, iterations=iterations,
-                       wall_time=wall, setup_time=setup, warm_start=warm_start)
-        return p
+        out = self.solve_once(kind, {"trim": epsilon}, warm_start, options, **obj)
+        if out.note:
+            get_logger("pareto").info(f"point {index} ({point_kind}, eps_trim={epsilon:.6g}): {out.status}: {out.note}")
+        return FrontPoint(index=index, kind=point_kind, epsilon=epsilon, J_time=out.J["time"], J_trim=out.J["trim"],
+                          parameters=out.parameters, success=out.success, status=out.status,
+                          iterations=out.iterations, wall_time=out.wall_time, setup_time=out.setup_time,
+                          warm_start=warm_start)
+
+    def solve_eps(self, index: int, eps: dict, warm_start: str, options=None, grid=()):
+        return self._solve("time", index, "eps", float(eps.get("trim", math.inf)), warm_start, options,
+                           scale=self.front_scale)
 
     def _solve_warm(self, kind, index, point_kind, epsilon, start: "_Snapshot", options=None, **obj):
-        """A re-solve with the configured warm start, retried with the primal one if it fails."""
+        """A re-solve with the configured warm start, retried with the primal one if it fails (iterations capped)."""
         return solve_with_fallback(lambda ws: self._solve(kind, index, point_kind, epsilon, ws,
-                                                          options if ws in MULTIPLIER_MODES else None, **obj),
+                                                          self.capped(options if ws in MULTIPLIER_MODES else None),
+                                                          **obj),
                                    self.settings.warm_start, start)
 
     def _near_start_options(self) -> dict | None:
@@ -254,30 +198,6 @@ class ParetoSolver:
         """One solve of min J_time (``"time"``) or J_trim (``"trim"``) s.t. J_trim <= epsilon, from the
         model's current values (multi-start); a failure is returned as a point with its status."""
         return self._solve(objective, index, kind, epsilon, warm_start)
-
-    def solve_point(self, key: str, solve) -> FrontPoint:
-        """``solve()`` a point, or load it from the store when an earlier run finished it.
-
-        A loaded point's stored solution is put back into the model, so what
-        follows starts from the same values as in an uninterrupted run. A
-        solved point is written to the store at once.
-        """
-        if self.store is not None and self.store.has(key):
-            p = FrontPoint(**self.store.record(key))
-            self.store.restore(key, self.m)
-            p.from_disk = True
-            return p
-        try:
-            p = solve()
-        except interrupts.Interrupted as exc:  # not stored: a rerun solves it again from the same start
-            exc.point = exc.point or key
-            raise
-        self._save(key, p)
-        return p
-
-    def _save(self, key: str, p: FrontPoint) -> None:
-        if self.store is not None:
-            self.store.save(key, asdict(p), self.m, duals=self.settings.warm_start in MULTIPLIER_MODES)
 
     def point_a(self) -> FrontPoint:
         """Anchor A alone (min J_time, the classic time-domain estimate) from the model's current values."""
@@ -295,6 +215,7 @@ class ParetoSolver:
         A is written to the store once its outcome is final (after B, when A needs the retry), so a
         resumed run repeats exactly the attempts of an uninterrupted one.
         """
+        self.minima, self._infeasible = {}, []  # known again once B is (a rerun may find another minimum)
         a_final = self.store is not None and self.store.has("A")
         if a_final:
             a = self.solve_point("A", self.point_a)
@@ -341,6 +262,9 @@ class ParetoSolver:
             self._save("A", a)
             snap_a = _Snapshot(self.m)
         self._snap_a, self._snap_b = snap_a, snap_b
+        self.anchor_points = {"A": a, "B": b}
+        if b.success and math.isfinite(b.J_trim):  # at most J_trim's own minimum (B's bound is min (1 + tol) + 1e-12)
+            self.minima["trim"] = (b.J_trim - 1e-12) / (1 + self.settings.lexicographic_tol)
         return a, b
 
     def _unstored(self, key: str, solve) -> FrontPoint:
@@ -382,6 +306,7 @@ class ParetoSolver:
         scale = self._front_scale(a)
         scale_multipliers(self.m, self.s_time / scale)
         last_good = _Snapshot(self.m)
+        self.front_scale, self._solved, self._infeasible = scale, [(self.loosest(), last_good)], []
         previous = None  # (snapshot, epsilon) of the interior point before last_good, for the predictor
         leaving = True  # the next start is anchor A's solution (no interior point solved yet)
         for k in range(1, s.points - 1):
@@ -405,12 +330,17 @@ class ParetoSolver:
             if p.success:
                 previous = (last_good, float(eps[k - 1])) if k > 1 and self.points[-1].success else None
                 last_good = self.snapshots[k] = _Snapshot(self.m)
+                self._solved.append(((float(eps[k]),), last_good))
                 leaving = False
             else:
+                if p.status == INFEASIBLE:
+                    self._infeasible.append((float(eps[k]),))
                 previous = None
                 last_good.restore()
             self.points.append(p)
             self.on_point(p)
+        if b.success:
+            self._solved.append(((b.J_trim,), self._snap_b))
         self.points.sort(key=lambda p: p.index)
         return self.points
 
@@ -428,27 +358,24 @@ class ParetoSolver:
         warm.restore()
 
     # ------------------------------------------------------------- choosing
-    def utopia_nadir(self):
+    def payoff_utopia_nadir(self):
+        """Utopia (J_time(A), J_trim(B)) and the payoff-table nadir (J_time(B), J_trim(A))."""
         a = next(p for p in self.points if p.kind == "A")
         b = next(p for p in self.points if p.kind == "B")
         return (a.J_time, b.J_trim), (b.J_time, a.J_trim)
 
-    def choose(self) -> tuple[FrontPoint | None, np.ndarray]:
+    def choose(self, rule: str | None = None) -> tuple[FrontPoint | None, np.ndarray]:
         """The converged front point closest to utopia (Eq. 11, post hoc), and all distances.
 
-        None when no point converged.
+        None when no point converged. ``rule``: the nadir rule (default ``settings.nadir``).
         """
-        utopia, nadir = self.utopia_nadir()
-        ok = [p for p in self.points if p.success]
-        if not ok:
-            return None, np.array([])
-        d = utopia_distance([p.J_time for p in ok], [p.J_trim for p in ok], utopia, nadir)
-        return ok[int(np.argmin(d))], d
+        p, d, _, _ = self.eq11(rule)
+        return p, d
 
-    def direct_choice(self, start: FrontPoint | None = None) -> FrontPoint:
+    def direct_choice(self, start: FrontPoint | None = None, rule: str | None = None) -> FrontPoint:
         """Eq. 11 as one NLP (squared distance: same minimiser, smooth), warm from the post-hoc choice."""
-        utopia, nadir = self.utopia_nadir()
-        start = start or self.choose()[0]
+        utopia, nadir = self.utopia_nadir(rule=rule)
+        start = start or self.choose(rule)[0]
         self.snapshots[start.index].restore()
         return self.solve_point("direct", lambda: self._solve("utopia", -1, "direct", math.inf, "primal",
                                                              utopia=utopia, nadir=nadir))
@@ -461,11 +388,3 @@ def _retried(first: FrontPoint, retry: FrontPoint, how: str) -> FrontPoint:
     retry.setup_time += first.setup_time
     retry.warm_start = f"{first.warm_start} ({first.status}), then {how}"
     return retry
-
-
-def _value(expr) -> float:
-    """Value of an objective expression at the model's current values; NaN if it cannot be evaluated."""
-    try:
-        return float(pyo.value(expr))
-    except (ValueError, ZeroDivisionError, OverflowError, TypeError):
-        return float("nan")

@@ -30,6 +30,7 @@ import pandas as pd
 from ..channels import OUTPUTS, TRIM_CHANNELS
 from ..dataset import load_flight_test
 from ..nlp.identification import prepare_data
+from ..pareto.epsilon import utopia_distance_n
 from ..pareto.result import IdentificationResult, write_json
 from ..physics.model import HelicopterModel
 from ..simulation.replay import Prediction, predict
@@ -178,10 +179,8 @@ def front_table(result: IdentificationResult, model: HelicopterModel) -> pd.Data
 def utopia_distance_of(result: IdentificationResult, point: dict) -> float | None:
     """Eq. 11: distance of a point to the utopia point, objectives normalised by nadir - utopia."""
     try:
-        terms = [(point[k] - result.utopia[i]) / (result.nadir[i] - result.utopia[i])
-                 for i, k in enumerate(("J_time", "J_trim")) if result.nadir[i] != result.utopia[i]]
-        d = math.sqrt(sum(x * x for x in terms))
-    except (KeyError, TypeError, ZeroDivisionError):
+        d = float(utopia_distance_n([[point[k] for k in ("J_time", "J_trim")]], result.utopia[:2], result.nadir[:2])[0])
+    except (KeyError, TypeError, ValueError):
         return None
     return d if math.isfinite(d) else None
 

@@ -403,6 +403,15 @@ def band_errors(responses, curves: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _nadir_rules(choices) -> list[str]:
+    """Lines naming the Eq. 11 choice under each nadir rule (info.eq11_by_nadir), if the run recorded them."""
+    if not choices:
+        return []
+    return ["Eq. 11 choice by nadir rule: " + "; ".join(
+        f"{rule}: point {c['index']} ({c['kind']}), nadir {tuple(round(v, 6) for v in c['nadir'])}, "
+        f"distance {c['distance']:.4g}" for rule, c in choices.items()), ""]
+
+
 def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png") -> Path:
     """Figures and ``report_linear.md`` of a tri-objective results folder; the folder must agree with ``cfg``
     (:func:`pyomo_heli.provenance.check_results_match`; ``warn`` gets its notes on records the folder lacks)."""
@@ -453,11 +462,14 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png") -> 
     text = [f"# Tri-objective identification: {cfg.path.name}", "",
             f"Objectives {', '.join(result.info['objectives'])}; grid {result.info['grid'][0]} (J_trim) x "
             f"{result.info['grid'][1]} (J_linear); total time {result.info['total_time']:.0f} s; "
-            f"{result.info['failed_points']} point(s) not converged.", "",
+            f"{result.info['failed_points']} point(s) not converged"
+            + (f", {result.info['infeasible_points']} of them infeasible (status `infeasible`)"
+               if result.info.get("infeasible_points") else "") + ".", "",
             "## Estimates (display units)", "", markdown_table(params, 5), "",
             "## Objective values of the choices", "", markdown_table(objs, 6), "",
             f"utopia (J_time, J_trim, J_linear) = {tuple(round(v, 6) for v in result.utopia)}, "
             f"nadir = {tuple(round(v, 6) for v in result.nadir)}", "",
+            *_nadir_rules(result.info.get("eq11_by_nadir")),
             "## Frequency-response errors in the coherent band", "", markdown_table(errs, 4), "",
             f"![front](front_projections.{figure_format})", "", f"![bode](bode.{figure_format})", "",
             "## Front", "", markdown_table(shown, 6), ""]

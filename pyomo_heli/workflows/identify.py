@@ -164,6 +164,8 @@ def _run_identification(cfg, out: Path, progress, restart, uncertainty) -> Ident
               "input_reference_s": cfg.input_reference_s,
               "solver": cfg.pareto.solver,
               "failed_points": failed,
+              # the Eq. 11 choice under both nadir rules (pareto.epsilon.NADIR_RULES; [pareto] nadir picks `chosen`)
+              "eq11_by_nadir": ps.choices() if chosen is not None else None,
               # an anchor that did not converge (after its retries) spoils everything derived from the anchors
               "unreliable": ({"reason": "; ".join(anchor_failures),
                               "quantities": list(UNRELIABLE_WITHOUT_ANCHORS)} if anchor_failures else None),

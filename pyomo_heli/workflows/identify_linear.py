@@ -26,6 +26,7 @@ from ..dataset import load_flight_test
 from ..dataset.frequency_response import frequency_responses, save_responses
 from ..nlp.identification import build_identification_nlp, identification_data
 from ..pareto.result import IdentificationResult
+from ..pareto.epsilon import INFEASIBLE
 from ..pareto.tri_front import TriParetoSolver, utopia_distance_n
 from ..provenance import provenance_info
 
@@ -69,20 +70,20 @@ def run_tri_identification(cfg, out, progress=info) -> IdentificationResult:
     if front_csv.exists():
         front_csv.unlink()
 
-    # anchors A, B, C, the (points x linear points) grid less A itself, and the direct Eq. 11 solve
-    bar = Progress(cfg.pareto.points * cfg.linear.points + 3, "front points")
-
     def on_point(p):
         rows.append(p.row())
         pd.DataFrame(rows).to_csv(front_csv, index=False, float_format="%.12g")
         params = format_parameters(p.parameters, cfg.model.parameters)
+        note = f"; {p.note}" if p.note else ""
         progress(f"  point {p.index:>2} {p.kind:<3} ({p.i_trim},{p.i_linear}) J_time={p.J_time:.6g} "
                  f"J_trim={p.J_trim:.6g} J_linear={p.J_linear:.6g} {params} "
-                 f"[{p.status}, {p.iterations} it, {p.wall_time:.1f} s]" + bar.tick())
+                 f"[{p.status}{note}, {p.iterations} it, {p.wall_time:.1f} s]" + bar.tick())
 
     t1 = time.perf_counter()
     ps = TriParetoSolver(m, cfg.pareto, cfg.linear.points, on_point=on_point)
     setup = time.perf_counter() - t1
+    # anchors A, B, C, the (J_trim points x J_linear points) grid less A itself, and the direct Eq. 11 solve
+    bar = Progress(ps.counts[0] * ps.counts[1] + 3, "front points")
     ps.front()
     chosen, _, utopia, nadir = ps.choose()
     bi, _, bi_utopia, bi_nadir = ps.choose(("time", "trim"), row_linear=0)
@@ -104,9 +105,14 @@ def run_tri_identification(cfg, out, progress=info) -> IdentificationResult:
         info={"config": str(cfg.path), "dataset": str(cfg.dataset), "objectives": list(cfg.objectives),
               "build_time": t_build, "solver_setup_time": setup, "total_time": time.perf_counter() - t0,
               "maneuvers": [mv.name for mv in data.maneuvers], "solver": cfg.pareto.solver,
-              "grid": [cfg.pareto.points, cfg.linear.points],
+              "grid": list(ps.counts),
               "eps_trim": list(ps.eps_trim), "eps_linear": list(ps.eps_linear),
               "bi_objective": {"chosen": _point_dict(bi), "utopia": list(bi_utopia), "nadir": list(bi_nadir)},
-              "failed_points": int((~front["success"].astype(bool)).sum()), **provenance_info(cfg)})
+              "failed_points": int((~front["success"].astype(bool)).sum()),
+              "infeasible_points": int((front["status"] == INFEASIBLE).sum()),
+              "mean_iterations_grid": float(front.loc[front.kind == "eps", "iterations"].mean()),
+              "max_iterations_grid": int(front.loc[front.kind == "eps", "iterations"].max()),
+              # the Eq. 11 choice under both nadir rules ([pareto] nadir picks `chosen`)
+              "eq11_by_nadir": ps.choices(), **provenance_info(cfg)})
     result.save(out)
     return result

@@ -1,0 +1,421 @@
+"""The epsilon-constraint method for any number of objectives (paper Eq. 10) and Eq. 11 written once.
+
+Objectives are named; the first is minimised, every other one is bounded,
+
+    min J_0   s.t.   J_k / s_k <= eps_k,   k = 1 .. N-1                      (Eq. 10)
+
+with ``s_k`` the objective's value at the initial guess (optimizer-level scaling). The bounds are
+mutable Params (``m.eps_trim`` of ``m.eps_con`` for J_trim, ``m.eps_<name>`` of
+``m.eps_<name>_con`` for the others), and one objective serves every solve,
+
+    f = sum_k w_k J_k + w_utopia sum_k ((J_k - U_k) r_k)^2,
+
+whose weights, utopia values U and inverse ranges r are *variables pinned by equal bounds*: the
+model is built and handed to the solver once, and switching objective or moving a bound is a
+re-solve, never a rewrite.
+
+:class:`EpsilonConstraintSolver` holds the model and its one solver and gives
+
+- :meth:`~EpsilonConstraintSolver.anchors`: the payoff table, one lexicographic anchor per objective
+  (A: min J_0; then for each bounded J_k: min J_k, then min J_0 keeping J_k at its minimum);
+- :meth:`~EpsilonConstraintSolver.grid_front`: a grid of bounds, one axis per bounded objective,
+  visited along a snake path, each point warm-started (continuation) from its nearest solved
+  neighbour on the grid;
+- :meth:`~EpsilonConstraintSolver.solve_at`: one point at a given vector of bounds, warm-started
+  from the nearest solved point (in bounds normalised by the anchors' ranges): what adaptive
+  placement calls;
+- :meth:`~EpsilonConstraintSolver.choose` / :meth:`~EpsilonConstraintSolver.direct_choice`: Eq. 11
+  post hoc over the converged points and as one NLP, with either nadir rule (:data:`NADIR_RULES`).
+
+Infeasible points (:data:`INFEASIBLE`) are found without an iteration-limit solve: a bound below
+the anchor minimum of its objective, or at most as loose as a grid point already found infeasible in
+every bound, is infeasible a priori (not solved); an Ipopt solve that ends in
+``Infeasible_Problem_Detected`` or ``Restoration_Failed`` under active bounds is recorded as
+infeasible, with Ipopt's status in the point's ``note``. ``settings.max_iter`` caps the iterations of
+each front solve.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict
+
+import numpy as np
+import pyomo.environ as pyo
+
+from .. import interrupts
+from ..log import get_logger
+from ..nlp.parameters import free_parameter_values
+from ..solvers import MULTIPLIER_MODES, SolverError, make_solver, scale_multipliers
+from .eq11 import (NADIR_RULES, nondominated, nondominated_nadir, payoff_nadir,  # noqa: F401 - re-exported
+                   utopia_distance_n)
+from .snapshot import Snapshot
+from .steps import (ANCHOR_NAMES, FRONT_STEP_OPTIONS, INFEASIBLE, IPOPT_INFEASIBLE,  # noqa: F401 - re-exported
+                    LEAVE_ANCHOR_OPTIONS, TIGHT_MARGIN, EpsilonPoint, Outcome, _value, epsilon_grid,
+                    pin_objective_settings, snake, solve_with_fallback)
+
+
+# ------------------------------------------------------------------------------------------ solver
+class EpsilonConstraintSolver:
+    """Eq. 10 for the objectives ``names`` (``m.J_<name>``; the first is minimised) on one model and one solver.
+
+    ``settings`` is a :class:`~pyomo_heli.pareto.front.ParetoSettings` (or any object with its fields).
+    Subclasses choose the point type by overriding :meth:`_point`.
+    """
+
+    def __init__(self, m, names, settings, on_point=None, store=None):
+        self.m, self.names = m, tuple(names)
+        self.primary, self.bounded = self.names[0], self.names[1:]
+        missing = [k for k in self.names if m.component(f"J_{k}") is None]
+        if missing:
+            raise ValueError(f"the NLP has no {', '.join('J_' + k for k in missing)}")
+        self.settings = settings
+        self.on_point = on_point or (lambda p: None)
+        self.store = store  # a PointStore: finished points to disk, resume from them
+        self.J = {k: m.component(f"J_{k}") for k in self.names}
+        self.scale = {k: (max(abs(pyo.value(e)), 1.0) if k == self.primary else max(pyo.value(e), 1e-12))
+                      for k, e in self.J.items()}
+        self.eps_params = {}
+        for k in self.bounded:
+            pname, cname = ("eps_trim", "eps_con") if k == "trim" else (f"eps_{k}", f"eps_{k}_con")
+            if m.component(pname) is None:
+                m.add_component(pname, pyo.Param(initialize=1e20, mutable=True))
+            m.del_component(cname)
+            m.add_component(cname, pyo.Constraint(expr=self.J[k] / self.scale[k] <= m.component(pname)))
+            self.eps_params[k] = m.component(pname)
+        pins = ([f"w_{k}" for k in self.names] + ["w_utopia"] + [f"U_{k}" for k in self.names]
+                + [f"r_{k}" for k in self.names])
+        m.objective_settings = pyo.Var(pins, initialize=0.0)
+        w = m.objective_settings
+        utopia = None
+        for k in self.names:
+            term = ((self.J[k] - w[f"U_{k}"]) * w[f"r_{k}"]) ** 2
+            utopia = term if utopia is None else utopia + term
+        if m.component("objective") is not None:
+            m.objective.deactivate()
+        expr = None
+        for k in self.names:
+            expr = w[f"w_{k}"] * self.J[k] if expr is None else expr + w[f"w_{k}"] * self.J[k]
+        m.selected_objective = pyo.Objective(expr=expr + w["w_utopia"] * utopia)
+        self.pin(**{f"w_{self.primary}": 1.0 / self.scale[self.primary]})
+        self.initial_guess = Snapshot(m)
+        log = get_logger("pareto")
+        log.info(f"setting up solver {settings.solver} (NL file, casadi functions; the first solve adds the "
+                 f"derivatives): up to minutes on a full-size problem")
+        t0 = time.perf_counter()
+        self.solver = make_solver(m, settings.solver, settings.solver_options)
+        log.debug(f"solver object made in {time.perf_counter() - t0:.1f} s")
+        self.points: list = []
+        self.snapshots: dict = {}
+        self.minima: dict = {}  # bounded objective -> its own minimum (from the anchors)
+        self.anchor_points: dict = {}
+        self._solved: list = []  # (bounds tuple, snapshot at the front's scale) of every converged front point
+        self._infeasible: list = []  # bounds tuples of points found infeasible
+        self.front_scale = self.scale[self.primary]
+
+    # -------------------------------------------------------------- one solve
+    def pin(self, **values) -> None:
+        pin_objective_settings(self.m, **values)
+
+    def set_objective(self, objective: str, scale: float | None = None, utopia=None, nadir=None) -> None:
+        """Pin the objective: ``objective`` (a name) divided by ``scale``, or "utopia" (Eq. 11 squared)."""
+        if objective == "utopia":
+            pins = {"w_utopia": 1.0}
+            for k, u, n in zip(self.names, utopia, nadir):
+                pins[f"U_{k}"], pins[f"r_{k}"] = u, (1.0 / (n - u) if n != u else 0.0)  # as utopia_distance_n
+            self.pin(**pins)
+        else:
+            self.pin(**{f"w_{objective}": 1.0 / (scale or self.scale[objective])})
+
+    def set_bounds(self, eps: dict) -> None:
+        for k in self.bounded:
+            v = eps.get(k, math.inf)
+            self.eps_params[k].set_value(v / self.scale[k] if math.isfinite(v) else 1e20)
+
+    def a_priori_infeasible(self, eps: dict) -> str:
+        """Why the bounds ``eps`` are infeasible without a solve ('' when that is not known)."""
+        for k, v in eps.items():
+            lo = self.minima.get(k)
+            if lo is not None and math.isfinite(v) and v < lo - 1e-12 * max(abs(lo), 1.0):
+                return f"eps_{k} = {v:.6g} is below the minimum of J_{k}, {lo:.6g} (its anchor)"
+        vec = self.bounds_vector(eps)
+        for bad in self._infeasible:
+            if all(v <= b for v, b in zip(vec, bad)):
+                return "every bound at most that of a point found infeasible"
+        return ""
+
+    def solve_once(self, objective: str, eps: dict | None = None, warm_start: str = "primal", options=None,
+                   scale: float | None = None, utopia=None, nadir=None) -> Outcome:
+        """One solve of ``objective`` under the bounds ``eps`` (name -> bound; missing or inf: inactive).
+
+        Bounds known infeasible are not solved (status :data:`INFEASIBLE`, 0 iterations); an Ipopt
+        infeasibility under active bounds is recorded as :data:`INFEASIBLE`, Ipopt's status in ``note``.
+        A solver that gives no solution at all is recorded with its error; the caller goes on.
+        """
+        eps = dict(eps or {})
+        self.set_objective(objective, scale, utopia, nadir)
+        self.set_bounds(eps)
+        why = self.a_priori_infeasible(eps)
+        if why:
+            return Outcome(J={k: math.nan for k in self.names}, parameters=free_parameter_values(self.m),
+                           success=False, status=INFEASIBLE, iterations=0, wall_time=0.0, setup_time=0.0,
+                           note=f"not solved: {why}")
+        note = ""
+        try:
+            res = self.solver.solve(warm_start=warm_start, options=options)
+            success, status, iterations, wall, setup = (res.success, res.status, res.iterations, res.wall_time,
+                                                        res.setup_time)
+        except SolverError as exc:  # no solution at all: record it, the sweep goes on
+            success, status, iterations, wall, setup = False, f"{type(exc).__name__}: {exc}", -1, 0.0, 0.0
+        if not success and status in IPOPT_INFEASIBLE and any(math.isfinite(v) for v in eps.values()):
+            status, note = INFEASIBLE, status
+        return Outcome(J={k: _value(e) for k, e in self.J.items()}, parameters=free_parameter_values(self.m),
+                       success=success, status=status, iterations=iterations, wall_time=wall, setup_time=setup,
+                       note=note)
+
+    def _point(self, index: int, kind: str, eps: dict, out: Outcome, warm_start: str, grid=()):
+        """The point record of a solve (subclasses return their own point type)."""
+        return EpsilonPoint(index=index, kind=kind, J=out.J, epsilon={k: eps.get(k, math.inf) for k in self.bounded},
+                            parameters=out.parameters, success=out.success, status=out.status,
+                            iterations=out.iterations, wall_time=out.wall_time, setup_time=out.setup_time,
+                            warm_start=warm_start, grid=tuple(grid), note=out.note)
+
+    def solve_eps(self, index: int, eps: dict, warm_start: str, options=None, grid=()):
+        """min J_0 under the bounds ``eps`` at the front's objective scale: one point."""
+        out = self.solve_once(self.primary, eps, warm_start, options, scale=self.front_scale)
+        return self._point(index, "eps", eps, out, warm_start, grid)
+
+    def capped(self, options: dict | None) -> dict | None:
+        """``options`` with the front's iteration cap (``settings.max_iter``) when one is set."""
+        cap = getattr(self.settings, "max_iter", None)
+        return {**(options or {}), "max_iter": int(cap)} if cap else options
+
+    # -------------------------------------------------------------- the store
+    point_class = EpsilonPoint
+
+    def solve_point(self, key: str, solve):
+        """``solve()`` a point, or load it from the store when an earlier run finished it.
+
+        A loaded point's stored solution is put back into the model, so what
+        follows starts from the same values as in an uninterrupted run. A
+        solved point is written to the store at once.
+        """
+        if self.store is not None and self.store.has(key):
+            p = self.point_class(**self.store.record(key))
+            self.store.restore(key, self.m)
+            p.from_disk = True
+            return p
+        try:
+            p = solve()
+        except interrupts.Interrupted as exc:  # not stored: a rerun solves it again from the same start
+            exc.point = exc.point or key
+            raise
+        self._save(key, p)
+        return p
+
+    def _save(self, key: str, p) -> None:
+        if self.store is not None:
+            self.store.save(key, asdict(p), self.m, duals=self.settings.warm_start in MULTIPLIER_MODES)
+
+    # -------------------------------------------------------------- anchors (payoff table)
+    def _lexicographic(self, objective: str, kind: str, index: int, start: Snapshot):
+        """Min ``objective``, then min J_0 keeping it at its minimum (a non-dominated anchor)."""
+        start.restore()
+        first = self.solve_once(objective, warm_start="primal")
+        if not first.success:
+            raise RuntimeError(f"anchor {kind} (J_{objective} alone) failed: {first.status}")
+        bound = first.J[objective] * (1 + self.settings.lexicographic_tol) + 1e-12
+        out = self.solve_once(self.primary, {objective: bound}, "primal")
+        p = self._point(index, kind, {objective: bound}, out, "primal", ())
+        p.iterations += first.iterations
+        p.wall_time += first.wall_time
+        p.first_stage_min = first.J[objective]
+        if not p.success:
+            raise RuntimeError(f"anchor {kind}, second stage, failed: {p.status}")
+        return p
+
+    def anchors(self) -> list:
+        """The payoff table: A = min J_0 from the model's values, then one lexicographic anchor per bounded objective.
+
+        Raises RuntimeError naming the anchor when one fails: everything after rests on them.
+        """
+        self.minima, self._infeasible, self._solved = {}, [], []
+        out = self.solve_once(self.primary, warm_start="none")
+        a = self._point(0, "A", {}, out, "none", (0,) * len(self.bounded))
+        if not a.success:
+            raise RuntimeError(f"anchor A (J_{self.primary} alone) failed: {a.status}")
+        snap_a = Snapshot(self.m)
+        self.anchor_points, self.snapshots = {"A": a}, {"A": snap_a}
+        for n, k in enumerate(self.bounded, start=1):
+            name = ANCHOR_NAMES[n]
+            self.anchor_points[name] = self._lexicographic(k, name, -n, snap_a)
+            self.snapshots[name] = Snapshot(self.m)
+            self.minima[k] = self.anchor_points[name].first_stage_min
+        for p in self.anchor_points.values():
+            self.on_point(p)
+        self.points = list(self.anchor_points.values())
+        return self.points
+
+    def _enter_front(self) -> Snapshot:
+        """Anchor A's solution at the front's objective scale (J_0 at A), registered as a solved front point."""
+        a = self.anchor_points["A"]
+        self.front_scale = max(abs(_get(a, self.primary)), 1.0) if math.isfinite(_get(a, self.primary)) else \
+            self.scale[self.primary]
+        self.snapshots["A"].restore()
+        scale_multipliers(self.m, self.scale[self.primary] / self.front_scale)  # A's multipliers: A's scale
+        snap = Snapshot(self.m)
+        self._solved.append((self.loosest(), snap))
+        return snap
+
+    def loosest(self) -> tuple:
+        """The bounds at anchor A: each bounded objective's value there (looser bounds are inactive)."""
+        a = self.anchor_points["A"]
+        return tuple(float(_get(a, k)) for k in self.bounded)
+
+    def bounds_vector(self, eps: dict) -> tuple:
+        """``eps`` as a tuple over the bounded objectives, an inactive bound read as its value at anchor A."""
+        loose = self.loosest() if "A" in self.anchor_points else (math.inf,) * len(self.bounded)
+        return tuple(min(float(eps.get(k, math.inf)), lo) for k, lo in zip(self.bounded, loose))
+
+    # -------------------------------------------------------------- the front
+    def nearest_start(self, eps: dict) -> Snapshot:
+        """The solved front point nearest to ``eps``, in bounds normalised by the anchors' ranges; the last on ties."""
+        vec = np.array(self.bounds_vector(eps))
+        rng = np.array([max(lo - self.minima.get(k, 0.0), 1e-300) for k, lo in zip(self.bounded, self.loosest())])
+        dist = [float(np.sum(np.abs((np.array(v) - vec) / rng))) for v, _ in self._solved]
+        best = min(range(len(dist)), key=lambda i: (dist[i], -i))
+        return self._solved[best][1]
+
+    def _solve_from(self, index: int, eps: dict, start: Snapshot, grid=()):
+        """One front point from ``start`` with the configured warm start (primal retry on failure), capped."""
+        s = self.settings
+        leaving = start is self._solved[0][1]  # anchor A's solution: the active set changes
+        options = LEAVE_ANCHOR_OPTIONS if leaving else (FRONT_STEP_OPTIONS if s.warm_start == "continuation" else None)
+        start.restore()
+        p = solve_with_fallback(
+            lambda ws: self.solve_eps(index, eps, ws, self.capped(options if ws in MULTIPLIER_MODES else None), grid),
+            s.warm_start, start)
+        vec = self.bounds_vector(eps)
+        if p.success:
+            self._solved.append((vec, Snapshot(self.m)))
+        else:
+            if p.status == INFEASIBLE:
+                self._infeasible.append(vec)
+            start.restore()
+        return p
+
+    def solve_at(self, eps, index: int | None = None, key: str | None = None):
+        """Solve the front point at the bounds ``eps`` (name -> bound, or a sequence over the bounded objectives).
+
+        Warm-started from the nearest solved front point (:meth:`nearest_start`); needs the anchors.
+        The point is appended to ``points`` and handed to ``on_point``; with a store and a ``key``
+        it is stored (and loaded on a rerun). This is the entry point of adaptive epsilon placement.
+        """
+        if not self._solved:
+            if "A" not in self.anchor_points:
+                raise RuntimeError("solve_at needs the anchors: call anchors() or a front first")
+            self._enter_front()
+        if not isinstance(eps, dict):
+            eps = dict(zip(self.bounded, np.atleast_1d(np.asarray(eps, float)).tolist()))
+        index = index if index is not None else max([p.index for p in self.points] + [0]) + 1
+        start = self.nearest_start(eps)
+        p = (self.solve_point(key, lambda: self._solve_from(index, eps, start)) if key
+             else self._solve_from(index, eps, start))
+        if p.success:
+            self.snapshots[index] = self._solved[-1][1] if not getattr(p, "from_disk", False) else Snapshot(self.m)
+            if getattr(p, "from_disk", False):
+                self._solved.append((self.bounds_vector(eps), self.snapshots[index]))
+        self.points.append(p)
+        self.on_point(p)
+        return p
+
+    def grid_front(self, counts, margin: float = TIGHT_MARGIN) -> list:
+        """Anchors, then a grid of ``counts`` bounds per bounded objective, each from its nearest solved neighbour.
+
+        Axis k runs from J_k at anchor A (inactive) down to ``margin`` of the anchor range above J_k's
+        minimum, with ``settings.spacing``: with every bound at its minimum the corner is infeasible or
+        degenerate, and the anchors already hold the minima. Position (0, ..., 0) is anchor A itself.
+        """
+        counts = tuple(int(c) for c in counts)
+        if len(counts) != len(self.bounded):
+            raise ValueError(f"a grid needs one count per bounded objective ({len(self.bounded)}), got {counts}")
+        self.anchors()
+        a = self.anchor_points["A"]
+        self.axes = [epsilon_grid(_get(a, k), self.minima[k] + margin * (_get(a, k) - self.minima[k]), n,
+                                  self.settings.spacing) for k, n in zip(self.bounded, counts)]
+        self._enter_front()
+        index, at = 1, {(0,) * len(counts): self._solved[0]}
+        for pos in snake(counts):
+            if not any(pos):
+                continue  # anchor A itself (every bound inactive)
+            eps = {k: float(ax[i]) for k, ax, i in zip(self.bounded, self.axes, pos)}
+            # nearest solved neighbour on the grid (index distance), the latest on ties
+            near = min(at, key=lambda q: (sum(abs(x - y) for x, y in zip(q, pos)), -list(at).index(q)))
+            p = self._solve_from(index, eps, at[near][1], pos)
+            if p.success:
+                at[pos] = self._solved[-1]
+                self.snapshots[index] = self._solved[-1][1]
+            self.points.append(p)
+            self.on_point(p)
+            index += 1
+        return self.points
+
+    # -------------------------------------------------------------- choosing (Eq. 11)
+    def payoff_utopia_nadir(self):
+        """Utopia: each objective's own minimum; nadir: its worst value over the anchors (payoff table)."""
+        anchors = list(self.anchor_points.values())
+        utopia = (_get(self.anchor_points["A"], self.primary),) + tuple(self.minima[k] for k in self.bounded)
+        return utopia, payoff_nadir([[_get(p, k) for k in self.names] for p in anchors])
+
+    def front_candidates(self) -> list:
+        """The converged anchors and front points (not the direct Eq. 11 solve)."""
+        return [p for p in self.points if p.success and p.kind != "direct"]
+
+    def nondominated_nadir(self, utopia) -> tuple:
+        """Each objective's worst value over the non-dominated converged points inside the grid's box
+        (every bounded objective at most its value at anchor A: the anchors of the other objectives
+        lie outside it when they have more than one bound)."""
+        loose = self.loosest()
+        J = np.array([[_get(p, k) for k in self.names] for p in self.front_candidates()
+                      if all(_get(p, k) <= lo * (1 + 1e-9) + 1e-12 for k, lo in zip(self.bounded, loose))])
+        return nondominated_nadir(J) if len(J) else tuple(utopia)
+
+    def utopia_nadir(self, rule: str | None = None):
+        """(utopia, nadir) of Eq. 11 with the nadir ``rule`` (:data:`NADIR_RULES`; default ``settings.nadir``)."""
+        rule = rule or getattr(self.settings, "nadir", "payoff")
+        utopia, nadir = self.payoff_utopia_nadir()
+        if rule == "nondominated":
+            nadir = self.nondominated_nadir(utopia)
+        return utopia, nadir
+
+    def eq11(self, rule: str | None = None, points=None):
+        """Eq. 11 post hoc: (the converged point closest to utopia, all distances, utopia, nadir); None if none."""
+        utopia, nadir = self.utopia_nadir(rule=rule)
+        pts = self.front_candidates() if points is None else points
+        if not pts:
+            return None, np.array([]), utopia, nadir
+        d = utopia_distance_n([[_get(p, k) for k in self.names] for p in pts], utopia, nadir)
+        return pts[int(np.argmin(d))], d, utopia, nadir
+
+    def choices(self) -> dict:
+        """The Eq. 11 choice under each nadir rule: rule -> {nadir, index, kind, distance, parameters}."""
+        out = {}
+        for rule in NADIR_RULES:
+            p, d, _, nadir = self.eq11(rule)
+            out[rule] = {"nadir": [float(v) for v in nadir], "index": None if p is None else p.index,
+                         "kind": None if p is None else p.kind, "distance": float(d.min()) if len(d) else None,
+                         "parameters": None if p is None else dict(p.parameters)}
+        return out
+
+    choose = eq11
+
+    def direct_choice(self, start, rule: str | None = None):
+        """Eq. 11 as one NLP (squared distance: same minimiser, smooth), warm from the post-hoc choice ``start``."""
+        utopia, nadir = self.utopia_nadir(rule=rule)
+        self.snapshots[start.kind if start.kind in self.anchor_points else start.index].restore()
+        out = self.solve_once("utopia", {}, "primal", utopia=utopia, nadir=nadir)
+        return self._point(-len(self.names), "direct", {}, out, "primal", ())
+
+
+def _get(p, k: str) -> float:
+    return float(getattr(p, f"J_{k}"))

@@ -1,0 +1,147 @@
+"""The parts of one front solve: outcome and point records, warm-start options and fallback, the grid's path.
+
+Used by :mod:`.epsilon` (the N-objective solver) and the fronts built on it (:mod:`.front`,
+:mod:`.tri_front`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import pyomo.environ as pyo
+
+from ..solvers import MULTIPLIER_MODES
+from .snapshot import Snapshot
+
+#: status of a point found infeasible (a priori, or by Ipopt under active bounds)
+INFEASIBLE = "infeasible"
+#: Ipopt statuses recorded as :data:`INFEASIBLE` when at least one epsilon bound is set
+IPOPT_INFEASIBLE = frozenset({"Infeasible_Problem_Detected", "Restoration_Failed"})
+#: fraction of the anchor range kept above each bounded objective's minimum at the tight end of a grid
+TIGHT_MARGIN = 0.05
+#: anchor names: A for the minimised objective, then one per bounded objective
+ANCHOR_NAMES = "ABCDEFGH"
+
+#: Options of a step that starts from anchor A (the first interior point, or the next one while
+#: every earlier one failed). There the active set changes (the epsilon bound becomes
+#: active, a parameter at its bound in A may leave it), and the small bound pushes of a warm start
+#: pin the iterate: with 1e-6 that step took 20 Ipopt iterations, with Ipopt's default 1e-3 four,
+#: while the later steps take 3 with 1e-6 and 5 with 1e-3 (Case 1, full size, docs/performance.md).
+LEAVE_ANCHOR_OPTIONS = {"warm_start_bound_push": 1e-3, "warm_start_mult_bound_push": 1e-3}
+
+#: Options of the later steps with ``"continuation"``: the start is (nearly) the solution, on the same
+#: active set, so it is left where it is: bound and slack pushes 1e-8 instead of 1e-6 (primal) and 1e-3
+#: (fractions and slacks). Case 1, full size, with the secant predictor: 29 -> 25 iterations over the
+#: 9 interior points, the same front (studies/warm_start_study.py, docs/performance.md).
+FRONT_STEP_OPTIONS = {"warm_start_bound_push": 1e-8, "warm_start_mult_bound_push": 1e-8,
+                      "warm_start_slack_bound_push": 1e-8, "warm_start_bound_frac": 1e-8,
+                      "warm_start_slack_bound_frac": 1e-8}
+
+
+def snake(counts) -> list[tuple[int, ...]]:
+    """Grid positions of ``counts`` (one count per axis) along a boustrophedon path: neighbours follow each other."""
+    counts = tuple(int(c) for c in counts)
+    if len(counts) == 1:
+        return [(i,) for i in range(counts[0])]
+    inner = snake(counts[1:])
+    return [(i,) + t for i in range(counts[0]) for t in (inner if i % 2 == 0 else inner[::-1])]
+
+
+def epsilon_grid(loose: float, tight: float, points: int, spacing: str = "geometric") -> np.ndarray:
+    """Bounds from ``loose`` (the value at anchor A, inactive) down to ``tight``: ``points`` values, ends included."""
+    if tight <= 0 or spacing == "linear":
+        return np.linspace(loose, tight, points)
+    return np.geomspace(loose, tight, points)
+
+
+def solve_with_fallback(solve, mode: str, start: Snapshot):
+    """``solve(mode)``; if a multiplier warm start fails, once more from ``start`` with ``solve("primal")``.
+
+    A warm start from a neighbouring solution can mislead the barrier method
+    (see ../shared/research/solvers.md: a full warm start stalled on a 50k
+    problem); the primal re-solve is the robust fallback. The returned point's
+    iterations and wall time include both attempts, and its ``warm_start``
+    says what happened. A point found infeasible (a priori, or by Ipopt's infeasibility detection)
+    is not retried: the retry would be a second run towards the same verdict.
+    """
+    p = solve(mode)
+    if p.success or mode not in MULTIPLIER_MODES or p.status == INFEASIBLE:
+        return p
+    start.restore()
+    retry = solve("primal")
+    retry.iterations += max(p.iterations, 0)
+    retry.wall_time += p.wall_time
+    retry.setup_time += p.setup_time
+    retry.warm_start = f"{mode} ({p.status}), then primal"
+    return retry
+
+
+def pin_objective_settings(m, **values) -> None:
+    """Pin every objective setting of ``m.objective_settings`` (unnamed ones to 0) by equal bounds."""
+    w = m.objective_settings
+    for k in w:
+        v = float(values.get(k, 0.0))
+        w[k].setlb(v)
+        w[k].setub(v)
+        w[k].set_value(v)
+
+
+def _value(expr) -> float:
+    """Value of an objective expression at the model's current values; NaN if it cannot be evaluated."""
+    try:
+        return float(pyo.value(expr))
+    except (ValueError, ZeroDivisionError, OverflowError, TypeError):
+        return float("nan")
+
+
+@dataclass
+class Outcome:
+    """What one solve gave: objective values, parameters, and how it went."""
+
+    J: dict
+    parameters: dict
+    success: bool
+    status: str
+    iterations: int
+    wall_time: float
+    setup_time: float
+    note: str = ""
+
+
+@dataclass
+class EpsilonPoint:
+    """One point of an N-objective front: objective values ``J`` and bounds ``epsilon`` by name (inf: inactive).
+
+    ``p.J_time`` reads ``p.J["time"]``, as on the two- and three-objective point types.
+    """
+
+    index: int
+    kind: str  # "A", "B", ... (anchors), "eps" (grid or solve_at), "direct"
+    J: dict
+    epsilon: dict
+    parameters: dict
+    success: bool
+    status: str
+    iterations: int
+    wall_time: float
+    setup_time: float = 0.0
+    warm_start: str = "primal"
+    grid: tuple = ()
+    note: str = ""
+    first_stage_min: float = math.nan  # anchors of bounded objectives: the objective's own minimum
+
+    def __getattr__(self, name):
+        if name.startswith("J_") and "J" in self.__dict__ and name[2:] in self.__dict__["J"]:
+            return self.__dict__["J"][name[2:]]
+        raise AttributeError(name)
+
+    def row(self) -> dict:
+        d = asdict(self)
+        for k in ("J", "epsilon", "parameters"):
+            d.pop(k)
+        d.update({f"J_{k}": v for k, v in self.J.items()})
+        d.update({f"epsilon_{k}": v for k, v in self.epsilon.items()})
+        d["grid"] = ",".join(str(i) for i in self.grid)
+        d.update(self.parameters)
+        return d

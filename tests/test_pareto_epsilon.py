@@ -1,0 +1,213 @@
+"""The N-objective epsilon-constraint solver (pyomo_heli.pareto.epsilon) against closed-form answers.
+
+Problem "box" (three objectives of x = (a, b), all minimised):
+
+    f1 = a^2 + b^2,   f2 = (a - 1)^2,   f3 = (b - 1)^2.
+
+Minimising f1 under f2 <= e2, f3 <= e3 decouples: a = 1 - sqrt(e2), b = 1 - sqrt(e3) (for e in
+[0, 1]), so every front point is known in closed form. The Pareto set is the square [0, 1]^2. Anchors:
+A = (0, 0) with f = (0, 1, 1); B = (1, 0) with (1, 0, 1); C = (0, 1) with (1, 1, 0). Utopia (0, 0, 0);
+payoff nadir (1, 1, 1). The true nadir is (2, 1, 1) (point (1, 1) is Pareto optimal with f1 = 2): the
+payoff table underestimates f1's range. On the grid (each bound from 1 down to 0.05), the worst f1 of
+the non-dominated points is at the tight corner, 2 (1 - sqrt(0.05))^2.
+
+Eq. 11 as one NLP, min sum_k (f_k / N_k)^2, is convex and symmetric, so a = b = t with
+16 t^3 / N1^2 = 8 (1 - t)^3 (N2 = N3 = 1), i.e. t = 1 / (1 + (2 / N1^2)^(1/3)).
+"""
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pyomo.environ as pyo
+import pytest
+
+from pyomo_heli.pareto.epsilon import (INFEASIBLE, EpsilonConstraintSolver, nondominated, nondominated_nadir,
+                                       snake, utopia_distance_n)
+from pyomo_heli.pareto.front import ParetoSettings
+
+NAMES = ("f1", "f2", "f3")
+SETTINGS = ParetoSettings(points=[4, 4], solver_options={"tol": 1e-10, "constr_viol_tol": 1e-13}, max_iter=100)
+
+
+def _model(J, names=NAMES):
+    m = pyo.ConcreteModel()
+    m.free_parameters = pyo.Set(initialize=["a", "b"], ordered=True)
+    m.theta_s = pyo.Var(m.free_parameters, initialize=0.3, bounds=(-5, 5))
+    m.theta_scale = pyo.Param(m.free_parameters, initialize=1.0)
+    a, b = m.theta_s["a"], m.theta_s["b"]
+    for name, expr in zip(names, J(a, b)):
+        m.add_component(f"J_{name}", pyo.Expression(expr=expr))
+    return m
+
+
+def _box():
+    return _model(lambda a, b: (a**2 + b**2, (a - 1) ** 2, (b - 1) ** 2))
+
+
+def _f(a, b):
+    return np.array([a**2 + b**2, (a - 1) ** 2, (b - 1) ** 2])
+
+
+def _t(n1):
+    return 1.0 / (1.0 + (2.0 / n1**2) ** (1.0 / 3.0))
+
+
+@pytest.fixture(scope="module")
+def box_front():
+    ps = EpsilonConstraintSolver(_box(), NAMES, SETTINGS)
+    ps.grid_front(SETTINGS.grid)
+    return ps
+
+
+def test_front_points_match_the_closed_form(box_front):
+    ps = box_front
+    anchors = ps.anchor_points
+    for name, (a, b) in {"A": (0, 0), "B": (1, 0), "C": (0, 1)}.items():
+        p = anchors[name]  # B, C hold their objective at its minimum (1 + 1e-6) + 1e-12: a or b at 1 - 1e-6
+        np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], [a, b], atol=2e-4)
+    axis = np.geomspace(1.0, 0.05, 4)  # from f_k(A) = 1 down to 5 % of the range above the minimum 0
+    np.testing.assert_allclose(ps.axes[0], axis, rtol=1e-6)
+    grid = [p for p in ps.points if p.kind == "eps"]
+    assert len(grid) == 4 * 4 - 1 and all(p.success for p in grid)
+    assert [p.grid for p in grid] == [q for q in snake((4, 4)) if any(q)]
+    for p in grid:
+        e2, e3 = p.epsilon["f2"], p.epsilon["f3"]
+        a, b = 1 - math.sqrt(e2), 1 - math.sqrt(e3)
+        # 1e-5: on row/column 0 the bound sits where f1's gradient vanishes (a weakly active constraint, zero
+        # multiplier), and the barrier keeps the iterate ~sqrt(tol) inside
+        np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], [a, b], atol=1e-5)
+        np.testing.assert_allclose([p.J_f1, p.J_f2, p.J_f3], _f(a, b), atol=2e-5)
+        assert 0 < p.iterations < 100
+
+
+def test_eq11_choice_under_both_nadir_rules(box_front):
+    ps = box_front
+    utopia, payoff = ps.utopia_nadir(rule="payoff")
+    np.testing.assert_allclose(utopia, [0, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(payoff, [1, 1, 1], atol=1e-5)  # B, C hold their objective at <= 1e-12: a, b = 1 - 1e-6
+    _, nd = ps.utopia_nadir(rule="nondominated")
+    n1 = 2 * (1 - math.sqrt(0.05)) ** 2  # the tight corner of the grid
+    np.testing.assert_allclose(nd, [n1, 1, 1], atol=1e-6)
+    for rule, nadir in (("payoff", (1.0, 1.0, 1.0)), ("nondominated", (n1, 1.0, 1.0))):
+        # post hoc: the grid point nearest to utopia, from the closed-form front
+        chosen, d, _, _ = ps.eq11(rule)
+        axis = np.geomspace(1.0, 0.05, 4)
+        cand = [(0.0, 0.0)] + [(1 - math.sqrt(e2), 1 - math.sqrt(e3)) for e2 in axis for e3 in axis]
+        dist = utopia_distance_n([_f(a, b) for a, b in cand], (0, 0, 0), nadir)
+        a, b = cand[int(np.argmin(dist))]
+        np.testing.assert_allclose([chosen.parameters["a"], chosen.parameters["b"]], [a, b], atol=1e-5)
+        assert d.min() == pytest.approx(dist.min(), abs=1e-6)
+        # direct Eq. 11 solve: a = b = t(N1)
+        direct = ps.direct_choice(chosen, rule=rule)
+        t = _t(nadir[0])
+        assert direct.success
+        np.testing.assert_allclose([direct.parameters["a"], direct.parameters["b"]], [t, t], atol=1e-5)
+    assert _t(1.0) == pytest.approx(1 / (1 + 2 ** (1 / 3)))  # 0.4425: the payoff rule's choice
+    choices = ps.choices()
+    assert set(choices) == {"payoff", "nondominated"}
+    assert choices["nondominated"]["nadir"] == pytest.approx([n1, 1, 1], abs=1e-6)
+
+
+def test_solve_at_warm_starts_from_the_nearest_point_and_matches_the_closed_form(box_front):
+    ps = box_front
+    p = ps.solve_at({"f2": 0.3, "f3": 0.6})
+    assert p.success and p.iterations < 100
+    np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], [1 - math.sqrt(0.3), 1 - math.sqrt(0.6)],
+                               atol=1e-6)
+    # a bound below the anchor minimum of its objective (f2 >= 0): infeasible, not solved
+    q = ps.solve_at([-0.01, 0.5])
+    assert q.status == INFEASIBLE and not q.success and q.iterations == 0 and "minimum of J_f2" in q.note
+    assert ps.points[-1] is q
+
+
+def test_infeasible_bounds_are_reported_without_an_iteration_limit_solve():
+    """Discs f2 <= e2 around (0, 1) and f3 <= e3 around (-1, 0) are sqrt(2) apart: with radii
+    sqrt(0.2) each they miss each other (Ipopt's infeasibility detection), and tighter bounds are
+    infeasible a priori (not solved)."""
+    m = _model(lambda a, b: ((a - 1) ** 2 + b**2 + 1.0, a**2 + (b - 1) ** 2, (a + 1) ** 2 + b**2))
+    ps = EpsilonConstraintSolver(m, NAMES, SETTINGS)
+    ps.anchors()
+    p = ps.solve_at({"f2": 0.2, "f3": 0.2})
+    assert p.status == INFEASIBLE and not p.success
+    assert p.note in ("Infeasible_Problem_Detected", "Restoration_Failed")
+    assert 0 < p.iterations < SETTINGS.max_iter  # stopped by the infeasibility detection, not the cap
+    q = ps.solve_at({"f2": 0.1, "f3": 0.15})
+    assert q.status == INFEASIBLE and q.iterations == 0 and "found infeasible" in q.note
+    r = ps.solve_at({"f2": 0.6, "f3": 0.6})  # radii 0.77 + 0.77 > 1.41: feasible
+    assert r.success and r.J_f2 <= 0.6 * (1 + 1e-6) and r.J_f3 <= 0.6 * (1 + 1e-6)
+
+
+def test_nondominated_nadir_by_hand():
+    J = np.array([[1.0, 5.0, 2.0],
+                  [2.0, 3.0, 3.0],
+                  [4.0, 1.0, 1.0],
+                  [3.0, 4.0, 4.0],   # dominated by [2, 3, 3]
+                  [9.0, 9.0, 0.5]])  # non-dominated (best f3)
+    assert nondominated(J).tolist() == [True, True, True, False, True]
+    assert nondominated_nadir(J) == (9.0, 9.0, 3.0)
+    assert nondominated_nadir(J[:4]) == (4.0, 5.0, 3.0)
+    # equal rows keep each other
+    assert nondominated(np.array([[1.0, 2.0], [1.0, 2.0]])).tolist() == [True, True]
+
+
+def test_snake_path_visits_neighbours_in_turn():
+    path = snake((3, 2, 2))
+    assert len(path) == len(set(path)) == 12
+    assert all(sum(abs(x - y) for x, y in zip(p, q)) == 1 for p, q in zip(path, path[1:]))
+    assert snake((2, 3)) == [(0, 0), (0, 1), (0, 2), (1, 2), (1, 1), (1, 0)]
+
+
+# ------------------------------------------------------------------ [pareto] settings of the N-objective front
+CONFIGS = Path(__file__).parent / "configs"
+
+
+def test_pareto_points_list_max_iter_and_nadir_in_the_config():
+    from pyomo_heli.config import ConfigError, load_identification_config
+
+    raw = tomllib.loads((CONFIGS / "case1_tri.toml").read_text())
+    del raw["linear"]["points"]
+    raw["pareto"].update(points=[5, 5], max_iter=100, nadir="nondominated")
+    cfg = load_identification_config(CONFIGS / "case1_tri.toml", raw=raw)
+    assert cfg.pareto.grid == (5, 5) and cfg.pareto.points == 5
+    assert cfg.pareto.max_iter == 100 and cfg.pareto.nadir == "nondominated"
+    bi = load_identification_config(CONFIGS / "case1.toml", {"pareto": {"points": [7]}})
+    assert bi.pareto.points == 7 and bi.pareto.grid == (7,) and bi.pareto.max_iter is None
+    assert load_identification_config(CONFIGS / "case1.toml").pareto.nadir == "payoff"  # the default
+    for overrides, needle in (({"pareto": {"points": [5, 5]}}, "one count per bounded objective"),
+                              ({"pareto": {"points": [5, 1]}}, "field 'points'"),
+                              ({"pareto": {"nadir": "worst"}}, "pareto.nadir"),
+                              ({"pareto": {"max_iter": 0}}, "field 'max_iter'")):
+        with pytest.raises(ConfigError) as exc:
+            load_identification_config(CONFIGS / "case1.toml", overrides)
+        msg = str(exc.value)
+        assert "case1.toml" in msg and needle in msg and "\n" not in msg, msg
+    with pytest.raises(ConfigError, match=r"\[linear\]: field 'points'.*give it once"):
+        load_identification_config(CONFIGS / "case1_tri.toml", {"pareto": {"points": [5, 5]}})
+
+
+def test_bi_objective_front_and_solve_at_on_the_closed_form():
+    """ParetoSolver (two objectives) on J_time = (a-1)^2 + b^2 + 1, J_trim = a^2 + (b-1)^2: min J_time under
+    J_trim <= e is the point sqrt(e) from (0, 1) towards (1, 0), a = sqrt(e/2), b = 1 - sqrt(e/2)."""
+    from pyomo_heli.pareto.front import ParetoSolver
+
+    m = _model(lambda a, b: ((a - 1) ** 2 + b**2 + 1.0, a**2 + (b - 1) ** 2), names=("time", "trim"))
+    m.eps_trim = pyo.Param(initialize=1e20, mutable=True)
+    ps = ParetoSolver(m, ParetoSettings(points=5, solver_options=SETTINGS.solver_options, max_iter=100))
+    pts = ps.front()
+    for p in (p for p in pts if p.kind == "eps"):
+        r = math.sqrt(p.epsilon / 2)
+        assert p.success and p.iterations < 100
+        np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], [r, 1 - r], atol=1e-5)
+    p = ps.solve_at(0.5)  # between grid points: warm from the nearest
+    assert p.kind == "eps" and p.epsilon == 0.5 and p.index == 5 and ps.points[-1] is p
+    np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], [0.5, 0.5], atol=1e-6)
+    q = ps.solve_at({"trim": -1.0})
+    assert q.status == INFEASIBLE and q.iterations == 0
+    chosen, d = ps.choose()
+    utopia, nadir = ps.utopia_nadir()
+    np.testing.assert_allclose(nadir, [3, 2], atol=1e-5)  # J_time(B) = 3 at (0, 1), J_trim(A) = 2 at (1, 0)
+    assert ps.utopia_nadir(rule="nondominated")[1] == pytest.approx(nadir, abs=1e-9)  # two objectives: the same
+    assert chosen.J_time == pytest.approx(min(p.J_time for p in ps.points if p.success
+                                              and math.isclose(utopia_distance_n([[p.J_time, p.J_trim]], utopia,
+                                                                                 nadir)[0], d.min())))

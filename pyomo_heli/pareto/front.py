@@ -1,5 +1,10 @@
 """Pareto front of (J_time, J_trim) by the epsilon-constraint method (paper Eq. 10-11).
 
+:class:`ParetoSolver` is the two-objective use of the N-objective solver
+:class:`~.epsilon.EpsilonConstraintSolver` (model, objective, one solve, store,
+``solve_at``, Eq. 11 with either nadir rule); what is its own here: the anchors
+with their retries, and the 1-D front with the secant predictor.
+
 The NLP is built and written for the solver once. Three objectives are
 needed:
 
@@ -153,7 +158,11 @@ class ParetoSolver(EpsilonConstraintSolver):
     point_class = FrontPoint
 
     def __init__(self, m, settings: ParetoSettings | None = None, on_point=None, store=None):
-        super().__init__(m, ("time", "trim"), settings or ParetoSettings(), on_point, store)
+        settings = settings or ParetoSettings()
+        if settings.grid is not None and len(settings.grid) != 1:
+            raise ValueError(f"pareto.points: the bi-objective front has one bounded objective, "
+                             f"got {list(settings.grid)}")
+        super().__init__(m, ("time", "trim"), settings, on_point, store)
         self.s_time, self.s_trim = self.scale["time"], self.scale["trim"]
         self._snap_initial = self.initial_guess
         self.points: list[FrontPoint] = []

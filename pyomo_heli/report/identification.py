@@ -185,6 +185,15 @@ def utopia_distance_of(result: IdentificationResult, point: dict) -> float | Non
     return d if math.isfinite(d) else None
 
 
+def nadir_rule_line(choices) -> str | None:
+    """The Eq. 11 choice under each nadir rule (chosen.json ``info.eq11_by_nadir``), None if not recorded."""
+    if not choices:
+        return None
+    return "Eq. 11 choice by nadir rule: " + "; ".join(
+        f"{rule}: point {c['index']} ({c['kind']}), nadir {tuple(float(f'{v:.6g}') for v in c['nadir'])}, "
+        f"distance {_fmt(c['distance'], 4)}" for rule, c in choices.items())
+
+
 def mean_interior_iterations(front: pd.DataFrame) -> float | None:
     eps = front[front["kind"] == "eps"]
     return float(eps["iterations"].mean()) if len(eps) else None
@@ -296,6 +305,8 @@ def write_report(out_dir, cfg, results_dir=None, figure_format: str = "png") -> 
                  + (" (the direct solve lies closer to U than every sampled front point: the front is sampled "
                        "coarsely near C, or its solves stopped short of the optimum)."
                     if dd is not None and dc is not None and dd < dc - 1e-3 else ".") + "  ")
+    if nadir_rule_line(info.get("eq11_by_nadir")):
+        L.append(nadir_rule_line(info["eq11_by_nadir"]) + ".  ")
     n_eps = int((result.front["kind"] == "eps").sum())
     L.append(f"Mean iterations per interior front point: {_fmt(mean_it, 4)} "
              f"(over {n_eps} epsilon-constraint solve{'s' if n_eps != 1 else ''}, failed ones included).")

@@ -17,7 +17,7 @@ from ..dataset.frequency_response import load_responses
 from ..pareto.result import IdentificationResult, ResultFileError, check_point_record, is_number
 from ..physics.model import INPUTS, OUTPUTS
 from ..simulation.linearize import linearize_float
-from .identification import _display, markdown_table, read_truth
+from .identification import _display, markdown_table, nadir_rule_line, read_truth
 
 ESTIMATES = (("time-domain (A)", "C0", "--"), ("bi-objective", "C2", "-."), ("tri-objective", "C3", "-"))
 
@@ -403,15 +403,6 @@ def band_errors(responses, curves: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _nadir_rules(choices) -> list[str]:
-    """Lines naming the Eq. 11 choice under each nadir rule (info.eq11_by_nadir), if the run recorded them."""
-    if not choices:
-        return []
-    return ["Eq. 11 choice by nadir rule: " + "; ".join(
-        f"{rule}: point {c['index']} ({c['kind']}), nadir {tuple(round(v, 6) for v in c['nadir'])}, "
-        f"distance {c['distance']:.4g}" for rule, c in choices.items()), ""]
-
-
 def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png") -> Path:
     """Figures and ``report_linear.md`` of a tri-objective results folder; the folder must agree with ``cfg``
     (:func:`pyomo_heli.provenance.check_results_match`; ``warn`` gets its notes on records the folder lacks)."""
@@ -469,7 +460,7 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png") -> 
             "## Objective values of the choices", "", markdown_table(objs, 6), "",
             f"utopia (J_time, J_trim, J_linear) = {tuple(round(v, 6) for v in result.utopia)}, "
             f"nadir = {tuple(round(v, 6) for v in result.nadir)}", "",
-            *_nadir_rules(result.info.get("eq11_by_nadir")),
+            *([line, ""] if (line := nadir_rule_line(result.info.get("eq11_by_nadir"))) else []),
             "## Frequency-response errors in the coherent band", "", markdown_table(errs, 4), "",
             f"![front](front_projections.{figure_format})", "", f"![bode](bode.{figure_format})", "",
             "## Front", "", markdown_table(shown, 6), ""]

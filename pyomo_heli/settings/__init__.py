@@ -7,7 +7,7 @@ error) and then apply the rules that compare fields. docs/settings.md says why p
 """
 from .base import ConfigError, Problems, Table, validate
 
-__all__ = ["ConfigError", "KINDS", "Problems", "Table", "schema", "validate"]
+__all__ = ["ConfigError", "KINDS", "Problems", "Table", "schema", "schema_text", "validate", "write_schemas"]
 
 
 def _identification():
@@ -50,4 +50,25 @@ def schema(kind: str) -> dict:
     out = KINDS[kind][1]()
     out["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     out["title"] = out.get("title", kind)
+    return out
+
+
+def schema_text(kind: str) -> str:
+    """The JSON Schema of ``kind`` as the text ``pyomo-heli schema KIND`` prints (and schemas/ holds)."""
+    import json
+
+    return json.dumps(schema(kind), indent=2) + "\n"
+
+
+def write_schemas(folder) -> list:
+    """Write every kind's schema to ``folder/<kind>.schema.json`` (``pyomo-heli schema --out-dir schemas``)."""
+    from pathlib import Path
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    out = []
+    for kind in KINDS:
+        path = folder / f"{kind}.schema.json"
+        path.write_text(schema_text(kind), encoding="utf-8")
+        out.append(path)
     return out

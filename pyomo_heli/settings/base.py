@@ -226,13 +226,14 @@ def _message(table_cls: type[Table], e: dict, field, value, table) -> str:
 
 
 def names_check(values: list, info: ValidationInfo, *, choices=None, what: str = "name", allow_empty: bool = False,
-                unknown: str | None = None) -> list:
+                unknown: str | None = None, empty: str | None = None) -> list:
     """A list of distinct names: empty only with ``allow_empty``, each of ``choices`` if given.
 
-    ``unknown``: the message of names not among ``choices`` (``{bad}`` the names, ``{field}``, ``{choices}``)."""
+    ``unknown``: the message of names not among ``choices`` (``{bad}`` the names, ``{one}`` the first, ``{field}``,
+    ``{choices}``); ``empty``: the message of an empty list (``{field}``)."""
     key = info.field_name
     if not values and not allow_empty:
-        fail(info, f"field '{key}' is empty")
+        fail(info, (empty or "field '{field}' is empty").format(field=key))
     dup = sorted({x for x in values if values.count(x) > 1})
     if dup:
         fail(info, f"field '{key}' names {dup} more than once")

@@ -16,7 +16,8 @@ SIGMA_MAX_SI = 10.0
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 
-def Names(choices=None, *, allow_empty: bool = False, unknown: str | None = None, what: str = "name"):
+def Names(choices=None, *, allow_empty: bool = False, unknown: str | None = None, what: str = "name",
+          empty: str | None = None):
     """The type of a list of distinct names (each of ``choices`` if given; empty only with ``allow_empty``)."""
     schema: dict[str, Any] = {"uniqueItems": True}
     if choices is not None:
@@ -25,7 +26,8 @@ def Names(choices=None, *, allow_empty: bool = False, unknown: str | None = None
         schema["minItems"] = 1
 
     def check(v: list, info: ValidationInfo) -> list:
-        return names_check(v, info, choices=choices, what=what, allow_empty=allow_empty, unknown=unknown)
+        return names_check(v, info, choices=choices, what=what, allow_empty=allow_empty, unknown=unknown,
+                           empty=empty)
 
     return Annotated[list[str], AfterValidator(check), Field(json_schema_extra=schema)]
 

@@ -239,6 +239,9 @@ class DiagnosisTable(Table):
                                                                      "quiet lead-in)")
 
 
+NON_EMPTY = "field '{field}' must be a non-empty list of names"
+
+
 class LoopTable(Table):
     """``[loop]``: the close-loop settings (docs/close_loop.md), read by ``pyomo-heli close-loop``."""
 
@@ -258,7 +261,7 @@ class LoopTable(Table):
     }
 
     max_iterations: int = Field(3, ge=0, description="most loop iterations after the first identification")
-    candidates: Optional[Names()] = Field(None, description="the candidate effects offered (names of "
+    candidates: Optional[Names(empty=NON_EMPTY)] = Field(None, description="the candidate effects offered (names of "
                                                             "pyomo_heli.diagnosis.candidates; default all)")
     alpha: Finite = Field(ALPHA, gt=0, le=1, description="significance level of the score test")
     ratio: Finite = Field(RATIO, gt=1, description="how much the best candidate must beat the runner-up")
@@ -274,8 +277,9 @@ class LoopTable(Table):
                                   "measured inputs as exact")
     discovery: bool = Field(False, description="structure determination over the candidates and the generic "
                                                "discrepancy family (docs/discovery.md)")
-    generic: Optional[Names(generic_names(), unknown="field 'generic': unknown discrepancy term {one!r}; choose "
-                                                     "from {choices}")] = Field(
+    generic: Optional[Names(generic_names(), empty=NON_EMPTY,
+                            unknown="field 'generic': unknown discrepancy term {one!r}; choose from {choices}")] = \
+        Field(
         None, description="the generic terms offered with discovery (default the whole family)")
     validation_rule: bool = Field(True, description="reject a step whose model makes the validation error rise "
                                                     "significantly on any output")
@@ -298,8 +302,8 @@ class IdentificationFile(Table):
     linear: Optional[LinearTable] = None
     diagnosis: Optional[DiagnosisTable] = None
     #: checked when close-loop reads it (:func:`pyomo_heli.workflows.close_loop.loop_settings`)
-    loop: dict[str, Any] = Field(default_factory=dict, json_schema_extra={"$ref": "#/$defs/LoopTable"},
-                                 description="close-loop settings (read by pyomo-heli close-loop)")
+    loop: dict[str, Any] = Field(default_factory=dict, description="close-loop settings (read by pyomo-heli "
+                                                                   "close-loop; declared by LoopTable)")
     study: dict[str, Any] = Field(default_factory=dict, description="free notes of a study (not read)")
 
 
@@ -308,5 +312,6 @@ def identification_schema() -> dict:
     schema = IdentificationFile.model_json_schema()
     loop = LoopTable.model_json_schema()
     schema.setdefault("$defs", {})["LoopTable"] = loop
-    schema["properties"]["loop"] = {"$ref": "#/$defs/LoopTable"}
+    schema["properties"]["loop"] = {"$ref": "#/$defs/LoopTable",
+                                    "description": schema["properties"]["loop"]["description"]}
     return schema

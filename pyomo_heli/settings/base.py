@@ -121,7 +121,7 @@ def _type_words(kind: str, cls: type[Table]) -> str | None:
 
 
 def _domain_words(e: dict) -> str:
-    ctx = e.get("ctx", {})
+    ctx = {k: f"{v:g}" if isinstance(v, float) else v for k, v in e.get("ctx", {}).items()}
     t = e["type"]
     if t == "greater_than":
         return f"> {ctx['gt']}"

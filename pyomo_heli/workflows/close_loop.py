@@ -99,7 +99,8 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
     if table is not None:
         for n in table.candidates or ():
             if n not in CANDIDATES:
-                problems.add("loop", f"field 'candidates': unknown candidate {n!r}; choose from {', '.join(CANDIDATES)}")
+                problems.add("loop", f"field 'candidates': unknown candidate {n!r}; choose from "
+                                     f"{', '.join(CANDIDATES)}")
     problems.raise_if_any()
     return LoopSettings(**{k: list(v) if isinstance(v, list) else v for k, v in table.model_dump().items()})
 

@@ -928,9 +928,8 @@ def main(argv=None) -> int:
     trusted (no point converged, an anchor failed); 130 interrupted by SIGINT or SIGTERM (finished points stay
     on disk; the same command resumes)."""
     from . import interrupts
-    from .config import ConfigError as IdentificationConfigError
     from .dataset import DatasetError
-    from .flighttest.config import ConfigError
+    from .settings import ConfigError  # every settings file's one error type
     from .ioerrors import OUTPUT_ERRNOS
     from .simulation.inputs import InputSpecError
     from .simulation.trim import TrimError
@@ -948,7 +947,7 @@ def main(argv=None) -> int:
         print(f"pyomo-heli: error: {exc}", file=sys.stderr)
         return 2
     show_traceback = show_traceback or getattr(args, "traceback", False)
-    bad_input = (UserError, InputSpecError, ConfigError, IdentificationConfigError, DatasetError, TrimError,
+    bad_input = (UserError, InputSpecError, ConfigError, DatasetError, TrimError,
                  SolverUnavailableError, StoreMismatchError, KeyError, ValueError)
     stdout = sys.stdout
     sys.stdout = _Stdout(stdout)

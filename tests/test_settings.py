@@ -289,3 +289,32 @@ def test_generator_defaults_and_vocabularies():
     fields = gen.ManeuverTable.model_fields
     plan = ManeuverPlan("x", "identification", 0.0, "col", "step", 0.1, 1.0, 5.0)
     assert (fields["t_start_s"].default, fields["ramp_s"].default) == (plan.t_start, plan.ramp)
+
+
+# ------------------------------------------------------------------ the flight-test manifest
+MANIFESTS = sorted([*ROOT.glob("data/*/manifest.json"), *ROOT.glob("tests/data/*/manifest.json")])
+
+
+@pytest.mark.parametrize("path", MANIFESTS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_bundled_manifest_fits_its_declaration(path):
+    from pyomo_heli.settings.manifest import Manifest
+
+    raw = json.loads(path.read_text())
+    Manifest.model_validate(raw)
+    doc = schema("manifest")
+    assert _check(raw, doc, doc, path.name) == []
+
+
+def test_manifest_declaration_is_the_readers():
+    """The reader takes its key tables from the declaration; format name and version agree with the format's."""
+    from pyomo_heli.dataset import reader
+    from pyomo_heli.dataset.schema import FORMAT_NAME, FORMAT_VERSION
+    from pyomo_heli.settings import manifest
+
+    assert (manifest.FORMAT_NAME, manifest.FORMAT_VERSION) == (FORMAT_NAME, FORMAT_VERSION)
+    assert reader.MANIFEST_KEYS == {"format": True, "format_version": True, "aircraft": True, "description": False,
+                                    "atmosphere": True, "mass_kg": True, "trim_file": True, "maneuvers": True,
+                                    "conventions": False, "source": False, "accuracy": False, "assumptions": False}
+    assert reader.MANEUVER_KEYS == {"name": True, "file": True, "role": True, "trim_speed_kt": True, "inputs": True,
+                                    "description": False}
+    assert reader.ATMOSPHERE_KEYS == ("rho_kg_m3", "g_m_s2")

@@ -34,12 +34,19 @@ def _loop():
     return LoopTable.model_json_schema()
 
 
+def _manifest():
+    from .manifest import Manifest
+
+    return Manifest.model_json_schema()
+
+
 #: config kind -> (what it is, its JSON Schema)
 KINDS = {
     "identify": ("identification config (identify, close-loop, diagnose, uncertainty, multistart)", _identification),
     "generate": ("flight-test generator config (generate-data)", _generator),
     "trim-loop": ("trim-loop config (trim-loop)", _trim_loop),
     "loop": ("the [loop] table of an identification config (close-loop)", _loop),
+    "manifest": ("manifest.json of a flight-test folder (check-data; docs/data_format.md)", _manifest),
 }
 
 

@@ -402,6 +402,19 @@ def cmd_generate_data(args) -> int:
     return 0
 
 
+def cmd_schema(args) -> int:
+    from .settings import write_schemas, schema_text
+
+    if args.out_dir:
+        for path in write_schemas(args.out_dir):
+            print(path)
+    elif args.kind:
+        print(schema_text(args.kind), end="")
+    else:
+        raise UserError("schema: give a config kind or --out-dir")
+    return 0
+
+
 def cmd_check_data(args) -> int:
     from .dataset.cli import check_data
 
@@ -841,6 +854,14 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("directory")
     c.set_defaults(func=cmd_check_data)
 
+    from .settings import KINDS
+
+    sc = sub.add_parser("schema", help="JSON Schema of a config kind, for editors (docs/settings.md)")
+    sc.add_argument("kind", nargs="?", choices=tuple(KINDS), help="the config kind: " + "; ".join(
+        f"{k}: {what}" for k, (what, _) in KINDS.items()))
+    sc.add_argument("--out-dir", help="write every kind's schema to OUT_DIR/<kind>.schema.json instead")
+    sc.set_defaults(func=cmd_schema)
+
     g = sub.add_parser("diagnose", help="residual analysis of an identification result (diagnosis.json, diagnosis.md)")
     g.add_argument("results_dir", help="results folder of pyomo-heli identify")
     g.add_argument("--config", help="identification config (default: the one named in chosen.json)")
@@ -907,9 +928,8 @@ def main(argv=None) -> int:
     trusted (no point converged, an anchor failed); 130 interrupted by SIGINT or SIGTERM (finished points stay
     on disk; the same command resumes)."""
     from . import interrupts
-    from .config import ConfigError as IdentificationConfigError
     from .dataset import DatasetError
-    from .flighttest.config import ConfigError
+    from .settings import ConfigError  # every settings file's one error type
     from .ioerrors import OUTPUT_ERRNOS
     from .simulation.inputs import InputSpecError
     from .simulation.trim import TrimError
@@ -927,7 +947,7 @@ def main(argv=None) -> int:
         print(f"pyomo-heli: error: {exc}", file=sys.stderr)
         return 2
     show_traceback = show_traceback or getattr(args, "traceback", False)
-    bad_input = (UserError, InputSpecError, ConfigError, IdentificationConfigError, DatasetError, TrimError,
+    bad_input = (UserError, InputSpecError, ConfigError, DatasetError, TrimError,
                  SolverUnavailableError, StoreMismatchError, KeyError, ValueError)
     stdout = sys.stdout
     sys.stdout = _Stdout(stdout)
@@ -964,7 +984,8 @@ def main(argv=None) -> int:
         internal = isinstance(exc, SolverError) and not isinstance(exc, SolverUnavailableError)
         if not internal and (isinstance(exc, bad_input) or isinstance(exc, OSError)):
             msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
-            print(f"pyomo-heli {cmd}: error: {msg}", file=sys.stderr)
+            for line in str(msg).splitlines() or [""]:  # a settings file: one line per error
+                print(f"pyomo-heli {cmd}: error: {line}", file=sys.stderr)
             return 2
         print(f"pyomo-heli {cmd}: internal error: {type(exc).__name__}: {exc}"
               + ("" if show_traceback else f"; {TRACEBACK_HINT}"), file=sys.stderr)

@@ -7,26 +7,20 @@ Example: studies/case1.toml.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from .tomlfile import read_toml
 
-from .nlp.identification import TIME_OUTPUTS, TRIM_OUTPUTS, NLPOptions
+from .nlp.identification import NLPOptions
 from .nlp.parameters import FreeParameter
 from .pareto.front import ParetoSettings
-from .physics.model import INPUTS, HelicopterModel
+from .physics.model import HelicopterModel
+from .settings import ConfigError, Problems, validate
+from .settings.common import SIGMA_MAX_SI  # noqa: F401 - re-exported
+from .settings.identification import OBJECTIVE_SETS, IdentificationFile, LinearTable
 from .units import SENSOR_SIGMA_KEYS
-from .solvers import SOLVER_NAMES, validate_solver_options
-
-
-#: largest noise sigma [SI: rad, rad/s, g, m/s] a config may give: no sensor is that poor; larger is a unit slip
-SIGMA_MAX_SI = 10.0
-
-
-class ConfigError(ValueError):
-    """A bad identification config; the message names the file and field."""
+from .solvers import validate_solver_options
 
 
 @dataclass
@@ -69,54 +63,14 @@ class DiagnosisSettings:
     noise_sigma: dict | None = None
 
 
-def _need(d, key, where, types, default=...):
-    if key not in d:
-        if default is ...:
-            raise ConfigError(f"{where}: missing field '{key}'")
-        return default
-    v = d[key]
-    if (isinstance(v, bool) and types is not bool) or not isinstance(v, types):
-        names = "/".join(t.__name__ for t in (types if isinstance(types, tuple) else (types,)))
-        raise ConfigError(f"{where}: field '{key}' must be {names}, got {v!r}")
-    return v
-
-
-def _only(d: dict, allowed, where: str) -> None:
-    """A misspelt key is an error, not a silently ignored setting."""
-    unknown = sorted(set(d) - set(allowed))
-    if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; use {', '.join(sorted(allowed))}")
-
-
-def _names(v, where: str, key: str, allow_empty: bool = False) -> list:
-    """A list of distinct strings (maneuver, output or channel names)."""
-    if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
-        raise ConfigError(f"{where}: field '{key}' must be a list of names, got {v!r}")
-    if not v and not allow_empty:
-        raise ConfigError(f"{where}: field '{key}' is empty")
-    dup = sorted({x for x in v if v.count(x) > 1})
-    if dup:
-        raise ConfigError(f"{where}: field '{key}' names {dup} more than once")
-    return v
-
-
-def _finite(d: dict, key: str, where: str, default=None):
-    """An optional finite number (not a bool)."""
-    v = d.get(key, default)
-    if v is None:
-        return None
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise ConfigError(f"{where}: field '{key}' must be a finite number, got {v!r}")
-    return float(v)
-
-
-def _unit_factor(spec, unit: str, where: str) -> float:
-    if unit in (spec.unit, "SI", ""):
+def unit_factor(spec, unit: str | None) -> float:
+    """The factor from ``unit`` (a parameter's SI unit, "SI" or its display unit) to SI; ValueError otherwise."""
+    if unit in (None, spec.unit, "SI", ""):
         return 1.0
     if spec.display is not None and unit == spec.display[0]:
         return 1.0 / spec.display[1]
     allowed = [spec.unit] + ([spec.display[0]] if spec.display else [])
-    raise ConfigError(f"{where}: unit '{unit}' not recognised for {spec.name}; use {' or '.join(allowed)}")
+    raise ValueError(f"unit '{unit}' not recognised for {spec.name}; use {' or '.join(allowed)}")
 
 
 def load_identification_config(path: str | Path, overrides: dict | None = None,
@@ -125,6 +79,8 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
 
     ``raw``: the config's tables as a dict (the parsed TOML) instead of reading ``path``; ``path`` then
     only names the config in messages and is the base of relative paths (its folder).
+    The tables are declared in :mod:`pyomo_heli.settings.identification`; every error of their fields is
+    reported at once (one line each), then every error of the rules across fields and of the data folder.
     """
     path = Path(path)
     if raw is None:
@@ -138,274 +94,175 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
     for k, v in (overrides or {}).items():
         raw[k] = {**raw.get(k, {}), **v} if isinstance(v, dict) else v
     f = str(path)
-    known = {"data", "model", "parameters", "objectives", "discretization", "pareto", "solver", "study", "loop",
-             "linear", "diagnosis"}
-    unknown = set(raw) - known
-    if unknown:
-        raise ConfigError(f"{f}: unknown table(s) {sorted(unknown)}; expected {sorted(known)}")
-    for k, v in raw.items():
-        if not isinstance(v, dict):
-            raise ConfigError(f"{f}: '{k}' must be a table [{k}], got {v!r}")
+    problems = Problems(f, ConfigError)
+    s = validate(IdentificationFile, raw, problems)
+    problems.raise_if_any()
+    data = s.data
 
-    data = _need(raw, "data", f, dict)
-    _only(data, ("dataset", "maneuvers", "validation", "resample_hz", "resample_inputs", "max_duration_s",
-                 "input_reference_s"), f"{f} [data]")
-    ds = Path(_need(data, "dataset", f"{f} [data]", str))
+    # ---- the data folder and the records
+    ds = Path(data.dataset)
     if not ds.is_absolute():
         ds = (path.parent / ds).resolve()
     if not ds.is_dir():
-        raise ConfigError(f"{f} [data]: field 'dataset': folder {ds} not found")
-    if not (ds / "manifest.json").is_file():
-        raise ConfigError(f"{f} [data]: field 'dataset': {ds} is not a flight-test folder (no manifest.json; "
-                          f"docs/data_format.md)")
-    mans = data.get("maneuvers", "identification")
-    if mans != "identification":
-        if not isinstance(mans, list):
-            raise ConfigError(f"{f} [data]: field 'maneuvers' must be \"identification\" or a list of names")
-        _names(mans, f"{f} [data]", "maneuvers")
-    val = data.get("validation", "validation")
-    if val != "validation":
-        if not isinstance(val, list):
-            raise ConfigError(f"{f} [data]: field 'validation' must be \"validation\" or a list of names")
-        _names(val, f"{f} [data]", "validation", allow_empty=True)
-        both = [n for n in val if isinstance(mans, list) and n in mans]
-        if both:  # a record the fit has seen validates nothing
-            raise ConfigError(f"{f} [data]: maneuver(s) {', '.join(both)} listed in both 'maneuvers' (fitted) and "
-                              f"'validation'; a validation record must be one the fit has not seen")
-    resample = _finite(data, "resample_hz", f"{f} [data]")
-    if resample is not None and not resample > 0:
-        raise ConfigError(f"{f} [data]: field 'resample_hz' must be a positive number")
-    max_dur = _finite(data, "max_duration_s", f"{f} [data]")
-    if max_dur is not None and not max_dur > 0:
-        raise ConfigError(f"{f} [data]: field 'max_duration_s' must be a positive number")
-    res_in = data.get("resample_inputs", "project")
-    if res_in not in ("sample", "project"):
-        raise ConfigError(f"{f} [data]: field 'resample_inputs' must be \"sample\" or \"project\", got {res_in!r}")
-    in_ref = data.get("input_reference_s", 0.0)
-    if isinstance(in_ref, bool) or not isinstance(in_ref, (int, float)) or not 0 <= in_ref < float("inf"):
-        raise ConfigError(f"{f} [data]: field 'input_reference_s' must be a number >= 0, got {in_ref!r}")
+        problems.add("data", f"field 'dataset': folder {ds} not found")
+    elif not (ds / "manifest.json").is_file():
+        problems.add("data", f"field 'dataset': {ds} is not a flight-test folder (no manifest.json; "
+                             f"docs/data_format.md)")
+    mans, val = data.maneuvers, data.validation
+    both = [n for n in val if isinstance(mans, list) and n in mans] if isinstance(val, list) else []
+    if both:  # a record the fit has seen validates nothing
+        problems.add("data", f"maneuver(s) {', '.join(both)} listed in both 'maneuvers' (fitted) and "
+                             f"'validation'; a validation record must be one the fit has not seen")
+    in_ref = data.input_reference_s
 
-    mdl = raw.get("model", {})
-    _only(mdl, ("extensions", "parameters"), f"{f} [model]")
+    # ---- the model and its free parameters
     extensions = []
-    ext_names = _names(_need(mdl, "extensions", f"{f} [model]", list, []), f"{f} [model]", "extensions",
-                       allow_empty=True)
-    if ext_names:
+    if s.model.extensions:
         from .diagnosis.candidates import make_candidate
 
-        for n in ext_names:
+        for n in s.model.extensions:
             try:
                 extensions.append(make_candidate(n))
             except KeyError as exc:
-                raise ConfigError(f"{f} [model]: field 'extensions': {exc.args[0]}") from None
+                problems.add("model", f"field 'extensions': {exc.args[0]}")
     model = HelicopterModel(extensions=extensions)
-    fixed = _need(mdl, "parameters", f"{f} [model]", dict, {})
-    for k in fixed:
-        if k not in model.parameters:
-            raise ConfigError(f"{f} [model.parameters]: unknown parameter name '{k}'")
-    if fixed:
+    fixed = s.model.parameters
+    unknown = [k for k in fixed if k not in model.parameters]
+    for k in unknown:
+        problems.add("model.parameters", f"unknown parameter name '{k}'")
+    if fixed and not unknown:
         try:
             model = model.with_parameters(**fixed)
         except ValueError as exc:
-            raise ConfigError(f"{f} [model.parameters]: {exc}") from None
-
-    params = _need(raw, "parameters", f, dict)
-    if not params:
-        raise ConfigError(f"{f} [parameters]: no free parameter given")
+            problems.add("model.parameters", str(exc))
+    if not s.parameters:
+        problems.add("parameters", "no free parameter given")
     free = []
-    for name, spec_raw in params.items():
-        where = f"{f} [parameters.{name}]"
+    for name, p in s.parameters.items():
+        where = f"parameters.{name}"
         if name not in model.parameters:
-            msg = model.parameters._unknown(name)
-            raise ConfigError(f"{where}: {msg}")
-        if not isinstance(spec_raw, dict):
-            raise ConfigError(f"{where}: must be a table with initial, lower, upper, scale, unit")
-        _only(spec_raw, ("initial", "lower", "upper", "scale", "unit"), where)
+            problems.add(where, model.parameters._unknown(name))
+            continue
         spec = model.parameters.spec(name)
-        fac = _unit_factor(spec, _need(spec_raw, "unit", where, str, spec.unit), where)
-        def num(key, default):
-            v = _finite(spec_raw, key, where, default)
-            return None if v is None else v * fac
+        try:
+            fac = unit_factor(spec, p.unit)
+        except ValueError as exc:
+            problems.add(where, str(exc))
+            continue
         lo_d, hi_d = spec.bounds or (None, None)
-        initial = num("initial", None)
-        lower = num("lower", None) if "lower" in spec_raw else lo_d
-        upper = num("upper", None) if "upper" in spec_raw else hi_d
-        scale = num("scale", None) if "scale" in spec_raw else spec.scale
-        if initial is None:
-            initial = spec.value
+        initial = spec.value if p.initial is None else p.initial * fac
+        lower = lo_d if p.lower is None else p.lower * fac
+        upper = hi_d if p.upper is None else p.upper * fac
+        scale = spec.scale if p.scale is None else p.scale * fac
         if lower is None or upper is None:
-            raise ConfigError(f"{where}: give 'lower' and 'upper' (no default range for {name})")
-        if "scale" in spec_raw and not scale > 0:
-            raise ConfigError(f"{where}: field 'scale' must be a number > 0, got {spec_raw['scale']!r}")
+            problems.add(where, f"give 'lower' and 'upper' (no default range for {name})")
+            continue
         try:
             # both bounds must be values the physics can take (a negative mass, a zero air density, ...)
             spec.check(lower)
             spec.check(upper)
             free.append(FreeParameter(name, initial, lower, upper, scale if scale else max(abs(initial), 1.0)))
         except ValueError as exc:
-            raise ConfigError(f"{where}: {exc} (bounds in SI: [{lower:g}, {upper:g}])") from None
+            problems.add(where, f"{exc} (bounds in SI: [{lower:g}, {upper:g}])")
 
-    obj = raw.get("objectives", {})
-    _only(obj, ("use", "time_outputs", "trim_outputs", "covariance", "input_errors", "noise_sigma"),
-          f"{f} [objectives]")
-    t_out = tuple(_names(_need(obj, "time_outputs", f"{f} [objectives]", list, list(NLPOptions.time_outputs)),
-                         f"{f} [objectives]", "time_outputs"))
-    r_out = tuple(_names(_need(obj, "trim_outputs", f"{f} [objectives]", list, list(NLPOptions.trim_outputs)),
-                         f"{f} [objectives]", "trim_outputs"))
-    for o in t_out:
-        if o not in TIME_OUTPUTS:
-            raise ConfigError(f"{f} [objectives]: unknown output '{o}' in time_outputs; choose from "
-                              f"{', '.join(TIME_OUTPUTS)}")
-    for o in r_out:
-        if o not in TRIM_OUTPUTS:
-            raise ConfigError(f"{f} [objectives]: unknown output '{o}' in trim_outputs; choose from "
-                              f"{', '.join(TRIM_OUTPUTS)}")
-    cov = _need(obj, "covariance", f"{f} [objectives]", str, "diagonal")
-    if cov not in ("diagonal", "full"):
-        raise ConfigError(f"{f} [objectives]: field 'covariance' must be diagonal or full")
-    in_err, noise_sigma = _input_errors(obj, f, in_ref=raw.get("data", {}).get("input_reference_s", 0.0))
+    # ---- the objectives
+    obj = s.objectives
+    t_out, r_out = tuple(obj.time_outputs), tuple(obj.trim_outputs)
+    in_err, noise_sigma = _input_errors(obj, problems, in_ref, "objectives", "input_errors")
     if noise_sigma is not None:
         lacking = [c for c in t_out + in_err if c not in noise_sigma]
         if lacking:
-            raise ConfigError(f"{f} [objectives.noise_sigma]: no sigma for {lacking} (every time output and every "
-                              f"channel of input_errors needs one); keys: {', '.join(SENSOR_SIGMA_KEYS)}")
-    disc = raw.get("discretization", {})
-    _only(disc, ("ncp",), f"{f} [discretization]")
-    ncp = _need(disc, "ncp", f"{f} [discretization]", int, 2)
-    if not 1 <= ncp <= 5:
-        raise ConfigError(f"{f} [discretization]: field 'ncp' must be 1..5")
-    nlp = NLPOptions(time_outputs=t_out, trim_outputs=r_out, covariance=cov, ncp=ncp, input_errors=in_err,
-                     noise_sigma=noise_sigma)
+            problems.add("objectives.noise_sigma", f"no sigma for {lacking} (every time output and every channel of "
+                                                   f"input_errors needs one); keys: {', '.join(SENSOR_SIGMA_KEYS)}")
+    use, linear = _objectives_use(s, raw, problems)
+    diagnosis = None
+    if s.diagnosis is not None:
+        diagnosis = DiagnosisSettings(*_input_errors(s.diagnosis, problems, in_ref, "diagnosis", "input_noise"))
 
-    par = raw.get("pareto", {})
-    _only(par, ("points", "spacing", "warm_start", "cold_check", "predictor", "max_iter", "nadir"), f"{f} [pareto]")
-    sol = raw.get("solver", {})
-    unknown = sorted(set(sol) - {"name", "options", "point_rows"})
-    if unknown:
-        raise ConfigError(f"{f} [solver]: unknown key(s) {', '.join(unknown)}; use name, options, point_rows")
-    solver = _need(sol, "name", f"{f} [solver]", str, "casadi-ipopt")
-    if solver not in SOLVER_NAMES:
-        raise ConfigError(f"{f} [solver]: field 'name': unknown solver '{solver}'; "
-                          f"choose from {', '.join(SOLVER_NAMES)}")
-    solver_options = dict(_need(sol, "options", f"{f} [solver]", dict, {}))
+    # ---- the solver and the front
+    sol = s.solver
+    solver_options = dict(sol.options)
     if "point_rows" in solver_options:
-        raise ConfigError(f"{f} [solver]: point_rows is a [solver] field, not an Ipopt option")
-    try:  # a bad option must not reach the solver: a NaN tol hung Ipopt, an absent linear solver crashed it
-        validate_solver_options(solver, solver_options)
-    except ValueError as exc:
-        raise ConfigError(f"{f} [solver] options: {exc}") from None
-    if not _need(sol, "point_rows", f"{f} [solver]", bool, True):
+        problems.add("solver", "point_rows is a [solver] field, not an Ipopt option")
+    else:
+        try:  # a bad option must not reach the solver: a NaN tol hung Ipopt, an absent linear solver crashed it
+            validate_solver_options(sol.name, solver_options)
+        except ValueError as exc:
+            problems.add_text(f"[solver] options: {exc}")
+    if not sol.point_rows:
         # every row through the NL file (docs/performance.md, "What was done" 8)
-        if solver != "casadi-ipopt":
-            raise ConfigError(f"{f} [solver]: field 'point_rows' applies to casadi-ipopt only (the AMPL solvers "
-                              f"read every row from the NL file anyway)")
+        if sol.name != "casadi-ipopt":
+            problems.add("solver", "field 'point_rows' applies to casadi-ipopt only (the AMPL solvers read every "
+                                   "row from the NL file anyway)")
         solver_options["point_rows"] = False
-    points = _need(par, "points", f"{f} [pareto]", (int, list), 11)
-    counts = points if isinstance(points, list) else [points]
-    if not counts or not all(isinstance(n, int) and not isinstance(n, bool) and 2 <= n <= 1000 for n in counts):
+    problems.raise_if_any()
+    nlp = NLPOptions(time_outputs=t_out, trim_outputs=r_out, covariance=obj.covariance, ncp=s.discretization.ncp,
+                     input_errors=in_err, noise_sigma=noise_sigma)
+    par = s.pareto
+    counts = par.points if isinstance(par.points, list) else [par.points]
+    if not counts or not all(2 <= n <= 1000 for n in counts):
         raise ConfigError(f"{f} [pareto]: field 'points': the epsilon grid needs 2 (the anchors) to 1000 points "
-                          f"per bounded objective, got {points}")
-    max_iter = _need(par, "max_iter", f"{f} [pareto]", int, None)
-    if max_iter is not None and max_iter < 1:
-        raise ConfigError(f"{f} [pareto]: field 'max_iter' must be a positive integer, got {max_iter}")
+                          f"per bounded objective, got {par.points}")
+    if isinstance(par.points, list) and len(par.points) != len(use) - 1:
+        raise ConfigError(f"{f} [pareto]: field 'points': a list gives one count per bounded objective "
+                          f"({len(use) - 1} with [objectives] use = {list(use)}), got {par.points}")
+    if isinstance(par.points, list) and "points" in raw.get("linear", {}):
+        raise ConfigError(f"{f} [linear]: field 'points': the grid is [pareto] points = {par.points}; give it once")
+    if par.placement == "adaptive" and "linear" in use:
+        raise ConfigError(f"{f} [pareto]: placement = \"adaptive\" applies to the two-objective front (J_time, "
+                          f"J_trim) so far; use placement = \"uniform\" with [objectives] use = [..., \"linear\"]")
     try:
-        pareto = ParetoSettings(points=points, spacing=_need(par, "spacing", f"{f} [pareto]", str, "geometric"),
-                                warm_start=_need(par, "warm_start", f"{f} [pareto]", str, "continuation"),
-                                cold_check=bool(_need(par, "cold_check", f"{f} [pareto]", bool, False)),
-                                predictor=_need(par, "predictor", f"{f} [pareto]", str, "secant"),
-                                max_iter=max_iter, nadir=_need(par, "nadir", f"{f} [pareto]", str, "payoff"),
-                                solver=solver, solver_options=solver_options)
-    except ConfigError:
-        raise
+        pareto = ParetoSettings(points=par.points, spacing=par.spacing, warm_start=par.warm_start,
+                                cold_check=par.cold_check, predictor=par.predictor, max_iter=par.max_iter,
+                                nadir=par.nadir, placement=par.placement, max_solves=par.max_solves, solver=sol.name,
+                                solver_options=solver_options)
     except ValueError as exc:
         raise ConfigError(f"{f} [pareto]: {exc}") from None
-    use, linear = _objectives_use(raw, f)
-    if isinstance(points, list) and len(points) != len(use) - 1:
-        raise ConfigError(f"{f} [pareto]: field 'points': a list gives one count per bounded objective "
-                          f"({len(use) - 1} with [objectives] use = {list(use)}), got {points}")
-    if isinstance(points, list) and "points" in raw.get("linear", {}):
-        raise ConfigError(f"{f} [linear]: field 'points': the grid is [pareto] points = {points}; give it once")
-    diagnosis = _diagnosis(raw, f, in_ref)
     return IdentificationConfig(path=path, dataset=ds, maneuvers=mans, validation=val,
-                                resample_hz=float(resample) if resample else None,
-                                max_duration=float(max_dur) if max_dur else None, model=model, free=free,
-                                nlp=nlp, pareto=pareto, raw=raw, objectives=use, linear=linear,
-                                input_reference_s=float(in_ref), resample_inputs=res_in, diagnosis=diagnosis)
+                                resample_hz=float(data.resample_hz) if data.resample_hz else None,
+                                max_duration=float(data.max_duration_s) if data.max_duration_s else None,
+                                model=model, free=free, nlp=nlp, pareto=pareto, raw=raw, objectives=use,
+                                linear=linear, input_reference_s=float(in_ref), resample_inputs=data.resample_inputs,
+                                diagnosis=diagnosis)
 
 
-def _input_errors(obj: dict, f, in_ref, table: str = "objectives",
-                  key: str = "input_errors") -> tuple[tuple, dict | None]:
+def _input_errors(table, problems: Problems, in_ref, name: str, key: str) -> tuple[tuple, dict | None]:
     """[objectives] input_errors (errors in variables) and the optional [objectives.noise_sigma] table; the
-    same for [diagnosis] input_noise and [diagnosis.noise_sigma] (``table``, ``key``)."""
-    chans = tuple(_names(_need(obj, key, f"{f} [{table}]", list, []), f"{f} [{table}]", key, allow_empty=True))
-    bad = [c for c in chans if c not in INPUTS]
-    if bad:
-        raise ConfigError(f"{f} [{table}]: unknown input channel(s) {bad} in {key}; choose from "
-                          f"{', '.join(INPUTS)}")
-    given = _need(obj, "noise_sigma", f"{f} [{table}]", dict, None)
+    same for [diagnosis] input_noise and [diagnosis.noise_sigma] (``name``, ``key``): the channels and the
+    sigmas in SI."""
+    chans = tuple(getattr(table, key))
+    given = table.noise_sigma
     if given is not None and not chans:
-        raise ConfigError(f"{f} [{table}]: noise_sigma is only used with {key}")
-    if chans and given is None and not (isinstance(in_ref, (int, float)) and in_ref > 0):
-        raise ConfigError(f"{f} [{table}]: {key} takes the noise sigmas from the records' quiet "
-                          f"lead-in; set [data] input_reference_s > 0 or give [{table}.noise_sigma]")
+        problems.add(name, f"noise_sigma is only used with {key}")
+    if chans and given is None and not in_ref > 0:
+        problems.add(name, f"{key} takes the noise sigmas from the records' quiet lead-in; set [data] "
+                           f"input_reference_s > 0 or give [{name}.noise_sigma]")
     sigma = None
     if given is not None:
-        sigma = {}
-        for k, v in given.items():
-            if k not in SENSOR_SIGMA_KEYS:
-                raise ConfigError(f"{f} [{table}.noise_sigma]: unknown key '{k}'; use {', '.join(SENSOR_SIGMA_KEYS)}")
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < math.inf:
-                raise ConfigError(f"{f} [{table}.noise_sigma]: '{k}' must be a positive number, got {v!r}")
-            ch, factor = SENSOR_SIGMA_KEYS[k]
-            if float(v) * factor > SIGMA_MAX_SI:
-                raise ConfigError(f"{f} [{table}.noise_sigma]: '{k}' = {v!r} is not a sensor noise sigma (above "
-                                  f"{SIGMA_MAX_SI:g} in SI: rad, rad/s, g or m/s); a unit slip?")
-            sigma[ch] = float(v) * factor
+        sigma = {SENSOR_SIGMA_KEYS[k][0]: float(v) * SENSOR_SIGMA_KEYS[k][1]
+                 for k, v in given.model_dump(exclude_none=True).items()}
     return chans, sigma
 
 
-def _diagnosis(raw: dict, f, in_ref) -> DiagnosisSettings | None:
-    """The [diagnosis] table; None when absent (the residual analysis follows the identification)."""
-    if "diagnosis" not in raw:
-        return None
-    d = raw["diagnosis"]
-    if not isinstance(d, dict):
-        raise ConfigError(f"{f} [diagnosis]: must be a table")
-    unknown = sorted(set(d) - {"input_noise", "noise_sigma"})
-    if unknown:
-        raise ConfigError(f"{f} [diagnosis]: unknown key(s) {', '.join(unknown)}; use input_noise, noise_sigma")
-    chans, sigma = _input_errors(d, f, in_ref, table="diagnosis", key="input_noise")
-    return DiagnosisSettings(chans, sigma)
-
-
-#: the objective sets an identification can use ([objectives] use)
-OBJECTIVE_SETS = (("time", "trim"), ("time", "trim", "linear"))
-
-
-def _objectives_use(raw: dict, f: str):
+def _objectives_use(s, raw: dict, problems: Problems):
     """[objectives] use and the [linear] table (local linear models, J_linear)."""
     from .linear_settings import LinearSettings
 
-    obj = raw.get("objectives", {})
-    use = _names(_need(obj, "use", f"{f} [objectives]", list, ["time", "trim"]), f"{f} [objectives]", "use")
-    bad = [u for u in use if u not in ("time", "trim", "linear")]
-    if bad:
-        raise ConfigError(f"{f} [objectives]: field 'use': unknown objective(s) {bad}; choose from time, trim, linear")
+    use = s.objectives.use
     order = tuple(k for k in ("time", "trim", "linear") if k in use)
     if order not in OBJECTIVE_SETS:
-        raise ConfigError(f"{f} [objectives]: field 'use': {list(use)} is not supported; use "
-                          + " or ".join(str(list(s)) for s in OBJECTIVE_SETS))
-    lin_raw = raw.get("linear", {})
-    if "linear" not in order:
-        if lin_raw:
-            raise ConfigError(f"{f} [linear]: given but [objectives] use does not include \"linear\"")
+        problems.add("objectives", f"field 'use': {list(use)} is not supported; use "
+                     + " or ".join(str(list(o)) for o in OBJECTIVE_SETS))
         return order, None
-    if not isinstance(lin_raw, dict):
-        raise ConfigError(f"{f} [linear]: must be a table")
+    if "linear" not in order:
+        if raw.get("linear"):
+            problems.add("linear", "given but [objectives] use does not include \"linear\"")
+        return order, None
     try:
-        return order, LinearSettings.from_table(lin_raw)
+        return order, LinearSettings.from_table(s.linear or LinearTable())
     except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{f} [linear]: {exc}") from None
+        problems.add("linear", str(exc))
+        return order, None
 
 
 def config_of_result(cfg: IdentificationConfig, result) -> IdentificationConfig:

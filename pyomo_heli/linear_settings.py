@@ -14,20 +14,22 @@ Example (studies/case1_tri.toml):
     omega_min_rad_s = 0.9
     omega_max_rad_s = 20.0
     points = 3                               # epsilon grid points on J_linear (the front is points x this)
+
+The table is declared (fields, defaults, domains) in :class:`pyomo_heli.settings.identification.LinearTable`.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 from .dataset.frequency_response import DEFAULT_PAIRS, SpectralSettings
-import math
-
+from .settings import Problems, validate
+from .settings.identification import MAX_LINEAR_POINTS as MAX_POINTS  # noqa: F401 - re-exported
+from .settings.identification import LinearTable
 from .units import KT
 
-_OUTPUTS = ("q", "theta", "n_x", "n_z")
-_INPUTS = ("col", "lon")
-#: most epsilon grid points on J_linear: the front is [pareto] points x this many solves
-MAX_POINTS = 50
+#: [linear] key -> SpectralSettings field
+_SPECTRAL = (("coherence_min", "coherence_min"), ("input_power_min", "input_power_min"), ("window_s", "window_s"),
+             ("overlap", "overlap"), ("omega_min_rad_s", "omega_min"), ("omega_max_rad_s", "omega_max"))
 
 
 @dataclass
@@ -38,40 +40,13 @@ class LinearSettings:
     points: int = 3
 
     @classmethod
-    def from_table(cls, t: dict) -> "LinearSettings":
-        known = {"pairs", "speeds_kt", "coherence_min", "input_power_min", "window_s", "overlap",
-                 "omega_min_rad_s", "omega_max_rad_s", "points"}
-        unknown = sorted(set(t) - known)
-        if unknown:
-            raise ValueError(f"unknown field(s) {unknown}; expected {sorted(known)}")
-        pairs = t.get("pairs", [list(p) for p in DEFAULT_PAIRS])
-        if not isinstance(pairs, list) or not all(isinstance(p, list) and len(p) == 2 for p in pairs):
-            raise ValueError("field 'pairs' must be a list of [output, input] pairs")
-        for o, i in pairs:
-            if o not in _OUTPUTS:
-                raise ValueError(f"field 'pairs': unknown output '{o}'; choose from {', '.join(_OUTPUTS)}")
-            if i not in _INPUTS:
-                raise ValueError(f"field 'pairs': unknown input '{i}'; choose from {', '.join(_INPUTS)}")
-        dup = sorted({tuple(p) for p in pairs if pairs.count(p) > 1})
-        if dup:
-            raise ValueError(f"field 'pairs' names {[list(p) for p in dup]} more than once")
-        speeds = t.get("speeds_kt", [0, 80])
-        if not isinstance(speeds, list) or not speeds or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 150 for v in speeds):
-            raise ValueError(f"field 'speeds_kt' must be a non-empty list of speeds in 0..150 kt, got {speeds!r}")
-        if len(set(speeds)) != len(speeds):
-            raise ValueError(f"field 'speeds_kt' names a speed more than once: {speeds}")
-        points = t.get("points", 3)
-        if not isinstance(points, int) or isinstance(points, bool) or not 2 <= points <= MAX_POINTS:
-            raise ValueError(f"field 'points' must be an integer in 2..{MAX_POINTS}, got {points!r}")
-        kw = {}
-        for key, name in (("coherence_min", "coherence_min"), ("input_power_min", "input_power_min"),
-                          ("window_s", "window_s"), ("overlap", "overlap"), ("omega_min_rad_s", "omega_min"),
-                          ("omega_max_rad_s", "omega_max")):
-            if key in t:
-                v = t[key]
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                    raise ValueError(f"field '{key}' must be a finite number, got {v!r}")
-                kw[name] = float(v)
-        return cls(pairs=tuple((o, i) for o, i in pairs), speeds=tuple(float(v) * KT for v in speeds),
-                   spectral=SpectralSettings(**kw), points=points)
+    def from_table(cls, t: "dict | LinearTable") -> "LinearSettings":
+        """From the [linear] table (a dict, checked here: ValueError with the errors, or its checked model)."""
+        if not isinstance(t, LinearTable):
+            problems = Problems("[linear]", ValueError)
+            t = validate(LinearTable, t, problems)
+            if problems:
+                raise ValueError("; ".join(line.removeprefix("[linear]: ") for line in problems.lines))
+        kw = {name: float(getattr(t, key)) for key, name in _SPECTRAL if getattr(t, key) is not None}
+        return cls(pairs=tuple((o, i) for o, i in t.pairs), speeds=tuple(float(v) * KT for v in t.speeds_kt),
+                   spectral=SpectralSettings(**kw), points=t.points)

@@ -6,6 +6,7 @@ The layers, lowest first (a top-level module or subpackage of pyomo_heli per nam
    ``tomlfile``, ``resources``, ``interrupts``, ``ioerrors``, ``log`` (logging, progress, provenance),
    ``parallel`` (tasks on Dask)
 1. ``physics``: the model's equations
+1a. ``settings``: the declarations of every settings file (pydantic tables); below everything that reads one
 2. ``simulation``, ``dataset``, ``solvers``: the float model in time, the data files, the NLP solvers
 3. ``nlp``: the Pyomo problem
 4. ``pareto``: the fronts and their results
@@ -37,6 +38,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pyomo_heli"
 LAYERS = [
     {"_version", "units", "channels", "tomlfile", "resources", "interrupts", "ioerrors", "log", "parallel"},
     {"physics"},
+    {"settings"},
     {"simulation", "dataset", "solvers"},
     {"nlp"},
     {"pareto"},

@@ -58,15 +58,14 @@ from .schema import (
     Quantity,
     column_names,
 )
+from ..settings.manifest import Accuracy, Atmosphere, Conventions, ManeuverEntry, Manifest, key_table
 
-MANIFEST_KEYS = {"format": True, "format_version": True, "aircraft": True, "description": False,
-                 "atmosphere": True, "mass_kg": True, "trim_file": True, "maneuvers": True,
-                 "conventions": False, "source": False, "accuracy": False, "assumptions": False}
-CONVENTION_KEYS = {"collective_station": False, "lon_sign": False, "theta_datum_deg": False}
-ACCURACY_KEYS = {"angle_deg": False, "speed_kt": False, "description": False}
-ATMOSPHERE_KEYS = ("rho_kg_m3", "g_m_s2")
-MANEUVER_KEYS = {"name": True, "file": True, "role": True, "trim_speed_kt": True, "inputs": True,
-                 "description": False}
+# the manifest's keys (key -> required), declared in pyomo_heli.settings.manifest
+MANIFEST_KEYS = key_table(Manifest)
+CONVENTION_KEYS = key_table(Conventions)
+ACCURACY_KEYS = key_table(Accuracy)
+ATMOSPHERE_KEYS = tuple(key_table(Atmosphere))
+MANEUVER_KEYS = key_table(ManeuverEntry)
 MISSING_TOKENS = {"", "nan", "-nan", "na", "n/a", "nat", "null", "none"}
 MAX_LISTED = 5
 _NAME_RE = re.compile(NAME_PATTERN)

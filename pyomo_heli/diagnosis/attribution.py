@@ -61,12 +61,11 @@ from ..nlp.objectives import noise_sigmas
 from ..simulation.compiled import simulate_outputs
 from ..simulation.sensitivity import sensitivities
 from ..simulation.trim import trim_float
+from ..settings.identification import ALPHA, CONFOUND_CORR, RATIO  # noqa: F401 - the [loop] defaults, declared there
 from .candidates import CANDIDATES, make_candidate
 from .innovations import input_noise_factor
 
-ALPHA = 0.01
-RATIO = 2.0
-CONFOUND_CORR = 0.7
+
 ABSORBED = 0.10
 SEGMENT_S = 1.0
 

@@ -58,6 +58,8 @@ from ..nlp.parameters import FreeParameter
 from ..pareto.result import write_json
 from ..pareto.store import FolderLock, claim_folder, read_checkpoint, write_checkpoint
 from ..physics.model import HelicopterModel
+from ..settings import Problems, validate
+from ..settings.identification import LoopTable
 from ..report.identification import CURVE_SPEEDS, predict, trim_rms, validation_rms
 from ..report.loop import LOOP_FILE, load_loop  # noqa: F401 - load_loop re-exported (studies)
 
@@ -86,74 +88,21 @@ class LoopSettings:
 
 
 def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
-    """The ``[loop]`` table of an identification config, checked; errors name the field."""
+    """The ``[loop]`` table of an identification config (declared by
+    :class:`pyomo_heli.settings.identification.LoopTable`), checked; every error names its field."""
     raw = cfg.raw.get("loop", {})
-    where = f"{cfg.path} [loop]"
+    problems = Problems(str(cfg.path))
     if not isinstance(raw, dict):
-        raise ConfigError(f"{where}: must be a table")
-    known = {f.name for f in dataclasses.fields(LoopSettings)}
-    bad = set(raw) - known
-    if bad:
-        raise ConfigError(f"{where}: unknown field(s) {sorted(bad)}; expected {sorted(known)}")
-    s = LoopSettings()
-    if "max_iterations" in raw:
-        v = raw["max_iterations"]
-        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-            raise ConfigError(f"{where}: field 'max_iterations' must be an integer >= 0, got {v!r}")
-        s.max_iterations = v
-    if "candidates" in raw:
-        v = raw["candidates"]
-        if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
-            raise ConfigError(f"{where}: field 'candidates' must be a non-empty list of names")
-        for n in v:
+        problems.add("loop", "must be a table")
+        problems.raise_if_any()
+    table = validate(LoopTable, raw, problems, "loop")
+    if table is not None:
+        for n in table.candidates or ():
             if n not in CANDIDATES:
-                raise ConfigError(f"{where}: field 'candidates': unknown candidate {n!r}; choose from "
-                                  f"{', '.join(CANDIDATES)}")
-        dup = sorted({n for n in v if v.count(n) > 1})
-        if dup:
-            raise ConfigError(f"{where}: field 'candidates' names {dup} more than once")
-        s.candidates = list(v)
-    for key, lo, hi in (("alpha", 0.0, 1.0), ("ratio", 1.0, float("inf")), ("confound_corr", 0.0, 1.0)):
-        if key in raw:
-            v = raw[key]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo < v <= hi:
-                raise ConfigError(f"{where}: field '{key}' must be a number in ({lo:g}, {hi:g}], got {v!r}")
-            setattr(s, key, float(v))
-    if "point" in raw:
-        if raw["point"] not in ("direct", "chosen"):
-            raise ConfigError(f"{where}: field 'point' must be \"direct\" or \"chosen\", got {raw['point']!r}")
-        s.point = raw["point"]
-    if "shape" in raw:
-        if raw["shape"] not in ("time_domain", "default"):
-            raise ConfigError(f"{where}: field 'shape' must be \"time_domain\" or \"default\", got {raw['shape']!r}")
-        s.shape = raw["shape"]
-    if "uncertainty" in raw:
-        if raw["uncertainty"] not in ("chosen", "none"):
-            raise ConfigError(f"{where}: field 'uncertainty' must be \"chosen\" or \"none\", "
-                              f"got {raw['uncertainty']!r}")
-        s.uncertainty = raw["uncertainty"]
-    if "score_inputs" in raw:
-        if raw["score_inputs"] not in ("eliminated", "measured"):
-            raise ConfigError(f"{where}: field 'score_inputs' must be \"eliminated\" or \"measured\", got "
-                              f"{raw['score_inputs']!r}")
-        s.score_inputs = raw["score_inputs"]
-    for key in ("robust", "discovery", "validation_rule"):
-        if key in raw:
-            if not isinstance(raw[key], bool):
-                raise ConfigError(f"{where}: field '{key}' must be true or false, got {raw[key]!r}")
-            setattr(s, key, raw[key])
-    if "generic" in raw:
-        from ..physics.discrepancy import generic_names
-
-        v = raw["generic"]
-        if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
-            raise ConfigError(f"{where}: field 'generic' must be a non-empty list of names")
-        for n in v:
-            if n not in generic_names():
-                raise ConfigError(f"{where}: field 'generic': unknown discrepancy term {n!r}; choose from "
-                                  f"{', '.join(generic_names())}")
-        s.generic = list(v)
-    return s
+                problems.add("loop", f"field 'candidates': unknown candidate {n!r}; choose from "
+                                     f"{', '.join(CANDIDATES)}")
+    problems.raise_if_any()
+    return LoopSettings(**{k: list(v) if isinstance(v, list) else v for k, v in table.model_dump().items()})
 
 
 def errors_of(model: HelicopterModel, params: dict, id_mans, val_mans, trims, label: str) -> dict:

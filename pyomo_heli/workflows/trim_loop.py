@@ -41,6 +41,7 @@ import pandas as pd
 from ..dataset import load_flight_test
 from ..dataset.schema import KT, TRIM_CHANNELS, TrimConventions
 from ..nlp.parameters import FreeParameter
+from ..settings import ConfigError
 from ..physics.conventions import THETA_DATUM, TrimOutputDatum, recorded_trim
 from ..physics.model import HelicopterModel
 from ..physics.parameters import DEG
@@ -52,8 +53,9 @@ REPORT_FILE = "report.md"
 JAC_STEP = 1e-5
 
 
-class TrimLoopError(ValueError):
-    """Bad trim-loop config or data (one line naming the file and field)."""
+class TrimLoopError(ConfigError):
+    """Bad trim-loop config or data (one line per error naming the file and field); a ConfigError, the one
+    error type of a bad settings file."""
 
 
 class TrimIdentificationFailed(RuntimeError):
@@ -80,96 +82,82 @@ class TrimLoopConfig:
 
 
 def load_trim_loop_config(path) -> TrimLoopConfig:
-    from ..config import _finite, _need, _only, _unit_factor
-    from ..diagnosis.attribution import ALPHA, CONFOUND_CORR, RATIO
+    """Read and check a trim-loop config (declared in :mod:`pyomo_heli.settings.trim_loop`): every error of the
+    fields at once, then those of the model's parameters, the solver options and the dataset folder."""
+    from ..config import unit_factor
     from ..diagnosis.candidates import CANDIDATES
+    from ..settings import Problems, validate
+    from ..settings.trim_loop import TrimLoopFile
+    from ..solvers import validate_solver_options
     from ..tomlfile import read_toml
 
     path = Path(path)
     raw = read_toml(path, TrimLoopError)
     f = str(path)
-    _only(raw, ("data", "model", "parameters", "loop", "solver"), f)
-    for k, v in raw.items():
-        if not isinstance(v, dict):
-            raise TrimLoopError(f"{f}: '{k}' must be a table [{k}], got {v!r}")
-    data = _need(raw, "data", f, dict)
-    _only(data, ("dataset", "holdout_every"), f"{f} [data]")
-    ds = Path(_need(data, "dataset", f"{f} [data]", str))
+    problems = Problems(f, TrimLoopError)
+    s = validate(TrimLoopFile, raw, problems)
+    problems.raise_if_any()
+    ds = Path(s.data.dataset)
     if not ds.is_absolute():
         ds = (path.parent / ds).resolve()
     if not (ds / "manifest.json").is_file():
-        raise TrimLoopError(f"{f} [data]: field 'dataset': {ds} is not a flight-test folder (no manifest.json)")
-    every = data.get("holdout_every", 3)
-    if isinstance(every, bool) or not isinstance(every, int) or (every != 0 and every < 2):
-        raise TrimLoopError(f"{f} [data]: field 'holdout_every' must be 0 (hold nothing out) or an integer >= 2, "
-                            f"got {every!r}")
-    mdl = raw.get("model", {})
-    _only(mdl, ("parameters",), f"{f} [model]")
-    fixed = dict(_need(mdl, "parameters", f"{f} [model]", dict, {}))
+        problems.add("data", f"field 'dataset': {ds} is not a flight-test folder (no manifest.json)")
+    every = s.data.holdout_every
+    if every == 1:
+        problems.add("data", f"field 'holdout_every' must be 0 (hold nothing out) or an integer >= 2, got {every!r}")
+    fixed = dict(s.model.parameters)
     base = HelicopterModel(extensions=(TrimOutputDatum(),))
     try:
         base = base.with_parameters(**fixed)
     except (KeyError, ValueError) as exc:
-        raise TrimLoopError(f"{f} [model.parameters]: {exc.args[0]}") from None
+        problems.add("model.parameters", str(exc.args[0]))
     free = []
-    for name, spec_raw in _need(raw, "parameters", f, dict).items():
-        where = f"{f} [parameters.{name}]"
+    for name, p in s.parameters.items():
+        where = f"parameters.{name}"
         if name == THETA_DATUM:
-            raise TrimLoopError(f"{where}: the pitch-attitude datum is freed by the dataset's manifest "
-                                f"(conventions.theta_datum_deg = \"estimate\"), not by the config")
+            problems.add(where, "the pitch-attitude datum is freed by the dataset's manifest "
+                                "(conventions.theta_datum_deg = \"estimate\"), not by the config")
+            continue
         if name not in base.parameters:
-            raise TrimLoopError(f"{where}: {base.parameters._unknown(name)}")
-        if not isinstance(spec_raw, dict):
-            raise TrimLoopError(f"{where}: must be a table with initial, lower, upper, scale, unit")
-        _only(spec_raw, ("initial", "lower", "upper", "scale", "unit"), where)
+            problems.add(where, base.parameters._unknown(name))
+            continue
         spec = base.parameters.spec(name)
-        fac = _unit_factor(spec, _need(spec_raw, "unit", where, str, spec.unit), where)
+        try:
+            fac = unit_factor(spec, p.unit)
+        except ValueError as exc:
+            problems.add(where, str(exc))
+            continue
         lo, hi = spec.bounds or (None, None)
         vals = {}
         for key, default in (("initial", spec.value / fac), ("lower", None if lo is None else lo / fac),
                              ("upper", None if hi is None else hi / fac), ("scale", (spec.scale or 1.0) / fac)):
-            v = _finite(spec_raw, key, where, default)
+            v = getattr(p, key)
+            v = default if v is None else v
             if v is None:
-                raise TrimLoopError(f"{where}: field '{key}' is needed ({name} has no default bounds)")
+                problems.add(where, f"field '{key}' is needed ({name} has no default bounds)")
+                continue
             vals[key] = v * fac
+        if len(vals) < 4:
+            continue
         try:
             free.append(FreeParameter(name, vals["initial"], vals["lower"], vals["upper"], vals["scale"]))
         except ValueError as exc:
-            raise TrimLoopError(f"{where}: {exc}") from None
-    loop = raw.get("loop", {})
-    _only(loop, ("max_iterations", "candidates", "alpha", "ratio", "confound_corr"), f"{f} [loop]")
-    n_it = loop.get("max_iterations", 2)
-    if isinstance(n_it, bool) or not isinstance(n_it, int) or n_it < 0:
-        raise TrimLoopError(f"{f} [loop]: field 'max_iterations' must be an integer >= 0, got {n_it!r}")
-    cands = loop.get("candidates")
+            problems.add(where, str(exc))
+    loop = s.loop
+    cands = loop.candidates
     if cands is not None:
-        if not isinstance(cands, list) or not all(isinstance(c, str) for c in cands):
-            raise TrimLoopError(f"{f} [loop]: field 'candidates' must be a list of names")
         bad = [c for c in cands if c not in CANDIDATES]
         if bad:
-            raise TrimLoopError(f"{f} [loop]: field 'candidates': unknown {bad}; choose from {', '.join(CANDIDATES)}")
-    nums = {}
-    for key, default, ok in (("alpha", ALPHA, lambda v: 0 < v < 1), ("ratio", RATIO, lambda v: v >= 1),
-                             ("confound_corr", CONFOUND_CORR, lambda v: 0 < v <= 1)):
-        v = _finite(loop, key, f"{f} [loop]", default)
-        if not ok(v):
-            raise TrimLoopError(f"{f} [loop]: field '{key}' = {v!r} is out of range")
-        nums[key] = float(v)
-    sol = raw.get("solver", {})
-    _only(sol, ("name", "options"), f"{f} [solver]")
-    solver = _need(sol, "name", f"{f} [solver]", str, "casadi-ipopt")
-    options = dict(_need(sol, "options", f"{f} [solver]", dict, {}))
-    from ..solvers import SOLVER_NAMES, validate_solver_options
-
-    if solver not in SOLVER_NAMES:
-        raise TrimLoopError(f"{f} [solver]: field 'name': unknown solver {solver!r}; "
-                            f"choose from {', '.join(SOLVER_NAMES)}")
+            problems.add("loop", f"field 'candidates': unknown {bad}; choose from {', '.join(CANDIDATES)}")
     try:
-        validate_solver_options(solver, options)
+        validate_solver_options(s.solver.name, dict(s.solver.options))
     except ValueError as exc:
-        raise TrimLoopError(f"{f} [solver] options: {exc}") from None
-    return TrimLoopConfig(path=path, dataset=ds, holdout_every=every, fixed=fixed, free=free, max_iterations=n_it,
-                          candidates=cands, solver=solver, solver_options=options, **nums)
+        problems.add_text(f"[solver] options: {exc}")
+    problems.raise_if_any()
+    return TrimLoopConfig(path=path, dataset=ds, holdout_every=every, fixed=fixed, free=free,
+                          max_iterations=loop.max_iterations, candidates=cands, solver=s.solver.name,
+                          solver_options=dict(s.solver.options), alpha=loop.alpha, ratio=loop.ratio,
+                          confound_corr=loop.confound_corr)
 
 
 # ---------------------------------------------------------------- data

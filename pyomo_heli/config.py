@@ -278,7 +278,8 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
                      noise_sigma=noise_sigma)
 
     par = raw.get("pareto", {})
-    _only(par, ("points", "spacing", "warm_start", "cold_check", "predictor"), f"{f} [pareto]")
+    _only(par, ("points", "spacing", "warm_start", "cold_check", "predictor", "placement", "max_solves"),
+          f"{f} [pareto]")
     sol = raw.get("solver", {})
     unknown = sorted(set(sol) - {"name", "options", "point_rows"})
     if unknown:
@@ -309,12 +310,17 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
                                 warm_start=_need(par, "warm_start", f"{f} [pareto]", str, "continuation"),
                                 cold_check=bool(_need(par, "cold_check", f"{f} [pareto]", bool, False)),
                                 predictor=_need(par, "predictor", f"{f} [pareto]", str, "secant"),
+                                placement=_need(par, "placement", f"{f} [pareto]", str, "uniform"),
+                                max_solves=_need(par, "max_solves", f"{f} [pareto]", int, 14),
                                 solver=solver, solver_options=solver_options)
     except ConfigError:
         raise
     except ValueError as exc:
         raise ConfigError(f"{f} [pareto]: {exc}") from None
     use, linear = _objectives_use(raw, f)
+    if pareto.placement == "adaptive" and "linear" in use:
+        raise ConfigError(f"{f} [pareto]: placement = \"adaptive\" applies to the two-objective front (J_time, "
+                          f"J_trim) so far; use placement = \"uniform\" with [objectives] use = [..., \"linear\"]")
     diagnosis = _diagnosis(raw, f, in_ref)
     return IdentificationConfig(path=path, dataset=ds, maneuvers=mans, validation=val,
                                 resample_hz=float(resample) if resample else None,

@@ -92,6 +92,7 @@ class FrontPoint:
 
 WARM_STARTS = ("continuation", "full", "primal", "none")
 PREDICTORS = ("secant", "none")
+PLACEMENTS = ("uniform", "adaptive")
 
 
 @dataclass
@@ -104,6 +105,8 @@ class ParetoSettings:
     solver_options: dict = field(default_factory=dict)
     cold_check: bool = False  # also solve every interior point cold, to measure what warm starts save
     predictor: str = "secant"  # start of interior point k>=3: "secant" extrapolation of points k-1, k-2, or "none"
+    placement: str = "uniform"  # "uniform" epsilon grid of ``points``, or "adaptive" (pareto/placement.py)
+    max_solves: int = 14  # "adaptive": front solves, anchors included (the direct Eq. 11 solve is one more)
 
     def __post_init__(self):
         if self.points < 2:
@@ -114,6 +117,10 @@ class ParetoSettings:
             raise ValueError(f"pareto.warm_start must be one of {', '.join(WARM_STARTS)}, got {self.warm_start!r}")
         if self.predictor not in PREDICTORS:
             raise ValueError(f"pareto.predictor must be one of {', '.join(PREDICTORS)}, got {self.predictor!r}")
+        if self.placement not in PLACEMENTS:
+            raise ValueError(f"pareto.placement must be one of {', '.join(PLACEMENTS)}, got {self.placement!r}")
+        if not 4 <= self.max_solves <= 1000:
+            raise ValueError(f"pareto.max_solves must be 4 to 1000, got {self.max_solves}")
 
 
 def epsilon_grid(j_trim_a: float, j_trim_b: float, points: int, spacing: str = "geometric") -> np.ndarray:
@@ -413,6 +420,26 @@ class ParetoSolver:
             self.on_point(p)
         self.points.sort(key=lambda p: p.index)
         return self.points
+
+    def anchor_a_start(self) -> _Snapshot:
+        """Anchor A's solution with its multipliers rescaled to the front's objective scale (as :meth:`front`
+        does before its first step): the start of a step off A. Call after :meth:`anchors`, with
+        ``self.points`` holding A."""
+        a = next(p for p in self.points if p.kind == "A")
+        self._snap_a.restore()
+        scale_multipliers(self.m, self.s_time / self._front_scale(a))
+        return _Snapshot(self.m)
+
+    def solve_epsilon(self, epsilon: float, index: int, start: _Snapshot, leaving: bool = False) -> FrontPoint:
+        """One front point: min J_time s.t. J_trim <= ``epsilon``, from ``start`` with the configured warm start
+        (``leaving``: the start is anchor A, :data:`LEAVE_ANCHOR_OPTIONS`), retried primal if it fails. The
+        per-epsilon solve of the adaptive placement (pareto/placement.py); ``self.points`` must hold A."""
+        s = self.settings
+        start.restore()
+        step = FRONT_STEP_OPTIONS if s.warm_start == "continuation" else None
+        scale = self._front_scale(next(p for p in self.points if p.kind == "A"))
+        return self._solve_warm("time", index, "eps", float(epsilon), start,
+                                LEAVE_ANCHOR_OPTIONS if leaving else step, scale=scale)
 
     def restore_initial_guess(self) -> None:
         """Put the model's values back to the initial guess it had when this solver was made (cold starts)."""

@@ -540,9 +540,10 @@ def cmd_identify(args) -> int:
     cfg = load_identification_config(args.config, overrides)
     from .log import info
 
+    points = (cfg.pareto.points if cfg.pareto.placement == "uniform"
+              else f"adaptive placement, at most {cfg.pareto.max_solves}")
     info(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
-         f"({cfg.pareto.points if cfg.pareto.placement == 'uniform' else f'adaptive placement, at most {cfg.pareto.max_solves}'} "
-         f"front points, solver {cfg.pareto.solver})")
+         f"({points} front points, solver {cfg.pareto.solver})")
     result = run_identification(cfg, args.out, uncertainty=getattr(args, "uncertainty", "all"),
                                 restart=getattr(args, "restart", False))
     if result.chosen is None:

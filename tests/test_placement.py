@@ -199,25 +199,64 @@ def test_settings_check_placement():
         ParetoSettings(placement="adaptive", max_solves=3)
 
 
-def test_tiny_identification_with_adaptive_placement_runs_and_resumes(tmp_path):
+def test_tiny_identification_with_adaptive_placement_runs_and_resumes(tmp_path, monkeypatch):
+    """A run interrupted at its fourth epsilon solve resumes from the stored points to the front of an
+    uninterrupted run (the placement depends only on the finished points, which are loaded exactly)."""
+    from pyomo_heli import interrupts
     from pyomo_heli.config import load_identification_config
+    from pyomo_heli.pareto.front import ParetoSolver
     from pyomo_heli.pareto.result import IdentificationResult
     from pyomo_heli.workflows.identify import run_identification
 
     cfg = load_identification_config(TINY, {"pareto": {"placement": "adaptive", "max_solves": 7}})
-    res = run_identification(cfg, tmp_path, progress=lambda *_: None, uncertainty=False)
-    s = res.info["placement"]
-    front = pd.read_csv(tmp_path / "front.csv")
+    original, calls = ParetoSolver.solve_epsilon, {"n": 0}
+
+    def interrupted_at_the_fourth(self, *args, **kw):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise interrupts.Interrupted()
+        return original(self, *args, **kw)
+
+    monkeypatch.setattr(ParetoSolver, "solve_epsilon", interrupted_at_the_fourth)
+    with pytest.raises(interrupts.Interrupted):
+        run_identification(cfg, tmp_path / "resumed", progress=lambda *_: None, uncertainty=False)
+    assert len(list((tmp_path / "resumed" / "points").glob("*.npz"))) == 5  # A, B and three epsilon points
+    monkeypatch.setattr(ParetoSolver, "solve_epsilon", original)
+    resumed = run_identification(cfg, tmp_path / "resumed", progress=lambda *_: None, uncertainty=False)
+    assert resumed.info["resumed_points"] == 5
+    fresh = run_identification(cfg, tmp_path / "fresh", progress=lambda *_: None, uncertainty=False)
+
+    s = fresh.info["placement"]
+    front = pd.read_csv(tmp_path / "fresh" / "front.csv")
     assert s["solves"] == len(front) <= 7 and set(front["kind"]) <= {"A", "B", "eps"}
     assert front["success"].all()
     assert s["rounds"] and s["direct_se"] is not None
-    # the chosen point is the converged point nearest utopia, and the direct Eq. 11 solve is no farther from it
-    # than the bracket that stopped the refinement allowed (or the cap stopped it: then it says so)
+    # converged means the chosen point's neighbours were within one standard error, and then the direct
+    # Eq. 11 solve is too (the cap may stop it first: then the summary says so)
     assert s["converged"] == (s["rounds"][-1]["bracket_se"] <= 1.0)
     if s["converged"]:
         assert s["direct_se"] <= 1.0
-    # a rerun resumes every point from the store and gives the same front
-    again = run_identification(cfg, tmp_path, progress=lambda *_: None, uncertainty=False)
-    assert again.info["resumed_points"] == len(front)
-    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "front.csv"), front)
-    assert IdentificationResult.load(tmp_path).info["placement"] == s
+    else:
+        assert "cap of 7" in s["stop"]
+    cols = ["index", "kind", "epsilon", "J_time", "J_trim", "theta_twist", "CL_alpha_HT", "iterations"]
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "resumed" / "front.csv")[cols], front[cols])
+    assert resumed.info["placement"] == s
+    assert IdentificationResult.load(tmp_path / "fresh").info["placement"] == s
+
+
+def test_placement_flag_reaches_the_config(tmp_path, monkeypatch):
+    """``--placement adaptive`` on identify overrides [pareto] placement (the demo shares the flag)."""
+    import pyomo_heli.workflows.identify as wf
+    from pyomo_heli.cli import build_parser, main
+
+    seen = {}
+
+    def stop(cfg, out, **kw):
+        seen["pareto"] = cfg.pareto
+        raise SystemExit(0)
+
+    monkeypatch.setattr(wf, "run_identification", stop)
+    with pytest.raises(SystemExit):
+        main(["identify", str(TINY), "--placement", "adaptive", "--out", str(tmp_path / "out")])
+    assert seen["pareto"].placement == "adaptive" and seen["pareto"].max_solves == 14
+    assert build_parser().parse_args(["demo", "--placement", "adaptive"]).placement == "adaptive"

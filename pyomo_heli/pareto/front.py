@@ -376,6 +376,9 @@ class ParetoSolver:
         initial guess if that is none).
         """
         s = self.settings
+        if s.placement != "uniform":  # never a uniform grid silently in place of the configured placement
+            raise ValueError(f"pareto.placement = {s.placement!r}: ParetoSolver.front() traces the uniform grid; "
+                             f"the adaptive placement runs through pareto.placement.AdaptiveFront (identify)")
         a, b = self.anchors()
         self.points = [a, b]
         self.snapshots = {a.index: self._snap_a, b.index: self._snap_b}

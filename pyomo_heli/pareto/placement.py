@@ -242,12 +242,15 @@ class PlacementSummary:
 
 
 class AdaptiveFront:
-    """Anchors, seed, arc-length points and refinement on a two-objective front solver.
+    """Anchors, seed, arc-length points and refinement on a front solver.
 
     ``solver``: a :class:`~pyomo_heli.pareto.front.ParetoSolver` (used through
     ``anchors``, ``solve_point``, ``solve_epsilon``, ``anchor_a_start``,
     ``utopia_nadir`` and its ``points``/``snapshots``). ``standard_errors(point)``
-    -> {parameter: standard error} at a converged point.
+    -> {parameter: standard error} at a converged point. ``objectives``: the
+    point attributes, the minimised one first; the epsilon coordinates are the
+    others (a scalar epsilon for two objectives, a list for more). The anchors
+    are the two-objective solver's A and B so far.
     """
 
     objectives = ("J_time", "J_trim")
@@ -278,20 +281,23 @@ class AdaptiveFront:
             self._se[p.index] = dict(self.standard_errors(p))
         return self._se[p.index]
 
-    def _solve(self, epsilon: float) -> None:
-        """One epsilon point, warm from the converged point nearest in normalised epsilon."""
+    def _solve(self, eps) -> None:
+        """One epsilon point (``eps``: the bounds on the constrained objectives ``objectives[1:]``), warm
+        from the converged point nearest in normalised epsilon coordinates."""
         ps = self.ps
         k = len(ps.points)  # index: A 0, B 1, then the order of solving
-        utopia, nadir = self.utopia, self.nadir
-        e = (epsilon - utopia[1]) / (nadir[1] - utopia[1])
-        self.taken.append(np.array([e]))
+        eps = np.atleast_1d(np.asarray(eps, float))
+        U, N = np.asarray(self.utopia, float), np.asarray(self.nadir, float)
+        e = (eps - U[1:]) / (N[1:] - U[1:])
+        self.taken.append(e)
         ok = self._ok()
-        zs = normalise(self._F(ok), utopia, nadir)[:, 1]
-        near = ok[int(np.argmin(np.abs(zs - e)))]
+        zs = normalise(self._F(ok), U, N)[:, 1:]
+        near = ok[int(np.argmin(np.linalg.norm(zs - e, axis=1)))]
         start = self._start_a if near.kind == "A" else ps.snapshots[near.index]
+        epsilon = float(eps[0]) if len(eps) == 1 else eps.tolist()  # as the solver takes it
         key = f"ada{k:03d}"
         p = ps.solve_point(key, lambda: ps.solve_epsilon(epsilon, k, start, leaving=near.kind == "A"))
-        if getattr(p, "from_disk", False) and p.epsilon != epsilon:
+        if getattr(p, "from_disk", False) and not np.array_equal(np.atleast_1d(p.epsilon), eps):
             from .store import StoreMismatchError
 
             raise StoreMismatchError(f"{ps.store.dir / key}.npz: stored at epsilon {p.epsilon!r}, but this run places "
@@ -319,16 +325,17 @@ class AdaptiveFront:
             s.stop = str(exc)
             return self._finish()
         self._start_a = ps.anchor_a_start()
-        # seed: the middle of the epsilon range
+        # seed: the middle of each epsilon range (from nadir to utopia, ``spacing`` as the uniform grid)
         from .front import epsilon_grid
 
-        self._solve(float(epsilon_grid(a.J_trim, b.J_trim, 3, self.spacing)[1]))
+        n = len(self.objectives)
+        self._solve([epsilon_grid(self.nadir[j], self.utopia[j], 3, self.spacing)[1] for j in range(1, n)])
         arc_budget = max(3, self.max_solves // 2)
         while len(ps.points) < arc_budget:
             gap = largest_gap(self._normalised(), self.taken)
             if gap is None:
                 break
-            self._solve(float(denormalise(gap[1], self.utopia, self.nadir, [1])[0]))
+            self._solve(denormalise(gap[1], self.utopia, self.nadir, list(range(1, n))))
         s.arc_length_solves = len(ps.points)
         self._refine()
         return self._finish()
@@ -364,7 +371,7 @@ class AdaptiveFront:
                 if len(ps.points) >= self.max_solves:
                     s.stop = f"cap of {self.max_solves} front solves reached"
                     return
-                self._solve(float(denormalise(e, self.utopia, self.nadir, [1])[0]))
+                self._solve(denormalise(e, self.utopia, self.nadir, list(range(1, len(self.objectives)))))
 
     def compare_direct(self, chosen, direct) -> float | None:
         """The direct Eq. 11 solve's distance from the chosen point in the chosen point's standard errors

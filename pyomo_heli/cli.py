@@ -544,14 +544,19 @@ def cmd_identify(args) -> int:
     from .config import load_identification_config
     from .workflows.identify import run_identification
 
-    overrides = {"pareto": {"cold_check": True}} if getattr(args, "cold_check", False) else None
+    pareto = {"cold_check": True} if getattr(args, "cold_check", False) else {}
+    if getattr(args, "placement", None):  # [pareto] placement ("adaptive": pareto/placement.py)
+        pareto["placement"] = args.placement
+    overrides = {"pareto": pareto} if pareto else None
     _check_out_dir(args.out)
     _check_out_not_foreign(args.out, "identification")
     cfg = load_identification_config(args.config, overrides)
     from .log import info
 
+    points = (cfg.pareto.points if cfg.pareto.placement == "uniform"
+              else f"adaptive placement, at most {cfg.pareto.max_solves}")
     info(f"identifying {', '.join(f.name for f in cfg.free)} from {cfg.dataset} "
-         f"({cfg.pareto.points} front points, solver {cfg.pareto.solver})")
+         f"({points} front points, solver {cfg.pareto.solver})")
     result = run_identification(cfg, args.out, uncertainty=getattr(args, "uncertainty", "all"),
                                 restart=getattr(args, "restart", False))
     if result.chosen is None:
@@ -711,6 +716,12 @@ def _logging_flags(parser, default) -> None:
 FIGURE_FORMATS = ("png", "pdf", "svg")
 
 
+def _placement_flag(parser) -> None:
+    parser.add_argument("--placement", choices=("uniform", "adaptive"),
+                        help="override [pareto] placement: the uniform epsilon grid, or adaptive placement by "
+                             "normalised arc length refined around the Eq. 11 choice ([pareto] max_solves)")
+
+
 def _figure_flag(parser) -> None:
     parser.add_argument("--figure-format", choices=FIGURE_FORMATS, default="png",
                         help="file format of the report's figures (default png)")
@@ -777,6 +788,7 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--uncertainty", choices=("all", "chosen", "none"), default="all",
                    help="Cramer-Rao standard errors for every front point (all, default), only for A, the chosen "
                         "point and the direct solve (chosen, faster), or none")
+    _placement_flag(i)
     _figure_flag(i)
     i.set_defaults(func=cmd_identify)
 
@@ -828,6 +840,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demo", help="run the bundled Case 1 into ./demo_out")
     d.add_argument("--out", default="demo_out")
     d.add_argument("--restart", action="store_true", help="discard finished points in --out instead of resuming")
+    _placement_flag(d)
     _figure_flag(d)
     d.set_defaults(func=cmd_demo)
 

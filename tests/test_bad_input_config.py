@@ -77,6 +77,8 @@ def test_the_base_config_loads(tmp_path):
     (dict(extra="[parameters.rho]\ninitial = 1.2\nlower = -1\nupper = 2\nscale = 1"),
      r"\[parameters.rho\]: parameter rho: value must be a finite number > 0"),
     (dict(pareto='cold_check = "yes"'), r"^\S+cfg.toml \[pareto\]: field 'cold_check' must be bool"),
+    (dict(pareto='placement = "smart"'), r"\[pareto\]: pareto.placement must be one of uniform, adaptive"),
+    (dict(pareto='placement = "adaptive"\nmax_solves = 3'), r"\[pareto\]: pareto.max_solves must be 4 to 1000"),
 ])
 def test_bad_config_is_one_clear_error(tmp_path, edit, message):
     with pytest.raises(ConfigError, match=message) as err:

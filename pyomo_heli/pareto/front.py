@@ -97,6 +97,7 @@ class FrontPoint:
 
 WARM_STARTS = ("continuation", "full", "primal", "none")
 PREDICTORS = ("secant", "none")
+PLACEMENTS = ("uniform", "adaptive")
 
 
 @dataclass
@@ -112,6 +113,8 @@ class ParetoSettings:
     max_iter: int | None = None  # Ipopt iteration cap of each front point's solve (grid, solve_at); None: the solver's
     nadir: str = "payoff"  # nadir of Eq. 11: "payoff" (anchors) or "nondominated" (front points), pareto.epsilon
     grid: tuple | None = None  # points per bounded objective (tri-objective: (J_trim, J_linear)); from points = [n, m]
+    placement: str = "uniform"  # "uniform" epsilon grid of ``points``, or "adaptive" (pareto/placement.py)
+    max_solves: int = 14  # "adaptive": front solves, anchors included (the direct Eq. 11 solve is one more)
 
     def __post_init__(self):
         if isinstance(self.points, (list, tuple)):
@@ -133,6 +136,10 @@ class ParetoSettings:
         if self.max_iter is not None and (isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int)
                                           or self.max_iter < 1):
             raise ValueError(f"pareto.max_iter must be a positive integer, got {self.max_iter!r}")
+        if self.placement not in PLACEMENTS:
+            raise ValueError(f"pareto.placement must be one of {', '.join(PLACEMENTS)}, got {self.placement!r}")
+        if not 4 <= self.max_solves <= 1000:
+            raise ValueError(f"pareto.max_solves must be 4 to 1000, got {self.max_solves}")
 
 
 def epsilon_grid(j_trim_a: float, j_trim_b: float, points: int, spacing: str = "geometric") -> np.ndarray:
@@ -302,6 +309,9 @@ class ParetoSolver(EpsilonConstraintSolver):
         initial guess if that is none).
         """
         s = self.settings
+        if s.placement != "uniform":  # never a uniform grid silently in place of the configured placement
+            raise ValueError(f"pareto.placement = {s.placement!r}: ParetoSolver.front() traces the uniform grid; "
+                             f"the adaptive placement runs through pareto.placement.AdaptiveFront (identify)")
         a, b = self.anchors()
         self.points = [a, b]
         self.snapshots = {a.index: self._snap_a, b.index: self._snap_b}
@@ -352,6 +362,26 @@ class ParetoSolver(EpsilonConstraintSolver):
             self._solved.append(((b.J_trim,), self._snap_b))
         self.points.sort(key=lambda p: p.index)
         return self.points
+
+    def anchor_a_start(self) -> _Snapshot:
+        """Anchor A's solution with its multipliers rescaled to the front's objective scale (as :meth:`front`
+        does before its first step): the start of a step off A. Call after :meth:`anchors`, with
+        ``self.points`` holding A."""
+        a = next(p for p in self.points if p.kind == "A")
+        self._snap_a.restore()
+        scale_multipliers(self.m, self.s_time / self._front_scale(a))
+        return _Snapshot(self.m)
+
+    def solve_epsilon(self, epsilon: float, index: int, start: _Snapshot, leaving: bool = False) -> FrontPoint:
+        """One front point: min J_time s.t. J_trim <= ``epsilon``, from ``start`` with the configured warm start
+        (``leaving``: the start is anchor A, :data:`LEAVE_ANCHOR_OPTIONS`), retried primal if it fails. The
+        per-epsilon solve of the adaptive placement (pareto/placement.py); ``self.points`` must hold A."""
+        s = self.settings
+        start.restore()
+        step = FRONT_STEP_OPTIONS if s.warm_start == "continuation" else None
+        scale = self._front_scale(next(p for p in self.points if p.kind == "A"))
+        return self._solve_warm("time", index, "eps", float(epsilon), start,
+                                LEAVE_ANCHOR_OPTIONS if leaving else step, scale=scale)
 
     def restore_initial_guess(self) -> None:
         """Put the model's values back to the initial guess it had when this solver was made (cold starts)."""

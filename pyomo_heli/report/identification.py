@@ -307,6 +307,17 @@ def write_report(out_dir, cfg, results_dir=None, figure_format: str = "png") -> 
                     if dd is not None and dc is not None and dd < dc - 1e-3 else ".") + "  ")
     if nadir_rule_line(info.get("eq11_by_nadir")):
         L.append(nadir_rule_line(info["eq11_by_nadir"]) + ".  ")
+    pl = info.get("placement")
+    if pl:  # adaptive epsilon placement (pareto/placement.py)
+        last = (pl.get("rounds") or [{}])[-1]
+        L.append(f"Adaptive epsilon placement: {pl['solves']} front solves, anchors included "
+                 f"({pl['arc_length_solves']} "
+                 f"by normalised arc length, {pl['refinement_solves']} refining around C; cap {pl['max_solves']}); "
+                 f"{'converged' if pl['converged'] else 'NOT converged'}: {pl['stop']}"
+                 + (f" (C's neighbours within {_fmt(last['bracket_se'], 3)} of its standard errors)"
+                    if 'bracket_se' in last else "")
+                 + (f"; the direct Eq. 11 solve lies {_fmt(pl['direct_se'], 3)} of C's standard errors from C"
+                    if pl.get("direct_se") is not None else "") + ".  ")
     n_eps = int((result.front["kind"] == "eps").sum())
     L.append(f"Mean iterations per interior front point: {_fmt(mean_it, 4)} "
              f"(over {n_eps} epsilon-constraint solve{'s' if n_eps != 1 else ''}, failed ones included).")

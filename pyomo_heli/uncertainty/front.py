@@ -24,6 +24,11 @@ def _information(cfg, data, parameters):
                              cfg.nlp.trim_outputs, input_errors=cfg.nlp.input_errors, noise_sigma=cfg.nlp.noise_sigma)
 
 
+def point_standard_errors(cfg, data, parameters: dict, kind: str = "eps") -> dict:
+    """name -> Cramer-Rao standard error (SI; nan at a bound) of a front point with these parameter values."""
+    return dict(cramer_rao(_information(cfg, data, parameters), cfg.free, kind=kind).se)
+
+
 def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "all"):
     """Compute and attach standard errors (every front point, A, chosen, direct); save to ``out``.
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import pandas as pd
@@ -17,6 +17,7 @@ from ..log import Progress, config_and_dataset, format_parameters, info, results
 from ..nlp.identification import build_problem
 from ..physics.extensions import extension_forms  # noqa: F401 - re-exported
 from ..pareto.front import ParetoSolver, utopia_distance
+from ..pareto.placement import AdaptiveFront
 from ..pareto.result import IdentificationResult, write_csv
 from .. import interrupts
 from ..pareto.store import FolderLock, PointStore, claim_folder, fingerprint
@@ -117,7 +118,8 @@ def _run_identification(cfg, out: Path, progress, restart, uncertainty) -> Ident
     front_csv = out / "front.csv"
     if front_csv.exists():
         front_csv.unlink()
-    bar = Progress(cfg.pareto.points, "front points")
+    bar = Progress(cfg.pareto.max_solves if cfg.pareto.placement == "adaptive" else cfg.pareto.points,
+                   "front points")
 
     def on_point(p):
         rows.append(p.row())
@@ -129,13 +131,26 @@ def _run_identification(cfg, out: Path, progress, restart, uncertainty) -> Ident
                  f"[{p.status}, {p.iterations} it, {p.wall_time:.1f} s]{where}" + bar.tick(from_disk))
 
     t1 = time.perf_counter()
-    ps = ParetoSolver(m, cfg.pareto, on_point=on_point, store=store)
+    adaptive = cfg.pareto.placement == "adaptive"
+    # adaptive: B is point 1 and the epsilon points are numbered in the order they are solved
+    ps = ParetoSolver(m, replace(cfg.pareto, points=2) if adaptive else cfg.pareto, on_point=on_point, store=store)
     setup = time.perf_counter() - t1
-    points = ps.front()
+    placement = None
+    if adaptive:
+        from ..uncertainty.front import point_standard_errors
+
+        placement = AdaptiveFront(ps, cfg.pareto.max_solves, lambda p: point_standard_errors(cfg, data, p.parameters,
+                                                                                           p.kind),
+                                  spacing=cfg.pareto.spacing, on_point=on_point, progress=progress)
+        points = placement.run()
+    else:
+        points = ps.front()
     chosen, dist = ps.choose()
     utopia, nadir = ps.utopia_nadir()
     if chosen is not None:
         direct = ps.direct_choice(chosen)
+        if placement is not None:
+            placement.compare_direct(chosen, direct)
         progress(f"  chosen: front point {chosen.index} (Eq. 11); direct Eq. 11 solve: {direct.status}")
     else:
         direct = None
@@ -172,6 +187,7 @@ def _run_identification(cfg, out: Path, progress, restart, uncertainty) -> Ident
               "resumed_points": sum(bool(getattr(p, "from_disk", False)) for p in points),
               "mean_iterations_front": _mean(front.loc[front.kind == "eps", "iterations"]),
               "mean_iterations_front_cold": _mean(front.loc[front.kind == "eps", "cold_iterations"]),
+              **({"placement": placement.summary.to_dict()} if placement is not None else {}),
               **provenance_info(cfg)})  # the config by content, the data's hash, the model: checked by readers
     result.save(out)
     if uncertainty and uncertainty != "none" and result.chosen is not None:

@@ -58,6 +58,7 @@ import pyomo.environ as pyo
 from .. import interrupts
 from ..log import get_logger
 from ..nlp.parameters import free_parameter_values
+from ..nlp.scaling import apply_scaling
 from ..solvers import MULTIPLIER_MODES, SolverError, make_solver, scale_multipliers
 from .snapshot import Snapshot as _Snapshot
 
@@ -203,6 +204,7 @@ class ParetoSolver:
         log.info(f"setting up solver {self.settings.solver} (NL file, casadi functions; the first solve adds the "
                  f"derivatives): up to minutes on a full-size problem")
         t0 = time.perf_counter()
+        apply_scaling(m, self.settings.solver, self.settings.solver_options)  # IDAES Scaler, when asked for
         self.solver = make_solver(m, self.settings.solver, self.settings.solver_options)
         log.debug(f"solver object made in {time.perf_counter() - t0:.1f} s")
         self.points: list[FrontPoint] = []

@@ -3,7 +3,7 @@
 :class:`IdentificationScaler` is an IDAES ``CustomScalerBase`` as IDAES unit models have one: it writes
 scaling factors into the model's ``scaling_factor`` suffixes (IDAES's convention, read back with
 ``idaes.core.scaling.get_scaling_factor``; Pyomo's ``core.scale_model`` and the casadi adapter with
-``[solver] scaling = true`` read the same suffixes, solvers/casadi_scaling.py). A factor is
+``[solver] options = { scaling = true }`` read the same suffixes, solvers/casadi_scaling.py). A factor is
 1 / nominal magnitude, the nominals taken from the physics, not from one solve:
 
 - states [SI]: ``STATE_NOMINAL`` (u 40 m/s, w 5 m/s, q 0.2 rad/s, theta 0.1 rad, inflow 0.05), their

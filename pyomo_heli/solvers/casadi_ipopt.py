@@ -97,7 +97,8 @@ class CasadiSettings:
     point_rows_first: bool = True
     #: hand Ipopt the problem scaled by the model's ``scaling_factor`` suffixes (variables, rows,
     #: objective; solvers/casadi_scaling.py), as IDAES's scalers and Pyomo's core.scale_model read
-    #: them; also the solver option ``scaling`` (``[solver] scaling``). False: the suffixes are ignored
+    #: them; also the solver option ``scaling`` (``[solver] options = { scaling = true }``).
+    #: False: the suffixes are ignored
     scaling: bool = False
 
 
@@ -133,7 +134,7 @@ class CasadiIpoptSolver(DerivativeFunctions):
         self.settings = settings or CasadiSettings()
         if "point_rows" in self.options:  # our own switch, not an Ipopt option ([solver] point_rows)
             self.settings = replace(self.settings, point_rows=bool(self.options.pop("point_rows")))
-        if "scaling" in self.options:  # likewise ([solver] scaling)
+        if "scaling" in self.options:  # likewise ([solver] options = { scaling = ... })
             self.settings = replace(self.settings, scaling=bool(self.options.pop("scaling")))
         self._pending_setup = 0.0
         #: seconds spent per set-up stage, summed over rebuilds (for the benchmark)

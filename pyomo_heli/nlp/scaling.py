@@ -27,6 +27,7 @@ Variables pinned by equal bounds (objective settings) and anything not named kee
 from __future__ import annotations
 
 import pyomo.environ as pyo
+from pyomo.common.gc_manager import PauseGC
 from idaes.core.scaling import CustomScalerBase
 from idaes.core.scaling.custom_scaler_base import ConstraintScalingScheme
 from idaes.core.scaling.util import get_scaling_factor_suffix
@@ -64,10 +65,9 @@ class IdentificationScaler(CustomScalerBase):
     """Scaling factors of an identification NLP (:func:`~pyomo_heli.nlp.identification.build_identification_nlp`)."""
 
     # ------------------------------------------------------------------ variables
-    def variable_nominal(self, v) -> float | None:
-        """The nominal magnitude of variable ``v`` (module docstring), None: keep factor 1."""
-        comp, block = v.parent_component().local_name, v.parent_block()
-        name = _name(v.index())
+    def variable_nominal(self, comp: str, block, idx, v) -> float | None:
+        """The nominal magnitude of variable ``v`` = ``block.<comp>[idx]`` (module docstring), None: factor 1."""
+        name = _name(idx)
         if comp == "x" or comp == "x0":
             return _nominal(name)
         if comp == "dx":
@@ -77,7 +77,7 @@ class IdentificationScaler(CustomScalerBase):
         if comp in ("y", "y_meas"):
             return _nominal(name)
         if comp == "trim_meas":  # index (trim point, channel)
-            return _nominal(v.index()[1])
+            return _nominal(idx[1])
         if comp == "u_err":
             return v.ub / _ERROR_BOUND if v.ub is not None else None
         if comp == "V":
@@ -85,31 +85,36 @@ class IdentificationScaler(CustomScalerBase):
         if comp in ("col", "lon", "theta", "lambda_i") or comp.startswith("beta_"):
             return _nominal(comp)
         if comp == "theta_s":
-            top = block.model()
-            nominal = top.component("theta_nominal")
-            return max(abs(pyo.value(nominal[name])) / pyo.value(top.theta_scale[name]), 1.0) if nominal else None
+            nominal = block.component("theta_nominal")
+            return max(abs(pyo.value(nominal[name])) / pyo.value(block.theta_scale[name]), 1.0) if nominal else None
         if comp == "L":
-            a = v.index()[0]
-            diag = block.L[a, a].value
+            diag = block.L[idx[0], idx[0]].value
             return abs(diag) if diag else None
         if comp == "mean_square":
             sigma = block.component("noise_sigma")
             return float(sigma[name]) ** 2 if sigma is not None else (abs(v.value) or None)
         return None
 
+    # The factors go into the suffix IDAES's get_scaling_factor_suffix gives for the component's block, where
+    # set_variable_scaling_factor puts them, but written directly, one component at a time: IDAES's
+    # per-component setters spent about 1.4 ms per component in their option handling (44 s for the 24k
+    # variables and rows of small_case1_noisy, minutes at Case 1's 200k).
     def variable_scaling_routine(self, model, overwrite: bool = False, submodel_scalers=None):
-        for v in model.component_data_objects(pyo.Var, descend_into=True):
-            if v.fixed:
-                continue
-            nominal = self.variable_nominal(v)
-            if nominal:
-                self.set_variable_scaling_factor(v, 1.0 / nominal, overwrite=overwrite)
+        with PauseGC():
+            for comp in model.component_objects(pyo.Var, descend_into=True):
+                blk, name = comp.parent_block(), comp.local_name
+                sfx = get_scaling_factor_suffix(blk)
+                for idx, v in comp.items():
+                    if v.fixed or not (overwrite or v not in sfx):
+                        continue
+                    nominal = self.variable_nominal(name, blk, idx, v)
+                    if nominal:
+                        sfx[v] = 1.0 / nominal
 
     # ---------------------------------------------------------------- constraints
-    def constraint_factor(self, c) -> float | None:
-        """The factor of row ``c`` from the physics (module docstring), None: IDAES's nominal-value walk."""
-        comp, block = c.parent_component().local_name, c.parent_block()
-        name = _name(c.index())
+    def constraint_factor(self, comp: str, block, idx) -> float | None:
+        """The factor of row ``block.<comp>[idx]`` from the physics (module docstring), None: IDAES's walk."""
+        name = _name(idx)
         if comp in ("ode", "dx_disc_eq", "equilibrium"):
             return TIME_NOMINAL / _nominal(name)
         if comp == "initial":
@@ -119,7 +124,7 @@ class IdentificationScaler(CustomScalerBase):
         if comp == "V_spec":
             return 1.0 / STATE_NOMINAL["u"]
         if comp == "cholesky":
-            a, b = c.index()
+            a, b = idx
             la, lb = abs(block.L[a, a].value or 0.0), abs(block.L[b, b].value or 0.0)
             return 1.0 / (la * lb) if la * lb > 0 else None
         if comp == "mean_square_def":
@@ -136,21 +141,26 @@ class IdentificationScaler(CustomScalerBase):
         # constraint component of all blocks of one kind (e.g. the flapping rows of every maneuver); its
         # first row's factor is given to all. Walking every row took 0.4 s per ODE row (the shared named
         # Expressions are expanded for each row): 10 min for a 5k-row problem.
-        families = {}
-        for c in model.component_data_objects(pyo.Constraint, active=True, descend_into=True):
-            factor = self.constraint_factor(c)
-            if factor is not None:
-                self.set_constraint_scaling_factor(c, factor, overwrite=overwrite)
-                continue
-            blk = c.parent_block()
-            kind = blk.parent_component().local_name if blk is not model else ""
-            families.setdefault((kind, c.parent_component().local_name, _name(c.index())), []).append(c)
+        families, suffixes = {}, {}
+        with PauseGC():
+            for comp in model.component_objects(pyo.Constraint, active=True, descend_into=True):
+                blk, name = comp.parent_block(), comp.local_name
+                sfx = suffixes[id(blk)] = get_scaling_factor_suffix(blk)
+                kind = blk.parent_component().local_name if blk is not model else ""
+                for idx, c in comp.items():
+                    if not c.active or not (overwrite or c not in sfx):
+                        continue
+                    factor = self.constraint_factor(name, blk, idx)
+                    if factor is not None:
+                        sfx[c] = factor
+                    else:
+                        families.setdefault((kind, name, _name(idx)), []).append(c)
         for rows in families.values():
             self.scale_constraint_by_nominal_value(rows[0], scheme=ConstraintScalingScheme.inverseMaximum,
                                                    overwrite=overwrite)
             sf = self.get_scaling_factor(rows[0])
             for c in rows[1:]:
-                self.set_constraint_scaling_factor(c, sf, overwrite=overwrite)
+                suffixes[id(c.parent_block())][c] = sf
         for o in model.component_data_objects(pyo.Objective, active=True, descend_into=True):
             # IDAES's setters take variables and constraints only; the objective's factor goes into the same
             # scaling_factor suffix of its block, where Pyomo's core.scale_model and the casadi adapter read it

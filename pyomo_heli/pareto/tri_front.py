@@ -26,6 +26,7 @@ import numpy as np
 import pyomo.environ as pyo
 
 from ..nlp.parameters import free_parameter_values
+from ..nlp.scaling import apply_scaling
 from ..solvers import make_solver, scale_multipliers
 from .front import (LEAVE_ANCHOR_OPTIONS, FrontPoint, ParetoSettings, epsilon_grid, pin_objective_settings,
                     solve_with_fallback)
@@ -80,6 +81,7 @@ class TriParetoSolver:
             m.objective.deactivate()
         m.selected_objective = pyo.Objective(expr=sum(w[f"w_{k}"] * J[k] for k in OBJECTIVES) + w["w_utopia"] * utopia)
         self._pin(w_time=1.0 / self.scale["time"])
+        apply_scaling(m, self.settings.solver, self.settings.solver_options)  # IDAES Scaler, when asked for
         self.solver = make_solver(m, self.settings.solver, self.settings.solver_options)
         self.points: list[TriFrontPoint] = []
         self.snapshots: dict = {}

@@ -100,6 +100,19 @@ def test_report_sections(report, short_cfg):
     assert "PyNumero" in diag
 
 
+def test_report_scaling(report):
+    """Section 3b: the IDAES Scaler's factors per family, nothing left unscaled, IDAES's own reports."""
+    sec = report.split("3b. IDAES scaling")[1].split("4a.")[0]
+    flat = " ".join(sec.split())  # the report wraps long lines
+    assert "man[*].x[u] 0.025" in flat and "trim[*].V 0.025" in flat and "man[*].ode[q] 5" in flat
+    assert "without a factor (kept at 1): 0 free variables, 0 constraints" in flat
+    mt = re.search(r"badly_scaled_var_generator .*?: (\d+) variables unscaled, (\d+) scaled", flat)
+    assert mt, sec
+    assert int(mt.group(2)) < int(mt.group(1))  # the scaling brings the small angles and rates to order one
+    assert "Scaling Factors for" in sec and "theta_s" in sec  # IDAES report_scaling_factors of the top level
+    assert "scaling report failed" not in sec
+
+
 def test_report_equations(report):
     point = report.split("4a. equations at one time point")[1].split("4b.")[0]
     assert "man[lon3211_80kt_a], t = 0.02 s" in point

@@ -6,7 +6,10 @@ report (``pyomo-heli inspect CONFIG`` prints it):
 1. the data and the free parameters (SI and display units);
 2. variables and constraints per block, and the degrees of freedom, counted
    here and by IDAES (``degrees_of_freedom``), which must agree;
-3. the IDAES structural diagnostics (``DiagnosticsToolbox.report_structural_issues``);
+3. the IDAES structural diagnostics (``DiagnosticsToolbox.report_structural_issues``), and the IDAES
+   scaling report: the factors :class:`~pyomo_heli.nlp.scaling.IdentificationScaler` writes (per
+   equation family), the rows and variables left without one, IDAES's ``report_scaling_factors`` of the
+   model's top level and the variables ``badly_scaled_var_generator`` flags, unscaled and scaled;
 4. the equations of one time point of the first maneuver and of its start
    trim block, first in a compact form (short names, 6 significant digits,
    with a legend), then in full (``expr.to_string()``, Pyomo's own names).
@@ -325,6 +328,59 @@ def _diagnostics_section(m) -> list[str]:
     return out
 
 
+def _family(c) -> str:
+    """'man[*].x[u]'-like name of a variable's or constraint's family (block indices starred)."""
+    comp, blk = c.parent_component(), c.parent_block()
+    idx = c.index()
+    first = idx[0] if isinstance(idx, tuple) else idx
+    head = "" if blk.parent_block() is None else f"{blk.parent_component().local_name}[*]."
+    return head + comp.local_name + (f"[{first}]" if isinstance(first, str) else "")
+
+
+def _scaling_section(m) -> list[str]:
+    """The IDAES scaling report of the Scaler's factors (applied to this inspection's model only)."""
+    out = _section("3b. IDAES scaling (nlp/scaling.py; the solves use it with the solver option scaling = true)")
+    try:
+        from idaes.core.scaling import get_scaling_factor, report_scaling_factors
+        from idaes.core.scaling.util import unscaled_constraints_generator, unscaled_variables_generator
+        from idaes.core.util.scaling import badly_scaled_var_generator
+
+        from .scaling import IdentificationScaler
+
+        def badly():
+            return [(v, sv) for v, sv in badly_scaled_var_generator(m)]
+
+        before = badly()
+        IdentificationScaler(overwrite=True).scale_model(m)
+        after = badly()
+        families: dict = {}
+        for kind, ctype in (("var", pyo.Var), ("con", pyo.Constraint)):
+            for c in m.component_data_objects(ctype, active=True if kind == "con" else None, descend_into=True):
+                if kind == "var" and c.fixed:
+                    continue
+                sf = get_scaling_factor(c)
+                if sf is not None:
+                    families.setdefault((kind, _family(c)), []).append(sf)
+        out.append("scaling factors (1 / nominal magnitude) per family: "
+                   + "; ".join(f"{name} {min(v):.3g}" + (f"..{max(v):.3g}" if max(v) != min(v) else "")
+                               for (kind, name), v in sorted(families.items())))
+        no_var = [v.name for v in unscaled_variables_generator(m)]
+        no_con = [c.name for c in unscaled_constraints_generator(m)]
+        out.append(f"without a factor (kept at 1): {len(no_var)} free variables"
+                   + (f" ({', '.join(sorted({_family(v) for v in unscaled_variables_generator(m)}))})" if no_var
+                      else "") + f", {len(no_con)} constraints")
+        out.append(f"IDAES badly_scaled_var_generator (scaled value above 1e4 or below 1e-3, zeros excepted): "
+                   f"{len(before)} variables unscaled, {len(after)} scaled"
+                   + (f"; still flagged: {', '.join(sorted({_family(v) for v, _ in after}))}" if after else ""))
+        buf = io.StringIO()
+        report_scaling_factors(m, descend_into=False, stream=buf)  # the model's own level: parameters, noise rows
+        out.append("IDAES report_scaling_factors of the model's top level (the blocks' families are listed above):")
+        out.append(buf.getvalue().rstrip())
+    except Exception as exc:  # never crash the report
+        out.append(f"scaling report failed: {type(exc).__name__}: {exc}")
+    return out
+
+
 def _time_point_section(m, mv) -> list[str]:
     blk = m.man[mv.name]
     samples, times = list(blk.samples), list(blk.t)
@@ -405,6 +461,7 @@ def inspect_problem(cfg, diagnostics: bool = True) -> str:
         out += _diagnostics_section(m)
     else:
         out += _section("3. IDAES structural diagnostics") + ["skipped (--no-diagnostics)"]
+    out += _scaling_section(m)
     if data.maneuvers:
         mv = data.maneuvers[0]
         out += _time_point_section(m, mv)

@@ -71,6 +71,8 @@ def add_parameters(m: pyo.Block, parameters: ParameterSet, free: list[FreeParame
     m.theta_s = pyo.Var(m.free_parameters, initialize=lambda _, n: by_name[n].initial / by_name[n].scale,
                         bounds=lambda _, n: (by_name[n].lower / by_name[n].scale, by_name[n].upper / by_name[n].scale))
     m.theta_scale = pyo.Param(m.free_parameters, initialize=lambda _, n: by_name[n].scale)
+    #: the parameters' nominal values (the model's ParameterSpec) [SI]: the scaling's nominals (nlp/scaling.py)
+    m.theta_nominal = pyo.Param(m.free_parameters, initialize=lambda _, n: float(parameters[n]))
     values: dict = {k: float(v) for k, v in parameters.items()}
     for n in names:
         values[n] = by_name[n].scale * m.theta_s[n]

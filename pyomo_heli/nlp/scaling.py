@@ -2,67 +2,185 @@
 
 :class:`IdentificationScaler` is an IDAES ``CustomScalerBase`` as IDAES unit models have one: it writes
 scaling factors into the model's ``scaling_factor`` suffixes (IDAES's convention, read back with
-``idaes.core.scaling.get_scaling_factor``):
+``idaes.core.scaling.get_scaling_factor``; Pyomo's ``core.scale_model`` and the casadi adapter with
+``[solver] options = { scaling = true }`` read the same suffixes, solvers/casadi_scaling.py). A factor is
+1 / nominal magnitude, the nominals taken from the physics, not from one solve:
 
-- variables: 1 / nominal, nominal = max(|value at the initial guess|, ``variable_floor``), so variables of
-  order one and smaller keep factor 1 and large ones (airspeed components in m/s, rotor thrust
-  coefficients' products, ...) come to order one;
-- constraints: 1 / the largest nominal term of the row (IDAES's ``inverseMaximum`` scheme over those
-  variable nominals), computed for the first row of each equation family and given to the family;
-- objective: 1 / max(|J_time|, 1) at the initial guess, the optimizer-level objective scale of the paper
-  (Fig. 4) that :class:`~pyomo_heli.pareto.front.ParetoSolver` applies through ``m.objective``.
+- states [SI]: ``STATE_NOMINAL`` (u 40 m/s, w 5 m/s, q 0.2 rad/s, theta 0.1 rad, inflow 0.05), their
+  time derivatives nominal / ``TIME_NOMINAL`` (1 s, the time scale of the pitch and heave dynamics),
+  flapping angles ``FLAPPING_NOMINAL`` (0.05 rad), the trim inputs ``INPUT_NOMINAL``, the outputs
+  ``OUTPUT_NOMINAL``, the trim speed like u;
+- free parameters: ``theta_s = p / scale`` has the nominal max(|p_nominal| / scale, 1), p_nominal the
+  value of the model's ParameterSpec (``m.theta_nominal``);
+- noise: the Cholesky factor of the output covariance and the mean squares by the noise level (the
+  known sigmas, else the start's residual level), the input errors by their sigma (bound / 6);
+- rows by their nominal residual: an ODE or collocation row of state s (residual in s per time) by
+  TIME_NOMINAL / nominal(s), an initial-state row by 1 / nominal(s), an output row by 1 / nominal(output);
+  the noise-covariance rows (Cholesky, mean squares) keep 1 (tried: by 1 / (L_aa L_bb) Case 1's point A
+  took 38 iterations instead of 26); the other rows (flapping
+  equations, the linear-model rows) by IDAES's ``inverseMaximum`` nominal-value walk over those variable
+  nominals, once per equation family (the walk expands the shared intermediates: 0.4 s per row);
+- objective: 1 / max(|value at the start|, 1), the optimizer-level objective scale of the paper (Fig. 4;
+  the Pareto solver's objective is already divided by |J_time(theta_0)|, so its factor is 1).
 
-:func:`scaled_model` applies the factors with Pyomo's ``core.scale_model`` transformation; the casadi
-adapter then solves the scaled copy through the NL file (``point_rows=False``: the compiled point rows
-are written for the unscaled variables). The one-off check of commit 921fc42
-(``git show 921fc42:studies/scaling_check.py``) compares the iterations of point A:
-on its default instance (small_case1_noisy.toml, lon3211_80kt_a cut to 3 s, 4946 variables) both reach the
-same estimate (to 2e-13), unscaled in 31 Ipopt iterations, scaled in 33; with the constraint factors alone
-(variables unscaled) Ipopt's restoration failed. Ipopt's own gradient-based scaling, the scaled free
-parameters ``theta_s`` and the objective scale already do what this adds, so the solves do not use it.
+Variables pinned by equal bounds (objective settings) and anything not named keep factor 1.
 """
 from __future__ import annotations
 
 import pyomo.environ as pyo
+from pyomo.common.gc_manager import PauseGC
 from idaes.core.scaling import CustomScalerBase
-from idaes.core.scaling.util import get_scaling_factor_suffix
 from idaes.core.scaling.custom_scaler_base import ConstraintScalingScheme
+from idaes.core.scaling.util import get_scaling_factor_suffix
+
+#: nominal magnitudes of the states [m/s, m/s, rad/s, rad, -]
+STATE_NOMINAL = {"u": 40.0, "w": 5.0, "q": 0.2, "theta": 0.1, "lambda_i": 0.05}
+#: time scale of the state derivatives [s]: nominal(dx_s / dt) = nominal(s) / TIME_NOMINAL
+TIME_NOMINAL = 1.0
+#: flapping angles [rad]
+FLAPPING_NOMINAL = 0.05
+#: trim inputs [rad]: collective and longitudinal cyclic
+INPUT_NOMINAL = {"col": 0.15, "lon": 0.05}
+#: outputs [rad/s, rad, g, g, m/s, rad]
+OUTPUT_NOMINAL = {"q": 0.2, "theta": 0.1, "n_x": 0.1, "n_z": 1.0, "TAS": 40.0, "beta_0": 0.05}
+#: bound of the input errors in sigmas (nlp.identification.INPUT_ERROR_BOUND)
+_ERROR_BOUND = 6.0
+
+
+def _nominal(name: str) -> float:
+    """Nominal of a state, flapping angle, input or output by name (extension states: 1)."""
+    if name in STATE_NOMINAL:
+        return STATE_NOMINAL[name]
+    if name.startswith("beta_"):
+        return FLAPPING_NOMINAL
+    return INPUT_NOMINAL.get(name, OUTPUT_NOMINAL.get(name, 1.0))
+
+
+def _name(idx):
+    """The first index entry of a component's index (the state, output or channel name), or None."""
+    first = idx[0] if isinstance(idx, tuple) else idx
+    return first if isinstance(first, str) else None
 
 
 class IdentificationScaler(CustomScalerBase):
     """Scaling factors of an identification NLP (:func:`~pyomo_heli.nlp.identification.build_identification_nlp`)."""
 
-    #: variables with |value| below this keep scaling factor 1 (nothing small is blown up)
-    variable_floor = 1.0
+    # ------------------------------------------------------------------ variables
+    def variable_nominal(self, comp: str, block, idx, v) -> float | None:
+        """The nominal magnitude of variable ``v`` = ``block.<comp>[idx]`` (module docstring), None: factor 1."""
+        name = _name(idx)
+        if comp == "x" or comp == "x0":
+            return _nominal(name)
+        if comp == "dx":
+            return _nominal(name) / TIME_NOMINAL
+        if comp == "beta":
+            return FLAPPING_NOMINAL
+        if comp in ("y", "y_meas"):
+            return _nominal(name)
+        if comp == "trim_meas":  # index (trim point, channel)
+            return _nominal(idx[1])
+        if comp == "u_err":
+            return v.ub / _ERROR_BOUND if v.ub is not None else None
+        if comp == "V":
+            return STATE_NOMINAL["u"]
+        if comp in ("col", "lon", "theta", "lambda_i") or comp.startswith("beta_"):
+            return _nominal(comp)
+        if comp == "theta_s":
+            nominal = block.component("theta_nominal")
+            return max(abs(pyo.value(nominal[name])) / pyo.value(block.theta_scale[name]), 1.0) if nominal else None
+        if comp == "L":
+            diag = block.L[idx[0], idx[0]].value
+            return abs(diag) if diag else None
+        if comp == "mean_square":
+            sigma = block.component("noise_sigma")
+            return float(sigma[name]) ** 2 if sigma is not None else (abs(v.value) or None)
+        return None
 
+    # The factors go into the suffix IDAES's get_scaling_factor_suffix gives for the component's block, where
+    # set_variable_scaling_factor puts them, but written directly, one component at a time: IDAES's
+    # per-component setters spent about 1.4 ms per component in their option handling (44 s for the 24k
+    # variables and rows of small_case1_noisy, minutes at Case 1's 200k).
     def variable_scaling_routine(self, model, overwrite: bool = False, submodel_scalers=None):
-        for v in model.component_data_objects(pyo.Var, descend_into=True):
-            if v.fixed or v.value is None:
-                continue
-            self.set_variable_scaling_factor(v, 1.0 / max(abs(v.value), self.variable_floor), overwrite=overwrite)
+        with PauseGC():
+            for comp in model.component_objects(pyo.Var, descend_into=True):
+                blk, name = comp.parent_block(), comp.local_name
+                sfx = get_scaling_factor_suffix(blk)
+                for idx, v in comp.items():
+                    if v.fixed or not (overwrite or v not in sfx):
+                        continue
+                    nominal = self.variable_nominal(name, blk, idx, v)
+                    if nominal:
+                        sfx[v] = 1.0 / nominal
+
+    # ---------------------------------------------------------------- constraints
+    def constraint_factor(self, comp: str, block, idx) -> float | None:
+        """The factor of row ``block.<comp>[idx]`` from the physics (module docstring), None: IDAES's walk."""
+        name = _name(idx)
+        if comp in ("ode", "dx_disc_eq", "equilibrium"):
+            return TIME_NOMINAL / _nominal(name)
+        if comp == "initial":
+            return 1.0 / _nominal(name)
+        if comp == "output_eq":
+            return 1.0 / OUTPUT_NOMINAL.get(name, 1.0)
+        if comp == "V_spec":
+            return 1.0 / STATE_NOMINAL["u"]
+        if comp in ("cholesky", "mean_square_def"):
+            # the noise-covariance rows (L L^T = R_hat, n * mean square = sum of squares) stay unscaled: by
+            # 1 / (L_aa L_bb) at the start (the residuals of the initial guess) Case 1's point A took 38
+            # Ipopt iterations instead of 26; with factor 1, 26 (docs/performance.md, "Scaling")
+            return 1.0
+        if comp == "eps_con":
+            return 1.0  # J_trim / J_trim(theta_0) <= eps (pareto.front): order one
+        return None
 
     def constraint_scaling_routine(self, model, overwrite: bool = False, submodel_scalers=None):
-        # One nominal-value walk per equation family: a family is an indexed constraint of one block with
-        # the same names in its index (e.g. the 'q' rows of a maneuver's ODE at every collocation point);
-        # its first row's factor is given to all. Walking every row took 0.4 s per ODE row (the shared
-        # named Expressions are expanded for each row): 10 min for a 5k-row problem.
-        families = {}
-        for c in model.component_data_objects(pyo.Constraint, active=True, descend_into=True):
-            idx = c.index()
-            names = tuple(i for i in (idx if isinstance(idx, tuple) else (idx,)) if isinstance(i, str))
-            families.setdefault((id(c.parent_component()), names), []).append(c)
+        # Rows without a physics factor: one nominal-value walk per equation family, a family being one
+        # constraint component of all blocks of one kind (e.g. the flapping rows of every maneuver); its
+        # first row's factor is given to all. Walking every row took 0.4 s per ODE row (the shared named
+        # Expressions are expanded for each row): 10 min for a 5k-row problem.
+        families, suffixes = {}, {}
+        with PauseGC():
+            for comp in model.component_objects(pyo.Constraint, active=True, descend_into=True):
+                blk, name = comp.parent_block(), comp.local_name
+                sfx = suffixes[id(blk)] = get_scaling_factor_suffix(blk)
+                kind = blk.parent_component().local_name if blk is not model else ""
+                for idx, c in comp.items():
+                    if not c.active or not (overwrite or c not in sfx):
+                        continue
+                    factor = self.constraint_factor(name, blk, idx)
+                    if factor is not None:
+                        sfx[c] = factor
+                    else:
+                        families.setdefault((kind, name, _name(idx)), []).append(c)
         for rows in families.values():
             self.scale_constraint_by_nominal_value(rows[0], scheme=ConstraintScalingScheme.inverseMaximum,
                                                    overwrite=overwrite)
             sf = self.get_scaling_factor(rows[0])
             for c in rows[1:]:
-                self.set_constraint_scaling_factor(c, sf, overwrite=overwrite)
+                suffixes[id(c.parent_block())][c] = sf
         for o in model.component_data_objects(pyo.Objective, active=True, descend_into=True):
             # IDAES's setters take variables and constraints only; the objective's factor goes into the same
-            # scaling_factor suffix of its block, where Pyomo's core.scale_model reads it
+            # scaling_factor suffix of its block, where Pyomo's core.scale_model and the casadi adapter read it
             sfx = get_scaling_factor_suffix(o.parent_block())
             if overwrite or o not in sfx:
                 sfx[o] = 1.0 / max(abs(pyo.value(o.expr)), 1.0)
+
+
+def wants_scaling(solver: str, solver_options: dict) -> bool:
+    """Whether a solve with these settings uses the scaled problem (casadi-ipopt's ``scaling`` switch)."""
+    if solver != "casadi-ipopt":
+        return False
+    from ..solvers.casadi_ipopt import CasadiSettings
+
+    return bool(solver_options.get("scaling", CasadiSettings.scaling))
+
+
+def apply_scaling(m, solver: str, solver_options: dict) -> bool:
+    """Write the Scaler's factors into ``m`` when the solver will use them; returns whether it did."""
+    if not wants_scaling(solver, solver_options):
+        return False
+    IdentificationScaler(overwrite=True).scale_model(m)
+    return True
 
 
 def scaled_model(m, scaler: IdentificationScaler | None = None):

@@ -46,6 +46,7 @@ import pyomo.environ as pyo
 from .. import interrupts
 from ..log import get_logger
 from ..nlp.parameters import free_parameter_values
+from ..nlp.scaling import apply_scaling
 from ..solvers import MULTIPLIER_MODES, SolverError, make_solver, scale_multipliers
 from .eq11 import (NADIR_RULES, nondominated, nondominated_nadir, payoff_nadir,  # noqa: F401 - re-exported
                    utopia_distance_n)
@@ -103,6 +104,7 @@ class EpsilonConstraintSolver:
         log.info(f"setting up solver {settings.solver} (NL file, casadi functions; the first solve adds the "
                  f"derivatives): up to minutes on a full-size problem")
         t0 = time.perf_counter()
+        apply_scaling(m, settings.solver, settings.solver_options)  # IDAES Scaler, when asked for
         self.solver = make_solver(m, settings.solver, settings.solver_options)
         log.debug(f"solver object made in {time.perf_counter() - t0:.1f} s")
         self.points: list = []

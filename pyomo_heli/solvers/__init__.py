@@ -17,7 +17,7 @@ convention, and returns a :class:`SolveResult`.
 from __future__ import annotations
 
 from .errors import ModelChangedError, SolverError, SolverFailedError, SolverUnavailableError
-from .casadi_ipopt import MULTIPLIER_MODES, scale_multipliers
+from .common import MULTIPLIER_MODES, scale_multipliers
 from .options import validate_solver_options
 from .result import SUCCESS_STATUSES, SolveResult
 

@@ -29,7 +29,7 @@ from pyomo.common.log import LoggingIntercept
 from pyomo.opt import TerminationCondition as TC
 
 from .. import interrupts
-from .casadi_ipopt import MULTIPLIER_MODES, _active_objective, ensure_suffix, resolve_options
+from .common import MULTIPLIER_MODES, _active_objective, ensure_suffix, resolve_options
 from .errors import SolverFailedError, SolverUnavailableError
 from .result import IPOPT_EXIT_MESSAGES, SUCCESS_STATUSES, SolveResult, status_from_exit_message
 

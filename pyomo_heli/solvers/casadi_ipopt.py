@@ -50,95 +50,15 @@ from pyomo.repn.plugins.nl_writer import NLWriter
 
 from .. import interrupts
 from ..ioerrors import writing
+from .casadi_derivatives import DerivativeFunctions
+from .casadi_scaling import NLPScaling
+from .common import (  # noqa: F401 - DEFAULT_OPTIONS ... ensure_suffix: the adapter's public names since its start
+    DEFAULT_OPTIONS, MULTIPLIER_MODES, WARM_START_MODES, WARM_START_OPTIONS, _active_objective, _bound,
+    ensure_suffix, resolve_options, scale_multipliers,
+)
 from .errors import ModelChangedError, SolverFailedError, SolverUnavailableError
 from .point_rows import PointRowsAssembly, find_point_rows
 from .result import IPOPT_EXIT_MESSAGES, SUCCESS_STATUSES, SolveResult
-
-#: Options every backend gets unless the caller overrides them.
-DEFAULT_OPTIONS = {"tol": 1e-8, "max_iter": 3000, "max_wall_time": 3600.0}
-
-#: Options of a *full* warm start (primal + duals). Without the duals,
-#: ``warm_start_init_point=yes`` is far worse than a cold start (measured),
-#: so these are only used together with the multipliers.
-WARM_START_OPTIONS = {
-    "warm_start_init_point": "yes",
-    "warm_start_bound_push": 1e-6,
-    "warm_start_mult_bound_push": 1e-6,
-    "mu_init": 1e-4,
-}
-
-#: ``"none"``: start from the Pyomo values as given (first solve).
-#: ``"primal"``: the same mechanics, meant as a re-solve from the previous
-#: solution loaded into the model.
-#: ``"full"``: primal + multipliers from the model suffixes + WARM_START_OPTIONS.
-#: ``"continuation"``: as ``"full"``, but the barrier restarts at ``tol / 10``
-#: instead of 1e-4: the start is the solution of a neighbouring problem (the
-#: previous epsilon of a front), so Ipopt only has to correct it, not follow
-#: the central path down again. Measured on the identification fronts: 3-4
-#: iterations per front point against 15-23 with ``"full"`` and 20-32 with
-#: ``"primal"`` (docs/performance.md). The Pareto default.
-WARM_START_MODES = ("none", "primal", "full", "continuation")
-#: warm-start modes that pass the multipliers stored in the model suffixes
-MULTIPLIER_MODES = ("full", "continuation")
-
-
-def resolve_options(base: dict | None, call: dict | None, warm_start: str) -> tuple[dict, bool, set]:
-    """Merge defaults < warm-start options < constructor options < call options.
-
-    Returns ``(ipopt_options, verbose, keys_set_by_user)``; ``verbose`` is our
-    own key and is removed from the Ipopt options.
-    """
-    if warm_start not in WARM_START_MODES:
-        raise ValueError(f"warm_start must be one of {WARM_START_MODES}, got {warm_start!r}")
-    user = {**(base or {}), **(call or {})}
-    verbose = bool(user.pop("verbose", False))
-    merged = dict(DEFAULT_OPTIONS)
-    if warm_start in MULTIPLIER_MODES:
-        merged.update(WARM_START_OPTIONS)
-    merged.update(user)
-    if warm_start == "continuation" and "mu_init" not in user:
-        merged["mu_init"] = float(merged["tol"]) / 10.0
-    return merged, verbose, set(user)
-
-
-def scale_multipliers(model, factor: float) -> None:
-    """Multiply the multipliers stored in the model suffixes by ``factor``.
-
-    Multipliers scale with the objective: when the next solve minimises
-    ``factor`` times the objective the stored multipliers belong to (a new
-    objective scale, paper Fig. 4), this keeps a multiplier warm start
-    consistent.
-    """
-    with PauseGC():  # one entry per row and bound (see CasadiIpoptSolver.rebuild)
-        for name in ("dual", "ipopt_zL_out", "ipopt_zU_out"):
-            suffix = model.component(name)
-            if isinstance(suffix, pyo.Suffix):
-                for key, value in list(suffix.items()):
-                    suffix[key] = value * factor
-
-
-def ensure_suffix(model, name: str, direction) -> pyo.Suffix:
-    """Return ``model.<name>`` as a Suffix with the given direction, creating it if missing."""
-    suffix = model.component(name)
-    if suffix is None:
-        suffix = pyo.Suffix(direction=direction)
-        model.add_component(name, suffix)
-    elif not isinstance(suffix, pyo.Suffix):
-        raise TypeError(f"model.{name} exists but is not a Suffix; the solver layer needs that name")
-    else:
-        suffix.direction = direction
-    return suffix
-
-
-def _active_objective(model):
-    objs = list(model.component_data_objects(pyo.Objective, active=True, descend_into=True))
-    if len(objs) > 1:
-        raise ValueError(f"model has {len(objs)} active objectives; exactly one is supported")
-    return objs[0] if objs else None
-
-
-def _bound(value, default):
-    return default if value is None else float(value)
 
 
 @dataclass(frozen=True)
@@ -175,9 +95,14 @@ class CasadiSettings:
     #: puts the nonlinear rows and variables (these) first too; with them last, point A took 13.5 s
     #: instead of 11.3 s on Case 1, same iterations (MUMPS' pivoting; docs/performance.md)
     point_rows_first: bool = True
+    #: hand Ipopt the problem scaled by the model's ``scaling_factor`` suffixes (variables, rows,
+    #: objective; solvers/casadi_scaling.py), as IDAES's scalers and Pyomo's core.scale_model read
+    #: them; also the solver option ``scaling`` (``[solver] options = { scaling = true }``).
+    #: False: the suffixes are ignored
+    scaling: bool = False
 
 
-class CasadiIpoptSolver:
+class CasadiIpoptSolver(DerivativeFunctions):
     """Ipopt-in-casadi adapter for one Pyomo model; build once, re-solve often.
 
     Parameters
@@ -209,6 +134,8 @@ class CasadiIpoptSolver:
         self.settings = settings or CasadiSettings()
         if "point_rows" in self.options:  # our own switch, not an Ipopt option ([solver] point_rows)
             self.settings = replace(self.settings, point_rows=bool(self.options.pop("point_rows")))
+        if "scaling" in self.options:  # likewise ([solver] options = { scaling = ... })
+            self.settings = replace(self.settings, scaling=bool(self.options.pop("scaling")))
         self._pending_setup = 0.0
         #: seconds spent per set-up stage, summed over rebuilds (for the benchmark)
         self.setup_breakdown = {"nl_write": 0.0, "casadi_import": 0.0, "expand": 0.0, "point_rows": 0.0,
@@ -231,9 +158,16 @@ class CasadiIpoptSolver:
         handled = [con for pr in blocks for con, _, _ in pr.rows if con.active]
         with tempfile.TemporaryDirectory(prefix="pyomo_heli_nl_") as tmp:
             path = os.path.join(tmp, "model.nl")
+            # casadi's NL import refuses suffix sections ("Suffix values unsupported"): exported suffixes
+            # (IDAES's scaling_factor, an AMPL backend's duals) stay out of the file; scaling is read below
+            exported = [sfx for sfx in self.model.component_data_objects(pyo.Suffix, descend_into=True)
+                        if sfx.export_enabled()]
+            directions = [sfx.direction for sfx in exported]
             try:
                 for con in handled:
                     con.deactivate()
+                for sfx in exported:
+                    sfx.direction = pyo.Suffix.LOCAL
                 with writing(path), open(path, "w") as ostream:  # a full temporary folder names the file
                     info = NLWriter().write(
                         self.model, ostream, linear_presolve=False, scale_model=False,
@@ -242,6 +176,8 @@ class CasadiIpoptSolver:
             finally:
                 for con in handled:
                     con.activate()
+                for sfx, direction in zip(exported, directions):
+                    sfx.direction = direction
             t_nl = time.perf_counter()
             nl = ca.NlpBuilder()
             nl.import_nl(path)
@@ -301,6 +237,13 @@ class CasadiIpoptSolver:
         self._jac_g = self._jacobian_function(x, g)
         if self._assembly is not None:
             self._jac_g = self._full_jacobian(self._jac_g)
+        #: the scaling the solves use (None: unscaled), read from the suffixes at this build
+        self._scaling = None
+        if self.settings.scaling:
+            scaling = NLPScaling.from_suffixes(self.model, self.variables, self.constraints, self.objective)
+            self._scaling = None if scaling.trivial else scaling
+        if self._scaling is not None and self._jac_g is not None:
+            self._jac_g = self._scaling.jacobian_function(ca, self._jac_g)
         self._hess_lag = False  # not built yet; built at the first exact-Hessian solve
         self._hessian_split = None  # block sizes {"S", "D2", "D1"} once a custom Hessian is built
         self._solvers = {}
@@ -313,14 +256,6 @@ class CasadiIpoptSolver:
         b["point_rows"] += t_rows - t_import
         b["expand"] += t_expand - t_rows
         b["jacobian"] += t_end - t_expand
-
-    def _dense(self, counts: np.ndarray, percentile: float = 99) -> list[int]:
-        """Indices whose nonzero count is an outlier (see ``dense_row_threshold``)."""
-        if len(counts) == 0:
-            return []
-        cfg = self.settings
-        threshold = max(cfg.dense_row_threshold, cfg.dense_factor * np.percentile(counts, percentile))
-        return np.flatnonzero(counts > threshold).tolist()
 
     def _scan_expressions(self) -> None:
         """Record what the NL file holds as numbers.
@@ -345,160 +280,6 @@ class CasadiIpoptSolver:
                     self._bound_params.update(identify_mutable_parameters(bound))
                     self._param_rows.append(i)
         self._param_rows = sorted(set(self._param_rows))
-
-    def _jacobian_function(self, x, g):
-        """Constraint Jacobian built block-wise, or None for casadi's default.
-
-        casadi colours the whole Jacobian at once, and every colour costs a
-        sweep over the whole expression graph. One dense row together with a
-        dense column (a model parameter used at every time step) defeats both
-        forward and reverse colouring and the build becomes quadratic (15 s at
-        4k variables, 64 s at 8k). Here the sparse rows x sparse columns block
-        is one casadi Jacobian (8 forward colours on the identification NLPs,
-        instead of 39 with the epsilon row or 47 with the dense columns), the
-        dense columns are one forward block over the sparse rows, and the dense
-        rows one reverse block over their own small subgraph: linear in size.
-        """
-        ca = self._ca
-        n, m = x.shape[0], g.shape[0]
-        if not self._dense_rows and not self._dense_cols:
-            return None
-        dense_rows, dense_cols = self._dense_rows, self._dense_cols
-        rows = np.setdiff1d(np.arange(m), dense_rows).tolist()
-        cols = np.setdiff1d(np.arange(n), dense_cols).tolist()
-        g_sparse = g[rows]
-        blocks = [ca.jacobian(g_sparse, x[cols])]
-        if dense_cols:
-            blocks.append(ca.jacobian(g_sparse, x[dense_cols]))
-        jac = ca.horzcat(*blocks)[:, np.argsort(cols + dense_cols).tolist()]  # columns back into NL order
-        if dense_rows:
-            jac = ca.vertcat(jac, ca.jacobian(g[dense_rows], x))[np.argsort(rows + dense_rows).tolist(), :]
-        p = ca.SX.sym("p", 0)
-        return ca.Function("nlp_jac_g", [x, p], [g, jac], ["x", "p"], ["g", "jac_g_x"])
-
-    # ------------------------------------------------ with point-described rows
-    def _full_jacobian(self, jac_nl):
-        """g and its Jacobian of the whole NLP: the NL part's and the point-described rows', in NLP order."""
-        ca, A = self._ca, self._assembly
-        n, n_nl, m_nl = len(self.variables), self._n_nl, self._m_nl
-        if jac_nl is None:
-            x, g = self._nlp["x"], self._nlp["g"]
-            jac_nl = ca.Function("nl_jac_g", [x, ca.SX.sym("p", 0)], [g, ca.jacobian(g, x)])
-        X, P = ca.MX.sym("x", n), ca.MX.sym("p", 0)
-        c0 = self._nl_col0
-        g_nl, J_nl = jac_nl(X[c0:c0 + n_nl], P)
-        J_nl = ca.horzcat(ca.MX(m_nl, c0), J_nl, ca.MX(m_nl, n - n_nl - c0))
-        g_map, J_map = A.rows_and_jacobian(X)
-        if self._nl_row0:
-            g, J = ca.vertcat(g_map, g_nl), ca.vertcat(J_map, J_nl)
-        else:
-            g, J = ca.vertcat(g_nl, g_map), ca.vertcat(J_nl, J_map)
-        return ca.Function("nlp_jac_g", [X, P], [g, J], ["x", "p"], ["g", "jac_g_x"])
-
-    def _hessian_function(self):
-        """The Lagrangian Hessian function of the whole NLP (None: casadi's own, NL route only)."""
-        h_nl = self._nl_hessian_function()
-        if self._assembly is None:
-            return h_nl
-        ca, A = self._ca, self._assembly
-        n, n_nl, m_nl = len(self.variables), self._n_nl, self._m_nl
-        if h_nl is None:
-            x, f, g = self._nlp["x"], self._nlp["f"], self._nlp["g"]
-            lf, lg = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", g.shape[0])
-            h_nl = ca.Function("nl_hess_l", [x, ca.SX.sym("p", 0), lf, lg],
-                               [ca.triu(ca.hessian(lf * f + ca.dot(lg, g), x)[0])])
-        X, P = ca.MX.sym("x", n), ca.MX.sym("p", 0)
-        lf, lg = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", len(self.constraints))
-        c0, r0 = self._nl_col0, self._nl_row0
-        H_nl = h_nl(X[c0:c0 + n_nl], P, lf, lg[r0:r0 + m_nl])
-        lam_map = lg[:r0] if r0 else lg[m_nl:]
-        H = ca.diagcat(ca.MX(c0, c0), H_nl, ca.MX(n - n_nl - c0, n - n_nl - c0)) + A.hessian(X, lam_map)
-        return ca.Function("nlp_hess_l", [X, P, lf, lg], [H], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-
-    def _nlp_functions(self):
-        """(f, g) and (f, grad f) of the whole NLP as casadi Functions of (x, p)."""
-        ca, (x, f, g) = self._ca, (self._nlp["x"], self._nlp["f"], self._nlp["g"])
-        p = ca.SX.sym("p", 0)
-        nlp = ca.Function("nlp", [x, p], [f, g], ["x", "p"], ["f", "g"])
-        grad = ca.Function("nlp_grad_f", [x, p], [f, ca.gradient(f, x)], ["x", "p"], ["f", "grad_f_x"])
-        if self._assembly is None:
-            return nlp, grad
-        n, n_nl, c0 = len(self.variables), self._n_nl, self._nl_col0
-        X, P = ca.MX.sym("x", n), ca.MX.sym("p", 0)
-        f_nl, g_nl = nlp(X[c0:c0 + n_nl], P)
-        f_g, gf = grad(X[c0:c0 + n_nl], P)
-        rows = self._assembly.rows(X)
-        g = ca.vertcat(rows, g_nl) if self._nl_row0 else ca.vertcat(g_nl, rows)
-        return (ca.Function("nlp", [X, P], [f_nl, g], ["x", "p"], ["f", "g"]),
-                # dense: casadi hands Ipopt the output buffer as it is, and the structural zeros of a
-                # sparse gradient would be whatever the buffer held (seen: inf_du 1e12 at iteration 0)
-                ca.Function("nlp_grad_f", [X, P],
-                            [f_g, ca.densify(ca.vertcat(ca.MX(c0, 1), gf, ca.MX(n - n_nl - c0, 1)))], ["x", "p"],
-                            ["f", "grad_f_x"]))
-
-    def _nl_hessian_function(self):
-        """Lagrangian Hessian of the NL part built block-wise, or None for casadi's default.
-
-        casadi's Hessian is one symmetric (star) colouring of the whole
-        Hessian and one forward sweep over the gradient graph per colour. On
-        the identification NLPs, 8 dense columns (free parameters, trim
-        controls used at every collocation point) and ~40 trim-block variables
-        that couple in a dense ~50x50 block force 53 colours, although the
-        rest needs 7: 45 s at 25k variables. Split of the columns:
-
-        * ``S``: the rest - one symmetric casadi Jacobian of grad[S] w.r.t. x[S];
-        * ``D2``: dense in the Hessian but in few Jacobian rows - rows of the
-          Hessian by reverse mode, over the small subgraph of grad[D2];
-        * ``D1``: the dense Jacobian columns (see :meth:`_jacobian_function`),
-          dense in the Hessian too on these NLPs - rows of the Hessian by
-          reverse mode (few colours, large subgraph).
-
-        The blocks together cover the Hessian exactly once up to symmetry;
-        the values equal casadi's up to rounding.
-        """
-        ca = self._ca
-        x, f, g = self._nlp["x"], self._nlp["f"], self._nlp["g"]
-        n, m = x.shape[0], g.shape[0]
-        lam_f = ca.SX.sym("lam_f")
-        lam_g = ca.SX.sym("lam_g", m)
-        grad = ca.gradient(lam_f * f + ca.dot(lam_g, g), x)
-        # The dense Jacobian columns are D1 whatever their Hessian degree, so the Hessian's
-        # sparsity is only needed for the other columns: the pattern of grad[rest] w.r.t.
-        # x[rest]. Without the dense columns casadi's bitwise propagation stays cheap
-        # (docs/performance.md, "What was done" 7).
-        d1 = list(self._dense_cols)
-        rest = np.setdiff1d(np.arange(n), d1)
-        hsp = ca.Function("nlp_grad_l", [x, lam_f, lam_g], [grad[rest.tolist()]]).jac_sparsity(0, 0)
-        degree = np.diff(np.array(hsp.colind(), dtype=int))[rest]
-        # 90th percentile: the ~45 dense Hessian columns (objective settings,
-        # trim-block variables coupled through J_trim) are more than 1 % of a
-        # small NLP; with the 99th percentile they hid themselves and the
-        # symmetric colouring of the rest took 8.5 s instead of 2.2 s at 3k
-        # variables (benchmark --quick, docs/performance.md).
-        d2 = rest[self._dense(degree, percentile=self.settings.hessian_dense_percentile)].tolist()
-        if not d1 and not d2:
-            return None
-        dense = d1 + d2
-        s = np.setdiff1d(np.arange(n), dense).tolist()
-        ns, n2 = len(s), len(d2)
-        self._hessian_split = {"S": ns, "D2": n2, "D1": len(d1)}
-        perm = s + d2 + d1
-        h_ss = ca.jacobian(grad[s], x[s], {"symmetric": True})
-        h_2 = ca.jacobian(grad[d2], x[s + d2]) if d2 else ca.SX(0, ns)  # rows D2, columns S + D2
-        h_1 = ca.jacobian(grad[d1], x[perm]).T if d1 else ca.SX(n, 0)  # columns D1, rows S + D2 + D1
-        h_2s, h_22 = h_2[:, :ns], h_2[:, ns:]
-        h_1s, h_12, h_11 = h_1[:ns, :], h_1[ns:ns + n2, :], h_1[ns + n2:, :]
-        hp = ca.vertcat(
-            ca.horzcat(h_ss, h_2s.T, h_1s),
-            ca.horzcat(h_2s, h_22, h_12),
-            ca.horzcat(h_1s.T, h_12.T, h_11),
-        )
-        back = np.argsort(perm).tolist()
-        hess = ca.triu(hp[back, back])
-        p = ca.SX.sym("p", 0)
-        return ca.Function(
-            "nlp_hess_l", [x, p, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]
-        )
 
     def _solver_for(self, ipopt_options: dict, verbose: bool):
         ipopt = dict(ipopt_options)
@@ -530,6 +311,8 @@ class CasadiIpoptSolver:
                 if self._hess_lag is False:
                     t_h = time.perf_counter()
                     self._hess_lag = self._hessian_function()
+                    if self._hess_lag is not None and self._scaling is not None:
+                        self._hess_lag = self._scaling.hessian_function(self._ca, self._hess_lag)
                     self.setup_breakdown["hessian"] += time.perf_counter() - t_h
                 if self._hess_lag is not None:
                     opts["hess_lag"] = self._hess_lag
@@ -539,6 +322,9 @@ class CasadiIpoptSolver:
                 # expression dict, each nlpsol sorted the whole graph again and derived its own
                 # gradient (docs/performance.md, "What was done" 7).
                 self._nlp_function, self._grad_f = self._nlp_functions()
+                if self._scaling is not None:  # casadi derives what is not given from the scaled NLP
+                    self._nlp_function, self._grad_f = self._scaling.nlp_functions(self._ca, self._nlp_function,
+                                                                                   self._grad_f)
             opts["grad_f"] = self._grad_f
             self._solvers[key] = self._ca.nlpsol("solver", "ipopt", self._nlp_function, opts)
             self.setup_breakdown["nlpsol"] += time.perf_counter() - t_n
@@ -640,6 +426,8 @@ class CasadiIpoptSolver:
         args = self._numeric_inputs()
         if warm_start in MULTIPLIER_MODES:
             args.update(self._multipliers_from_model())
+        if self._scaling is not None:
+            args = self._scaling.scale_inputs(args)
         t0 = time.perf_counter()
         # Ipopt polls Python for signals and swallows the exception (NonIpopt_Exception_Thrown): the guard
         # records the signal, and an interrupted solve raises Interrupted instead of returning an iterate
@@ -653,6 +441,8 @@ class CasadiIpoptSolver:
         wall = time.perf_counter() - t0
         stats = solver.stats()
         self.last_stats = stats  # casadi's solver statistics of this call (iterations, t_wall_* per function)
+        if self._scaling is not None:
+            sol = self._scaling.unscale_solution(sol)
         self._load(sol)
         status = stats.get("return_status", "unknown")
         setup, self._pending_setup = self._pending_setup, 0.0

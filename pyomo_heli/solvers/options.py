@@ -29,7 +29,7 @@ checked:
 For every backend, non-finite numbers and values that are neither a string
 nor a number (booleans, lists, tables, dates) are refused before any solver
 sees them. Keys the adapters consume themselves are allowed: ``verbose``
-(all backends) and ``point_rows`` (casadi-ipopt).
+(all backends), ``point_rows`` and ``scaling`` (casadi-ipopt).
 """
 
 from __future__ import annotations
@@ -51,6 +51,7 @@ __all__ = ["validate_solver_options"]
 ADAPTER_KEYS = {
     "verbose": ("casadi-ipopt", "pounce", "ipopt"),  # resolve_options pops it
     "point_rows": ("casadi-ipopt",),  # CasadiIpoptSolver pops it
+    "scaling": ("casadi-ipopt",),  # CasadiIpoptSolver pops it (CasadiSettings.scaling)
 }
 
 # IpoptGetAvailableLinearSolvers bits (IpLinearSolvers.h, Ipopt 3.14)

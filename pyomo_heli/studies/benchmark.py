@@ -8,6 +8,7 @@
                                                               # every target in one run (~30 min, 7 GB)
     python studies/benchmark.py --quick                       # seconds; what the test suite runs
     python studies/benchmark.py --no-shooting --compare-nl-route   # + set-up and point A with every row in the NL file
+    python studies/benchmark.py --no-front --no-shooting --compare-scaling   # A + 5-point front unscaled vs scaled
 
 Prints markdown tables and writes JSON (default results/benchmark.json) after
 every finished part. Bad options exit with status 2 and a one-line message.
@@ -66,6 +67,10 @@ def main(argv=None) -> int:
                     help="also set up and solve point A (first size) with every row through the NL file")
     ap.add_argument("--nl-route", action="store_true",
                     help="every row through the NL file (no point rows), as before 2026-11-24 afternoon")
+    ap.add_argument("--compare-scaling", action="store_true",
+                    help="also solve anchor A and a short front (--scaling-points) unscaled and scaled by the IDAES "
+                         "Scaler (solver option scaling), each from a fresh build; prints iterations and time ratios")
+    ap.add_argument("--scaling-points", type=int, default=5, help="front points of --compare-scaling (default 5)")
     ap.add_argument("--quick", action="store_true", help="tiny instance in seconds (ignores --config/--size)")
     ap.add_argument("--out", type=Path, default=Path("results") / "benchmark.json", help="JSON output")
     args = ap.parse_args(argv)
@@ -82,6 +87,8 @@ def main(argv=None) -> int:
         if args.max_duration <= 0:
             ap.exit(2, f"benchmark: --max-duration must be positive, got {args.max_duration}\n")
         overrides["data"] = {"max_duration_s": args.max_duration}
+    if args.scaling_points < 2:
+        ap.exit(2, f"benchmark: --scaling-points must be at least 2, got {args.scaling_points}\n")
     if args.repeat < 1:
         ap.exit(2, f"benchmark: --repeat must be at least 1, got {args.repeat}\n")
     config, sizes = args.config, args.size
@@ -95,7 +102,8 @@ def main(argv=None) -> int:
     settings = BenchmarkSettings(config=config, sizes=sizes, front=not args.no_front, shooting=shooting,
                                  shooting_max_simulations=args.shooting_max_sims or None,
                                  overrides=overrides, command=command.strip(), repeats=args.repeat,
-                                 compare_nl_route=args.compare_nl_route, nl_route=args.nl_route)
+                                 compare_nl_route=args.compare_nl_route, nl_route=args.nl_route,
+                                 compare_scaling=args.compare_scaling, scaling_points=args.scaling_points)
     try:
         result = run_benchmark(settings, args.out, progress=lambda msg: print(msg, flush=True))
     except ConfigError as exc:

@@ -10,7 +10,9 @@ What is measured (all in one process, so the ratios compare like with like):
 - a whole Pareto front (warm-started) and its interior points solved cold
   (``ParetoSettings.cold_check``);
 - point A again with the maneuver set repeated k times (``sizes``), for the
-  growth of the solve time with the number of samples.
+  growth of the solve time with the number of samples;
+- with ``compare_scaling``: anchor A and a short front solved twice, unscaled and scaled by the IDAES
+  Scaler (nlp/scaling.py, the casadi adapter's ``scaling`` switch), each from a fresh build.
 
 Results are a plain dict (JSON on disk, written after every finished size, so
 an interrupted run keeps what it finished) and a markdown table. Timings are
@@ -62,6 +64,10 @@ class BenchmarkSettings:
     compare_nl_route: bool = False
     #: the whole benchmark with every row through the NL file (``CasadiSettings.point_rows = False``)
     nl_route: bool = False
+    #: also solve anchor A and a front of ``scaling_points`` points at the first size unscaled and scaled
+    #: (``[solver] options = { scaling = true }``), each from a fresh build, and compare iterations, times and estimates
+    compare_scaling: bool = False
+    scaling_points: int = 5
     overrides: dict = field(default_factory=dict)  # config table overrides, as load_identification_config
     command: str = ""
 
@@ -209,6 +215,40 @@ def measure_nl_route(cfg, base: IdentificationData, k: int, progress=info) -> di
     return row
 
 
+def measure_scaling(cfg, base: IdentificationData, k: int, points: int, progress=info) -> dict:
+    """Anchor A and a front of ``points`` points, unscaled then scaled (the adapter's ``scaling`` switch), each on
+    a fresh build of size k; per point the iterations, solve time and estimates, and the scaled/unscaled ratios."""
+    data = repeat_maneuvers(base, k)
+    runs = {}
+    for scaled in (False, True):
+        m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
+        pareto = dataclasses.replace(cfg.pareto, points=points, cold_check=False,
+                                     solver_options={**cfg.pareto.solver_options, "scaling": scaled})
+        t0 = time.perf_counter()
+        ps = ParetoSolver(m, pareto)
+        pts = ps.front()
+        runs["scaled" if scaled else "unscaled"] = {
+            "points": [_point(p) for p in pts], "setup_time": sum(p.setup_time for p in pts),
+            "clock_time": time.perf_counter() - t0,  # scaler, set-up, solves
+            "iterations": sum(p.iterations for p in pts), "solve_time": sum(p.wall_time for p in pts),
+            "all_success": all(p.success for p in pts)}
+        r = runs["scaled" if scaled else "unscaled"]
+        progress(f"{'scaled' if scaled else 'unscaled'}: A {pts[0].iterations} it {pts[0].wall_time:.2f} s; front of "
+                 f"{len(pts)} points {r['iterations']} it {r['solve_time']:.2f} s")
+    u, s = runs["unscaled"], runs["scaled"]
+    scales = {f.name: f.scale for f in cfg.free}
+    return {**runs, "size": k, "n_points": points,
+            "a_iterations_ratio": s["points"][0]["iterations"] / max(u["points"][0]["iterations"], 1),
+            "a_time_ratio": s["points"][0]["wall_time"] / u["points"][0]["wall_time"],
+            "front_iterations_ratio": s["iterations"] / max(u["iterations"], 1),
+            "front_time_ratio": s["solve_time"] / u["solve_time"],
+            # relative estimate difference, every point: the scaling must not move the front
+            "max_parameter_difference": max(parameter_difference(ps_["parameters"], pu["parameters"], scales)
+                                            for ps_, pu in zip(s["points"], u["points"])),
+            "max_J_time_difference": max(abs(ps_["J_time"] - pu["J_time"]) / max(abs(pu["J_time"]), 1.0)
+                                         for ps_, pu in zip(s["points"], u["points"]))}
+
+
 def compute_ratios(result: dict) -> dict:
     """The issue's ratios from the raw numbers of one run (also used by the test to check the arithmetic)."""
     r = {}
@@ -228,6 +268,11 @@ def compute_ratios(result: dict) -> dict:
     if nl and first is not None:
         r["nl_route_setup_over_point_rows_setup"] = nl["setup_time"] / first["setup_time"]
         r["nl_route_a_solve_over_point_rows_a_solve"] = nl["a_solve_time"] / first["a_solve_time"]
+    sc = result.get("scaling")
+    if sc:
+        for key in ("a_iterations_ratio", "a_time_ratio", "front_iterations_ratio", "front_time_ratio",
+                    "max_parameter_difference", "max_J_time_difference"):
+            r[f"scaled_{key}"] = sc[key]
     ss = result.get("single_shooting")
     if ss and first is not None:
         a_total = first["build_time"] + first["setup_time"] + first["a_solve_time"]
@@ -300,6 +345,10 @@ def run_benchmark(settings: BenchmarkSettings, out: str | Path | None = None, pr
         if i == 0 and settings.compare_nl_route:
             result["nl_route"] = measure_nl_route(cfg, base, int(k), progress)
             save()
+        if i == 0 and settings.compare_scaling:
+            progress(f"scaling: anchor A and a front of {settings.scaling_points} points, unscaled and scaled ...")
+            result["scaling"] = measure_scaling(routed, base, int(k), settings.scaling_points, progress)
+            save()
     save()
     return result
 
@@ -362,6 +411,19 @@ def format_tables(result: dict) -> str:
             lines.append(f"| {name} | {_fmt(s['build_time'])} | {_fmt(s['setup_time'])} | {_fmt(s['a_solve_time'])} | "
                          f"{s['a_iterations']} | {s['point_a']['J_time']:.10g} |")
         lines.append("\nNL-route set-up [s]: " + ", ".join(f"{k} {_fmt(v)}" for k, v in nl["setup_breakdown"].items()))
+    sc = result.get("scaling")
+    if sc:
+        lines += ["", f"Unscaled and scaled (IDAES Scaler, solver option scaling), size {sc['size']}x, fresh builds, "
+                  "same process:", "",
+                  "| point | kind | unscaled it | scaled it | unscaled [s] | scaled [s] | J_time unscaled "
+                  "| J_time scaled |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for pu, ps_ in zip(sc["unscaled"]["points"], sc["scaled"]["points"]):
+            lines.append(f"| {pu['index']} | {pu['kind']} | {pu['iterations']} | {ps_['iterations']} | "
+                         f"{_fmt(pu['wall_time'])} | {_fmt(ps_['wall_time'])} | {pu['J_time']:.10g} | "
+                         f"{ps_['J_time']:.10g} |")
+        lines.append(f"| total | | {sc['unscaled']['iterations']} | {sc['scaled']['iterations']} | "
+                     f"{_fmt(sc['unscaled']['solve_time'])} | {_fmt(sc['scaled']['solve_time'])} | | |")
     ss = result.get("single_shooting")
     if ss:
         a = first["point_a"]

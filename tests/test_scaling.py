@@ -1,0 +1,135 @@
+"""Scaling through IDAES's API (nlp/scaling.py) and the casadi adapter's scaled solve (solvers/casadi_scaling.py).
+
+- the Scaler writes a factor for every free variable, active row and the objective of a small identification
+  NLP, with the physics nominals (checked against the numbers written here, not read back from the module);
+- the adapter's scaled solve of a two-variable problem gives the analytic solution, objective and the same
+  multipliers as the unscaled solve;
+- point A of a small instance solved scaled equals the unscaled estimate to 1e-6 relative.
+"""
+from pathlib import Path
+
+import pyomo.environ as pe
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ROOT / "tests" / "configs" / "tiny_case1_noisy.toml"
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.nlp.identification import identification_data
+
+    cfg = load_identification_config(TINY)
+    return cfg, identification_data(cfg)
+
+
+def _build(tiny):
+    from pyomo_heli.nlp.identification import build_identification_nlp
+
+    cfg, data = tiny
+    return build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
+
+
+def test_scaler_sets_a_physics_factor_on_every_family(tiny):
+    from idaes.core.scaling import get_scaling_factor
+
+    from pyomo_heli.nlp.scaling import IdentificationScaler
+
+    cfg, _ = tiny
+    m = _build(tiny)
+    IdentificationScaler().scale_model(m)
+    free = [v for v in m.component_data_objects(pe.Var, descend_into=True) if not v.fixed]
+    rows = list(m.component_data_objects(pe.Constraint, active=True, descend_into=True))
+    assert [v.name for v in free if get_scaling_factor(v) is None] == []
+    assert [c.name for c in rows if get_scaling_factor(c) is None] == []
+    assert all(get_scaling_factor(c) > 0 for c in [*free, *rows])
+    # every variable and row family of the maneuver and trim blocks is there
+    blk = m.man[m.maneuver_names.first()]
+    t = blk.t.at(3)
+    trim = m.trim[m.trim_speeds.first()]
+    expected = [  # 1 / nominal: u 40 m/s, w 5 m/s, q 0.2 rad/s, theta 0.1 rad, inflow 0.05, time scale 1 s
+        (blk.x["u", t], 1 / 40), (blk.x["w", t], 1 / 5), (blk.x["q", t], 1 / 0.2), (blk.x["theta", t], 1 / 0.1),
+        (blk.x["lambda_i", t], 1 / 0.05), (blk.dx["q", t], 1 / 0.2), (blk.beta["beta_1c", t], 1 / 0.05),
+        (blk.y["TAS", blk.samples.first()], 1 / 40), (blk.y["n_z", blk.samples.first()], 1.0),
+        (trim.V, 1 / 40), (trim.col, 1 / 0.15), (trim.lon, 1 / 0.05), (trim.theta, 1 / 0.1),
+        (blk.ode["u", t], 1 / 40), (blk.ode["q", t], 1 / 0.2), (blk.dx_disc_eq["w", t], 1 / 5),
+        (blk.initial["theta"], 1 / 0.1), (blk.output_eq["q", blk.samples.first()], 1 / 0.2),
+        (trim.equilibrium["lambda_i"], 1 / 0.05), (trim.V_spec, 1 / 40),
+    ]
+    for c, sf in expected:
+        assert get_scaling_factor(c) == pytest.approx(sf), c.name
+    for f in cfg.free:  # theta_s = p / scale, nominal max(|ParameterSpec value| / scale, 1)
+        nominal = max(abs(cfg.model.parameters[f.name]) / f.scale, 1.0)
+        assert get_scaling_factor(m.theta_s[f.name]) == pytest.approx(1 / nominal), f.name
+    # flapping rows: IDAES's nominal-value walk, one factor per family
+    assert len({get_scaling_factor(c) for c in blk.flapping.values()}) == 1
+    # objective by its value at the start
+    sfx = m.component("scaling_factor")
+    assert sfx[m.objective] == pytest.approx(1 / abs(pe.value(m.J_time)))
+
+
+def _two_variable_model(scaled: bool):
+    """min (x - 3)^2 + (y/1000 - 2)^2  s.t.  x + y/1000 = 4,  y <= 1400: x = 2.6, y = 1400, f = 0.52."""
+    m = pe.ConcreteModel()
+    m.x = pe.Var(initialize=0.0)
+    m.y = pe.Var(initialize=0.0, bounds=(None, 1400.0))
+    m.c = pe.Constraint(expr=m.x + m.y / 1000 == 4)
+    m.o = pe.Objective(expr=(m.x - 3) ** 2 + (m.y / 1000 - 2) ** 2)
+    if scaled:
+        m.scaling_factor = pe.Suffix(direction=pe.Suffix.EXPORT)
+        m.scaling_factor[m.y] = 1e-3
+        m.scaling_factor[m.c] = 10.0
+        m.scaling_factor[m.o] = 0.5
+    return m
+
+
+def test_adapter_scaled_solve_matches_analytic_solution_and_multipliers():
+    from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver, CasadiSettings
+
+    out = {}
+    for scaled in (False, True):
+        m = _two_variable_model(scaled)
+        solver = CasadiIpoptSolver(m, {"tol": 1e-10}, CasadiSettings(scaling=scaled))
+        assert (solver._scaling is not None) == scaled
+        r = solver.solve("none")
+        assert r.success
+        assert pe.value(m.x) == pytest.approx(2.6, abs=1e-7)
+        assert pe.value(m.y) == pytest.approx(1400.0, rel=1e-7)
+        assert r.objective == pytest.approx(0.52, rel=1e-7)  # unscaled objective, whatever the factor
+        out[scaled] = (m.dual[m.c], m.ipopt_zU_out[m.y])
+    # multipliers of the unscaled problem: lam = -2 (x - 3) = 0.8 for the row; for y the bound multiplier
+    # 2 (y/1000 - 2)/1000 + lam/1000 = -0.4e-3 (ASL signs: dual = -lam, zU <= 0)
+    assert out[True][0] == pytest.approx(out[False][0], rel=1e-6)
+    assert out[True][1] == pytest.approx(out[False][1], rel=1e-6)
+    assert out[True][0] == pytest.approx(-0.8, rel=1e-6)
+    assert out[True][1] == pytest.approx(-0.4e-3, rel=1e-5)
+
+
+def test_scaled_point_a_equals_unscaled_estimate(tiny):
+    import dataclasses
+
+    from pyomo_heli.pareto.front import ParetoSolver
+
+    cfg, _ = tiny
+    res = {}
+    for scaled in (False, True):
+        m = _build(tiny)
+        settings = dataclasses.replace(cfg.pareto, solver_options={**cfg.pareto.solver_options, "scaling": scaled})
+        ps = ParetoSolver(m, settings)
+        assert (ps.solver._scaling is not None) == scaled  # the scaled problem is the one solved
+        res[scaled] = ps.point_a()
+        assert res[scaled].success
+    for name, v in res[False].parameters.items():
+        assert res[True].parameters[name] == pytest.approx(v, rel=1e-6), name
+    assert res[True].J_time == pytest.approx(res[False].J_time, rel=1e-9)
+
+
+def test_scaling_is_an_adapter_option():
+    from pyomo_heli.solvers import validate_solver_options
+
+    validate_solver_options("casadi-ipopt", {"scaling": True})
+    with pytest.raises(ValueError, match="'scaling' applies to casadi-ipopt only"):
+        validate_solver_options("pounce", {"scaling": True})
+    with pytest.raises(ValueError, match="'scaling' must be true or false"):
+        validate_solver_options("casadi-ipopt", {"scaling": "yes"})

@@ -421,3 +421,34 @@ def composite_responses(records, output: str, inputs, settings: CompositeSetting
             out.append(FrequencyResponse(float(speed), output, inp, omega, T, coh, power, ok, list(names), err,
                                          tuple(x for x in inputs if x != inp)))
     return out
+
+
+#: composite settings for the long (90 s) sweeps of the bundled flight test: windows up to 60 s, each counted
+#: where it holds 4 periods (with 2, the lowest bins of a Hann window carry leakage of several dB and degrees
+#: on noise-free sweeps; docs/linear.md section 6)
+SWEEP_SETTINGS = CompositeSettings(windows_s=(5.0, 10.0, 20.0, 30.0, 45.0, 60.0), min_periods=4.0)
+
+
+def sweep_responses(records, pairs=DEFAULT_PAIRS, speeds=None,
+                    settings: CompositeSettings | None = None) -> list[FrequencyResponse]:
+    """Composite responses of each (output, input) pair at each speed of the sweep ``records``.
+
+    At each trim speed every record is used together, conditioned on every input any of them moves (manifest
+    ``inputs``): a pilot's corrections on lon during a col sweep are removed from the col response.
+    ``speeds`` [m/s] restricts the flight conditions.
+    """
+    s = settings or SWEEP_SETTINGS
+    by_speed: dict[float, list] = {}
+    for mv in records:
+        by_speed.setdefault(round(float(mv.trim_speed), 6), []).append(mv)
+    out = []
+    for output, input in pairs:
+        for V, recs in sorted(by_speed.items()):
+            if speeds is not None and not any(abs(V - v) < 1e-3 for v in speeds):
+                continue
+            moved = sorted({i for mv in recs for i in mv.inputs})
+            if input not in moved:
+                continue
+            frs = composite_responses(recs, output, tuple(moved), s, speed=V)
+            out.append(next(f for f in frs if f.input == input))
+    return out

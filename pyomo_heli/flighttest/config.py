@@ -42,6 +42,8 @@ class ManeuverPlan:
     omega_min: float = 0.3
     omega_max: float = 20.0
     dwell: int = 2
+    #: sweep only: flown with the pilot holding the attitude (flighttest/pilot.py); default true for sweeps
+    pilot: bool = False
 
 
 @dataclass
@@ -86,9 +88,9 @@ SENSOR_KEYS = ("noise", "sim_rate_hz", "record_rate_hz", "antialias_hz", "sigma"
 TRIM_KEYS = ("speeds_kt", "sigma_col_deg", "sigma_lon_deg", "sigma_theta_deg", "offset_col_deg", "offset_lon_deg",
              "offset_theta_deg")
 MANEUVER_KEYS = ("name", "role", "speed_kt", "channel", "shape", "amplitude_deg", "step_s", "duration_s",
-                 "t_start_s", "ramp_s", "omega_min_rad_s", "omega_max_rad_s", "dwell_cycles")
+                 "t_start_s", "ramp_s", "omega_min_rad_s", "omega_max_rad_s", "dwell_cycles", "pilot")
 #: keys only a frequency sweep takes
-SWEEP_KEYS = ("omega_min_rad_s", "omega_max_rad_s", "dwell_cycles")
+SWEEP_KEYS = ("omega_min_rad_s", "omega_max_rad_s", "dwell_cycles", "pilot")
 #: plausible |amplitude| of a maneuver input: the dataset format's limit of the recorded input column
 INPUT_LIMITS = {q.si: (q.limit, q.limit_text) for q in MANEUVER_QUANTITIES if q.si in INPUT_CHANNELS}
 
@@ -137,7 +139,7 @@ def _maneuver(mv, where: str, record_rate: float) -> ManeuverPlan:
     where = named
     role = _get(mv, "role", where, str)
     if role not in ROLES:
-        raise ConfigError(f"{where}: role must be identification or validation, got {role!r}")
+        raise ConfigError(f"{where}: role must be one of {', '.join(ROLES)}, got {role!r}")
     channel = _get(mv, "channel", where, str)
     if channel not in INPUT_CHANNELS:
         raise ConfigError(f"{where}: key 'channel' must be one of {', '.join(INPUT_CHANNELS)}, got {channel!r}")
@@ -177,6 +179,10 @@ def _maneuver(mv, where: str, record_rate: float) -> ManeuverPlan:
         if isinstance(dwell, bool) or dwell < 0:
             raise ConfigError(f"{where}: key 'dwell_cycles' must be an integer >= 0, got {dwell!r}")
         sweep["dwell"] = dwell
+        pilot = _get(mv, "pilot", where, bool, True)
+        if not isinstance(pilot, bool):
+            raise ConfigError(f"{where}: key 'pilot' must be true or false, got {pilot!r}")
+        sweep["pilot"] = pilot
         try:  # the shape's own checks (length against dwell and lowest period)
             InputSignal(channel, shape, amplitude * DEG, step, omega_min=sweep["omega_min"],
                         omega_max=sweep["omega_max"], dwell=dwell)

@@ -14,6 +14,13 @@ Example (studies/case1_tri.toml):
     omega_min_rad_s = 0.9
     omega_max_rad_s = 20.0
     points = 3                               # epsilon grid points on J_linear (the front is points x this)
+    weighting = "bins"                       # or "tischler_remple" (below)
+
+``weighting`` (docs/linear.md section 3): "bins" (default) evaluates Eq. 9 at every coherent bin of the
+single-window estimates of the identification maneuvers; "tischler_remple" at 20 logarithmically spaced
+frequencies of the composite, conditioned responses of the sweep records (role "frequency"), band
+coherence >= 0.6, as Tischler and Remple (ch. 11). Both use W_gamma = [1.58 (1 - exp(-gamma^2))]^2,
+W_g = 1, W_p = 0.01745.
 """
 from __future__ import annotations
 
@@ -28,6 +35,8 @@ _OUTPUTS = ("q", "theta", "n_x", "n_z")
 _INPUTS = ("col", "lon")
 #: most epsilon grid points on J_linear: the front is [pareto] points x this many solves
 MAX_POINTS = 50
+#: how J_linear weighs frequencies (see the module docstring)
+WEIGHTINGS = ("bins", "tischler_remple")
 
 
 @dataclass
@@ -36,11 +45,12 @@ class LinearSettings:
     speeds: tuple = (0.0, 80.0 * KT)  # [m/s]
     spectral: SpectralSettings = field(default_factory=SpectralSettings)
     points: int = 3
+    weighting: str = "bins"  # or "tischler_remple"
 
     @classmethod
     def from_table(cls, t: dict) -> "LinearSettings":
         known = {"pairs", "speeds_kt", "coherence_min", "input_power_min", "window_s", "overlap",
-                 "omega_min_rad_s", "omega_max_rad_s", "points"}
+                 "omega_min_rad_s", "omega_max_rad_s", "points", "weighting"}
         unknown = sorted(set(t) - known)
         if unknown:
             raise ValueError(f"unknown field(s) {unknown}; expected {sorted(known)}")
@@ -73,5 +83,8 @@ class LinearSettings:
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                     raise ValueError(f"field '{key}' must be a finite number, got {v!r}")
                 kw[name] = float(v)
+        weighting = t.get("weighting", "bins")
+        if weighting not in WEIGHTINGS:
+            raise ValueError(f"field 'weighting' must be one of {', '.join(WEIGHTINGS)}, got {weighting!r}")
         return cls(pairs=tuple((o, i) for o, i in pairs), speeds=tuple(float(v) * KT for v in speeds),
-                   spectral=SpectralSettings(**kw), points=points)
+                   spectral=SpectralSettings(**kw), points=points, weighting=weighting)

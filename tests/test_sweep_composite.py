@@ -347,3 +347,68 @@ def test_pilot_gain_rule():
     B[2, 1] = -1.0
     with pytest.raises(ValueError, match="not positive"):
         pilot_gains(lin)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# J_linear with the Tischler-Remple weighting ([linear] weighting = "tischler_remple")
+# ---------------------------------------------------------------------------------------------------------------
+def test_tischler_remple_coherence_weight_hand_values():
+    """W_gamma = [1.58 (1 - exp(-gamma^2))]^2, by hand: gamma^2 = 0.6: 1 - e^-0.6 = 0.451188, x 1.58 =
+    0.712877, squared 0.508194; gamma^2 = 1: 0.632121 x 1.58 = 0.998751 -> 0.997503; 0 -> 0."""
+    from pyomo_heli.nlp.objectives import W_GAIN, W_PHASE, coherence_weight
+
+    assert np.allclose(coherence_weight([0.0, 0.6, 1.0]), [0.0, 0.508194, 0.997503], atol=2e-6)
+    assert (W_GAIN, W_PHASE) == (1.0, 0.01745)
+
+
+def test_tischler_remple_points_are_log_spaced_in_the_band():
+    from pyomo_heli.dataset.frequency_response import FrequencyResponse, tischler_remple_points
+
+    w = np.geomspace(0.3, 20.0, 100)
+    coh = np.where((w > 0.5) & (w < 15.0), 0.9, 0.3)
+    fr = FrequencyResponse(0.0, "q", "lon", w, 1.0 / (1j * w + 1), coh, np.ones(100), coh >= 0.6)
+    tr = tischler_remple_points(fr).band()
+    assert len(tr.omega) == 20 and tr.omega.min() == w[fr.coherent].min() and tr.omega.max() == w[fr.coherent].max()
+    steps = np.diff(np.log(tr.omega))
+    assert steps.max() < 1.6 * steps.min()  # equal steps in log frequency, to the 100-point grid
+
+
+def test_linear_settings_weighting_field():
+    from pyomo_heli.linear_settings import LinearSettings
+
+    assert LinearSettings.from_table({}).weighting == "bins"  # the default: committed results unchanged
+    assert LinearSettings.from_table({"weighting": "tischler_remple"}).weighting == "tischler_remple"
+    with pytest.raises(ValueError, match="field 'weighting' must be one of bins, tischler_remple"):
+        LinearSettings.from_table({"weighting": "cifer"})
+
+
+def test_tischler_remple_j_linear_on_pilot_flown_sweeps(pilot_flown):
+    """data_responses with weighting = tischler_remple: the sweep records' composite responses at 20 points
+    each; J_linear (Eq. 9) of the truth's exact linear response on noise-free data is small (at most
+    20 W_gamma (0.5^2 + 0.01745 3^2) = 8.2 per response by the 0.5 dB / 3 deg agreement) and grows when
+    Iyy is 20 % off."""
+    from types import SimpleNamespace
+
+    from pyomo_heli.linear_settings import LinearSettings
+    from pyomo_heli.nlp.objectives import j_linear_value
+    from pyomo_heli.simulation.linearize import linearize_float
+    from pyomo_heli.simulation.trim import trim_float
+    from pyomo_heli.workflows.identify_linear import data_responses
+
+    ft, model, _ = pilot_flown
+    cfg = SimpleNamespace(linear=LinearSettings(weighting="tischler_remple"), path="c.toml", dataset="d",
+                          maneuvers="identification")
+    band = [r.band() for r in data_responses(cfg, ft)]
+    assert sorted(r.label for r in band) == ["n_z/col at 0 kt", "n_z/col at 80 kt", "q/lon at 0 kt", "q/lon at 80 kt"]
+    assert all(len(r.omega) == 20 for r in band)
+
+    def j(m):
+        G = [linearize_float(m, r.speed, trim_float(m, r.speed)).frequency_response(r.output, r.input, r.omega)
+             for r in band]
+        return j_linear_value(band, G)
+
+    j_truth, j_off = j(model), j(model.with_parameters(Iyy=1.2 * model.parameters["Iyy"]))
+    assert j_truth < 8.2 and j_off > 3 * j_truth, (j_truth, j_off)
+    no_sweeps = SimpleNamespace(frequency=lambda: [])
+    with pytest.raises(ValueError, match="needs sweep records"):
+        data_responses(cfg, no_sweeps)

@@ -452,3 +452,25 @@ def sweep_responses(records, pairs=DEFAULT_PAIRS, speeds=None,
             frs = composite_responses(recs, output, tuple(moved), s, speed=V)
             out.append(next(f for f in frs if f.input == input))
     return out
+
+
+#: frequencies per response of the Tischler-Remple cost: n_omega = 20, spaced logarithmically over the band
+TR_POINTS = 20
+
+
+def tischler_remple_points(fr: FrequencyResponse, n: int = TR_POINTS) -> FrequencyResponse:
+    """``fr`` with its coherent band cut to (at most) ``n`` frequencies spaced logarithmically across it.
+
+    Tischler and Remple (ch. 11) evaluate the cost at n_omega = 20 logarithmically spaced frequencies of
+    each response's coherent band, so that every decade counts alike; here each target frequency takes the
+    nearest coherent grid point (a target in a gap of the band takes the point nearest to it, once).
+    """
+    k = np.flatnonzero(fr.coherent)
+    keep = np.zeros(len(fr.omega), dtype=bool)
+    if len(k):
+        w = fr.omega[k]
+        targets = np.geomspace(w.min(), w.max(), n) if len(k) > 1 else w
+        idx = {int(k[np.argmin(np.abs(np.log(w) - np.log(t)))]) for t in targets}
+        keep[sorted(idx)] = True
+    return FrequencyResponse(fr.speed, fr.output, fr.input, fr.omega, fr.T, fr.coherence, fr.input_power, keep,
+                             list(fr.maneuvers), fr.random_error, tuple(fr.conditioned_on))

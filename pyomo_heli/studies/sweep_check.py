@@ -3,6 +3,9 @@
     python -m pyomo_heli.studies.sweep_check             # noise-free sweeps (the truth simulated again)
     python -m pyomo_heli.studies.sweep_check --noisy     # the recorded sweeps of data/bo105_synthetic
 
+With ``--noisy`` it also prints J_r of Eq. 9 with ``[linear] weighting = "tischler_remple"`` (20 points
+per response) for the truth model and for M0 without the wake on the tail.
+
 The noise-free records are the truth histories of the sweeps of ``data/bo105_synthetic.toml`` (M0 + the
 wake on the tail, pilot holding the attitude), taken at the record rate without sensors. The reference
 is the central-difference linearisation of the same truth model at its trim
@@ -81,6 +84,17 @@ def main(argv=None) -> pd.DataFrame:
     table = pd.DataFrame(rows)
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.max_colwidth", 60):
         print(table.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+    if args.noisy:
+        from ..dataset.frequency_response import tischler_remple_points
+        from ..nlp.objectives import j_linear_value
+        from ..physics.model import HelicopterModel
+        from ..simulation.trim import trim_float
+
+        band = [tischler_remple_points(r).band() for r in sweep_responses(records, DEFAULT_PAIRS)]
+        for name, m in (("truth", model), ("M0", HelicopterModel())):
+            lins = {V: linearize_float(m, V, trim_float(m, V)) for V in {r.speed for r in band}}
+            js = [j_linear_value([r], [lins[r.speed].frequency_response(r.output, r.input, r.omega)]) for r in band]
+            print(f"J_r (tischler_remple) of {name}: " + ", ".join(f"{r.label} {j:.1f}" for r, j in zip(band, js)))
     return table
 
 

@@ -14,6 +14,7 @@ Example (studies/case1_tri.toml):
     omega_min_rad_s = 0.9
     omega_max_rad_s = 20.0
     points = 3                               # epsilon grid points on J_linear (the front is points x this)
+    weighting = "bins"                       # or "tischler_remple": composite responses of the sweep records
 
 The table is declared (fields, defaults, domains) in :class:`pyomo_heli.settings.identification.LinearTable`.
 """
@@ -38,6 +39,7 @@ class LinearSettings:
     speeds: tuple = (0.0, 80.0 * KT)  # [m/s]
     spectral: SpectralSettings = field(default_factory=SpectralSettings)
     points: int = 3
+    weighting: str = "bins"  # or "tischler_remple" (docs/linear.md section 3)
 
     @classmethod
     def from_table(cls, t: "dict | LinearTable") -> "LinearSettings":
@@ -49,4 +51,4 @@ class LinearSettings:
                 raise ValueError("; ".join(line.removeprefix("[linear]: ") for line in problems.lines))
         kw = {name: float(getattr(t, key)) for key, name in _SPECTRAL if getattr(t, key) is not None}
         return cls(pairs=tuple((o, i) for o, i in t.pairs), speeds=tuple(float(v) * KT for v in t.speeds_kt),
-                   spectral=SpectralSettings(**kw), points=t.points)
+                   spectral=SpectralSettings(**kw), points=t.points, weighting=t.weighting)

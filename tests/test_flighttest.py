@@ -110,6 +110,9 @@ def test_bundled_datasets_regenerate_identically(tmp_path):
         committed, fresh = _files(DATA / n), _files(tmp_path / n)
         assert "truth.json" in committed and "manifest.json" in committed and "trims.csv" in committed
         assert sorted(fresh) == sorted(committed), n
+        if n == "bo105_synthetic":  # the sweep set (role "frequency") is regenerated and compared too
+            assert {f"maneuvers/{s}.csv" for s in ("lonsweep_hover", "colsweep_hover", "lonsweep_80kt",
+                                                   "colsweep_80kt")} <= set(committed)
         for f in committed:
             if not f.endswith(".csv"):
                 assert fresh[f] == committed[f], f"{n}/{f}: regenerated file differs from the committed one"
@@ -135,7 +138,7 @@ def test_check_data_passes_on_bundled_synthetic_dataset():
                           cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""
-    assert "22 maneuvers (10 identification, 12 validation)" in proc.stdout
+    assert "26 maneuvers (10 identification, 12 validation, 4 frequency)" in proc.stdout
     assert "24 trim points" in proc.stdout and "(14 level, 10 maneuver start trims)" in proc.stdout
 
 
@@ -166,7 +169,13 @@ def test_bundled_dataset_has_the_papers_test_points(name):
     assert sorted(round(m.trim_speed / KT) for m in ident) == [0, 0, 0, 20, 20, 20, 80, 80, 80, 80]
     for m in ft.maneuvers.values():
         assert m.sample_rate == pytest.approx(50.0)
-        assert m.duration == pytest.approx(15.0 if round(m.trim_speed / KT) >= 60 else 12.0)
+        if m.role != "frequency":
+            assert m.duration == pytest.approx(15.0 if round(m.trim_speed / KT) >= 60 else 12.0)
+    # the sweep set (bo105_synthetic only): lon and col at hover and 80 kt, 95 s records
+    fr = ft.frequency()
+    assert sorted((m.inputs[0] if m.inputs == ["lon"] else "col", round(m.trim_speed / KT)) for m in fr) == (
+        [("col", 0), ("col", 80), ("lon", 0), ("lon", 80)] if name == "bo105_synthetic" else [])
+    assert all(m.duration == pytest.approx(95.0) for m in fr)
 
 
 # ============================================================== 3. truth effects
@@ -489,6 +498,31 @@ def test_same_seed_same_files_other_seed_other_noise(tmp_path):
     assert len(da.trims) == len(dc.trims) == 3  # 2 level + 1 maneuver start
     assert not np.array_equal(da.trims["lon"], dc.trims["lon"])
     assert np.allclose(da.trims["lon"], dc.trims["lon"], atol=6 * np.hypot(0.05, 0.05) * DEG)
+
+
+def test_bundled_sweep_set_moves_no_earlier_draw():
+    """The four frequency sweeps appended to data/bo105_synthetic.toml (role "frequency") leave every earlier
+    maneuver's noise stream and the trim stream where they were, and add no trim row; the pilot's remnant
+    of a sweep is a child of the sweep's own stream (regenerate test above: the files themselves)."""
+    from pyomo_heli.flighttest.generate import noise_streams, pilot_rng, stream_indices
+
+    cfg = load_config(SYNTHETIC_TOML)
+    sweeps = [p for p in cfg.maneuvers if p.shape == "sweep"]
+    assert [(p.name, p.role, p.channel, round(p.speed / KT)) for p in sweeps] == [
+        ("lonsweep_hover", "frequency", "lon", 0), ("colsweep_hover", "frequency", "col", 0),
+        ("lonsweep_80kt", "frequency", "lon", 80), ("colsweep_80kt", "frequency", "col", 80)]
+    assert cfg.maneuvers[-4:] == sweeps and all(p.pilot for p in sweeps)
+    before = dataclasses.replace(cfg, maneuvers=cfg.maneuvers[:-4])
+    (m_new, t_new), (m_old, t_old) = noise_streams(cfg), noise_streams(before)
+    for a, b in zip(m_new, m_old):
+        assert np.array_equal(a.standard_normal(8), b.standard_normal(8))
+    assert np.array_equal(t_new.standard_normal(8), t_old.standard_normal(8))
+    used = set(stream_indices(cfg)) | {cfg.trim_stream}
+    assert len(used) == len(cfg.maneuvers) + 1  # every maneuver its own stream, none the trims'
+    remnants = [pilot_rng(cfg, k).standard_normal(4) for k in stream_indices(cfg)[-4:]]
+    others = [np.random.default_rng(np.random.SeedSequence(cfg.seed).spawn(len(cfg.maneuvers) + 1)[k])
+              .standard_normal(4) for k in sorted(used)]
+    assert not any(np.allclose(r, o) for r in remnants for o in others)
 
 
 def test_appended_maneuvers_keep_the_trims_with_trim_stream(tmp_path):

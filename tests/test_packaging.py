@@ -69,7 +69,7 @@ def test_package_data_resolves_and_is_the_repositorys():
     assert bundled_flight_test() == (ROOT / "data" / "bo105_synthetic").resolve()
     assert demo_config() == (ROOT / "studies" / "case1.toml").resolve()
     ft = load_flight_test(bundled_flight_test())
-    assert len(ft.identification()) == 10 and len(ft.maneuvers) == 22
+    assert len(ft.identification()) == 10 and len(ft.maneuvers) == 26  # + 12 validation, 4 frequency sweeps
     # the demo's dataset path, relative to the config, also holds next to the packaged copy of the config
     assert (PKG / "data" / cfg.raw["data"]["dataset"]).resolve() == bundled_flight_test()
 

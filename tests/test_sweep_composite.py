@@ -93,7 +93,8 @@ dwell_cycles = 1
 
 
 def test_generated_flight_test_records_the_sweep(tmp_path):
-    """The generator applies the configured sweep: the recorded (noise-free) input is the shape itself."""
+    """The generator applies the configured sweep: without the pilot the recorded (noise-free) input is the
+    shape itself."""
     from pyomo_heli.flighttest.generate import generate_from_file
 
     cfg = tmp_path / "g.toml"
@@ -121,6 +122,7 @@ omega_min_rad_s = 2
 omega_max_rad_s = 15
 dwell_cycles = 0
 t_start_s = 1
+pilot = false
 """)
     generate_from_file(cfg, tmp_path / "out")
     d = pd.read_csv(tmp_path / "out" / "maneuvers" / "lon_sweep.csv")
@@ -213,3 +215,200 @@ def test_conditioning_removes_a_correlated_second_input(at80):
         naive, = composite_responses([r for r in recs if r.name == f"{inp}_sweep"], out, (inp,), settings)
         _, db_naive, deg_naive = _errors(naive, lin)
         assert db_naive > 1.0 or deg_naive > 6.0, (out, inp, db_naive, deg_naive)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Sweeps flown with the attitude-holding pilot (flighttest/pilot.py), as the generator records them
+# ---------------------------------------------------------------------------------------------------------------
+PILOT_CFG = """
+[dataset]
+name = "s"
+aircraft = "bo105"
+seed = 5
+[truth.effects.wake_on_tail]
+K_lamT = 1.5
+[sensors]
+noise = false
+sim_rate_hz = 100
+record_rate_hz = 50
+antialias_hz = 10
+[trims]
+speeds_kt = [80]
+[[maneuvers]]
+name = "lon_doublet"
+role = "identification"
+speed_kt = 80
+channel = "lon"
+shape = "doublet"
+amplitude_deg = 0.5
+step_s = 1
+duration_s = 4
+"""
+
+
+def _sweep_plan(name, ch, kt, length=30.0):
+    return f"""
+[[maneuvers]]
+name = "{name}"
+role = "frequency"
+speed_kt = {kt}
+channel = "{ch}"
+shape = "sweep"
+amplitude_deg = 0.2
+step_s = {length - 3}
+duration_s = {length}
+omega_min_rad_s = 1.0
+omega_max_rad_s = 20
+dwell_cycles = 1
+"""
+
+
+@pytest.fixture(scope="module")
+def pilot_flown(tmp_path_factory):
+    """Noise-free 30 s lon and col sweeps at hover and 80 kt (M0 + wake on tail), pilot holding the attitude."""
+    from pyomo_heli.dataset import load_flight_test
+    from pyomo_heli.flighttest.config import load_config
+    from pyomo_heli.flighttest.generate import generate, truth_model
+
+    text = PILOT_CFG + "".join(_sweep_plan(f"{ch}sweep_{kt}", ch, kt) for kt in (0, 80) for ch in ("lon", "col"))
+    path = tmp_path_factory.mktemp("pilot") / "g.toml"
+    path.write_text(text)
+    cfg = load_config(path)
+    out = generate(cfg, path.parent / "out")
+    return load_flight_test(out), truth_model(cfg), cfg
+
+
+def test_pilot_flown_sweeps_give_the_bare_airframe_response(pilot_flown):
+    """Input measured at the actuator (sweep + the pilot's corrections): the composite, conditioned response
+    is the bare airframe's exact linear response C (jwI - A)^-1 B + D within 0.5 dB and 3 deg over the whole
+    coherent band (composite coherence >= 0.6)."""
+    from pyomo_heli.dataset.frequency_response import sweep_responses
+    from pyomo_heli.simulation.linearize import linearize_float
+    from pyomo_heli.simulation.trim import trim_float
+
+    ft, model, _ = pilot_flown
+    recs = ft.frequency()
+    assert sorted(r.name for r in recs) == ["colsweep_0", "colsweep_80", "lonsweep_0", "lonsweep_80"]
+    col80 = ft.maneuvers["colsweep_80"]
+    assert col80.inputs == ["col", "lon"]  # the pilot moves lon in the col sweep ...
+    assert np.ptp(col80.data["lon"]) > math.radians(0.02)
+    for r in recs:  # ... and keeps the attitude within a few degrees
+        assert np.ptp(r.data["theta"]) < math.radians(6.0), r.name  # peak to peak
+    frs = sweep_responses(recs)  # SWEEP_SETTINGS: windows hold 4 periods, the record 5
+    assert len(frs) == 4
+    for fr in frs:
+        lin = linearize_float(model, fr.speed, trim_float(model, fr.speed))
+        k = fr.coherent
+        assert k.sum() >= 60 and fr.omega[k].min() < 1.3, (fr.label, k.sum())  # 1.27-20 rad/s: 66 points
+        assert np.all(fr.coherence[k] >= 0.6)
+        ratio = fr.T[k] / lin.frequency_response(fr.output, fr.input, fr.omega[k])
+        db, deg = np.max(np.abs(20 * np.log10(np.abs(ratio)))), np.max(np.abs(np.degrees(np.angle(ratio))))
+        assert db < 0.5 and deg < 3.0, (fr.label, db, deg)
+
+
+def test_compiled_feedback_simulation_matches_the_python_integrator():
+    """simulate_with_feedback (casadi RK4, the generator's) against simulate(..., feedback=...) (Python RK4)."""
+    from pyomo_heli.flighttest.pilot import AttitudeHold, pilot_gains
+    from pyomo_heli.physics.model import HelicopterModel
+    from pyomo_heli.simulation.compiled import simulate_with_feedback
+    from pyomo_heli.simulation.integrate import sampled, simulate
+    from pyomo_heli.simulation.linearize import linearize_float
+    from pyomo_heli.simulation.trim import trim_float
+
+    model = HelicopterModel()
+    tp = trim_float(model, V80)
+    k_theta, _ = pilot_gains(linearize_float(model, V80, tp))
+    k_q = 0.05  # a rate gain too (the rule gives 0 here)
+    s = InputSignal("col", "sweep", math.radians(0.5), 2.5, t_start=0.2, omega_min=3.0, omega_max=15.0, dwell=0)
+    t = np.arange(0.0, 3.0, 0.01)
+    fast = simulate_with_feedback(model, tp, t, {"col": s(t)}, {"lon": {"theta": -k_theta, "q": -k_q}},
+                                  x_ref={"theta": tp.theta}, substeps=2)
+    slow = simulate(model, tp, t, {"col": sampled(t, s(t))}, method="rk4", substeps=2,
+                    feedback=AttitudeHold(k_theta, k_q, tp.theta))
+    for k in ("q", "theta", "lon", "col", "n_z", "u"):
+        assert np.max(np.abs(fast[k] - slow[k].to_numpy())) < 1e-10 * max(1.0, np.max(np.abs(slow[k]))), k
+    assert np.ptp(fast["lon"]) > 1e-4  # the pilot did act
+
+
+def test_pilot_gain_rule():
+    """K_theta = omega_p^2 / M_lon, K_q = max(0, (2 zeta omega_p + M_q) / M_lon) on a hand-made linear model."""
+    from pyomo_heli.flighttest.pilot import PILOT_OMEGA, PILOT_ZETA, pilot_gains
+    from pyomo_heli.simulation.linearize import LinearModel
+
+    states = ("u", "w", "q", "theta", "lambda_i")
+    A, B = np.zeros((5, 5)), np.zeros((5, 2))
+    A[2, 2], B[2, 1] = -0.5, 40.0
+    lin = LinearModel(0.0, A, B, np.zeros((6, 5)), np.zeros((6, 2)), states)
+    kt, kq = pilot_gains(lin)
+    assert kt == pytest.approx(PILOT_OMEGA ** 2 / 40.0)
+    assert kq == pytest.approx((2 * PILOT_ZETA * PILOT_OMEGA - 0.5) / 40.0)
+    A[2, 2] = -5.0
+    assert pilot_gains(lin)[1] == 0.0  # enough natural damping: no rate feedback
+    B[2, 1] = -1.0
+    with pytest.raises(ValueError, match="not positive"):
+        pilot_gains(lin)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# J_linear with the Tischler-Remple weighting ([linear] weighting = "tischler_remple")
+# ---------------------------------------------------------------------------------------------------------------
+def test_tischler_remple_coherence_weight_hand_values():
+    """W_gamma = [1.58 (1 - exp(-gamma^2))]^2, by hand: gamma^2 = 0.6: 1 - e^-0.6 = 0.451188, x 1.58 =
+    0.712877, squared 0.508194; gamma^2 = 1: 0.632121 x 1.58 = 0.998751 -> 0.997503; 0 -> 0."""
+    from pyomo_heli.nlp.objectives import W_GAIN, W_PHASE, coherence_weight
+
+    assert np.allclose(coherence_weight([0.0, 0.6, 1.0]), [0.0, 0.508194, 0.997503], atol=2e-6)
+    assert (W_GAIN, W_PHASE) == (1.0, 0.01745)
+
+
+def test_tischler_remple_points_are_log_spaced_in_the_band():
+    from pyomo_heli.dataset.frequency_response import FrequencyResponse, tischler_remple_points
+
+    w = np.geomspace(0.3, 20.0, 100)
+    coh = np.where((w > 0.5) & (w < 15.0), 0.9, 0.3)
+    fr = FrequencyResponse(0.0, "q", "lon", w, 1.0 / (1j * w + 1), coh, np.ones(100), coh >= 0.6)
+    tr = tischler_remple_points(fr).band()
+    assert len(tr.omega) == 20 and tr.omega.min() == w[fr.coherent].min() and tr.omega.max() == w[fr.coherent].max()
+    steps = np.diff(np.log(tr.omega))
+    assert steps.max() < 1.6 * steps.min()  # equal steps in log frequency, to the 100-point grid
+
+
+def test_linear_settings_weighting_field():
+    from pyomo_heli.linear_settings import LinearSettings
+
+    assert LinearSettings.from_table({}).weighting == "bins"  # the default: committed results unchanged
+    assert LinearSettings.from_table({"weighting": "tischler_remple"}).weighting == "tischler_remple"
+    with pytest.raises(ValueError, match="field 'weighting' must be one of bins, tischler_remple"):
+        LinearSettings.from_table({"weighting": "cifer"})
+
+
+def test_tischler_remple_j_linear_on_pilot_flown_sweeps(pilot_flown):
+    """data_responses with weighting = tischler_remple: the sweep records' composite responses at 20 points
+    each; J_linear (Eq. 9) of the truth's exact linear response on noise-free data is small (at most
+    20 W_gamma (0.5^2 + 0.01745 3^2) = 8.2 per response by the 0.5 dB / 3 deg agreement) and grows when
+    Iyy is 20 % off."""
+    from types import SimpleNamespace
+
+    from pyomo_heli.linear_settings import LinearSettings
+    from pyomo_heli.nlp.objectives import j_linear_value
+    from pyomo_heli.simulation.linearize import linearize_float
+    from pyomo_heli.simulation.trim import trim_float
+    from pyomo_heli.workflows.identify_linear import data_responses
+
+    ft, model, _ = pilot_flown
+    cfg = SimpleNamespace(linear=LinearSettings(weighting="tischler_remple"), path="c.toml", dataset="d",
+                          maneuvers="identification")
+    band = [r.band() for r in data_responses(cfg, ft)]
+    assert sorted(r.label for r in band) == ["n_z/col at 0 kt", "n_z/col at 80 kt", "q/lon at 0 kt", "q/lon at 80 kt"]
+    assert all(len(r.omega) == 20 for r in band)
+
+    def j(m):
+        G = [linearize_float(m, r.speed, trim_float(m, r.speed)).frequency_response(r.output, r.input, r.omega)
+             for r in band]
+        return j_linear_value(band, G)
+
+    j_truth, j_off = j(model), j(model.with_parameters(Iyy=1.2 * model.parameters["Iyy"]))
+    assert j_truth < 8.2 and j_off > 3 * j_truth, (j_truth, j_off)
+    no_sweeps = SimpleNamespace(frequency=lambda: [])
+    with pytest.raises(ValueError, match="needs sweep records"):
+        data_responses(cfg, no_sweeps)

@@ -421,3 +421,56 @@ def composite_responses(records, output: str, inputs, settings: CompositeSetting
             out.append(FrequencyResponse(float(speed), output, inp, omega, T, coh, power, ok, list(names), err,
                                          tuple(x for x in inputs if x != inp)))
     return out
+
+
+#: composite settings for the long (90 s) sweeps of the bundled flight test: windows up to 60 s, each counted
+#: where it holds 4 periods (with 2, the lowest bins of a Hann window carry leakage of several dB and degrees
+#: on noise-free sweeps; docs/linear.md section 6)
+SWEEP_SETTINGS = CompositeSettings(windows_s=(5.0, 10.0, 20.0, 30.0, 45.0, 60.0), min_periods=4.0)
+
+
+def sweep_responses(records, pairs=DEFAULT_PAIRS, speeds=None,
+                    settings: CompositeSettings | None = None) -> list[FrequencyResponse]:
+    """Composite responses of each (output, input) pair at each speed of the sweep ``records``.
+
+    At each trim speed every record is used together, conditioned on every input any of them moves (manifest
+    ``inputs``): a pilot's corrections on lon during a col sweep are removed from the col response.
+    ``speeds`` [m/s] restricts the flight conditions.
+    """
+    s = settings or SWEEP_SETTINGS
+    by_speed: dict[float, list] = {}
+    for mv in records:
+        by_speed.setdefault(round(float(mv.trim_speed), 6), []).append(mv)
+    out = []
+    for output, input in pairs:
+        for V, recs in sorted(by_speed.items()):
+            if speeds is not None and not any(abs(V - v) < 1e-3 for v in speeds):
+                continue
+            moved = sorted({i for mv in recs for i in mv.inputs})
+            if input not in moved:
+                continue
+            frs = composite_responses(recs, output, tuple(moved), s, speed=V)
+            out.append(next(f for f in frs if f.input == input))
+    return out
+
+
+#: frequencies per response of the Tischler-Remple cost: n_omega = 20, spaced logarithmically over the band
+TR_POINTS = 20
+
+
+def tischler_remple_points(fr: FrequencyResponse, n: int = TR_POINTS) -> FrequencyResponse:
+    """``fr`` with its coherent band cut to (at most) ``n`` frequencies spaced logarithmically across it.
+
+    Tischler and Remple (ch. 11) evaluate the cost at n_omega = 20 logarithmically spaced frequencies of
+    each response's coherent band, so that every decade counts alike; here each target frequency takes the
+    nearest coherent grid point (a target in a gap of the band takes the point nearest to it, once).
+    """
+    k = np.flatnonzero(fr.coherent)
+    keep = np.zeros(len(fr.omega), dtype=bool)
+    if len(k):
+        w = fr.omega[k]
+        targets = np.geomspace(w.min(), w.max(), n) if len(k) > 1 else w
+        idx = {int(k[np.argmin(np.abs(np.log(w) - np.log(t)))]) for t in targets}
+        keep[sorted(idx)] = True
+    return FrequencyResponse(fr.speed, fr.output, fr.input, fr.omega, fr.T, fr.coherence, fr.input_power, keep,
+                             list(fr.maneuvers), fr.random_error, tuple(fr.conditioned_on))

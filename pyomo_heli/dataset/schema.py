@@ -19,7 +19,8 @@ FORMAT_NAME = "pyomo_heli-flighttest"
 FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
 TRUTH_NAME = "truth.json"  # evaluation-only ground truth; never opened by this package
-ROLES = ("identification", "validation")
+#: "frequency": records for frequency responses only (sweeps), used by no time-domain fit or validation
+ROLES = ("identification", "validation", "frequency")
 INPUT_CHANNELS = INPUTS
 NAME_PATTERN = r"[A-Za-z0-9_-]+"
 
@@ -365,6 +366,10 @@ class FlightTest:
     def validation(self) -> list[Maneuver]:
         return [m for m in self.maneuvers.values() if m.role == "validation"]
 
+    def frequency(self) -> list[Maneuver]:
+        """The records of role "frequency" (frequency sweeps for the local linear models)."""
+        return [m for m in self.maneuvers.values() if m.role == "frequency"]
+
     def summary(self) -> str:
         """A readable table of the maneuvers and trim points."""
         n_id, n_val = len(self.identification()), len(self.validation())
@@ -376,7 +381,9 @@ class FlightTest:
         if self.trim_only:
             lines.append("  trim-only flight test: no maneuvers")
         else:
-            lines.append(f"  {len(self.maneuvers)} maneuvers ({n_id} identification, {n_val} validation):")
+            n_fr = len(self.frequency())
+            lines.append(f"  {len(self.maneuvers)} maneuvers ({n_id} identification, {n_val} validation"
+                         + (f", {n_fr} frequency" if n_fr else "") + "):")
         header = ["name", "role", "trim kt", "duration s", "rate Hz", "samples", "inputs", "channels"]
         rows = []
         for m in self.maneuvers.values():

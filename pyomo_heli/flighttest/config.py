@@ -40,6 +40,8 @@ class ManeuverPlan:
     omega_min: float = 0.3
     omega_max: float = 20.0
     dwell: int = 2
+    #: sweep only: flown with the pilot holding the attitude (flighttest/pilot.py); default true for sweeps
+    pilot: bool = False
 
 
 @dataclass
@@ -104,7 +106,8 @@ def _maneuver(mv, problems: Problems, where: str, record_rate: float) -> Maneuve
     if mv.shape == "sweep":
         sweep = {"omega_min": 0.3 if mv.omega_min_rad_s is None else mv.omega_min_rad_s,
                  "omega_max": 20.0 if mv.omega_max_rad_s is None else mv.omega_max_rad_s,
-                 "dwell": 2 if mv.dwell_cycles is None else mv.dwell_cycles}
+                 "dwell": 2 if mv.dwell_cycles is None else mv.dwell_cycles,
+                 "pilot": True if mv.pilot is None else mv.pilot}
         if not sweep["omega_max"] > sweep["omega_min"]:
             bad(f"key 'omega_max_rad_s' must be > {sweep['omega_min']:g} rad/s, got {sweep['omega_max']:g}")
         else:

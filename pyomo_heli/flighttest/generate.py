@@ -19,10 +19,13 @@ import pandas as pd
 
 from ..channels import OUTPUTS
 from ..physics.model import HelicopterModel
+from ..simulation.compiled import simulate_with_feedback
 from ..simulation.inputs import InputSignal
 from ..simulation.integrate import simulate
+from ..simulation.linearize import linearize_float
 from ..simulation.trim import trim_sweep
 from .config import GeneratorConfig, load_config
+from .pilot import pilot_gains, remnant
 from .sensors import average_trim, record
 from .truth_effects import make_effect
 
@@ -48,21 +51,54 @@ def simulate_maneuvers(cfg: GeneratorConfig, model: HelicopterModel):
     speeds = sorted({p.speed for p in cfg.maneuvers} | set(cfg.trim_speeds))
     trims = dict(zip(speeds, trim_sweep(model, speeds)))
     runs = {}
-    for plan in cfg.maneuvers:
+    streams = stream_indices(cfg)
+    for k, plan in enumerate(cfg.maneuvers):
         sig = InputSignal(plan.channel, plan.shape, plan.amplitude, plan.step, t_start=plan.t_start + PAD,
                           ramp=plan.ramp, omega_min=plan.omega_min, omega_max=plan.omega_max, dwell=plan.dwell)
         t = np.arange(0.0, plan.duration + 2 * PAD + 1e-9, 1.0 / cfg.sensors.sim_rate)
+        if plan.pilot:
+            runs[plan.name] = _fly_with_pilot(cfg, model, trims[plan.speed], plan, sig, t, streams[k])
+            continue
         runs[plan.name] = simulate(model, trims[plan.speed], t, {plan.channel: sig},
                                    max_step=0.05)  # below the 0.1 s input ramps: no edge is stepped over
     return trims, runs
+
+
+def pilot_rng(cfg: GeneratorConfig, stream: int) -> np.random.Generator:
+    """The pilot's remnant of the maneuver on noise stream ``stream``: the first child of that stream
+    (``SeedSequence(seed).spawn(...)[stream].spawn(1)[0]``), so it moves no other draw."""
+    return np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(stream, 0)))
+
+
+def _fly_with_pilot(cfg, model, trim, plan, sig, t, stream) -> pd.DataFrame:
+    """A sweep flown with the attitude-holding pilot of flighttest/pilot.py: RK4 with the pilot's state
+    feedback at every stage (one step per sample of the simulation rate), the remnant on lon."""
+    k_theta, k_q = pilot_gains(linearize_float(model, plan.speed, trim))
+    inc = {plan.channel: sig(t)}
+    inc["lon"] = inc.get("lon", 0.0 * t) + remnant(pilot_rng(cfg, stream), float(t[0]), float(t[-1]))(t)
+    run = simulate_with_feedback(model, trim, t, inc, {"lon": {"theta": -k_theta, "q": -k_q}},
+                                 x_ref={"theta": trim.theta}, substeps=1)
+    return pd.DataFrame({"t": t, **run})
 
 
 def _describe(p) -> str:
     """Manifest description of a maneuver plan."""
     if p.shape == "sweep":
         return (f"{p.channel} sweep, {np.degrees(p.amplitude):g} deg, {p.omega_min:g}-{p.omega_max:g} rad/s, "
-                f"{p.dwell} dwell cycles, {p.step:g} s long, from t = {p.t_start:g} s")
+                f"{p.dwell} dwell cycles, {p.step:g} s long, from t = {p.t_start:g} s"
+                + (", pilot holding the attitude on lon" if p.pilot else ""))
     return f"{p.channel} {p.shape}, {np.degrees(p.amplitude):g} deg, step {p.step:g} s, from t = {p.t_start:g} s"
+
+
+def stream_indices(cfg: GeneratorConfig) -> list[int]:
+    """The child of SeedSequence(seed) that each maneuver's noise uses (config order; the trim stream skipped)."""
+    trim = len(cfg.maneuvers) if cfg.trim_stream is None else cfg.trim_stream
+    return [k if k < trim else k + 1 for k in range(len(cfg.maneuvers))]
+
+
+def _moved(p) -> list[str]:
+    """The inputs a maneuver moves: its channel, and lon where the pilot holds the attitude."""
+    return [c for c in ("col", "lon") if c == p.channel or (p.pilot and c == "lon")]
 
 
 def noise_streams(cfg: GeneratorConfig):
@@ -70,7 +106,7 @@ def noise_streams(cfg: GeneratorConfig):
     n = len(cfg.maneuvers)
     trim = n if cfg.trim_stream is None else cfg.trim_stream
     children = np.random.SeedSequence(cfg.seed).spawn(n + 1)
-    maneuvers = [np.random.default_rng(children[k if k < trim else k + 1]) for k in range(n)]
+    maneuvers = [np.random.default_rng(children[k]) for k in stream_indices(cfg)]
     return maneuvers, np.random.default_rng(children[trim])
 
 
@@ -197,7 +233,7 @@ def generate(cfg: GeneratorConfig, out: str | Path, force: bool = False) -> Path
         "atmosphere": {"rho_kg_m3": model.parameters["rho"], "g_m_s2": model.parameters["g"]},
         "mass_kg": model.parameters["m"],
         "maneuvers": [{"name": p.name, "role": p.role, "trim_speed_kt": round(p.speed / 0.514444444444, 6),
-                       "inputs": [p.channel], "description": _describe(p)}
+                       "inputs": _moved(p), "description": _describe(p)}
                       for p in cfg.maneuvers],
     }
     if (out / "manifest.json").is_file():  # --force on a flight test: none of its files may outlive it

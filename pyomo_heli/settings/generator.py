@@ -16,10 +16,10 @@ from .common import Finite, sigma_table
 
 #: maneuver roles (pyomo_heli.dataset.schema.ROLES) and input shapes (pyomo_heli.simulation.inputs.SHAPES);
 #: tests/test_settings.py keeps them equal
-ROLES = ("identification", "validation")
+ROLES = ("identification", "validation", "frequency")
 SHAPES = ("3211", "doublet", "step", "pulse", "sweep")
 #: keys only a frequency sweep takes
-SWEEP_KEYS = ("omega_min_rad_s", "omega_max_rad_s", "dwell_cycles")
+SWEEP_KEYS = ("omega_min_rad_s", "omega_max_rad_s", "dwell_cycles", "pilot")
 
 
 class GenTable(Table):
@@ -96,7 +96,7 @@ class ManeuverTable(GenTable):
                 "dwell_cycles": "key 'dwell_cycles' must be an integer >= 0, got {v!r}"}
 
     name: str = Field(description="record name: letters, digits, '_' and '-'")
-    role: Literal[ROLES] = Field(description="identification or validation")
+    role: Literal[ROLES] = Field(description="identification, validation or frequency (sweeps for J_linear)")
     speed_kt: Finite = Field(description="trim speed [kt] (display unit)")
     channel: Literal[INPUTS] = Field(description="the input excited")
     shape: Literal[SHAPES] = Field(description="the input shape")
@@ -111,6 +111,8 @@ class ManeuverTable(GenTable):
                                                                       "(default 20)")
     dwell_cycles: Optional[int] = Field(None, ge=0, description="sweep only: cycles dwelt at omega_min "
                                                                 "(default 2)")
+    pilot: Optional[bool] = Field(None, description="sweep only: flown with the pilot holding the attitude "
+                                                    "(flighttest/pilot.py; default true)")
 
     @model_validator(mode="after")
     def _sweep_keys(self):

@@ -210,6 +210,9 @@ class LinearTable(Table):
     omega_max_rad_s: Optional[Finite] = Field(None, description="highest frequency [rad/s] (default 20)")
     points: int = Field(3, ge=2, le=MAX_LINEAR_POINTS, description="epsilon grid points on J_linear (the front "
                                                                    "is [pareto] points x this)")
+    weighting: Literal["bins", "tischler_remple"] = Field("bins", description="J_linear frequencies: every coherent "
+                                                          "bin of the identification maneuvers, or Tischler-Remple "
+                                                          "(20 log-spaced frequencies of the sweep records)")
 
     @field_validator("pairs")
     @classmethod

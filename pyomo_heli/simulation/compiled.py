@@ -200,3 +200,91 @@ def input_sensitivities(model: HelicopterModel, trim: TrimPoint, t_eval, increme
             G[:, cols + k] += B[k][:, ch]
             G[:, cols + k + 1] += B[k][:, [ni + c for c in ch]]
     return y, S
+
+
+#: (structure, substeps) -> (step function with state feedback, output function, output names, extensions)
+_FEEDBACK: dict = {}
+
+
+def _feedback_functions(model: HelicopterModel, substeps: int):
+    """As :func:`_functions`, with linear state feedback inside the interval: u = u_lin(tau) + K (x - x_ref)."""
+    key = (_structure(model), substeps)
+    if key in _FEEDBACK:
+        return _FEEDBACK[key][:2]
+    import casadi as ca
+
+    ops = get_ops("casadi")
+    states, names, exts = model.state_names, list(model.parameters), model.float_extensions
+    nx, ni = len(states), len(INPUTS)
+    x = ca.SX.sym("x", nx)
+    p = ca.SX.sym("p", len(names))
+    fb = ca.SX.sym("fb", ni * nx + nx)  # K row by row, then x_ref
+    K = ca.reshape(fb[:ni * nx], nx, ni).T
+    x_ref = fb[ni * nx:]
+    pmap = dict(zip(names, ca.vertsplit(p)))
+
+    def rates(xv, u):
+        eqs = evaluate(dict(zip(states, ca.vertsplit(xv))), {"col": u[0], "lon": u[1]}, pmap, ops=ops,
+                       extensions=exts).state_eqs
+        return ca.vertcat(*[eqs[s][1] / eqs[s][0] for s in states])
+
+    u0, u1, dt = ca.SX.sym("u0", ni), ca.SX.sym("u1", ni), ca.SX.sym("dt")
+
+    def rhs(tau, y):
+        return rates(y, u0 + tau / dt * (u1 - u0) + K @ (y - x_ref))
+
+    h, tau, y = dt / substeps, 0.0, x
+    for _ in range(substeps):
+        y = rk4_step(rhs, tau, y, h)
+        tau = tau + h
+    step = ca.Function("rk4_interval_feedback", [x, ca.vertcat(u0, u1, dt), p, fb], [y])
+    _FEEDBACK[key] = (step, exts)
+    return step, exts
+
+
+def simulate_with_feedback(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mapping[str, np.ndarray],
+                           gain: Mapping[str, Mapping[str, float]], x_ref: Mapping[str, float] | None = None,
+                           substeps: int = 4) -> dict[str, np.ndarray]:
+    """States, inputs and outputs at ``t_eval`` of the RK4 simulation with linear state feedback
+
+        u(t) = u_trim + increment(t) + sum_s gain[input][s] (x_s - x_ref_s)      [rad]
+
+    (the increments linear between samples, as in :func:`simulate_outputs`; the feedback acts at every RK4
+    stage). ``x_ref`` defaults to the trim state. Returns every state, ``col``, ``lon`` (the total inputs,
+    feedback included, as an actuator records them) and every output, by name.
+    ``pyomo_heli.simulation.integrate.simulate(..., feedback=...)`` is the Python counterpart.
+    """
+    t_eval = np.asarray(t_eval, dtype=float)
+    unknown = (set(increments) | set(gain)) - set(INPUTS)
+    if unknown:
+        raise ValueError(f"unknown input channel(s) {sorted(unknown)}; choose from {', '.join(INPUTS)}")
+    states = model.state_names
+    bad = sorted({s for g in gain.values() for s in g} - set(states))
+    if bad:
+        raise ValueError(f"feedback from unknown state(s) {bad}; the model's states are {', '.join(states)}")
+    step, _ = _feedback_functions(model, substeps)
+    _, out_fun, out_names = _functions(model, substeps)
+    n = len(t_eval)
+    base = trim.inputs()
+    u = np.vstack([base[k] + np.asarray(increments.get(k, np.zeros(n)), dtype=float) for k in INPUTS])
+    p = np.array([model.parameters[name] for name in model.parameters], dtype=float)
+    x0 = np.array([trim.state()[s] for s in states], dtype=float)
+    xr = x0 if x_ref is None else np.array([x_ref.get(s, trim.state()[s]) for s in states], dtype=float)
+    K = np.array([[float(gain.get(i, {}).get(s, 0.0)) for s in states] for i in INPUTS])
+    fb = np.concatenate([K.ravel(), xr])
+    if n > 1:
+        acc = step.mapaccum("rk4_record_feedback", n - 1)
+        intervals = np.vstack([u[:, :-1], u[:, 1:], np.diff(t_eval)[None, :]])
+        xs = np.hstack([x0[:, None], np.asarray(acc(x0, intervals, np.tile(p[:, None], (1, n - 1)),
+                                                    np.tile(fb[:, None], (1, n - 1))))])
+    else:
+        xs = x0[:, None]
+    bad_t = ~np.all(np.isfinite(xs), axis=0)
+    if bad_t.any():
+        raise RuntimeError(f"simulation diverged at t = {t_eval[np.argmax(bad_t)]:.3f} s")
+    u_total = u + K @ (xs - xr[:, None])
+    ys = np.asarray(out_fun.map(n)(xs, u_total, np.tile(p[:, None], (1, n))))
+    out = {s: xs[j].copy() for j, s in enumerate(states)}
+    out.update({k: u_total[j].copy() for j, k in enumerate(INPUTS)})
+    out.update({o: ys[j].copy() for j, o in enumerate(out_names)})
+    return out

@@ -53,7 +53,7 @@ def rk4(rhs, t_eval, y0, substeps: int = 4) -> np.ndarray:
 def simulate(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mapping[str, Increment] | None = None,
              x0: Mapping | None = None, base_inputs: Mapping | None = None, rtol: float = 1e-10,
              atol: float = 1e-10, max_step: float | None = None, method: str = "DOP853",
-             substeps: int = 4) -> pd.DataFrame:
+             substeps: int = 4, feedback: Callable[[float, Mapping], Mapping] | None = None) -> pd.DataFrame:
     """Integrate the model and return states, inputs, flapping and outputs at ``t_eval``.
 
     The initial state is the trim state (or ``x0``); the inputs are the trim
@@ -61,7 +61,10 @@ def simulate(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mappin
     ``substeps`` classic Runge-Kutta steps between consecutive ``t_eval``
     points: with sampled (piecewise-linear) inputs the input is smooth inside
     every step, where an adaptive method would crawl through every kink of a
-    noisy input record. Columns: t, every state,
+    noisy input record. ``feedback(t, x)`` (x: the state by name) returns
+    increments [rad] added to the inputs, e.g. a pilot holding the attitude
+    (:mod:`pyomo_heli.flighttest.pilot`); the returned inputs include them.
+    Columns: t, every state,
     col, lon, beta_0, beta_1c, beta_1s and every output (n_x, n_z, TAS, ...).
     """
     increments = dict(increments or {})
@@ -76,11 +79,15 @@ def simulate(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mappin
         start.update(x0)
     y0 = np.array([start[n] for n in names], dtype=float)
 
-    def inputs_at(t):
-        return {k: base[k] + (float(increments[k](t)) if k in increments else 0.0) for k in INPUTS}
+    def inputs_at(t, y):
+        u = {k: base[k] + (float(increments[k](t)) if k in increments else 0.0) for k in INPUTS}
+        if feedback is not None:
+            for k, v in feedback(t, dict(zip(names, y))).items():
+                u[k] += float(v)
+        return u
 
     def rhs(t, y):
-        return model.rhs_vector(y, inputs_at(t))
+        return model.rhs_vector(y, inputs_at(t, y))
 
     if method == "rk4":
         ys = rk4(rhs, t_eval, y0, substeps)
@@ -94,7 +101,7 @@ def simulate(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mappin
     rows = []
     for i, t in enumerate(t_eval):
         x = dict(zip(names, ys[:, i]))
-        u = inputs_at(t)
+        u = inputs_at(t, ys[:, i])
         ctx = model.evaluate(x, u)
         row = {"t": t, **x, **u, **dict(zip(FLAPPING, (float(b) for b in ctx.beta)))}
         row.update({k: float(v) for k, v in ctx.outputs.items() if k not in ("q", "theta")})

@@ -23,7 +23,8 @@ import pandas as pd
 
 from ..log import Progress, format_parameters, info
 from ..dataset import load_flight_test
-from ..dataset.frequency_response import frequency_responses, save_responses
+from ..dataset.frequency_response import (frequency_responses, save_responses, sweep_responses,
+                                          tischler_remple_points)
 from ..nlp.identification import build_identification_nlp, identification_data
 from ..pareto.result import IdentificationResult
 from ..pareto.epsilon import INFEASIBLE
@@ -39,7 +40,15 @@ def _point_dict(p) -> dict:
 
 
 def data_responses(cfg, ft):
-    """Frequency responses of the config's identification maneuvers (full record rate)."""
+    """Frequency responses of the config's identification maneuvers (full record rate); with
+    ``[linear] weighting = "tischler_remple"`` the composite responses of the sweep records (role
+    "frequency"), each band cut to 20 logarithmically spaced frequencies."""
+    if cfg.linear.weighting == "tischler_remple":
+        sweeps = ft.frequency()
+        if not sweeps:
+            raise ValueError(f"{cfg.path} [linear]: weighting = 'tischler_remple' needs sweep records (role "
+                             f"'frequency') in {cfg.dataset}; it has none")
+        return [tischler_remple_points(r) for r in sweep_responses(sweeps, cfg.linear.pairs, cfg.linear.speeds)]
     if cfg.maneuvers == "identification":
         mans = ft.identification()
     else:

@@ -206,7 +206,8 @@ def run_bundled(out: Path, config: Path, dataset: Path) -> dict:
         if mode not in cost or not (loop / "loop.json").is_file():
             cfg = base / mode / "loop.toml"
             cfg.parent.mkdir(parents=True, exist_ok=True)
-            cfg.write_text(text.replace("\n[loop]\n", f"\n[loop]\ndiscovery = {'true' if mode == 'on' else 'false'}\n", 1))
+            flag = "true" if mode == "on" else "false"
+            cfg.write_text(text.replace("\n[loop]\n", f"\n[loop]\ndiscovery = {flag}\n", 1))
             load0, t0, c0 = os.getloadavg()[0], time.perf_counter(), _cpu()
             code = cli_main(["close-loop", str(cfg), "--dataset", str(dataset), "--out", str(loop)])
             if code != 0:

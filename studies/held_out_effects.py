@@ -185,11 +185,12 @@ def _cpu() -> float:
     return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
 
 
-def run_bundled(out: Path, config: Path, dataset: Path) -> dict:
+def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> dict:
     """The bundled flight test through the closed loop of ``config`` twice in this one process: discovery on and
     off (the config's text with ``[loop] discovery`` set), each timed (wall and CPU seconds, load average).
     ``OUT/bundled/{on,off}/loop`` and ``OUT/bundled/cost.json``, written after each loop; a loop already
-    finished (its time recorded) is not rerun. Returns the cost record with the wake-naming check."""
+    finished (its time recorded) is not rerun; ``modes`` runs only some (two invocations may run "on" and "off"
+    at the same time: the file is merged on every write). Returns the cost record with the wake-naming check."""
     import os
 
     from pyomo_heli.diagnosis.candidates import CANDIDATES
@@ -198,10 +199,15 @@ def run_bundled(out: Path, config: Path, dataset: Path) -> dict:
     base = out / "bundled"
     base.mkdir(parents=True, exist_ok=True)
     cost_file = base / "cost.json"
-    cost = json.loads(cost_file.read_text()) if cost_file.is_file() else {}
+
+    def merged(mine: dict) -> dict:
+        old = json.loads(cost_file.read_text()) if cost_file.is_file() else {}
+        return {**old, **mine}
+
+    cost = merged({})
     text = re.sub(r"(?m)^discovery\s*=.*\n", "", config.read_text())
     truth = json.loads((dataset / "truth.json").read_text())["parameters"]
-    for mode in ("on", "off"):
+    for mode in modes:
         loop = base / mode / "loop"
         if mode not in cost or not (loop / "loop.json").is_file():
             cfg = base / mode / "loop.toml"
@@ -214,6 +220,7 @@ def run_bundled(out: Path, config: Path, dataset: Path) -> dict:
                 raise SystemExit(code)
             cost[mode] = {"wall_s": time.perf_counter() - t0, "cpu_s": _cpu() - c0,
                           "load_start": load0, "load_end": os.getloadavg()[0]}
+            cost = merged({mode: cost[mode]})
             cost_file.write_text(json.dumps(cost, indent=1))
         doc = json.loads((loop / "loop.json").read_text())
         its = doc["iterations"]
@@ -230,9 +237,11 @@ def run_bundled(out: Path, config: Path, dataset: Path) -> dict:
             trim_change_pct=100 * (np.sqrt(np.mean([kept["trim_rms"][c] ** 2 for c in TRIM]))
                                    / np.sqrt(np.mean([its[0]["trim_rms"][c] ** 2 for c in TRIM])) - 1),
             errors_pct={n: 100 * (kept["parameters"][n] - truth[n]) / abs(truth[n]) for n in PARAMETERS})
+        cost = merged({mode: cost[mode]})
         cost_file.write_text(json.dumps(cost, indent=1))
         print(f"bundled, discovery {mode}: {cost[mode]}", flush=True)
-    if "on" in cost and "off" in cost:
+    cost = merged({})
+    if "wall_s" in cost.get("on", {}) and "wall_s" in cost.get("off", {}):
         for k in ("wall_s", "cpu_s"):
             cost[f"ratio_{k}"] = cost["on"][k] / cost["off"][k]
         cost_file.write_text(json.dumps(cost, indent=1))
@@ -252,11 +261,13 @@ def main(argv=None) -> int:
                     help="instead: the bundled flight test (data/bo105_synthetic) through the loop with discovery on "
                          "and off in this one run, both timed (cost ratio), the wake's naming and the parameter errors "
                          "-> OUT/bundled/cost.json")
+    ap.add_argument("--modes", nargs="+", choices=["on", "off"], default=["on", "off"],
+                    help="with --bundled: the loops to run (default both, in this order)")
     a = ap.parse_args(argv)
     out = out_folder(ap, a.out)
     config, gen = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
     if a.bundled:
-        run_bundled(out, config, ROOT / "data" / "bo105_synthetic")
+        run_bundled(out, config, ROOT / "data" / "bo105_synthetic", a.modes)
         return 0
     bad = [e for e in a.effects if e != "none" and e not in HELD_OUT_EFFECTS]
     if bad:

@@ -228,8 +228,8 @@ def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> 
         cost[mode].update(
             decisions=[(it.get("discovery") or {}).get("decision") or (it.get("attribution") or {}).get("decision")
                        for it in its],
-            added=[(it.get("discovery") or {}).get("added") or (it.get("attribution") or {}).get("accepted")
-                   for it in its],
+            added=[it["discovery"].get("added") if it.get("discovery")
+                   else (it.get("attribution") or {}).get("accepted") for it in its],
             kept=kept["extensions"],
             wake_named=bool(mode == "on" and (its[0].get("discovery") or {}).get("decision") == "named"
                             and its[0]["discovery"].get("added") == "rotor_wake_on_tail"),

@@ -29,11 +29,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _study_args import in_file, out_folder, positive_int
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
 
-from pyomo_heli.cli import main as cli_main
-from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS
+from pyomo_heli.cli import main as cli_main  # noqa: E402
+from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS  # noqa: E402
+from pyomo_heli.studies.args import in_file, out_folder, positive_int  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 PARAMETERS = ("theta_twist", "CL_alpha_HT", "Iyy")
@@ -177,6 +177,78 @@ def evaluate(effect: str, seed: int, loop: Path) -> dict:
     return row
 
 
+def _cpu() -> float:
+    """CPU seconds of this process and its finished children (the loop's cost on one core, whatever the load)."""
+    import resource
+
+    a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+
+
+def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> dict:
+    """The bundled flight test through the closed loop of ``config`` twice in this one process: discovery on and
+    off (the config's text with ``[loop] discovery`` set), each timed (wall and CPU seconds, load average).
+    ``OUT/bundled/{on,off}/loop`` and ``OUT/bundled/cost.json``, written after each loop; a loop already
+    finished (its time recorded) is not rerun; ``modes`` runs only some (two invocations may run "on" and "off"
+    at the same time: the file is merged on every write). Returns the cost record with the wake-naming check."""
+    import os
+
+    from pyomo_heli.diagnosis.candidates import CANDIDATES
+    from pyomo_heli.report.loop import final_index
+
+    base = out / "bundled"
+    base.mkdir(parents=True, exist_ok=True)
+    cost_file = base / "cost.json"
+
+    def merged(mine: dict) -> dict:
+        old = json.loads(cost_file.read_text()) if cost_file.is_file() else {}
+        return {**old, **mine}
+
+    cost = merged({})
+    text = re.sub(r"(?m)^discovery\s*=.*\n", "", config.read_text())
+    truth = json.loads((dataset / "truth.json").read_text())["parameters"]
+    for mode in modes:
+        loop = base / mode / "loop"
+        if mode not in cost or not (loop / "loop.json").is_file():
+            cfg = base / mode / "loop.toml"
+            cfg.parent.mkdir(parents=True, exist_ok=True)
+            flag = "true" if mode == "on" else "false"
+            cfg.write_text(text.replace("\n[loop]\n", f"\n[loop]\ndiscovery = {flag}\n", 1))
+            load0, t0, c0 = os.getloadavg()[0], time.perf_counter(), _cpu()
+            code = cli_main(["close-loop", str(cfg), "--dataset", str(dataset), "--out", str(loop)])
+            if code != 0:
+                raise SystemExit(code)
+            cost[mode] = {"wall_s": time.perf_counter() - t0, "cpu_s": _cpu() - c0,
+                          "load_start": load0, "load_end": os.getloadavg()[0]}
+            cost = merged({mode: cost[mode]})
+            cost_file.write_text(json.dumps(cost, indent=1))
+        doc = json.loads((loop / "loop.json").read_text())
+        its = doc["iterations"]
+        kept = its[final_index(doc)]
+        cost[mode].update(
+            decisions=[(it.get("discovery") or {}).get("decision") or (it.get("attribution") or {}).get("decision")
+                       for it in its],
+            added=[it["discovery"].get("added") if it.get("discovery")
+                   else (it.get("attribution") or {}).get("accepted") for it in its],
+            kept=kept["extensions"],
+            wake_named=bool(mode == "on" and (its[0].get("discovery") or {}).get("decision") == "named"
+                            and its[0]["discovery"].get("added") == "rotor_wake_on_tail"),
+            other_physical_kept=[n for n in kept["extensions"] if n in CANDIDATES and n != "rotor_wake_on_tail"],
+            trim_change_pct=100 * (np.sqrt(np.mean([kept["trim_rms"][c] ** 2 for c in TRIM]))
+                                   / np.sqrt(np.mean([its[0]["trim_rms"][c] ** 2 for c in TRIM])) - 1),
+            errors_pct={n: 100 * (kept["parameters"][n] - truth[n]) / abs(truth[n]) for n in PARAMETERS})
+        cost = merged({mode: cost[mode]})
+        cost_file.write_text(json.dumps(cost, indent=1))
+        print(f"bundled, discovery {mode}: {cost[mode]}", flush=True)
+    cost = merged({})
+    if "wall_s" in cost.get("on", {}) and "wall_s" in cost.get("off", {}):
+        for k in ("wall_s", "cpu_s"):
+            cost[f"ratio_{k}"] = cost["on"][k] / cost["off"][k]
+        cost_file.write_text(json.dumps(cost, indent=1))
+        print(f"cost ratio (discovery on / off): wall {cost['ratio_wall_s']:.2f}, cpu {cost['ratio_cpu_s']:.2f}")
+    return cost
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=positive_int, default=3, help="noise seeds per effect (20261122 + k)")
@@ -185,9 +257,18 @@ def main(argv=None) -> int:
     ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
     ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
     ap.add_argument("--out", required=True)
+    ap.add_argument("--bundled", action="store_true",
+                    help="instead: the bundled flight test (data/bo105_synthetic) through the loop with discovery on "
+                         "and off in this one run, both timed (cost ratio), the wake's naming and the parameter errors "
+                         "-> OUT/bundled/cost.json")
+    ap.add_argument("--modes", nargs="+", choices=["on", "off"], default=["on", "off"],
+                    help="with --bundled: the loops to run (default both, in this order)")
     a = ap.parse_args(argv)
     out = out_folder(ap, a.out)
     config, gen = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
+    if a.bundled:
+        run_bundled(out, config, ROOT / "data" / "bo105_synthetic", a.modes)
+        return 0
     bad = [e for e in a.effects if e != "none" and e not in HELD_OUT_EFFECTS]
     if bad:
         ap.error(f"--effects: unknown held-out effect(s) {bad}; choose from {', '.join(HELD_OUT_EFFECTS)} or none")

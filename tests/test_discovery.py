@@ -147,6 +147,34 @@ def test_robust_p_never_more_liberal_than_the_plain_likelihood_ratio():
     assert np.isnan(robust_p(float("nan"), {"LM": 1.0, "LM_white": 1.0, "df": 3.0})[0])
 
 
+def test_shape_by_channel_reads_speed_shape_state_and_sign_from_the_score_table():
+    """The per-channel shape of what is left: per dX/dZ/dM the generic term of largest LM among the speed shapes and
+    among the states, with the sign of its one-step estimate in words; a bump's mu in knots from Omega R."""
+    import pandas as pd
+
+    from pyomo_heli.diagnosis.discovery import channel_shapes, shapes_sentence
+    from pyomo_heli.physics.discrepancy import generic_names
+    from pyomo_heli.units import KT
+
+    names = generic_names() + ["cg_offset"]
+    lm = {n: 1.0 for n in names}
+    kappa = {n: 1.0 for n in names}
+    lm.update(dM_bump05=30.0, dM_w=5.0, dZ_mu4=8.0, dZ_alpha=12.0, dX_one=2.0, dX_q=3.0, cg_offset=99.0)
+    kappa.update(dM_bump05=-0.004, dZ_mu4=0.01, dZ_alpha=-0.02, dX_one=-0.1)
+    sc = pd.DataFrame({"name": names, "LM": [lm[n] for n in names], "kappa_hat": [kappa[n] for n in names],
+                       "p_value": [1e-3 if lm[n] > 1 else 0.5 for n in names]})
+    rows = {r["channel"]: r for r in channel_shapes(sc, omega_r=0.05 ** -1 * 20 * KT)}  # mu 0.05 at 20 kt
+    assert set(rows) == {"dX", "dZ", "dM"}
+    assert rows["dM"]["speed term"] == "dM_bump05" and rows["dM"]["speed shape"] == "nose-down dM, a bump at 20 kt"
+    assert rows["dM"]["state term"] == "dM_w"
+    assert rows["dZ"]["speed shape"] == "down dZ, growing as speed^4 (a high-speed rise)"
+    assert rows["dZ"]["state shape"] == "dZ falling with angle of attack (up per +alpha)"
+    assert rows["dX"]["speed shape"] == "aft dX, constant over speed" and rows["dX"]["state term"] == "dX_q"
+    text = shapes_sentence(list(rows.values()))
+    assert text.index("angle of attack") < text.index("speed^4")  # the stronger (LM 12 > 8) first
+    assert "cg_offset" not in text
+
+
 @pytest.mark.slow
 def test_bundled_flight_test_names_the_wake_through_encompassing(tmp_path):
     """Full size (slow, `pytest --runslow -k bundled_flight_test_names`): the bundled flight test with discovery

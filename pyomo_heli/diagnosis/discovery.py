@@ -50,7 +50,8 @@ import time
 import numpy as np
 from scipy import stats
 
-from ..physics.discrepancy import generic_names, is_generic
+from ..physics.discrepancy import BUMP_CENTRES, FORCE_CHANNELS, generic_names, is_generic
+from ..units import KT
 from . import attribution as attr
 from .candidates import CANDIDATES, make_candidate
 
@@ -231,6 +232,12 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
     level = alpha / max(len(names), 1)  # Bonferroni over the whole library: the family-wise level is alpha
     out = {"library_size": len(names), "level": level, "attribution": att.to_dict(), "encompassing": [],
            "added": None, "initial": None}
+    try:
+        omega_r = float(model.parameters["Omega"]) * float(model.parameters["R"])
+    except (KeyError, TypeError):
+        omega_r = None
+    # the shape of what is left per force/moment channel, over speed and over the state it follows (score test)
+    out["shape_by_channel"] = channel_shapes(sc, omega_r)
 
     def pairs_of(fits):
         """(P, G) for every significant physical candidate and the best generic term, when that one is significant."""
@@ -272,7 +279,9 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
                            + ("; unexplained residual (its best generic term is significant on its own, "
                               f"p = {G['p']:.2g} < {alpha:g}, not over the library)" if unexplained else "")
                            + (f"; best generic description of what is left: {describe_fit(G)}, p = {G['p']:.2g}"
-                              if G else ""))
+                              if G else "")
+                           + (f"; shape per channel (score test): {shapes_sentence(out['shape_by_channel'])}"
+                              if out["shape_by_channel"] else ""))
         return out
     rows = []
     for pf in p_sig:
@@ -330,6 +339,59 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
                    message="not explained by any library effect" + (f" (tested: {tested})" if rows else "")
                            + f"; discovered {describe_fit(G)}, p = {G['p']:.2g} < {level:.2g}")
     return out
+
+
+#: the speed shapes of the generic family, in words (the rest of the regressors are states or controls)
+SPEED_SHAPES = {"one": "constant over speed", "mu": "growing linearly with speed", "mu2": "growing as speed^2",
+                "mu4": "growing as speed^4 (a high-speed rise)",
+                **{k: f"a bump at mu = {c:.2f}" for k, c in BUMP_CENTRES.items()}}
+#: the state or control a state regressor follows
+STATE_WORDS = {"alpha": "angle of attack", "w": "heave velocity w", "q": "pitch rate q", "lam": "induced inflow",
+               "col": "collective", "lon": "longitudinal cyclic"}
+#: the sign of a positive force or moment, in words (body axes: x forward, z down, M nose up)
+SIGN_WORDS = {"X": ("forward", "aft"), "Z": ("down", "up"), "M": ("nose-up", "nose-down")}
+
+
+def channel_shapes(scores, omega_r: float | None = None) -> list[dict]:
+    """The shape of what is left, per force or moment channel (X, Z, M), from the score test over the generic family
+    (no extra solve): the channel's best speed shape (constant, mu, mu^2, mu^4 or a bump) and its best state or
+    control dependence (alpha, w, q, lambda_i, col, lon), each with the one-step estimate ``kappa_hat`` (its sign
+    the sign of the force or moment, or of its slope against the state), LM and p, and a sentence. ``omega_r``
+    [m/s] (rotor tip speed) turns a bump's mu into knots. Channels with no generic term scored are left out."""
+    rows = []
+    sc = scores.set_index("name")
+    for ch in FORCE_CHANNELS:
+        row = {"channel": f"d{ch}"}
+        for kind, words in (("speed", SPEED_SHAPES), ("state", STATE_WORDS)):
+            names = [f"d{ch}_{r}" for r in words if f"d{ch}_{r}" in sc.index]
+            if not names:
+                continue
+            best = max(names, key=lambda n: float(sc.loc[n, "LM"]))
+            r, k = best[3:], float(sc.loc[best, "kappa_hat"])
+            pos, neg = SIGN_WORDS[ch]
+            if kind == "speed":
+                shape = words[r]
+                if r in BUMP_CENTRES and omega_r:
+                    shape = f"a bump at {BUMP_CENTRES[r] * omega_r / KT:.0f} kt"
+                text = f"{pos if k > 0 else neg} d{ch}, {shape}"
+            else:
+                text = f"d{ch} {'rising' if k > 0 else 'falling'} with {words[r]} ({pos if k > 0 else neg} per +{r})"
+            row.update({f"{kind} term": best, f"{kind} kappa_hat": k, f"{kind} LM": float(sc.loc[best, "LM"]),
+                        f"{kind} p": float(sc.loc[best, "p_value"]), f"{kind} shape": text})
+        if len(row) > 1:
+            rows.append(row)
+    return rows
+
+
+def shapes_sentence(rows: list[dict]) -> str:
+    """One line per channel of :func:`channel_shapes`, the stronger of speed and state first."""
+    parts = []
+    for r in rows:
+        kinds = sorted((k for k in ("speed", "state") if f"{k} term" in r), key=lambda k: -r[f"{k} LM"])
+        parts.append(f"{r['channel']}: " + "; ".join(f"{r[f'{k} shape']} ({r[f'{k} term']}, kappa = "
+                                                     f"{r[f'{k} kappa_hat']:.2g}, p = {r[f'{k} p']:.2g})"
+                                                     for k in kinds))
+    return " | ".join(parts)
 
 
 def robust_p(lr: float, row, one_sided: bool = False) -> tuple[float, float, float]:

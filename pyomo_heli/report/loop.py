@@ -331,6 +331,11 @@ def discovery_section(it: dict) -> list[str]:
               markdown_table(pd.DataFrame([{k: v for k, v in r.items() if k != "shape"} for r in d["encompassing"]]),
                              digits=5), ""]
     L += [f"**Discovery: {d['decision']}** - {d['message']}", ""]
+    if d.get("shape_by_channel") and d["decision"] in ("none", "ambiguous"):
+        L += ["Shape of what is left per force/moment channel (score test over the generic family: the best speed "
+              "shape and the best state or control dependence, sign from the one-step estimate kappa_hat):", "",
+              markdown_table(pd.DataFrame([{k: v for k, v in r.items() if not k.endswith("term")}
+                                           for r in d["shape_by_channel"]]), digits=3), ""]
     return L
 
 

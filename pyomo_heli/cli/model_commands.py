@@ -8,15 +8,27 @@ from ..units import DEG, KT
 from .folders import _check_out_file
 from .options import MAX_INPUT_DEG, MAX_SIM_SAMPLES, UserError, _check_speed_kt, _parse_params
 
-def cmd_trim(args) -> int:
-    from ..nlp.trim_table import trim_table
+def _speeds_and_model(args):
+    """``--speeds-kt`` checked, ``--json`` writable, and the model with the ``--param`` overrides."""
     from ..physics.model import HelicopterModel
 
     for v in args.speeds_kt:
         _check_speed_kt(v, "--speeds-kt")
     if args.json:
         _check_out_file(args.json, "--json")
-    model = _parse_params(args.param, HelicopterModel())
+    return _parse_params(args.param, HelicopterModel())
+
+
+def _write_json(path, records) -> None:
+    with open(path, "w") as fh:
+        json.dump(records, fh, indent=2)
+        fh.write("\n")
+
+
+def cmd_trim(args) -> int:
+    from ..nlp.trim_table import trim_table
+
+    model = _speeds_and_model(args)
     table = trim_table(model, [v * KT for v in args.speeds_kt], solver=args.solver)
     records = []
     for v_kt, row in zip(args.speeds_kt, table.to_dict("records")):
@@ -30,9 +42,7 @@ def cmd_trim(args) -> int:
         print(f"{r['speed_kt']:8.1f} {r['col_deg']:8.3f} {r['lon_deg']:8.3f} {r['theta_deg']:9.3f} "
               f"{r['lambda_i']:9.5f} {r['beta_0_deg']:10.3f} {r['beta_1c_deg']:11.3f}")
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(records, fh, indent=2)
-            fh.write("\n")
+        _write_json(args.json, records)
     return 0
 
 
@@ -91,15 +101,10 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_linearize(args) -> int:
-    from ..physics.model import HelicopterModel
     from ..report.linear import linearization_dict, linearization_text
     from ..simulation.linearize import linearize_float
 
-    for v in args.speeds_kt:
-        _check_speed_kt(v, "--speeds-kt")
-    if args.json:
-        _check_out_file(args.json, "--json")
-    model = _parse_params(args.param, HelicopterModel())
+    model = _speeds_and_model(args)
     records = []
     for v in args.speeds_kt:
         lin = linearize_float(model, v * KT)
@@ -107,9 +112,7 @@ def cmd_linearize(args) -> int:
         print()
         records.append(linearization_dict(lin, v))
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(records, fh, indent=2)
-            fh.write("\n")
+        _write_json(args.json, records)
         print(f"wrote {args.json}")
     return 0
 

@@ -21,11 +21,15 @@ class _Parser(argparse.ArgumentParser):
 
 # ---------------------------------------------------------------- argparse types
 # argparse reports a failing ``type=`` as "argument --OPTION: MESSAGE", so these name the option themselves.
-def _number(text: str) -> float:
+def _read(text: str, convert, what: str):
     try:
-        return float(text)
+        return convert(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        raise argparse.ArgumentTypeError(f"{text!r} is not {what}") from None
+
+
+def _number(text: str) -> float:
+    return _read(text, float, "a number")
 
 
 def finite_float(text: str) -> float:
@@ -35,48 +39,42 @@ def finite_float(text: str) -> float:
     return v
 
 
+def _must(value, ok: bool, rule: str, text: str):
+    """``value`` when ``ok``, else the argparse error "must be RULE, got TEXT"."""
+    if not ok:
+        raise argparse.ArgumentTypeError(f"must be {rule}, got {text}")
+    return value
+
+
 def positive_float(text: str) -> float:
     v = finite_float(text)
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
-    return v
+    return _must(v, v > 0, "a finite number > 0", text)
 
 
 def nonneg_float(text: str) -> float:
     v = finite_float(text)
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
-    return v
+    return _must(v, v >= 0, "a finite number >= 0", text)
 
 
 def _integer(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    return _read(text, int, "an integer")
 
 
 def nonneg_int(text: str) -> int:
     v = _integer(text)
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text}")
-    return v
+    return _must(v, v >= 0, "an integer >= 0", text)
 
 
 def positive_int(text: str) -> int:
     v = _integer(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text}")
-    return v
+    return _must(v, v >= 1, "an integer >= 1", text)
 
 
 def _starts(text: str) -> int:
     from ..workflows.multistart import MAX_STARTS
 
     v = _integer(text)
-    if not 1 <= v <= MAX_STARTS:
-        raise argparse.ArgumentTypeError(f"must be an integer between 1 and {MAX_STARTS:,}, got {text}")
-    return v
+    return _must(v, 1 <= v <= MAX_STARTS, f"an integer between 1 and {MAX_STARTS:,}", text)
 
 
 def _epsilon(text: str) -> float:

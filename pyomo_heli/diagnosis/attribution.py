@@ -291,12 +291,20 @@ def score_column(A: np.ndarray, e: np.ndarray, b: np.ndarray, seg: np.ndarray, o
 
 
 def decide(names, evidence, significant, projected: dict, ratio: float = RATIO,
-           confound_corr: float = CONFOUND_CORR) -> dict:
+           confound_corr: float = CONFOUND_CORR, among: str = "all") -> dict:
     """The decision rule (module docstring) on candidates sorted by ``evidence`` (LM; 0 for a wrong-sign
     one-sided score), highest first: ``none`` if the top is not ``significant``; ``accepted`` if it is and its
     evidence is at least ``ratio`` times the runner-up's; else ``confounded`` when their ``projected``
-    sensitivities correlate (|rho| >= ``confound_corr``), ``ambiguous`` when not. Returns ``decision``,
+    sensitivities correlate (|rho| >= ``confound_corr``), ``ambiguous`` when not. ``among``: ``all`` (the
+    maneuver loop) ranks every candidate; ``significant`` (the trim loop) only the significant ones, so the top
+    is the strongest significant candidate and the runner-up the next significant one. Returns ``decision``,
     ``rho`` (top and runner-up, or None) and ``pairs``: every pair of significant candidates that correlate."""
+    if among not in ("all", "significant"):
+        raise ValueError(f"among = {among!r}: choose 'all' or 'significant'")
+    if among == "significant":
+        keep = [i for i, s in enumerate(significant) if s]
+        names, evidence, significant = ([seq[i] for i in keep] for seq in (names, evidence, significant))
+
     def corr(a, b):
         x, y = projected[a], projected[b]
         return float(x @ y / np.sqrt(max((x @ x) * (y @ y), 1e-300)))

@@ -22,8 +22,9 @@ from .candidates import CANDIDATES, make_candidate
 def score_trims(model: HelicopterModel, conventions, pts: pd.DataFrame, identified, candidates=None,
                 alpha: float = ALPHA, ratio: float = RATIO, confound_corr: float = CONFOUND_CORR,
                 variance: str = "hc3") -> dict:
-    """Score test of each candidate's strength at zero on the trim residuals of ``pts`` (decision rules of
-    :mod:`pyomo_heli.diagnosis.attribution`: level alpha / number of testable candidates, ratio, confounding).
+    """Score test of each candidate's strength at zero on the trim residuals of ``pts`` (decision rule of
+    :func:`pyomo_heli.diagnosis.attribution.decide` among the significant candidates: level alpha / number of
+    testable candidates, ratio, confounding).
 
     e = data - model [deg], S = d(trims)/d(identified), s_j = d(trims)/d(kappa_j) (one-sided forward
     difference at zero for a one-sided strength), all whitened by the common residual variance
@@ -98,15 +99,14 @@ def score_trims(model: HelicopterModel, conventions, pts: pd.DataFrame, identifi
         r["evidence"] = r["LM"] if r["testable"] and r["p_value"] < 1.0 else 0.0
     rows.sort(key=lambda r: -r["evidence"])
     rule = decide([r["name"] for r in rows], [r["evidence"] for r in rows], [r["significant"] for r in rows], proj,
-                  ratio, confound_corr)
+                  ratio, confound_corr, among="significant")
     decision, accepted = rule["decision"], None
-    top, second = (rows + [None, None])[:2]
+    sig = [r for r in rows if r["significant"]]
+    top, second = (sig + [None, None])[:2]
     if decision == "none":
+        best = rows[0] if rows else None
         message = (f"no candidate significant at p < {alpha:g}/{n_test}" +
-                   (f" (best: {top['name']}, LM {top['LM']:.3g}, p = {top['p_value']:.2g})" if top else ""))
-        if any(r["significant"] for r in rows):
-            message = (f"top candidate {top['name']} (LM {top['LM']:.3g}, p = {top['p_value']:.2g}) not significant "
-                       f"at p < {alpha:g}/{n_test}")
+                   (f" (best: {best['name']}, LM {best['LM']:.3g}, p = {best['p_value']:.2g})" if best else ""))
     elif decision == "accepted":
         accepted = top["name"]
         message = (f"{top['name']} LM {top['LM']:.3g} (p = {top['p_value']:.2g}), "

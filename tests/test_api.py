@@ -2,7 +2,6 @@
 import json
 import math
 import os
-import re
 from pathlib import Path
 
 import numpy as np
@@ -14,24 +13,19 @@ from pyomo_heli.dataset import DatasetError
 from pyomo_heli.resources import bundled_flight_test
 
 HERE = Path(__file__).parent
-DOC = HERE.parent / "docs" / "api.md"
-
-
-def _example() -> str:
-    blocks = re.findall(r"```python\n(.*?)```", DOC.read_text(), flags=re.S)
-    assert len(blocks) == 1, "docs/api.md has one example block"
-    return blocks[0]
+EXAMPLE = HERE / "data" / "api_example.py"  # the example of docs/api.md
 
 
 @pytest.fixture(scope="module")
 def example(tmp_path_factory):
-    """Run the docs/api.md example in an empty folder; return its namespace and folder."""
+    """Run the API example (tests/data/api_example.py, shown in docs/api.md) in an empty folder; return its
+    namespace and folder."""
     cwd = tmp_path_factory.mktemp("api_example")
     old = os.getcwd()
     os.chdir(cwd)
     try:
         ns = {}
-        exec(compile(_example(), str(DOC), "exec"), ns)
+        exec(compile(EXAMPLE.read_text(), str(EXAMPLE), "exec"), ns)
     finally:
         os.chdir(old)
     return ns, cwd

@@ -1,8 +1,7 @@
 """Tests of the flight-test dataset format (pyomo_heli.dataset): writer, loader, validator, check-data.
 
-The valid dataset is produced by the pandas-only example of docs/data_format.md, kept here as
-tests/data/example_dataset.py (a slow check compares it with the doc's block); every malformed case is a
-small mutation of it.
+The valid dataset is produced by the pandas-only example tests/data/example_dataset.py (the example
+docs/data_format.md points to); every malformed case is a small mutation of it.
 """
 from __future__ import annotations
 
@@ -12,7 +11,6 @@ import json
 import math
 import os
 import pathlib
-import re
 import shutil
 
 import numpy as np
@@ -31,7 +29,6 @@ from pyomo_heli.dataset import (
 from pyomo_heli.dataset.cli import check_data
 
 EXAMPLE = pathlib.Path(__file__).resolve().parent / "data" / "example_dataset.py"
-DOC = pathlib.Path(__file__).resolve().parents[1] / "docs" / "data_format.md"  # read by the slow doc check only
 KT = 1852.0 / 3600.0
 DEG = math.pi / 180.0
 LON = "maneuvers/lon3211_80kt.csv"
@@ -39,19 +36,6 @@ HOV = "maneuvers/col_doublet_hover.csv"
 VAL = "maneuvers/lon_doublet_80kt.csv"
 TRIMS = "trims.csv"
 NAMES = ["lon3211_80kt", "col_doublet_hover", "lon_doublet_80kt"]
-
-
-def doc_example_code() -> str:
-    text = DOC.read_text()
-    m = re.search(r"<!-- BEGIN EXAMPLE -->\s*```python\n(.*?)```\s*<!-- END EXAMPLE -->", text, re.S)
-    assert m, "example block not found in docs/data_format.md"
-    return m.group(1)
-
-
-@pytest.mark.slow
-def test_the_doc_example_is_the_tested_one():
-    """docs/data_format.md shows exactly the example the tests run (tests/data/example_dataset.py)."""
-    assert EXAMPLE.read_text().split("\n", 1)[1] == doc_example_code()
 
 
 @pytest.fixture(scope="session")

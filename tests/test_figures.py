@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 @pytest.mark.parametrize("case", ["case1", "case2"])
 def test_pareto_front_labels_do_not_cover_markers(case):
     """Every point label (A, B, U, C) is drawn clear of every marker of its panel (bounding boxes in pixels)."""
-    r = IdentificationResult.load(ROOT / "docs" / "results" / case)
+    r = IdentificationResult.load(ROOT / "tests" / "results" / case)  # copies of the committed runs
     fig = plots.plot_pareto_front(r.front, r.utopia, r.nadir, r.chosen, r.direct)
     canvas = FigureCanvasAgg(fig)
     canvas.draw()

@@ -210,7 +210,7 @@ def test_display_units_agree_with_the_parameter_table():
 def test_result_tables_are_printed_in_display_units():
     from pyomo_heli.pareto.result import IdentificationResult
 
-    r = IdentificationResult.load(ROOT / "docs" / "results" / "case1")
+    r = IdentificationResult.load(ROOT / "tests" / "results" / "case1")
     text = str(r)
     assert "theta_twist [deg/m]" in text and "CL_alpha_HT [1/rad]" in text
     twist = r.chosen["parameters"]["theta_twist"] / DEG

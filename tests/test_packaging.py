@@ -67,7 +67,8 @@ def test_package_data_resolves_and_is_the_repositorys():
     assert cfg.dataset == bundled_flight_test()
     # one copy in the repository: the package data are the files configs and tests use
     assert bundled_flight_test() == (ROOT / "data" / "bo105_synthetic").resolve()
-    assert demo_config() == (ROOT / "studies" / "case1.toml").resolve()
+    link = PKG / "data" / "case1.toml"  # in the source tree a link to the repository's Case 1 config
+    assert link.is_symlink() and demo_config() == link.resolve() and link.resolve().parent != link.parent
     ft = load_flight_test(bundled_flight_test())
     assert len(ft.identification()) == 10 and len(ft.maneuvers) == 26  # + 12 validation, 4 frequency sweeps
     # the demo's dataset path, relative to the config, also holds next to the packaged copy of the config

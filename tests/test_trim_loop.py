@@ -172,10 +172,10 @@ def test_generated_trim_only_flight_test_identified_exactly(tmp_path):
 
 
 def test_bundled_real_data_study_writes_report(tmp_path):
-    """The real-data study runs from the repository and writes report, figures and JSON; the NLP's J_trim
-    equals the float model's at the estimate (two routes)."""
+    """The real-data study (a copy of its config) runs from the repository and writes report, figures and JSON;
+    the NLP's J_trim equals the float model's at the estimate (two routes)."""
     out = tmp_path / "bo105"
-    run = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "trim-loop", "studies/bo105_flight_trims.toml",
+    run = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "trim-loop", "tests/configs/bo105_flight_trims.toml",
                           "--out", str(out)], capture_output=True, text=True, cwd=ROOT)
     assert run.returncode == 0, run.stderr
     for f in ("report.md", "trim_loop.json", "trim_curves.png", "trim_residuals.png"):
@@ -205,9 +205,9 @@ def test_maneuver_identification_refuses_trim_only_data(tmp_path):
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.nlp.identification import identification_data
 
-    src = (ROOT / "studies" / "case1.toml").read_text()
+    src = (ROOT / "tests" / "configs" / "case1.toml").read_text()
     cfg_path = tmp_path / "c.toml"
-    cfg_path.write_text(src.replace('dataset = "../data/bo105_synthetic"', f'dataset = "{BUNDLED}"'))
+    cfg_path.write_text(src.replace('dataset = "../../data/bo105_synthetic"', f'dataset = "{BUNDLED}"'))
     cfg = load_identification_config(cfg_path)
     with pytest.raises(ValueError, match="trim-only flight test .*pyomo-heli trim-loop"):
         identification_data(cfg)
@@ -253,7 +253,7 @@ def test_maneuver_identification_refuses_trim_rows_with_empty_channels(tmp_path)
     _cell(ds, 2, {"lon_deg": ""})
     assert load_flight_test(ds).trim_counts()["lon"] == len(load_flight_test(ds).trims) - 1
     cfg_path = tmp_path / "c.toml"
-    cfg_path.write_text((ROOT / "studies" / "case1.toml").read_text().replace('dataset = "../data/bo105_synthetic"',
-                                                                              f'dataset = "{ds}"'))
+    cfg_path.write_text((ROOT / "tests" / "configs" / "case1.toml").read_text().replace(
+        'dataset = "../../data/bo105_synthetic"', f'dataset = "{ds}"'))
     with pytest.raises(ValueError, match=r"trims.csv: rows \[2\] leave a trim channel empty"):
         identification_data(load_identification_config(cfg_path))

@@ -245,6 +245,82 @@ def _input_error_whitening(model: HelicopterModel, data, time_outputs, w, seg, i
     return whiten, seg
 
 
+def score_column(A: np.ndarray, e: np.ndarray, b: np.ndarray, seg: np.ndarray, one_sided: bool,
+                 variance: str = "batch") -> dict:
+    """The score test of one candidate's strength at zero, every array whitened (module docstring).
+
+    ``A``: the nuisance columns (identified parameters' sensitivities, input offsets), ``e``: the residual,
+    ``b``: the candidate's sensitivity, ``seg``: the segment of every row. b~ = b - A A^+ b, g = b~.e,
+    F = b~.b~, kappa_hat = g / F, LM = g^2 / var(g) with the score's variance by ``variance``:
+
+    - ``white``: F, LM referred to chi-square(1) (df infinite);
+    - ``batch``: batch means over the segments of u_i = b~_i (e_i - kappa_hat b~_i), referred to F(1, df),
+      df = F^2 / sum_s F_s^2 - 1 (Satterthwaite, F_s: segment s's share of F);
+    - ``hc3``: as batch, each u_i divided by (1 - h_ii), h_ii the row's leverage in the least-squares fit of
+      [A, b]; with one segment per row the HC3 sandwich, for few rows and a few fitted columns.
+
+    One-sided strength: a score of the wrong sign gives p = 1, otherwise p is halved. Returns ``projected``
+    (b~), ``F``, ``F_raw`` (b.b), ``g``, ``kappa_hat``, ``LM``, ``LM_white`` (g^2 / F), ``df`` and ``p_value``.
+    """
+    if variance not in ("white", "batch", "hc3"):
+        raise ValueError(f"variance = {variance!r}: choose 'white', 'batch' or 'hc3'")
+    coef = np.linalg.lstsq(A, b, rcond=None)[0] if A.shape[1] else np.zeros(0)
+    bt = b - A @ coef
+    F, F_raw = float(bt @ bt), float(b @ b)
+    g = float(bt @ e)
+    kappa = g / F if F > 0 else 0.0
+    df = np.inf
+    if variance != "white" and F > 0:
+        u = bt * (e - kappa * bt)  # score contributions, the candidate's fit removed from the residual
+        if variance == "hc3":
+            X = np.column_stack([A, b])
+            u = u / np.maximum(1.0 - np.einsum("ij,ji->i", X, np.linalg.pinv(X)), 1e-6)
+        var = float(np.sum(np.bincount(seg, weights=u) ** 2))
+        lm = g * g / var if var > 0 else 0.0
+        # the variance estimate is a weighted sum of one chi-square(1) per segment, weights = the segments'
+        # shares of F: its effective degrees of freedom (Satterthwaite), less one for kappa_hat
+        v = np.bincount(seg, weights=bt * bt)
+        df = max(F * F / float(np.sum(v * v)) - 1.0, 1.0)
+    else:
+        lm = g * g / F if F > 0 else 0.0
+    ref = stats.f(1, df) if np.isfinite(df) else stats.chi2(1)
+    p = 1.0 if one_sided and kappa < 0 else float(ref.sf(lm)) * (0.5 if one_sided else 1.0)
+    return {"projected": bt, "F": F, "F_raw": F_raw, "g": g, "kappa_hat": kappa, "LM": lm,
+            "LM_white": g * g / F if F > 0 else 0.0, "df": df, "p_value": p}
+
+
+def decide(names, evidence, significant, projected: dict, ratio: float = RATIO,
+           confound_corr: float = CONFOUND_CORR, among: str = "all") -> dict:
+    """The decision rule (module docstring) on candidates sorted by ``evidence`` (LM; 0 for a wrong-sign
+    one-sided score), highest first: ``none`` if the top is not ``significant``; ``accepted`` if it is and its
+    evidence is at least ``ratio`` times the runner-up's; else ``confounded`` when their ``projected``
+    sensitivities correlate (|rho| >= ``confound_corr``), ``ambiguous`` when not. ``among``: ``all`` (the
+    maneuver loop) ranks every candidate; ``significant`` (the trim loop) only the significant ones, so the top
+    is the strongest significant candidate and the runner-up the next significant one. Returns ``decision``,
+    ``rho`` (top and runner-up, or None) and ``pairs``: every pair of significant candidates that correlate."""
+    if among not in ("all", "significant"):
+        raise ValueError(f"among = {among!r}: choose 'all' or 'significant'")
+    if among == "significant":
+        keep = [i for i, s in enumerate(significant) if s]
+        names, evidence, significant = ([seq[i] for i in keep] for seq in (names, evidence, significant))
+
+    def corr(a, b):
+        x, y = projected[a], projected[b]
+        return float(x @ y / np.sqrt(max((x @ x) * (y @ y), 1e-300)))
+
+    sig = [n for n, s in zip(names, significant) if s]
+    pairs = [(a, b, corr(a, b)) for i, a in enumerate(sig) for b in sig[i + 1:] if abs(corr(a, b)) >= confound_corr]
+    rho = None
+    if not names or not significant[0]:
+        decision = "none"
+    elif len(names) < 2 or evidence[1] * ratio <= evidence[0]:
+        decision = "accepted"
+    else:
+        rho = corr(names[0], names[1])
+        decision = "confounded" if abs(rho) >= confound_corr else "ambiguous"
+    return {"decision": decision, "rho": rho, "pairs": pairs}
+
+
 def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outputs, candidates=None,
               alpha: float = ALPHA, ratio: float = RATIO, confound_corr: float = CONFOUND_CORR,
               substeps: int = 2, robust: bool = True, segment_s: float = SEGMENT_S, input_errors=(),
@@ -308,37 +384,22 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
     n_cands = len(cands)
     for c in cands:
         b = whiten(cols[c.strength])
-        coef, *_ = np.linalg.lstsq(A, b, rcond=None) if A.shape[1] else (np.zeros(0),)
-        bt = b - A @ coef
-        F, F_raw = float(bt @ bt), float(b @ b)
-        g = float(bt @ ew)
-        kappa = g / F if F > 0 else 0.0
-        df = np.inf
-        if robust and variance == "batch" and F > 0:
-            # batch means: sum the score contributions per segment; residual with the candidate's fit removed
-            u = bt * (ew - kappa * bt)
-            var = float(np.sum(np.bincount(seg, weights=u) ** 2))
-            lm = g * g / var if var > 0 else 0.0
-            # the variance estimate is a weighted sum of one chi-square(1) per segment, weights = the segments'
-            # shares of F: its effective degrees of freedom (Satterthwaite), less one for kappa_hat
-            v = np.bincount(seg, weights=bt * bt)
-            df = max(F * F / float(np.sum(v * v)) - 1.0, 1.0)
-        else:
-            lm = g * g / F if F > 0 else 0.0
+        sc = score_column(A, ew, b, seg, c.one_sided, variance if robust else "white")
+        bt, F, df = sc["projected"], sc["F"], sc["df"]
         ref = stats.f(1, df) if np.isfinite(df) else stats.chi2(1)
         half = 0.5 if c.one_sided else 1.0
-        p = 1.0 if c.one_sided and kappa < 0 else float(ref.sf(lm)) * half
         # the LM this candidate needs to be significant (its own df; one-sided: the two-sided quantile of 2 x level)
         lm_needed = float(ref.isf(alpha / n_cands / half))
-        corr_id = [abs(float(b @ A[:, k]) / np.sqrt(max(F_raw * float(A[:, k] @ A[:, k]), 1e-300)))
+        corr_id = [abs(float(b @ A[:, k]) / np.sqrt(max(sc["F_raw"] * float(A[:, k] @ A[:, k]), 1e-300)))
                    for k in range(n_id)]
         k_like = int(np.argmax(corr_id)) if corr_id else None
         proj[c.name] = bt
-        rows.append({"name": c.name, "strength": c.strength, "LM": lm, "df": df, "LM_needed": lm_needed, "p_value": p,
+        rows.append({"name": c.name, "strength": c.strength, "LM": sc["LM"], "df": df, "LM_needed": lm_needed,
+                     "p_value": sc["p_value"],
                      # the white-noise LM (variance F): LM / LM_white is the robust variance's correction factor
-                     "LM_white": g * g / F if F > 0 else 0.0,
-                     "kappa_hat": kappa,
-                     "kept": F / F_raw if F_raw > 0 else 0.0,
+                     "LM_white": sc["LM_white"],
+                     "kappa_hat": sc["kappa_hat"],
+                     "kept": F / sc["F_raw"] if sc["F_raw"] > 0 else 0.0,
                      "like": list(identified)[k_like] if k_like is not None else "",
                      "like_corr": corr_id[k_like] if k_like is not None else 0.0,
                      "trim_share": float(bt[trim_rows] @ bt[trim_rows]) / F if F > 0 else 0.0})
@@ -352,23 +413,19 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
     scores["evidence"] = np.where(scores["p_value"] < 1.0, scores["LM"], 0.0)
     scores = scores.sort_values("evidence", ascending=False).reset_index(drop=True)
 
-    def corr(a, b):
-        x, y = proj[a], proj[b]
-        return float(x @ y / np.sqrt(max((x @ x) * (y @ y), 1e-300)))
-
-    sig_names = list(scores.loc[scores.significant, "name"])
-    pairs = [(a, b, corr(a, b)) for i, a in enumerate(sig_names) for b in sig_names[i + 1:]
-             if abs(corr(a, b)) >= confound_corr]
+    rule = decide(list(scores["name"]), list(scores["evidence"]), list(scores["significant"]), proj, ratio,
+                  confound_corr)
+    pairs = rule["pairs"]
     top = scores.iloc[0]
     second = scores.iloc[1] if len(scores) > 1 else None
     accepted, signature = None, {}
-    if not top.significant:
+    if rule["decision"] == "none":
         decision = "none"
         signature = _signature(e, w, groups)
         message = (f"top candidate not significant ({top['name']}: LM {top.evidence:.3g}, p = {top.p_value:.2g} >= "
                    f"{level:.2g}, needs LM > {top.LM_needed:.3g} with df {top.df:.3g}); "
                    "any remaining residual is unexplained by the library, signature attached")
-    elif second is None or second.evidence * ratio <= top.evidence:
+    elif rule["decision"] == "accepted":
         decision, accepted = "accepted", str(top["name"])
         runner = f"; runner-up {second['name']} LM {second.evidence:.3g}" if second is not None else ""
         message = (f"{top['name']} LM {top.evidence:.3g} (df {top.df:.3g}, p = {top.p_value:.2g}){runner}; "
@@ -377,8 +434,7 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
             message += (f"; note: {100 * (1 - top.kept):.0f} % of its signal is absorbed by the identified "
                         f"parameters (most like {top.like}, |rho| = {top.like_corr:.2f})")
     else:
-        rho = corr(top["name"], second["name"])
-        decision = "confounded" if abs(rho) >= confound_corr else "ambiguous"
+        decision, rho = rule["decision"], rule["rho"]
         message = (f"{top['name']} (LM {top.evidence:.3g}) and {second['name']} (LM {second.evidence:.3g}) are within "
                    f"a factor {ratio:g}; projected sensitivities correlate rho = {rho:.2f}: "
                    + ("the data cannot separate them, none is picked" if decision == "confounded"

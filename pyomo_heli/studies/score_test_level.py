@@ -24,6 +24,9 @@ loop's reference F(1, df) and with the same LM referred to chi-square(1), the re
 correction (rows "chi2(1)"; the ratio rule is not re-evaluated there). The candidates'
 scores within one seed are correlated, so the pairs are not independent draws.
 
+``--trims``: the same question for the trim-only score test of ``pyomo-heli trim-loop``
+(:mod:`pyomo_heli.studies.trim_score_level`, its own options).
+
 ``--truth wake`` measures the power instead: the same records from M0 + the wake-on-tail truth effect of
 the small wake test (K_lamT 1.5), twist, CL_alpha_HT and Iyy identified on 3 front points as in that
 test; the column ``decisions`` counts what the loop's first round would do (the candidate accepted, or
@@ -145,7 +148,16 @@ def summary(docs: list[dict]) -> pd.DataFrame:
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if "--trims" in argv:  # the trim-only score test: its own study and options
+        from .trim_score_level import main as trim_main
+
+        argv.remove("--trims")
+        return trim_main(argv)
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--trims", action="store_true",
+                    help="the trim-only score test on synthetic trim sets instead "
+                         "(pyomo_heli.studies.trim_score_level; --trims --help lists its options)")
     ap.add_argument("--seeds", required=True, help="e.g. 101-140 or 101,105,110-115")
     ap.add_argument("--identification", choices=("eiv", "oe"), default="eiv")
     ap.add_argument("--out", type=Path, required=True)

@@ -1,6 +1,6 @@
 """How often does the trim-only score test fire when nothing is missing, and does it find a real effect?
 
-    python studies/trim_score_level.py --seeds 0-11 [--truth m0|wake] [--noise-deg 0.2]
+    python studies/score_test_level.py --trims --seeds 0-11 [--truth m0|wake] [--noise-deg 0.2]
 
 Every seed writes a trim-only flight test like the real Bo-105 one (docs/real_data.md): collective every
 10 kt from hover, cyclic from 3 kt, attitude from 6 kt (each channel at its own speeds), root collective,
@@ -9,8 +9,8 @@ is M0 at f_e = 1.4 m^2, x_h = 0.02 m (``--truth m0``: nothing missing, every can
 or that plus the truth simulator's wake-on-tail effect E1, K_lamT = 1.5 (``--truth wake``, written
 independently of the candidates). It identifies f_e, x_h, a and the datum from the nominal table (nothing
 held out) and prints, per seed, the score test's decision and every testable candidate's p-value
-(:func:`pyomo_heli.workflows.trim_loop.score_trims`, level 0.01 over the testable candidates), then the fraction of
-p-values below 0.05 and 0.01 and the count of seeds with an acceptance.
+(:func:`pyomo_heli.diagnosis.trim_attribution.score_trims`, level 0.01 over the testable candidates), then the
+fraction of p-values below 0.05 and 0.01 and the count of seeds with an acceptance.
 """
 from __future__ import annotations
 
@@ -71,7 +71,7 @@ def one_seed(seed: int, truth: str, noise_deg: float, folder: Path) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="score_test_level.py --trims", description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=seed_range, default=seed_range("0-11"), help="FIRST-LAST (default 0-11)")
     ap.add_argument("--truth", choices=("m0", "wake"), default="m0")
     ap.add_argument("--noise-deg", type=positive_float, default=0.2, help="noise sigma of every point [deg]")

@@ -7,9 +7,9 @@ identifies that point directly and closes the loop on the trim residuals alone:
 
 1. the trim points in long form, one per measured (row, channel); every ``holdout_every``-th point
    of each channel in speed order (the 3rd, 6th, ... with the default 3) is held out for validation;
-2. the identification NLP: one Pyomo trim block per distinct identification speed
-   (:func:`pyomo_heli.nlp.trim_block.build_trim_block`), the free parameters shared, the model's trims
-   taken to the recorded conventions (:func:`pyomo_heli.physics.conventions.recorded_trim`), and
+2. the identification NLP (:mod:`pyomo_heli.nlp.trim_identification`): one Pyomo trim block per distinct
+   identification speed (:func:`pyomo_heli.nlp.trim_block.build_trim_block`), the free parameters shared,
+   the model's trims taken to the recorded conventions (:func:`pyomo_heli.physics.conventions.recorded_trim`), and
 
        J_trim = (1/N) sum_rows sum_(measured channels c) ((y_c - y_c,model) / 1 deg)^2
 
@@ -18,7 +18,8 @@ identifies that point directly and closes the loop on the trim residuals alone:
    by central differences at the estimate, cov = s^2 (J^T J)^-1 with s^2 = SSR / (n - p);
 4. the score test of every library candidate (:mod:`pyomo_heli.diagnosis.candidates`) on the trim
    residuals, with the decision rules of :mod:`pyomo_heli.diagnosis.attribution` (Bonferroni level
-   alpha / n, ratio and confounding rules) and a leverage-corrected sandwich variance (:func:`score_trims`);
+   alpha / n, ratio and confounding rules) and a leverage-corrected sandwich variance
+   (:func:`pyomo_heli.diagnosis.trim_attribution.score_trims`);
    a candidate with no trim signature is reported as not testable on trims;
 5. an accepted candidate is added with its strength free (initial value its one-step estimate) and the
    fit repeated, up to ``max_iterations`` times; otherwise the loop stops and the remaining residual's
@@ -31,7 +32,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,24 +42,19 @@ from ..dataset import load_flight_test
 from ..dataset.schema import KT, TRIM_CHANNELS, TrimConventions
 from ..nlp.parameters import FreeParameter
 from ..settings import ConfigError
-from ..physics.conventions import THETA_DATUM, TrimOutputDatum, recorded_trim
+from ..physics.conventions import THETA_DATUM, TrimOutputDatum
 from ..physics.model import HelicopterModel
 from ..physics.parameters import DEG
-from ..simulation.trim import trim_sweep
+from ..diagnosis.trim_attribution import residual_shape, rms_by, score_trims
+from ..nlp.trim_identification import TrimIdentificationFailed, identify_trims, standard_errors  # noqa: F401 (cli)
+from ..simulation.recorded_trims import predict
 
 RESULT_FILE = "trim_loop.json"
-REPORT_FILE = "report.md"
-#: relative central-difference step of the float Jacobian (of max(|value|, scale))
-JAC_STEP = 1e-5
 
 
 class TrimLoopError(ConfigError):
     """Bad trim-loop config or data (one line per error naming the file and field); a ConfigError, the one
     error type of a bad settings file."""
-
-
-class TrimIdentificationFailed(RuntimeError):
-    """The J_trim minimisation did not converge (a failed solve, not bad input)."""
 
 
 # ---------------------------------------------------------------- config
@@ -179,263 +174,6 @@ def trim_points(ft, holdout_every: int = 3) -> pd.DataFrame:
     if not out:
         return pd.DataFrame(columns=["row", "channel", "V", "value", "role"])
     return pd.concat(out, ignore_index=True)
-
-
-# ---------------------------------------------------------------- the model as recorded
-def predict(model: HelicopterModel, conventions, V, channels) -> np.ndarray:
-    """Recorded trim value [rad] of ``channels[i]`` at speed ``V[i]`` [m/s] (float trims, continuation)."""
-    V = np.asarray(V, dtype=float)
-    speeds = sorted(set(V.tolist()))
-    tps = dict(zip(speeds, trim_sweep(model, speeds)))
-    p = model.parameters
-    rec = {v: recorded_trim(tp.col, tp.lon, tp.theta, p, conventions) for v, tp in tps.items()}
-    return np.array([rec[v][c] for v, c in zip(V, channels)], dtype=float)
-
-
-def jacobian(model: HelicopterModel, conventions, pts: pd.DataFrame, names) -> np.ndarray:
-    """d(recorded trims)/d(parameter) [rad per SI unit], central differences of the float trims."""
-    cols = []
-    for n in names:
-        spec = model.parameters.spec(n)
-        v = model.parameters[n]
-        h = JAC_STEP * max(abs(v), spec.scale or 1.0)
-        lo, hi = spec.bounds or (-np.inf, np.inf)
-        a, b = (v - h, v + h)
-        if a < lo:
-            a = v
-        if b > hi:
-            b = v
-        ya = predict(model.with_parameters(**{n: a}), conventions, pts["V"], pts["channel"])
-        yb = predict(model.with_parameters(**{n: b}), conventions, pts["V"], pts["channel"])
-        cols.append((yb - ya) / (b - a))
-    return np.array(cols).T if cols else np.zeros((len(pts), 0))
-
-
-# ---------------------------------------------------------------- identification (Pyomo NLP)
-def build_trim_nlp(model: HelicopterModel, free, pts: pd.DataFrame, conventions):
-    """The trim-only identification NLP: trim blocks per distinct speed, J_trim over ``pts`` as objective."""
-    import pyomo.environ as pyo
-
-    from ..nlp.objectives import add_trim_objective
-    from ..nlp.parameters import add_parameters
-    from ..nlp.trim_block import build_trim_block
-
-    m = pyo.ConcreteModel(name="trim_identification")
-    pmap = add_parameters(m, model.parameters, free)
-    speeds = sorted(set(pts["V"].tolist()))
-    init = model.with_parameters(**{f.name: f.initial for f in free}) if free else model
-    guesses = trim_sweep(init, speeds)
-    m.trim = pyo.Block(range(len(speeds)))
-    rec = []
-    for i, (V, tp) in enumerate(zip(speeds, guesses)):
-        build_trim_block(m.trim[i], model, pmap, V, guess={**tp.to_dict(), **tp.extra_states})
-        blk = m.trim[i]
-        rec.append(recorded_trim(blk.col, blk.lon, blk.theta, pmap, conventions))
-    index = {v: i for i, v in enumerate(speeds)}
-    residuals = [[float(r.value) - rec[index[r.V]][r.channel] for r in grp.itertuples()]
-                 for _, grp in pts.groupby("row", sort=True)]
-    add_trim_objective(m, residuals)
-    m.J_time = pyo.Expression(expr=0.0)  # no maneuvers: the front's other objective does not exist
-    m.objective = pyo.Objective(expr=m.J_trim)
-    m.speeds = speeds
-    return m
-
-
-def identify_trims(model: HelicopterModel, free, pts: pd.DataFrame, conventions, solver: str = "casadi-ipopt",
-                   options: dict | None = None) -> tuple[dict, dict]:
-    """Minimise J_trim over the free parameters; returns (values SI, solve info). RuntimeError on failure."""
-    import pyomo.environ as pyo
-
-    from ..nlp.parameters import free_parameter_values
-    from ..solvers import make_solver
-
-    m = build_trim_nlp(model, free, pts, conventions)
-    res = make_solver(m, solver, options).solve(warm_start="none")
-    info = {"status": res.status, "iterations": res.iterations, "J_trim": float(pyo.value(m.J_trim)),
-            "wall_time_s": res.wall_time, "solver": res.solver}
-    if not res.success:
-        raise TrimIdentificationFailed(f"trim identification failed: Ipopt status {res.status} ({res.message})")
-    return free_parameter_values(m), info
-
-
-def standard_errors(model: HelicopterModel, conventions, pts: pd.DataFrame, names) -> dict:
-    """Least-squares standard errors of ``names`` at ``model`` (its values are the estimate).
-
-    e = data - model [deg]; J [deg per SI unit]; s^2 = e.e / (n - p); cov = s^2 (J^T J)^-1.
-    """
-    y = predict(model, conventions, pts["V"], pts["channel"])
-    e = (pts["value"].to_numpy(dtype=float) - y) / DEG
-    J = jacobian(model, conventions, pts, names) / DEG
-    n, p = J.shape
-    dof = max(n - p, 1)
-    s2 = float(e @ e) / dof
-    if p == 0:
-        return {"se": {}, "se_robust": {}, "corr": [], "s_deg": math.sqrt(s2), "dof": dof, "cond": 0.0}
-    JtJ = J.T @ J
-    inv = np.linalg.pinv(JtJ)
-    cov = s2 * inv
-    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    # sandwich (heteroscedasticity-robust, HC1) covariance: does not assume one variance for every point
-    meat = (J * (e**2)[:, None]).T @ J * n / dof
-    se_rob = np.sqrt(np.maximum(np.diag(inv @ meat @ inv), 0.0))
-    d = np.where(se > 0, se, 1.0)
-    corr = cov / np.outer(d, d)
-    return {"se": dict(zip(names, se.tolist())), "se_robust": dict(zip(names, se_rob.tolist())),
-            "corr": corr.tolist(), "s_deg": math.sqrt(s2), "dof": dof,
-            "cond": float(np.linalg.cond(JtJ / np.outer(np.sqrt(np.diag(JtJ)), np.sqrt(np.diag(JtJ)))))}
-
-
-# ---------------------------------------------------------------- score test on trims
-def score_trims(model: HelicopterModel, conventions, pts: pd.DataFrame, identified, candidates=None,
-                alpha: float = 0.01, ratio: float = 2.0, confound_corr: float = 0.7, variance: str = "hc3") -> dict:
-    """Score test of each candidate's strength at zero on the trim residuals of ``pts`` (decision rules of
-    :mod:`pyomo_heli.diagnosis.attribution`: level alpha / number of testable candidates, ratio, confounding).
-
-    e = data - model [deg], S = d(trims)/d(identified), s_j = d(trims)/d(kappa_j) (one-sided forward
-    difference at zero for a one-sided strength), s~_j = s_j - S S^+ s_j, with the common residual
-    variance s^2: g = s~.e / s^2, F = s~.s~ / s^2, kappa_hat = g / F. The score's variance (``variance``):
-
-    - ``hc3`` (default): sandwich over the points, each point's residual r_i = e_i - kappa_hat s~_i divided by
-      (1 - h_ii), h_ii its leverage in the fit of [S, s_j]: LM = (s~.e)^2 / sum_i (s~_i r_i / (1 - h_ii))^2;
-    - ``hc0``: the same without the leverage (attribution.py's batch means with one segment per point);
-    - ``white``: the classical F test of the added column, (SSR_0 - SSR_1) / (SSR_1 / (n - p - 1)).
-
-    hc3 and hc0 are referred to F(1, df), df = F^2 / sum_i (s~_i^2 / s^2)^2 - 1 (Satterthwaite), white to
-    F(1, n - p - 1). With tens of trim points and a few identified parameters the leverage matters: on 20
-    noise-only synthetic trim sets (studies/trim_score_level.py) 3.8 % of the hc3 p-values fell below 0.05,
-    11.2 % of the hc0 ones. Every row keeps all three p-values (``p_by_variance``).
-    """
-    from scipy import stats
-
-    from ..diagnosis.candidates import CANDIDATES, make_candidate
-
-    have = {e.name for e in model.extensions}
-    names = [n for n in (candidates or list(CANDIDATES)) if n not in have]
-    y = predict(model, conventions, pts["V"], pts["channel"])
-    e = (pts["value"].to_numpy(dtype=float) - y) / DEG
-    S = jacobian(model, conventions, pts, identified) / DEG
-    s2 = max(float(e @ e) / max(len(e) - S.shape[1], 1), 1e-24)  # floor: noise-free data fit exactly
-    rows, proj, testable = [], {}, []
-    for n in names:
-        cand = make_candidate(n)
-        full = HelicopterModel(parameters=model.parameters, extensions=tuple(model.extensions) + (cand,))
-        spec = full.parameters.spec(cand.strength)
-        h = 1e-3 * (spec.scale or 1.0)
-        base = predict(full, conventions, pts["V"], pts["channel"])
-        up = predict(full.with_parameters(**{cand.strength: h}), conventions, pts["V"], pts["channel"])
-        if cand.one_sided:
-            s = (up - base) / h / DEG
-        else:
-            dn = predict(full.with_parameters(**{cand.strength: -h}), conventions, pts["V"], pts["channel"])
-            s = (up - dn) / (2 * h) / DEG
-        # the raw sensitivity per point [deg per unit strength], points as in the returned "points"
-        row = {"name": n, "strength": cand.strength, "signature": cand.signature, "sensitivity_deg": s.tolist()}
-        raw = float(s @ s)
-        coef = np.linalg.lstsq(S, s, rcond=None)[0] if S.shape[1] else np.zeros(0)
-        st = s - S @ coef if S.shape[1] else s
-        F = float(st @ st) / s2
-        if raw / s2 < 1e-12 or F < 1e-9 * raw / s2:
-            row.update(testable=False, LM=0.0, df=float("nan"), p_value=1.0, kappa_hat=0.0,
-                       kept=0.0 if raw > 0 else float("nan"),
-                       note="no trim signature" if raw / s2 < 1e-12 else "absorbed by the identified parameters")
-            rows.append(row)
-            continue
-        g = float(st @ e) / s2
-        kappa = g / F
-        r = e - kappa * st  # residual with the candidate fitted too
-        half = 0.5 if cand.one_sided else 1.0
-        n_pts, k = len(e), S.shape[1] + 1
-        # classical F test of the added column (exact for a linear model with one Gaussian noise level)
-        ssr1 = float(r @ r)
-        lm_white = (ssr1 and (float(e @ e) - ssr1) / (ssr1 / max(n_pts - k, 1))) or 0.0
-        p_white = float(stats.f(1, max(n_pts - k, 1)).sf(lm_white))
-        # sandwich variance of the score, one segment per point, raw (HC0, the batch means of attribution.py)
-        # and with each point's residual inflated by its leverage in the augmented fit (HC3)
-        X = np.column_stack([S, s]) if S.shape[1] else s[:, None]
-        lev = np.einsum("ij,ji->i", X, np.linalg.pinv(X))
-        u0 = st * r
-        u3 = u0 / np.maximum(1.0 - lev, 1e-6)
-        lm_hc0 = float(st @ e) ** 2 / float(u0 @ u0) if float(u0 @ u0) > 0 else 0.0
-        lm_hc3 = float(st @ e) ** 2 / float(u3 @ u3) if float(u3 @ u3) > 0 else 0.0
-        v = st * st / s2
-        df = max(F * F / float(v @ v) - 1.0, 1.0)
-        ps = {"white": p_white, "hc0": float(stats.f(1, df).sf(lm_hc0)), "hc3": float(stats.f(1, df).sf(lm_hc3))}
-        lms = {"white": lm_white, "hc0": lm_hc0, "hc3": lm_hc3}
-        if variance == "white":
-            df = float(max(n_pts - k, 1))
-        lm = lms[variance]
-        ps = {key: (1.0 if cand.one_sided and kappa < 0 else val * half) for key, val in ps.items()}
-        p = ps[variance]
-        row.update(p_by_variance=ps)
-        proj[n] = st
-        testable.append(n)
-        row.update(testable=True, LM=lm, df=df, p_value=p, kappa_hat=kappa, kept=F / (raw / s2), note="")
-        rows.append(row)
-    n_test = max(len(testable), 1)
-    level = alpha / n_test
-    for r in rows:
-        r["significant"] = bool(r["testable"] and r["p_value"] < level)
-        r["evidence"] = r["LM"] if r["testable"] and r["p_value"] < 1.0 else 0.0
-    rows.sort(key=lambda r: -r["evidence"])
-    sig = [r for r in rows if r["significant"]]
-    decision, accepted, message = "none", None, ""
-    if not sig:
-        top = rows[0] if rows else None
-        message = (f"no candidate significant at p < {alpha:g}/{n_test}" +
-                   (f" (best: {top['name']}, LM {top['LM']:.3g}, p = {top['p_value']:.2g})" if top else ""))
-    else:
-        top, second = sig[0], (sig[1] if len(sig) > 1 else None)
-        if second is None or second["evidence"] * ratio <= top["evidence"]:
-            decision, accepted = "accepted", top["name"]
-            message = (f"{top['name']} LM {top['LM']:.3g} (p = {top['p_value']:.2g}), "
-                       f"{top['strength']} ~ {top['kappa_hat']:.4g}")
-        else:
-            a, b = proj[top["name"]], proj[second["name"]]
-            rho = float(a @ b / math.sqrt(max((a @ a) * (b @ b), 1e-300)))
-            decision = "confounded" if abs(rho) >= confound_corr else "ambiguous"
-            message = (f"{top['name']} (LM {top['LM']:.3g}) and {second['name']} (LM {second['LM']:.3g}) within a "
-                       f"factor {ratio:g}, projected sensitivities rho = {rho:.2f}: none is picked")
-    for r in rows:
-        r.pop("evidence")
-    return {"decision": decision, "accepted": accepted, "message": message, "level": level, "alpha": alpha,
-            "n_testable": len(testable), "scores": rows,
-            "points": {"speed_kt": (pts["V"] / KT).tolist(), "channel": pts["channel"].tolist()}}
-
-
-# ---------------------------------------------------------------- residual shape
-def residual_shape(pts: pd.DataFrame, e_deg: np.ndarray) -> dict:
-    """Per channel: the residual (data - model) against speed, its largest step between neighbouring speeds,
-    the means below and above that step, and its least-squares linear trend [deg per 10 kt]."""
-    out = {}
-    for c in TRIM_CHANNELS:
-        sel = (pts["channel"] == c).to_numpy()
-        if not sel.any():
-            continue
-        order = np.argsort(pts["V"].to_numpy()[sel], kind="stable")
-        kt = pts["V"].to_numpy()[sel][order] / KT
-        r = e_deg[sel][order]
-        d = {"speed_kt": kt.tolist(), "residual_deg": r.tolist(), "rms_deg": float(np.sqrt(np.mean(r**2))),
-             "mean_deg": float(r.mean())}
-        if r.size >= 2:
-            j = int(np.argmax(np.abs(np.diff(r))))
-            d.update(step_deg=float(r[j + 1] - r[j]), step_between_kt=[float(kt[j]), float(kt[j + 1])],
-                     mean_below_step_deg=float(r[: j + 1].mean()), mean_above_step_deg=float(r[j + 1:].mean()))
-            slope = np.polyfit(kt, r, 1)[0] if np.ptp(kt) > 0 else 0.0
-            d["trend_deg_per_10kt"] = float(10 * slope)
-        out[c] = d
-    return out
-
-
-def rms_by(pts: pd.DataFrame, e_deg: np.ndarray) -> dict:
-    """RMS [deg] of the residuals per role and channel."""
-    out = {}
-    for role in ("identification", "validation"):
-        out[role] = {}
-        for c in TRIM_CHANNELS:
-            sel = ((pts["role"] == role) & (pts["channel"] == c)).to_numpy()
-            if sel.any():
-                out[role][c] = float(np.sqrt(np.mean(e_deg[sel] ** 2)))
-    return out
 
 
 # ---------------------------------------------------------------- the loop
@@ -561,13 +299,6 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
     return doc
 
 
-def _held_text(every: int) -> str:
-    if not every:
-        return "nothing held out"
-    nth = {2: "second", 3: "third", 4: "fourth", 5: "fifth"}.get(every, f"{every}th")
-    return f"every {nth} point of each channel in speed order held out"
-
-
 def _shown(model, name, value):
     spec = model.parameters.spec(name)
     if spec.display is None:
@@ -603,152 +334,13 @@ def dense_curves(cfg: TrimLoopConfig, doc: dict, which: int | None) -> dict:
     return {"speed_kt": kt.tolist(), **{c: y[ch == c].tolist() for c in TRIM_CHANNELS}}
 
 
-LABELS = {"col": "collective (as recorded) [deg]", "lon": "longitudinal cyclic [deg]",
-          "theta": "pitch attitude [deg]"}
-
-
-def plot_trim_curves(doc: dict, curves_before: dict, curves_after: dict, path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    pts = doc["points"]
-    fig, axes = plt.subplots(3, 1, figsize=(7, 9), sharex=True)
-    for ax, c in zip(axes, TRIM_CHANNELS):
-        for role, mk, lab in (("identification", "o", "data, identification"), ("validation", "s", "data, held out")):
-            sel = [i for i, (cc, r) in enumerate(zip(pts["channel"], pts["role"])) if cc == c and r == role]
-            ax.plot([pts["speed_kt"][i] for i in sel], [pts["value_deg"][i] for i in sel], mk,
-                    mfc="none" if role == "validation" else None, color="k", label=lab)
-        ax.plot(curves_before["speed_kt"], curves_before[c], "--", color="tab:blue", label="model before (initial)")
-        ax.plot(curves_after["speed_kt"], curves_after[c], "-", color="tab:red", label="model after (identified)")
-        ax.set_ylabel(LABELS[c])
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    axes[-1].set_xlabel("airspeed [kt]")
-    fig.suptitle(f"{doc['aircraft']}: level-flight trims, data vs model")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
-
-
-def plot_residuals(doc: dict, path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    pts = doc["points"]
-    fig, axes = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
-    first, last = doc["initial"]["model_deg"], doc["iterations"][-1]["model_deg"]
-    for ax, c in zip(axes, TRIM_CHANNELS):
-        sel = sorted((i for i, cc in enumerate(pts["channel"]) if cc == c), key=lambda i: pts["speed_kt"][i])
-        v = [pts["speed_kt"][i] for i in sel]
-        ax.plot(v, [pts["value_deg"][i] - first[i] for i in sel], "--o", color="tab:blue", mfc="none",
-                label="before")
-        ax.plot(v, [pts["value_deg"][i] - last[i] for i in sel], "-o", color="tab:red", label="after")
-        held = [pts["speed_kt"][i] for i in sel if pts["role"][i] == "validation"]
-        for h in held:
-            ax.axvline(h, color="0.8", lw=0.8)
-        ax.axhline(0.0, color="k", lw=0.8)
-        ax.set_ylabel(f"data - model, {c} [deg]")
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, title="grey lines: held-out speeds", title_fontsize=7)
-    axes[-1].set_xlabel("airspeed [kt]")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
-
-
 def write_trim_report(cfg: TrimLoopConfig, doc: dict, out) -> Path:
-    """``report.md`` and the two figures; the dense model curves are added to ``trim_loop.json``."""
+    """``report.md`` and the two figures (:mod:`pyomo_heli.report.trim_loop`); the dense model curves are added
+    to ``trim_loop.json``."""
+    from ..report.trim_loop import write_trim_loop_report
+
     out = Path(out)
-    before = dense_curves(cfg, doc, None)
-    after = dense_curves(cfg, doc, len(doc["iterations"]) - 1)
-    doc["curves"] = {"before": before, "after": after}
+    doc["curves"] = {"before": dense_curves(cfg, doc, None),
+                     "after": dense_curves(cfg, doc, len(doc["iterations"]) - 1)}
     (out / RESULT_FILE).write_text(json.dumps(doc, indent=1, default=_plain) + "\n")
-    plot_trim_curves(doc, before, after, out / "trim_curves.png")
-    plot_residuals(doc, out / "trim_residuals.png")
-    last = doc["iterations"][-1]
-    c = doc["conventions"]
-    L = [f"# Trim-only closed loop: {doc['aircraft']}", "",
-         f"Config `{cfg.path}`, dataset `{doc['dataset']}` (relative to the config).", ""]
-    if doc.get("source"):
-        L += [f"Source: {doc['source']}", ""]
-    L += [f"Front: {doc['front']}.", "",
-          "## Conventions applied by the model's output equations", "",
-          "- collective: recorded at r/R = "
-          f"{c['collective_station'] if c['collective_station'] is not None else 'r_ref'}"
-          f" (model col at r_ref = {c['model_r_ref']:g}); col_rec = col + (r_c - r_ref) theta_twist R",
-          f"- longitudinal cyclic sign: {c['lon_sign']:+d} (+1: positive aft)",
-          "- pitch-attitude datum: " + ("unknown, **estimated** (theta_datum below)" if c["theta_datum_estimated"]
-                                        else f"{c['theta_datum_deg']:g} deg (declared)"),
-          f"- mass {doc['mass_kg']:g} kg, air density {doc['rho_kg_m3']:g} kg/m^3 (manifest)"]
-    for a in doc.get("assumptions") or []:
-        L.append(f"- assumption: {a}")
-    n_id, n_val = doc["counts"]["identification"], doc["counts"]["validation"]
-    L += ["", "## Data", "",
-          f"Trim points per channel, identification / held out ({_held_text(doc['holdout_every'])}): "
-          + ", ".join(f"{ch} {n_id[ch]}/{n_val[ch]}" for ch in TRIM_CHANNELS), ""]
-    L += ["## Iterations", ""]
-    for it in doc["iterations"]:
-        L += [f"### Iteration {it['iteration']}"
-              + (f" (with {', '.join(it['extensions'])})" if it["extensions"] else ""),
-              "", f"J_trim = {it['solve']['J_trim']:.4g} deg^2 (Ipopt {it['solve']['status']}, "
-              f"{it['solve']['iterations']} iterations; float-model check {it['J_trim_float']:.4g}); "
-              f"residual sigma {it['residual_sigma_deg']:.3f} deg, "
-              f"{it['dof']} degrees of freedom", "",
-              "| parameter | estimate | standard error | robust SE | unit |", "|---|---|---|---|---|"]
-        for n, p in it["parameters"].items():
-            tag = " (convention offset)" if n == THETA_DATUM else ""
-            L.append(f"| {n}{tag} | {p['shown'][0]:.5g} | {p['se_shown'][0]:.3g} | {p['se_robust_shown'][0]:.3g} | "
-                     f"{p['shown'][1]} |")
-        L += ["", "Standard errors: s^2 (J^T J)^-1 with one residual variance s^2 for every point; robust: the "
-                  "sandwich (HC1) estimate. Both take the residuals as independent, which a structured residual "
-                  "(below) is not: read them as lower bounds."]
-        st = it["score_test"]
-        L += ["", f"Score test ({st['n_testable']} candidates with a trim signature, level {st['level']:.2g}, "
-                  f"leverage-corrected sandwich variance): "
-                  f"**{st['decision']}**: {st['message']}", "",
-              "| candidate | LM | df | p | estimate | kept | note |", "|---|---|---|---|---|---|---|"]
-        for r in st["scores"]:
-            if r["testable"]:
-                L.append(f"| {r['name']} | {r['LM']:.3g} | {r['df']:.3g} | {r['p_value']:.2g} | {r['kappa_hat']:.3g} | "
-                         f"{r['kept']:.2f} | |")
-            else:
-                L.append(f"| {r['name']} | - | - | - | - | - | {r['note']} |")
-        L.append("")
-    L += ["## RMS error, data minus model [deg]", "", "| points | channel | before | after |", "|---|---|---|---|"]
-    for role in ("identification", "validation"):
-        for ch in TRIM_CHANNELS:
-            if ch in last["rms_deg"][role]:
-                L.append(f"| {role} | {ch} | {doc['initial']['rms_deg'][role][ch]:.3f} | "
-                         f"{last['rms_deg'][role][ch]:.3f} |")
-    raw = doc["initial"]["rms_deg_without_conventions"]
-    L += ["", "Before = the initial model with the declared conventions applied; without them (collective read as "
-              "if at r_ref, no datum) the initial RMS on all identification points would be "
-              + ", ".join(f"{ch} {v:.3f}" for ch, v in raw["identification"].items()) + " deg."]
-    L += ["", "## Remaining residual (final model, all points)", "",
-          "| channel | RMS | largest step | between [kt] | mean below / above | trend [deg/10 kt] |",
-          "|---|---|---|---|---|---|"]
-    for ch, s in last["residual_shape"].items():
-        L.append(f"| {ch} | {s['rms_deg']:.3f} | {s.get('step_deg', 0):+.2f} | "
-                 f"{s.get('step_between_kt', ['-', '-'])[0]:.1f}-{s.get('step_between_kt', ['-', '-'])[1]:.1f} | "
-                 f"{s.get('mean_below_step_deg', 0):+.2f} / {s.get('mean_above_step_deg', 0):+.2f} | "
-                 f"{s.get('trend_deg_per_10kt', 0):+.3f} |")
-    if last["score_test"]["decision"] != "accepted":
-        L += ["", "No candidate of the library explains the remaining residual (score test above). Its shape per "
-                  "channel is in the table and in `trim_residuals.png`; a generic speed-dependent correction "
-                  "(structure determination) is not part of this loop. docs/real_data.md discusses the missing "
-                  "physics the shape points to."]
-    L += ["", "Not represented by the 3-DoF longitudinal model (not fitted, whatever the data hold): lateral cyclic "
-              "and roll attitude (no lateral degrees of freedom), tail-rotor collective (no tail rotor), main-rotor "
-              "power (no torque equation)."]
-    L += ["", f"Stopped: {doc['stopped']}.", "",
-          "Figures: `trim_curves.png` (data and model before/after), `trim_residuals.png` (data minus model).",
-          "Every number above is in `trim_loop.json`.", ""]
-    path = out / REPORT_FILE
-    path.write_text("\n".join(L))
-    return path
+    return write_trim_loop_report(doc, cfg.path, out)

@@ -1,4 +1,4 @@
-"""The pandas-only dataset example of docs/data_format.md (the same code): writes ./bo105_example."""
+"""The pandas-only flight-test dataset example (docs/data_format.md, section 9): writes ./bo105_example."""
 import json
 from pathlib import Path
 

@@ -1,4 +1,5 @@
-"""Bad command-line input: one line naming the option, file or key at fault, exit status 2, never a traceback.
+"""The command line's checks of its options and results folders (pyomo_heli.cli.options, pyomo_heli.cli.folders):
+one line naming the option, file or key at fault, exit status 2, never a traceback.
 
 Every case fails before any solve or simulation (each test well under a second, except the infeasible
 multi-start, about 3 s); nothing is written into the repository (tmp_path only).

@@ -1,4 +1,5 @@
-"""Bad input data, second round: inconsistencies that used to pass silently or with a misleading message.
+"""The dataset's consistency checks (pyomo_heli.dataset.reader): inconsistencies that used to pass silently or
+with a misleading message.
 
 1. trims.csv: a maneuver's start trim (``source`` = maneuver name) must be at that maneuver's manifest
    ``trim_speed_kt`` (within the manifest-vs-airspeed tolerance max(5 kt, 20 %), not below 15 kt);

@@ -1,4 +1,5 @@
-"""Bad input data and generator configs give one clear line naming the file, column/field, row or key.
+"""The dataset reader's checks (pyomo_heli.dataset.reader, schema) and the generator config's
+(pyomo_heli.flighttest.config): bad input gives one clear line naming the file, column/field, row or key.
 
 1. numeric CSV cells must be plain ASCII decimals: ``1_0`` and non-ASCII digits (``٥``), which Python's
    float() accepts, are rejected by check-data and the loader (maneuver tables and the trim table);

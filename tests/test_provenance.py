@@ -1,4 +1,5 @@
-"""Issue 32, data and consistency: nothing overwritten unasked, results and config agree, implausible input named.
+"""Provenance and consistency (pyomo_heli.provenance and the commands' checks): nothing overwritten unasked,
+results and config agree, implausible input named.
 
 Every test runs on a tiny config or fixture and checks one guarantee of docs/robustness.md, section
 "Data never overwritten, results and config agree".

@@ -1,4 +1,4 @@
-"""A front whose anchor did not converge (issue 32, item 5).
+"""A front whose anchor did not converge (pyomo_heli.pareto.front, workflows.identify).
 
 Anchors set the utopia point, the nadir, the epsilon grid and the scale, so a failed anchor spoils
 everything derived from them. A failed anchor is retried (B cold, A from B's solution); one that still

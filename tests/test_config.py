@@ -1,4 +1,5 @@
-"""Bad identification configs and model parameter values: one error naming the file, table and field.
+"""The identification config (pyomo_heli.config) and model parameter values: one error naming the file, table
+and field.
 
 Found by an adversarial audit (2026-11-25): before, these gave tracebacks, vague messages, or were
 accepted silently (a misspelt key ignored, a negative mass reaching the trim solver, an empty output list

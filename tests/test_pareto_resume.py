@@ -1,4 +1,5 @@
-"""Trust in the answer, items 4-5: failures never stop a sweep, nothing finished is lost.
+"""Resuming a front or a multi-start (pyomo_heli.pareto.store, workflows.multistart): failures never stop a
+sweep, nothing finished is lost.
 
 All on a tiny Case 1 (one 80 kt maneuver cut to 2 s, noisy data, 4 front
 points). The kill test runs the real command in a subprocess, SIGKILLs it once

@@ -1,0 +1,122 @@
+"""The loops and their diagnosis: ``close-loop``, ``trim-loop`` and ``diagnose``."""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+from .folders import (_check_diagnosis_out, _check_out_dir, _check_out_not_foreign, _point_parameters,
+                      _results_folder, _solver_status_line, _warning)
+from .options import UserError
+
+def cmd_close_loop(args) -> int:
+    from ..workflows.close_loop import close_loop, loop_settings
+    from ..config import load_identification_config
+    from ..report.loop import write_loop_report
+
+
+    overrides = None
+    if args.dataset is not None:
+        d = Path(args.dataset)
+        if not d.is_dir():
+            raise UserError(f"option --dataset: folder {args.dataset} not found")
+        if not (d / "manifest.json").is_file():  # checked before --out is created
+            held = [n for n in ("loop.json", "front.csv", "chosen.json", "starts.csv") if (d / n).is_file()]
+            what = f"it holds results ({', '.join(held)}) and" if held else "it"
+            raise UserError(f"option --dataset: {args.dataset} is not a flight-test folder: {what} has no "
+                            f"manifest.json (a flight test as written by generate-data)")
+        overrides = {"data": {"dataset": str(Path(args.dataset).resolve())}}
+    _check_out_dir(args.out)
+    _check_out_not_foreign(args.out, "close-loop")
+    cfg = load_identification_config(args.config, overrides)
+    settings = loop_settings(cfg)
+    if args.max_iterations is not None:
+        if args.max_iterations < 0:
+            raise UserError("option --max-iterations must be >= 0")
+        settings.max_iterations = args.max_iterations
+    from ..workflows.close_loop import IdentificationFailed
+
+    try:
+        doc = close_loop(cfg, args.out, settings, restart=args.restart)
+    except IdentificationFailed as exc:  # a failed solve, not bad input: exit 1 as identify
+        print(f"pyomo-heli close-loop: {exc}", file=sys.stderr)
+        return 1
+    path = write_loop_report(args.out, cfg, figure_format=args.figure_format)
+    print(f"{len(doc['iterations'])} identification(s); stopped: {doc['stopped']}")
+    print(f"loop.json and {path} written")
+    return 0
+
+
+def cmd_trim_loop(args) -> int:
+    """Trim-only closed loop (pyomo_heli.workflows.trim_loop): report, figures and trim_loop.json in --out."""
+    from ..workflows.trim_loop import TrimIdentificationFailed, load_trim_loop_config, run_trim_loop, write_trim_report
+
+    _check_out_dir(args.out)
+    cfg = load_trim_loop_config(args.config)
+    try:
+        doc = run_trim_loop(cfg, args.out)
+    except TrimIdentificationFailed as exc:  # a failed solve, not bad input: exit 1 as identify
+        print(f"pyomo-heli trim-loop: {exc}", file=sys.stderr)
+        return 1
+    path = write_trim_report(cfg, doc, args.out)
+    print(f"{len(doc['iterations'])} identification(s); stopped: {doc['stopped']}")
+    print(f"{path}, trim_curves.png, trim_residuals.png and trim_loop.json written")
+    return 0
+
+
+def _data_rate_hz(cfg) -> tuple[float, str]:
+    """Sample rate [Hz] of the residuals a diagnosis of ``cfg`` tests: [data] resample_hz, else the slowest maneuver."""
+    if cfg.resample_hz:
+        return float(cfg.resample_hz), f"[data] resample_hz of config {cfg.path}"
+    from ..dataset import load_flight_test
+
+    ft = load_flight_test(cfg.dataset)
+    sel = cfg.maneuvers
+    names = set(sel) if not isinstance(sel, str) else {n for n, mv in ft.maneuvers.items() if mv.role == sel}
+    if not isinstance(cfg.validation, str) and cfg.validation:
+        names |= set(cfg.validation)
+    rates = [ft.maneuvers[n].sample_rate for n in names if n in ft.maneuvers]
+    rates = [r for r in rates if math.isfinite(r)]
+    return (min(rates) if rates else math.inf), f"dataset {cfg.dataset} of config {cfg.path}"
+
+
+@_results_folder(lambda a: a.out or a.results_dir)
+def cmd_diagnose(args) -> int:
+
+    from ..diagnosis.analysis import diagnose
+    from ..config import load_result_config
+    from ..diagnosis.residuals import compute_residuals
+    from ..pareto.result import IdentificationResult
+    from ..report.diagnosis import write_diagnosis_report
+
+    if not 0 < args.alpha < 1:
+        raise UserError(f"--alpha must lie in (0, 1), got {args.alpha}")
+    if args.out is not None:
+        _check_out_dir(args.out)
+        _check_diagnosis_out(args.out, args.results_dir)
+    res = IdentificationResult.load(args.results_dir)
+    # the config (given, or named in chosen.json) plus a close-loop iteration's effects, checked against the folder
+    notes = []  # records the folder lacks: said once the command has checked everything else
+    cfg = load_result_config(args.results_dir, args.config, res, warn=notes.append)
+    parameters = _point_parameters(res, args.point, args.results_dir)
+    rate, source = _data_rate_hz(cfg)
+    if args.test_rate_hz > rate * (1 + 1e-9):
+        raise UserError(f"option --test-rate-hz: {args.test_rate_hz:g} Hz is above the sample rate of the data "
+                        f"({rate:g} Hz, {source}); the whiteness test cannot sample faster than the data")
+    for note in notes:
+        _warning("diagnose")(note)
+    label = "multi-objective (C)" if args.point == "chosen" else "time-domain (A)"
+    out = Path(args.out or args.results_dir)
+    print(f"diagnosing {label} of {args.results_dir} (config {cfg.path})")
+    print(_solver_status_line(res, args.point))
+    r = compute_residuals(cfg, parameters, label, test_rate_hz=args.test_rate_hz)
+    if not args.no_residuals:
+        r.save(out / f"residuals_{args.point}")
+    d = diagnose(r, alpha=args.alpha, test_rate_hz=args.test_rate_hz, seed=args.seed)
+    d.save(out / "diagnosis.json")
+    cmd = "pyomo-heli diagnose " + " ".join(sys.argv[1:][1:]) if sys.argv[1:2] == ["diagnose"] else None
+    write_diagnosis_report(out, r, d, results_dir=args.results_dir, command=cmd, figure_format=args.figure_format)
+    print(d)
+    print(f"wrote {out / 'diagnosis.json'}, {out / 'diagnosis.md'} and figures")
+    return 0
+

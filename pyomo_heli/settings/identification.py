@@ -155,6 +155,10 @@ class ParetoTable(Table):
         "spacing": (None, "pareto.spacing must be 'geometric' or 'linear', got {v!r}"),
         "warm_start": (None, "pareto.warm_start must be one of " + ", ".join(WARM_STARTS) + ", got {v!r}"),
         "predictor": (None, "pareto.predictor must be one of " + ", ".join(PREDICTORS) + ", got {v!r}"),
+        "nadir": (None, "pareto.nadir must be one of payoff, nondominated, got {v!r}"),
+        "placement": (None, "pareto.placement must be one of uniform, adaptive, got {v!r}"),
+        "max_solves": (None, "pareto.max_solves must be 4 to 1000, got {v!r}"),
+        "max_iter": (None, "field 'max_iter' must be a positive integer, got {v!r}"),
     }
 
     points: Union[int, list[int]] = Field(11, description="epsilon grid points, the two anchors included; a list "
@@ -172,6 +176,14 @@ class ParetoTable(Table):
     placement: Literal["uniform", "adaptive"] = Field("uniform", description="epsilon placement: uniform grid, "
                                                                              "or arc length + refinement at C")
     max_solves: int = Field(14, ge=4, le=1000, description="adaptive placement: front solves, anchors included")
+
+    @field_validator("points", mode="before")
+    @classmethod
+    def _points(cls, v, info: ValidationInfo):
+        counts = v if isinstance(v, list) else [v]
+        if not counts or not all(isinstance(n, int) and not isinstance(n, bool) and 2 <= n <= 1000 for n in counts):
+            fail(info, f"field 'points': the epsilon grid needs 2 (the anchors) to 1000 points, got {v!r}")
+        return v
 
 
 class IdentificationSolverTable(SolverTable):

@@ -52,7 +52,8 @@ class ManeuverEntry(Table):
 
     name: str = Field(pattern=r"^[A-Za-z0-9_-]+$", description="record name: letters, digits, '_' and '-'")
     file: str = Field(description="the record's CSV file, '/'-separated, relative to the dataset folder")
-    role: Literal["identification", "validation"] = Field(description="identification or validation")
+    role: Literal["identification", "validation", "frequency"] = Field(description="identification, validation or "
+                                                                                   "frequency (sweeps for J_linear)")
     trim_speed_kt: Finite = Field(ge=0, description="trim speed the record starts from [kt] (display unit)")
     inputs: list[Literal[INPUTS]] = Field(min_length=1, description="the input channels the maneuver excites")
     description: Optional[str] = Field(None, description="free text")

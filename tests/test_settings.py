@@ -307,7 +307,7 @@ def test_every_bundled_manifest_fits_its_declaration(path):
 
 def test_manifest_declaration_is_the_readers():
     """The reader takes its key tables from the declaration; format name and version agree with the format's."""
-    from pyomo_heli.dataset import reader
+    from pyomo_heli.dataset import tables as reader  # the reader's key tables
     from pyomo_heli.dataset.schema import FORMAT_NAME, FORMAT_VERSION
     from pyomo_heli.settings import manifest
 

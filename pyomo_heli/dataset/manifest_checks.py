@@ -141,7 +141,7 @@ class ManifestChecks:
             return None
         return pp.as_posix()
 
-    # ------------------------------------------------------------ tables
+    # ------------------------------------------------------------ manifest objects
 
     def check_conventions(self, man):
         """The manifest's ``conventions`` object as TrimConventions (None after a problem or when absent)."""

@@ -444,8 +444,8 @@ def _pre_input_noise(ft, channel):
     """Pooled std of ``channel`` over the steady first 1.9 s of every 80 kt maneuver (own mean removed)."""
     ss, dof = 0.0, 0
     for m in ft.maneuvers.values():
-        if round(m.trim_speed / KT) != 80:
-            continue
+        if round(m.trim_speed / KT) != 80 or m.role == "frequency":
+            continue  # the sweeps (role frequency) are flown with a pilot's remnant on lon from t = 0
         x = m.data.loc[m.data.t <= 1.9, channel].to_numpy()
         ss += np.sum((x - x.mean()) ** 2)
         dof += x.size - 1

@@ -202,6 +202,7 @@ class LinearTable(Table):
         "pairs": ("field 'pairs' must be a list of [output, input] pairs", None),
         "speeds_kt": "field 'speeds_kt' must be a non-empty list of speeds in 0..150 kt, got {v!r}",
         "points": f"field 'points' must be an integer in 2..{MAX_LINEAR_POINTS}, got {{v!r}}",
+        "weighting": "field 'weighting' must be one of bins, tischler_remple, got {v!r}",
     }
 
     pairs: list[list[str]] = Field(default_factory=lambda: [list(p) for p in DEFAULT_PAIRS],

@@ -120,24 +120,18 @@ def _type_words(kind: str, cls: type[Table]) -> str | None:
             "tuple_type": "a list"}.get(kind)
 
 
+#: pydantic error type -> (words, context key) of a domain error
+_DOMAIN_WORDS = {"greater_than": ("> {}", "gt"), "greater_than_equal": (">= {}", "ge"), "less_than": ("< {}", "lt"),
+                 "less_than_equal": ("<= {}", "le"), "literal_error": ("one of {}", "expected"),
+                 "too_short": ("at least {} long", "min_length"), "too_long": ("at most {} long", "max_length")}
+
+
 def _domain_words(e: dict) -> str:
     ctx = {k: f"{v:g}" if isinstance(v, float) else v for k, v in e.get("ctx", {}).items()}
-    t = e["type"]
-    if t == "greater_than":
-        return f"> {ctx['gt']}"
-    if t == "greater_than_equal":
-        return f">= {ctx['ge']}"
-    if t == "less_than":
-        return f"< {ctx['lt']}"
-    if t == "less_than_equal":
-        return f"<= {ctx['le']}"
-    if t == "literal_error":
-        return f"one of {ctx['expected']}"
-    if t == "too_short":
-        return f"at least {ctx.get('min_length')} long"
-    if t == "too_long":
-        return f"at most {ctx.get('max_length')} long"
-    return e["msg"]
+    if e["type"] not in _DOMAIN_WORDS:
+        return e["msg"]
+    words, key = _DOMAIN_WORDS[e["type"]]
+    return words.format(ctx.get(key))
 
 
 def error_lines(cls: type[Table], errors: list[dict], raw) -> list[tuple[str | None, str]]:

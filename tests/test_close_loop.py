@@ -97,7 +97,7 @@ def test_flapping_lag_is_found_or_reported_confounded_with_iyy(tmp_path):
     # the wake instance's records (2 s quiet lead-in, inputs referred to its mean): on MANEUVERS the noise of
     # the first input sample acts as a constant input error, and the coloured residual it leaves costs the
     # robust test its power there (flapping_lag LM 46 on 4.2 degrees of freedom, p = 0.00104 against 0.001;
-    # here LM 630, p = 3e-6; docs/close_loop.md, "Degrees of freedom of the robust score test")
+    # here LM 630, p = 3e-6; docs/close_loop.md, "The score test's level")
     cfg = make_case(tmp_path, "[truth.effects.flapping_lag]\ntau_f = 0.071\n", seed=24, points=2,
                     maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
     att = identify_and_attribute(cfg, tmp_path / "out")

@@ -1,4 +1,5 @@
-"""Output failures named by their path: a full disk is an I/O error of a file, never "bad input".
+"""Output failures named by their path: a full disk is an I/O error of a file, never "bad input"; and what an
+output folder already holds.
 
 Python's ``OSError`` from a failed ``write`` (no space left, file too large,
 an I/O error) carries no file name. :func:`writing` adds it, so the command
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import errno
 from contextlib import contextmanager
+from pathlib import Path
 
 #: errno values of a failed output (not of a missing or forbidden input path): exit status 1, not 2
 OUTPUT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EROFS, errno.EPIPE,
@@ -27,3 +29,12 @@ def writing(path):
         if exc.filename is None and not isinstance(exc, OutputError):
             raise OutputError(exc.errno, exc.strerror or str(exc), str(path)) from exc
         raise
+
+
+def visible_entries(folder, ignore_suffixes: tuple[str, ...] = ()) -> list[Path]:
+    """The entries of ``folder`` that count as its contents, sorted: none for a new (missing) folder; hidden
+    names (leading dot) and names ending in one of ``ignore_suffixes`` are left out."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted(c for c in folder.iterdir() if not c.name.startswith(".") and not c.name.endswith(ignore_suffixes))

@@ -9,6 +9,7 @@ import os
 import sys
 from pathlib import Path
 
+from ..ioerrors import visible_entries
 from .options import UserError
 
 def _check_out_dir(path, option: str = "--out") -> None:
@@ -44,7 +45,8 @@ _RUN_LEFTOVERS = ("points", "checkpoint.json")
 
 
 def _visible(folder: Path) -> list[Path]:
-    return sorted(c for c in folder.iterdir() if not c.name.startswith(".") and not c.name.endswith((".tmp", ".lock")))
+    """What a folder holds, leaving out a run's temporary and lock files."""
+    return visible_entries(folder, ignore_suffixes=(".tmp", ".lock"))
 
 
 def _names(paths, at_most: int = 5) -> str:
@@ -60,8 +62,6 @@ def _check_out_not_foreign(path, kind: str, option: str = "--out") -> None:
     from ..pareto.store import StoreMismatchError, folder_kind
 
     p = Path(path)
-    if not p.is_dir():
-        return
     present = _visible(p)
     if not present:
         return

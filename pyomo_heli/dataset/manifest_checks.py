@@ -143,17 +143,24 @@ class ManifestChecks:
 
     # ------------------------------------------------------------ manifest objects
 
+    def optional_object(self, man, field: str, keys) -> dict | None:
+        """The manifest's optional object ``field``, its keys checked against ``keys`` (key -> required; each
+        missing or unknown key recorded as a problem); None when absent or not an object (that recorded)."""
+        if field not in man:
+            return None
+        obj = man[field]
+        if not isinstance(obj, dict):
+            self.add(MANIFEST_NAME, field, f"must be an object with keys {', '.join(keys)}, got {_type_name(obj)}")
+            return None
+        self.check_keys(obj, keys, f"{field}.")
+        return obj
+
     def check_conventions(self, man):
         """The manifest's ``conventions`` object as TrimConventions (None after a problem or when absent)."""
-        if "conventions" not in man:
-            return None
-        c = man["conventions"]
-        if not isinstance(c, dict):
-            self.add(MANIFEST_NAME, "conventions", f"must be an object with keys {', '.join(CONVENTION_KEYS)}, "
-                                                   f"got {_type_name(c)}")
-            return None
         n0 = len(self.problems)
-        self.check_keys(c, CONVENTION_KEYS, "conventions.")
+        c = self.optional_object(man, "conventions", CONVENTION_KEYS)
+        if c is None:
+            return None
         station, sign, datum = None, 1, 0.0
         if "collective_station" in c:
             v = c["collective_station"]
@@ -185,15 +192,10 @@ class ManifestChecks:
         return TrimConventions(collective_station=station, lon_sign=sign, theta_datum=datum)
 
     def check_accuracy(self, man):
-        if "accuracy" not in man:
-            return None
-        a = man["accuracy"]
-        if not isinstance(a, dict):
-            self.add(MANIFEST_NAME, "accuracy", f"must be an object with keys {', '.join(ACCURACY_KEYS)}, "
-                                                f"got {_type_name(a)}")
-            return None
         n0 = len(self.problems)
-        self.check_keys(a, ACCURACY_KEYS, "accuracy.")
+        a = self.optional_object(man, "accuracy", ACCURACY_KEYS)
+        if a is None:
+            return None
         for key, unit in (("angle_deg", "deg"), ("speed_kt", "kt")):
             if key in a and (not _is_number(a[key]) or a[key] < 0):
                 self.add(MANIFEST_NAME, f"accuracy.{key}", f"must be a number >= 0 [{unit}], got {a[key]!r}")

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from ..channels import OUTPUTS
+from ..ioerrors import visible_entries
 from ..physics.model import HelicopterModel
 from ..simulation.compiled import simulate_with_feedback
 from ..simulation.inputs import InputSignal
@@ -118,10 +119,6 @@ class OutputFolderError(ValueError):
 _RESULT_MARKERS = ("checkpoint.json", "front.csv", "chosen.json", "loop.json", "starts.csv", "multistart.json")
 
 
-def _visible(folder: Path) -> list[Path]:
-    return sorted(p for p in folder.iterdir() if not p.name.startswith("."))
-
-
 def _listed(paths, root: Path, at_most: int = 5) -> str:
     names = [p.relative_to(root).as_posix() + ("/" if p.is_dir() else "") for p in paths]
     return ", ".join(names[:at_most]) + (f", ... ({len(names)} in all)" if len(names) > at_most else "")
@@ -162,9 +159,7 @@ def check_output_folder(out: str | Path, force: bool = False) -> None:
     - a folder holding other files: refused unless ``force``, which writes the flight test beside them.
     """
     out = Path(out)
-    if not out.is_dir():
-        return
-    present = _visible(out)
+    present = visible_entries(out)
     if not present:
         return
     results = [out / n for n in _RESULT_MARKERS if (out / n).exists()]

@@ -40,10 +40,10 @@ def _structure(model: HelicopterModel) -> tuple:
     return (tuple(id(e) for e in model.float_extensions), tuple(model.state_names), tuple(model.parameters))
 
 
-def _functions(model: HelicopterModel, substeps: int):
-    key = (_structure(model), substeps)
-    if key in _FUNCTIONS:
-        return _FUNCTIONS[key][:3]
+def _symbolic_model(model: HelicopterModel):
+    """casadi symbols ``x`` (the states, in ``model.state_names`` order) and ``p`` (the parameters, in
+    ``model.parameters`` order), and the model evaluated with them: ``context(xv, col, lon)`` is
+    :func:`evaluate`'s context, ``rates(xv, col, lon)`` the column of state rates dx/dt."""
     import casadi as ca
 
     ops = get_ops("casadi")
@@ -59,6 +59,25 @@ def _functions(model: HelicopterModel, substeps: int):
         eqs = context(xv, col, lon).state_eqs
         return ca.vertcat(*[eqs[s][1] / eqs[s][0] for s in states])
 
+    return x, p, context, rates
+
+
+def _rk4_interval(rhs, x, dt, substeps: int):
+    """``substeps`` classic RK4 steps of dy/dtau = rhs(tau, y) across one sample interval [0, dt] from y = x."""
+    h, tau, y = dt / substeps, 0.0, x
+    for _ in range(substeps):
+        y = rk4_step(rhs, tau, y, h)
+        tau = tau + h
+    return y
+
+
+def _functions(model: HelicopterModel, substeps: int):
+    key = (_structure(model), substeps)
+    if key in _FUNCTIONS:
+        return _FUNCTIONS[key][:3]
+    import casadi as ca
+
+    x, p, context, rates = _symbolic_model(model)
     # one sample interval: inputs u0 at its start, u1 at its end, linear in between (tau: time into it)
     u0, u1, dt = ca.SX.sym("u0", len(INPUTS)), ca.SX.sym("u1", len(INPUTS)), ca.SX.sym("dt")
 
@@ -66,17 +85,13 @@ def _functions(model: HelicopterModel, substeps: int):
         u = u0 + tau / dt * (u1 - u0)
         return rates(y, u[0], u[1])
 
-    h, tau, y = dt / substeps, 0.0, x
-    for _ in range(substeps):
-        y = rk4_step(rhs, tau, y, h)
-        tau = tau + h
-    step = ca.Function("rk4_interval", [x, ca.vertcat(u0, u1, dt), p], [y])
+    step = ca.Function("rk4_interval", [x, ca.vertcat(u0, u1, dt), p], [_rk4_interval(rhs, x, dt, substeps)])
 
     col, lon = ca.SX.sym("col"), ca.SX.sym("lon")
     ctx = context(x, col, lon)
     out_names = list(ctx.outputs)
     outputs = ca.Function("outputs", [x, ca.vertcat(col, lon), p], [ca.vertcat(*[ctx.outputs[o] for o in out_names])])
-    _FUNCTIONS[key] = (step, outputs, out_names, exts)
+    _FUNCTIONS[key] = (step, outputs, out_names, model.float_extensions)
     return step, outputs, out_names
 
 
@@ -213,31 +228,20 @@ def _feedback_functions(model: HelicopterModel, substeps: int):
         return _FEEDBACK[key][:2]
     import casadi as ca
 
-    ops = get_ops("casadi")
-    states, names, exts = model.state_names, list(model.parameters), model.float_extensions
-    nx, ni = len(states), len(INPUTS)
-    x = ca.SX.sym("x", nx)
-    p = ca.SX.sym("p", len(names))
+    x, p, _, rates = _symbolic_model(model)
+    exts = model.float_extensions
+    nx, ni = len(model.state_names), len(INPUTS)
     fb = ca.SX.sym("fb", ni * nx + nx)  # K row by row, then x_ref
     K = ca.reshape(fb[:ni * nx], nx, ni).T
     x_ref = fb[ni * nx:]
-    pmap = dict(zip(names, ca.vertsplit(p)))
-
-    def rates(xv, u):
-        eqs = evaluate(dict(zip(states, ca.vertsplit(xv))), {"col": u[0], "lon": u[1]}, pmap, ops=ops,
-                       extensions=exts).state_eqs
-        return ca.vertcat(*[eqs[s][1] / eqs[s][0] for s in states])
-
     u0, u1, dt = ca.SX.sym("u0", ni), ca.SX.sym("u1", ni), ca.SX.sym("dt")
 
     def rhs(tau, y):
-        return rates(y, u0 + tau / dt * (u1 - u0) + K @ (y - x_ref))
+        u = u0 + tau / dt * (u1 - u0) + K @ (y - x_ref)
+        return rates(y, u[0], u[1])
 
-    h, tau, y = dt / substeps, 0.0, x
-    for _ in range(substeps):
-        y = rk4_step(rhs, tau, y, h)
-        tau = tau + h
-    step = ca.Function("rk4_interval_feedback", [x, ca.vertcat(u0, u1, dt), p, fb], [y])
+    step = ca.Function("rk4_interval_feedback", [x, ca.vertcat(u0, u1, dt), p, fb],
+                       [_rk4_interval(rhs, x, dt, substeps)])
     _FEEDBACK[key] = (step, exts)
     return step, exts
 

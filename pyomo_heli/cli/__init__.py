@@ -57,6 +57,14 @@ def _dask_flags(parser, what: str) -> None:
                         help=f"send the {what} to the Dask cluster of this scheduler (e.g. tcp://host:8786)")
 
 
+def _config_command(sub, name: str, help: str, out_help: str):
+    """A command that reads a config (positional) and writes the results folder ``--out`` (required)."""
+    parser = sub.add_parser(name, help=help)
+    parser.add_argument("config")
+    parser.add_argument("--out", required=True, help=out_help)
+    return parser
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .._version import __version__
 
@@ -101,9 +109,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "other files there; without it such an --out is refused")
     g.set_defaults(func=cmd_generate_data)
 
-    i = sub.add_parser("identify", help="multi-objective identification from a config (Pareto front)")
-    i.add_argument("config")
-    i.add_argument("--out", required=True, help="results folder")
+    i = _config_command(sub, "identify", "multi-objective identification from a config (Pareto front)",
+                        "results folder")
     i.add_argument("--no-report", action="store_true", help="skip figures and report")
     i.add_argument("--cold-check", action="store_true",
                    help="also solve every interior front point cold ([pareto] cold_check), to measure warm starts")
@@ -114,10 +121,9 @@ def build_parser() -> argparse.ArgumentParser:
     _figure_flag(i)
     i.set_defaults(func=cmd_identify)
 
-    cl = sub.add_parser("close-loop", help="identify, attribute the residual to a candidate effect, add it, "
-                                           "re-identify, repeat ([loop] table of the config)")
-    cl.add_argument("config")
-    cl.add_argument("--out", required=True, help="results folder (loop.json, loop_report.md, iter_*/)")
+    cl = _config_command(sub, "close-loop", "identify, attribute the residual to a candidate effect, add it, "
+                                            "re-identify, repeat ([loop] table of the config)",
+                         "results folder (loop.json, loop_report.md, iter_*/)")
     cl.add_argument("--max-iterations", type=nonneg_int, help="override [loop] max_iterations")
     cl.add_argument("--dataset", help="flight-test folder replacing the config's [data] dataset (e.g. another noise "
                                       "realisation from generate-data --seed)")
@@ -127,10 +133,9 @@ def build_parser() -> argparse.ArgumentParser:
     _figure_flag(cl)
     cl.set_defaults(func=cmd_close_loop)
 
-    tl = sub.add_parser("trim-loop", help="identify a trim-only flight test (J_trim), test the candidate effects on "
-                                          "the trim residuals, add the accepted one, repeat (docs/real_data.md)")
-    tl.add_argument("config")
-    tl.add_argument("--out", required=True, help="results folder (report.md, trim_loop.json, figures)")
+    tl = _config_command(sub, "trim-loop", "identify a trim-only flight test (J_trim), test the candidate effects "
+                                           "on the trim residuals, add the accepted one, repeat (docs/real_data.md)",
+                         "results folder (report.md, trim_loop.json, figures)")
     tl.set_defaults(func=cmd_trim_loop)
 
     u = sub.add_parser("uncertainty", help="standard errors and identifiability of an existing results folder")
@@ -171,9 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
     n.add_argument("--no-diagnostics", action="store_true", help="skip the IDAES structural diagnostics")
     n.set_defaults(func=cmd_inspect)
 
-    rl = sub.add_parser("report-linear", help="figures and report of a tri-objective results folder")
-    rl.add_argument("config")
-    rl.add_argument("--out", required=True, help="results folder written by identify")
+    rl = _config_command(sub, "report-linear", "figures and report of a tri-objective results folder",
+                         "results folder written by identify")
     _figure_flag(rl)
     rl.set_defaults(func=cmd_report_linear)
 

@@ -53,6 +53,12 @@ def _names_or(word: str, allow_empty: bool):
     return check
 
 
+def InputChannels(field: str):
+    """The type of a list of input channels, possibly empty; an unknown channel is named with ``field``."""
+    return Names(INPUTS, allow_empty=True,
+                 unknown=f"unknown input channel(s) {{bad}} in {field}; choose from {{choices}}")
+
+
 class DataTable(Table):
     """``[data]``: the flight test and the records the fit and the validation use."""
 
@@ -129,8 +135,7 @@ class ObjectivesTable(Table):
         Field(default_factory=lambda: list(TRIM_CHANNELS), description="trim channels J_trim fits")
     covariance: Literal["diagonal", "full"] = Field("diagonal", description="the output-error weighting: the "
                                                                             "residual covariance's diagonal or all")
-    input_errors: Names(INPUTS, allow_empty=True,
-                        unknown="unknown input channel(s) {bad} in input_errors; choose from {choices}") = Field(
+    input_errors: InputChannels("input_errors") = Field(
         default_factory=list, description="input channels with measurement errors estimated by the fit (errors "
                                           "in variables)")
     noise_sigma: Optional[NoiseSigmaTable] = Field(None, description="the sigmas of input_errors' fit (default: "
@@ -255,8 +260,7 @@ class LinearTable(Table):
 class DiagnosisTable(Table):
     """``[diagnosis]``: the input-noise model of the residual analysis (docs/diagnosis.md)."""
 
-    input_noise: Names(INPUTS, allow_empty=True,
-                       unknown="unknown input channel(s) {bad} in input_noise; choose from {choices}") = Field(
+    input_noise: InputChannels("input_noise") = Field(
         default_factory=list, description="input channels whose measurement noise the whiteness test takes out "
                                           "(default: [objectives] input_errors)")
     noise_sigma: Optional[NoiseSigmaTable] = Field(None, description="their sigmas (default: from the records' "

@@ -198,9 +198,13 @@ class CompositeSettings:
     """Composite windowing (Tischler and Remple, ch. 7; CIFER's COMPOSITE) and the coherent band.
 
     Each window length in ``windows_s`` gives a Welch estimate (Hann, ``overlap``); a window of length
-    T_w counts only at omega >= ``min_periods`` * 2 pi / T_w (it must hold that many periods) and only
-    if it has at least two segments in the data; no frequency below ``record_periods`` periods in the
-    longest record counts (Tischler and Remple: record length >= 4-5 times the longest period). The estimates
+    T_w counts only at omega >= ``min_periods`` * 2 pi / T_w (it must hold that many periods) and uses
+    only the records that hold two segments and are at least T_w / ``max_window_fraction`` long (with
+    0.5, Tischler and Remple's guideline, ch. 7: the longest window at most half the record, so that every
+    record gives 6 segments at 80 % overlap and the window's coherence and random error are averages, not
+    nearly one segment's, which has coherence 1 whatever the data); no frequency below
+    ``record_periods`` periods in the longest record counts (Tischler and Remple: record length >= 4-5
+    times the longest period). The estimates
     are averaged at each frequency of a
     logarithmic grid of ``n_omega`` points in [omega_min, omega_max] with the weights 1 / eps_r^2
     (random error from coherence, below). A bin is coherent where the composite (partial) coherence
@@ -216,6 +220,7 @@ class CompositeSettings:
     n_omega: int = 100
     min_periods: float = 2.0
     record_periods: float = 5.0
+    max_window_fraction: float = 1.0  # longest window / record length (SWEEP_SETTINGS: 0.5, CIFER's T_rec / 2)
 
     def __post_init__(self):
         self.windows_s = tuple(float(w) for w in self.windows_s)
@@ -230,6 +235,8 @@ class CompositeSettings:
         if self.n_omega < 2 or self.min_periods <= 0 or self.record_periods < 0:
             raise ValueError(f"composite n_omega must be >= 2 and min_periods > 0, got {self.n_omega}, "
                              f"{self.min_periods}")
+        if not 0 < self.max_window_fraction <= 1:
+            raise ValueError(f"composite max_window_fraction must be in (0, 1], got {self.max_window_fraction}")
 
 
 @dataclass
@@ -255,8 +262,9 @@ def _record_arrays(mv, names):
 
 
 def window_spectra(records, inputs, output: str, window_s: float, overlap: float = 0.8,
-                   nfft_factor: int = 2) -> WindowSpectra | None:
-    """Welch spectral matrices of (inputs, output) for one window length; None if no record holds 2 segments.
+                   nfft_factor: int = 2, max_fraction: float = 1.0) -> WindowSpectra | None:
+    """Welch spectral matrices of (inputs, output) for one window length; None if no record holds 2 segments
+    and is at least ``window_s / max_fraction`` long.
 
     Records of different lengths are combined by their segment counts (each record's Welch average
     weighted by its number of segments), so the result is the average over every segment.
@@ -269,8 +277,8 @@ def window_spectra(records, inputs, output: str, window_s: float, overlap: float
         fs = mv.sample_rate
         n = int(round(window_s * fs))
         step = n - int(round(overlap * n))
-        if n < MIN_WINDOW_SAMPLES or step < 1 or mv.n_samples < n + step:
-            continue  # fewer than two segments: no average at this window length
+        if n < MIN_WINDOW_SAMPLES or step < 1 or mv.n_samples < n + step or mv.n_samples < n / max_fraction - 1e-9:
+            continue  # fewer than two segments, or the window is too long for this record: no average
         segs = 1 + (mv.n_samples - n) // step
         sig = _record_arrays(mv, list(inputs) + [output])
         kw = dict(fs=fs, window="hann", nperseg=n, noverlap=n - step, detrend=False, nfft=nfft_factor * n)
@@ -379,7 +387,7 @@ def composite_responses(records, output: str, inputs, settings: CompositeSetting
     longest = max((mv.n_samples - 1) / mv.sample_rate for mv in records)  # [s]
     omega_record = s.record_periods * 2 * np.pi / longest
     for w in s.windows_s:
-        sp = window_spectra(records, inputs, output, w, s.overlap, s.nfft_factor)
+        sp = window_spectra(records, inputs, output, w, s.overlap, s.nfft_factor, s.max_window_fraction)
         if sp is None:
             continue
         used.append(w)
@@ -423,10 +431,12 @@ def composite_responses(records, output: str, inputs, settings: CompositeSetting
     return out
 
 
-#: composite settings for the long (90 s) sweeps of the bundled flight test: windows up to 60 s, each counted
-#: where it holds 4 periods (with 2, the lowest bins of a Hann window carry leakage of several dB and degrees
-#: on noise-free sweeps; docs/linear.md section 6)
-SWEEP_SETTINGS = CompositeSettings(windows_s=(5.0, 10.0, 20.0, 30.0, 45.0, 60.0), min_periods=4.0)
+#: composite settings for the long sweeps of the bundled flight test: the default ladder extended to 90 s, each
+#: window used only on records at least twice its length (45 s on the 95 s records) and counted where it holds
+#: 4 periods (with 2, the main lobe of the Hann window, +-2 bins, reaches 0 rad/s, where the records' trim drift
+#: is; docs/linear.md section 6)
+SWEEP_SETTINGS = CompositeSettings(windows_s=(5.0, 10.0, 15.0, 20.0, 30.0, 45.0, 60.0, 90.0), min_periods=4.0,
+                                   max_window_fraction=0.5)
 
 
 def sweep_responses(records, pairs=DEFAULT_PAIRS, speeds=None,

@@ -436,3 +436,14 @@ def test_tischler_remple_j_linear_on_pilot_flown_sweeps(pilot_flown):
     no_sweeps = SimpleNamespace(frequency=lambda: [])
     with pytest.raises(ValueError, match="needs sweep records"):
         data_responses(cfg, no_sweeps)
+
+
+def test_sweep_check_rejects_bad_regeneration_options(capsys):
+    """One-line usage errors (exit 2) before any simulation."""
+    from pyomo_heli.studies.sweep_check import main
+
+    for argv, word in ((["--duration", "5"], "--duration"), (["--amplitude-deg", "-1"], "--amplitude-deg"),
+                       (["--noisy", "--duration", "190"], "--noisy")):
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        assert e.value.code == 2 and word in capsys.readouterr().err.splitlines()[-1], argv

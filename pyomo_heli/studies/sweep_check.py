@@ -2,6 +2,7 @@
 
     python -m pyomo_heli.studies.sweep_check             # noise-free sweeps (the truth simulated again)
     python -m pyomo_heli.studies.sweep_check --noisy     # the recorded sweeps of data/bo105_synthetic
+    python -m pyomo_heli.studies.sweep_check --duration 190 --amplitude-deg 0.05   # other sweeps (noise-free)
 
 With ``--noisy`` it also prints J_r of Eq. 9 with ``[linear] weighting = "tischler_remple"`` (20 points
 per response) for the truth model and for M0 without the wake on the tail.
@@ -31,15 +32,18 @@ ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "data" / "bo105_synthetic.toml"
 
 
-def noise_free_sweeps(config=CONFIG, names=None, duration=None):
+def noise_free_sweeps(config=CONFIG, names=None, duration=None, amplitude=None):
     """Noise-free records (Maneuver objects at the record rate) of the pilot-flown sweeps of ``config``,
-    the truth model and its trims. ``duration`` [s] shortens every sweep (the sweep law over that length)."""
+    the truth model and its trims. ``duration`` [s] changes the length of every sweep record (the sweep
+    law over that length, the same dwell), ``amplitude`` [rad] the sweep amplitude."""
     import dataclasses
 
     cfg = load_config(config)
     plans = [p for p in cfg.maneuvers if p.shape == "sweep" and (names is None or p.name in names)]
     if duration is not None:
         plans = [dataclasses.replace(p, step=duration - p.t_start - 1.0, duration=duration) for p in plans]
+    if amplitude is not None:
+        plans = [dataclasses.replace(p, amplitude=amplitude) for p in plans]
     cfg = dataclasses.replace(cfg, maneuvers=plans, trim_speeds=[], trim_stream=None)
     model = truth_model(cfg)
     trims, runs = simulate_maneuvers(cfg, model)
@@ -72,8 +76,19 @@ def errors(fr, lin) -> dict:
 def main(argv=None) -> pd.DataFrame:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--noisy", action="store_true", help="the recorded sweeps of data/bo105_synthetic")
+    ap.add_argument("--duration", type=float, help="noise-free sweeps regenerated with records this long [s] "
+                    "(bundled: 95)")
+    ap.add_argument("--amplitude-deg", type=float, help="noise-free sweeps regenerated with this amplitude [deg] "
+                    "(bundled: 0.2)")
     args = ap.parse_args(argv)
-    records, model, trims = noise_free_sweeps()
+    if args.noisy and (args.duration or args.amplitude_deg):
+        ap.error("--noisy uses the recorded sweeps; --duration and --amplitude-deg regenerate noise-free ones")
+    if args.duration is not None and not args.duration > 10:
+        ap.error(f"--duration must be more than 10 s, got {args.duration:g}")
+    if args.amplitude_deg is not None and not args.amplitude_deg > 0:
+        ap.error(f"--amplitude-deg must be positive, got {args.amplitude_deg:g}")
+    records, model, trims = noise_free_sweeps(
+        duration=args.duration, amplitude=None if args.amplitude_deg is None else np.radians(args.amplitude_deg))
     if args.noisy:
         ft = load_flight_test(ROOT / "data" / "bo105_synthetic")
         records = ft.frequency()

@@ -373,16 +373,17 @@ def results_folder(out: str = "out", describe=None):
     return wrap
 
 
-def run_in_folder(folder, describe, fn, *args, **kwargs):
-    """``fn(*args, **kwargs)`` with the package's messages appended to ``folder/pyomo_heli.log`` and
-    ``folder/provenance.json`` written afterwards (``describe() -> (config, datasets)``): on success, or after
-    a failure once the run has written to the folder (its log is open), never into a folder the function
-    refused before starting."""
+@contextlib.contextmanager
+def logged_run(folder, describe):
+    """While the block runs, the package's messages are appended to ``folder/pyomo_heli.log``; afterwards
+    ``folder/provenance.json`` is written (``describe() -> (config, datasets)``): on success, or after a failure
+    once the run has written to the folder (its log is open), never into a folder the block refused before
+    starting. On success the log's last line (not on the console) says how long the run took."""
     ok = False
     t0 = time.perf_counter()
     with log_to_folder(folder) as handler:
         try:
-            result = fn(*args, **kwargs)
+            yield handler
             ok = True
             if Path(folder).is_dir():  # the last line of the folder's log only (not on the console)
                 handler.handle(logger.makeRecord(logger.name, logging.INFO, __file__, 0,
@@ -392,7 +393,12 @@ def run_in_folder(folder, describe, fn, *args, **kwargs):
             if Path(folder).is_dir() and (ok or handler.stream is not None):
                 config, datasets = describe()
                 write_provenance(folder, config, datasets)
-    return result
+
+
+def run_in_folder(folder, describe, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` inside :func:`logged_run` of ``folder``."""
+    with logged_run(folder, describe):
+        return fn(*args, **kwargs)
 
 
 def config_and_dataset(arguments: dict, name: str = "cfg"):

@@ -45,21 +45,21 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from .. import interrupts
 from ..config import ConfigError, IdentificationConfig, config_of_result  # noqa: F401 - re-exported
 from ..dataset import load_flight_test
 from ..diagnosis import attribution as attr
 from ..diagnosis.candidates import CANDIDATES, make_candidate
-from ..log import Progress, config_and_dataset, info, results_folder
+from ..log import info
 from .identify import run_identification, shape_values
 from ..nlp.identification import identification_data, prepare_data
 from ..pareto.result import write_json
-from ..pareto.store import FolderLock, claim_folder, read_checkpoint, write_checkpoint
+from ..pareto.store import read_checkpoint
 from ..settings import Problems, validate
 from ..settings.identification import LoopTable
 from ..report.loop import LOOP_FILE, load_loop  # noqa: F401 - load_loop re-exported (studies)
 from .loop_steps import (_with_candidate, _without, backward_check, errors_of,  # noqa: F401 (tests)
                          select_shape, validation_check)
+from .run_folder import RunFolder
 
 
 @dataclass
@@ -187,7 +187,6 @@ def _score_inputs(cfg: IdentificationConfig, settings: LoopSettings) -> dict:
     return {"input_errors": cfg.nlp.input_errors, "noise_sigma": cfg.nlp.noise_sigma}
 
 
-@results_folder("out", config_and_dataset)
 def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = None, progress=info,
                restart: bool = False) -> dict:
     """Run the loop; returns the content of ``loop.json`` (also written after every iteration).
@@ -195,26 +194,27 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
     A rerun on the same ``out`` reuses the finished iterations and shape decisions of the same fingerprint
     (:func:`_finished`); ``restart`` discards them and identifies every iteration afresh."""
     settings = settings or loop_settings(cfg)
-    out = Path(out)
-    claim_folder(out, "close-loop", restart)  # another command's results folder: refused before anything is done
-    ft = load_flight_test(cfg.dataset)
-    id_data = identification_data(cfg, ft)
-    val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
-                if cfg.validation else [])
-    # the folder only once the data loaded (a bad dataset leaves no folder behind), locked for the loop's life;
-    # SIGINT/SIGTERM stop it with Interrupted (finished iterations and points stay on disk, a rerun resumes)
-    with interrupts.guard(), FolderLock(out, "close-loop"):
-        return _close_loop(cfg, out, settings, progress, restart, ft, id_data, val_mans)
+    # another command's results folder: refused before anything is done
+    with RunFolder(out, "close-loop", cfg, restart) as run:
+        ft = load_flight_test(cfg.dataset)
+        id_data = identification_data(cfg, ft)
+        val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
+                    if cfg.validation else [])
+        # the folder only once the data loaded (a bad dataset leaves no folder behind), locked for the loop's life;
+        # SIGINT/SIGTERM stop it with Interrupted (finished iterations and points stay on disk, a rerun resumes)
+        with run.locked():
+            return _close_loop(cfg, run, settings, progress, ft, id_data, val_mans)
 
 
-def _close_loop(cfg, out: Path, settings, progress, restart, ft, id_data, val_mans) -> dict:
-    write_checkpoint(out, "close-loop")
+def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) -> dict:
+    out, restart = run.root, run.restart
+    run.mark()
     trims = ft.trims.reset_index(drop=True)
     doc = {"config": str(cfg.path), "dataset": str(cfg.dataset), "settings": dataclasses.asdict(settings),
            "units": "SI (rad, rad/s, m/s, g)", "iterations": [], "stopped": None}
     i = 0
     added_shape = None  # the shape rule's record for the candidate added last
-    bar = Progress(settings.max_iterations + 1, "loop iterations", at_most=True)
+    bar = run.progress_bar(settings.max_iterations + 1, "loop iterations", at_most=True)
     models = []  # the model of every finished iteration (the validation rule compares the last two)
     base_names = [e.name for e in cfg.model.extensions]  # declared by the config: never dropped by the loop
     while True:

@@ -13,15 +13,15 @@ from pathlib import Path
 import pandas as pd
 
 from ..config import IdentificationConfig
-from ..log import Progress, config_and_dataset, format_parameters, info, results_folder
+from ..log import format_parameters, info
 from ..nlp.identification import build_problem
 from ..physics.extensions import extension_forms  # noqa: F401 - re-exported
 from ..pareto.front import ParetoSolver, utopia_distance
 from ..pareto.placement import AdaptiveFront
-from ..pareto.result import IdentificationResult, write_csv
-from .. import interrupts
-from ..pareto.store import FolderLock, PointStore, claim_folder, fingerprint
+from ..pareto.result import IdentificationResult
+from ..pareto.store import fingerprint
 from ..provenance import provenance_info
+from .run_folder import RunFolder
 
 
 #: what the anchors define: unreliable when one of them did not converge (chosen.json info.unreliable)
@@ -48,6 +48,12 @@ def _mean(series):
     return float(series.mean()) if len(series) else None
 
 
+def built_message(data, what: str, seconds: float) -> str:
+    """The line that reports the NLP built: maneuvers, trim points, ``what`` (trim blocks, frequency points)."""
+    return (f"built NLP: {len(data.maneuvers)} maneuvers, {len(data.trims)} trim points, {what} in "
+            f"{seconds:.1f} s")
+
+
 def identification_fingerprint(cfg: IdentificationConfig) -> str:
     """What must not change between a killed run and its resumption: the config (after overrides) and data.
 
@@ -70,7 +76,6 @@ def identification_fingerprint(cfg: IdentificationConfig) -> str:
     return fingerprint(raw, cfg.dataset, command="identify", **extra)
 
 
-@results_folder("out", config_and_dataset)
 def run_identification(cfg: IdentificationConfig, out: str | Path, progress=info,
                        restart: bool = False, uncertainty: bool | str = False) -> IdentificationResult:
     """Solve anchors, front and choice; write each front point to ``out/front.csv`` as it finishes.
@@ -95,35 +100,27 @@ def run_identification(cfg: IdentificationConfig, out: str | Path, progress=info
     ``starts.csv``) is refused (StoreMismatchError, one line naming the folder), ``restart`` or not. A stored
     point that cannot be read is solved again with a warning (:mod:`pyomo_heli.pareto.store`).
     """
-    claim_folder(out, "identification", restart)
-    if "linear" in getattr(cfg, "objectives", ()):
-        from .identify_linear import run_tri_identification
+    with RunFolder(out, "identification", cfg, restart) as run, run.locked():
+        if "linear" in getattr(cfg, "objectives", ()):
+            from .identify_linear import run_tri_identification
 
-        with interrupts.guard(), FolderLock(out, "identification"):
-            return run_tri_identification(cfg, out, progress)  # uncertainty, resume: two-objective runs only
-    with interrupts.guard(), FolderLock(out, "identification"):
-        return _run_identification(cfg, Path(out), progress, restart, uncertainty)
+            return run_tri_identification(cfg, run, progress)  # uncertainty, resume: two-objective runs only
+        return _run_identification(cfg, run, progress, uncertainty)
 
 
-def _run_identification(cfg, out: Path, progress, restart, uncertainty) -> IdentificationResult:
-    store = PointStore(out, identification_fingerprint(cfg), restart=restart, what="identification")
-    if store.keys():
-        progress(f"resuming: {len(store.keys())} finished point(s) in {store.dir}")
+def _run_identification(cfg, run: RunFolder, progress, uncertainty) -> IdentificationResult:
+    out = run.root
+    store = run.store(identification_fingerprint(cfg), progress)
     t0 = time.perf_counter()
     m, data, ft = build_problem(cfg)
     t_build = time.perf_counter() - t0
-    progress(f"built NLP: {len(data.maneuvers)} maneuvers, {len(data.trims)} trim points, "
-             f"{len(data.speeds)} trim blocks in {t_build:.1f} s")
-    rows = []
-    front_csv = out / "front.csv"
-    if front_csv.exists():
-        front_csv.unlink()
-    bar = Progress(cfg.pareto.max_solves if cfg.pareto.placement == "adaptive" else cfg.pareto.points,
-                   "front points")
+    progress(built_message(data, f"{len(data.speeds)} trim blocks", t_build))
+    table = run.front("front.csv")  # rewritten as each point finishes
+    bar = run.progress_bar(cfg.pareto.max_solves if cfg.pareto.placement == "adaptive" else cfg.pareto.points,
+                           "front points")
 
     def on_point(p):
-        rows.append(p.row())
-        write_csv(pd.DataFrame(rows), front_csv)
+        table.add(p.row())
         params = format_parameters(p.parameters, cfg.model.parameters)
         from_disk = getattr(p, "from_disk", False)
         where = " (from disk)" if from_disk else ""
@@ -155,7 +152,7 @@ def _run_identification(cfg, out: Path, progress, restart, uncertainty) -> Ident
     else:
         direct = None
         progress("  no front point converged: nothing to choose (statuses in front.csv)")
-    front = pd.DataFrame(rows).sort_values("index").reset_index(drop=True)
+    front = pd.DataFrame(table.rows).sort_values("index").reset_index(drop=True)
     ok = front["success"].astype(bool)
     front["utopia_distance"] = float("nan")
     if ok.any():

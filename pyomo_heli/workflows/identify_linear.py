@@ -17,11 +17,10 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict
-from pathlib import Path
 
 import pandas as pd
 
-from ..log import Progress, format_parameters, info
+from ..log import format_parameters, info
 from ..dataset import load_flight_test
 from ..dataset.frequency_response import (frequency_responses, save_responses, sweep_responses,
                                           tischler_remple_points)
@@ -30,6 +29,8 @@ from ..pareto.result import IdentificationResult
 from ..pareto.epsilon import INFEASIBLE
 from ..pareto.tri_front import TriParetoSolver, utopia_distance_n
 from ..provenance import provenance_info
+from .identify import built_message
+from .run_folder import RunFolder
 
 
 def _point_dict(p) -> dict:
@@ -56,9 +57,9 @@ def data_responses(cfg, ft):
     return frequency_responses(mans, cfg.linear.pairs, cfg.linear.speeds, cfg.linear.spectral)
 
 
-def run_tri_identification(cfg, out, progress=info) -> IdentificationResult:
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+def run_tri_identification(cfg, run: RunFolder, progress=info) -> IdentificationResult:
+    """The tri-objective run in the claimed and locked folder ``run`` (see the module docstring)."""
+    out = run.root
     t0 = time.perf_counter()
     ft = load_flight_test(cfg.dataset)
     data = identification_data(cfg, ft)
@@ -72,16 +73,11 @@ def run_tri_identification(cfg, out, progress=info) -> IdentificationResult:
                  + (f", {r.omega.min():.2f}..{r.omega.max():.2f} rad/s" if len(r.omega) else ""))
     m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp, responses=[r for r in band if len(r.omega)])
     t_build = time.perf_counter() - t0
-    progress(f"built NLP: {len(data.maneuvers)} maneuvers, {len(data.trims)} trim points, "
-             f"{sum(len(r.omega) for r in band)} frequency points in {t_build:.1f} s")
-    rows = []
-    front_csv = out / "front.csv"
-    if front_csv.exists():
-        front_csv.unlink()
+    progress(built_message(data, f"{sum(len(r.omega) for r in band)} frequency points", t_build))
+    table = run.front("front.csv")  # rewritten as each point finishes
 
     def on_point(p):
-        rows.append(p.row())
-        pd.DataFrame(rows).to_csv(front_csv, index=False, float_format="%.12g")
+        table.add(p.row())
         params = format_parameters(p.parameters, cfg.model.parameters)
         note = f"; {p.note}" if p.note else ""
         progress(f"  point {p.index:>2} {p.kind:<3} ({p.i_trim},{p.i_linear}) J_time={p.J_time:.6g} "
@@ -92,7 +88,7 @@ def run_tri_identification(cfg, out, progress=info) -> IdentificationResult:
     ps = TriParetoSolver(m, cfg.pareto, cfg.linear.points, on_point=on_point)
     setup = time.perf_counter() - t1
     # anchors A, B, C, the (J_trim points x J_linear points) grid less A itself, and the direct Eq. 11 solve
-    bar = Progress(ps.counts[0] * ps.counts[1] + 3, "front points")
+    bar = run.progress_bar(ps.counts[0] * ps.counts[1] + 3, "front points")
     ps.front()
     chosen, _, utopia, nadir = ps.choose()
     bi, _, bi_utopia, bi_nadir = ps.choose(("time", "trim"), row_linear=0)
@@ -100,12 +96,12 @@ def run_tri_identification(cfg, out, progress=info) -> IdentificationResult:
     on_point(direct)
     progress(f"  chosen (3 objectives): point {chosen.index} {chosen.kind}; bi-objective choice: point {bi.index}; "
              f"direct Eq. 11 solve: {direct.status}")
-    front = pd.DataFrame(rows).sort_values("index").reset_index(drop=True)
+    front = pd.DataFrame(table.rows).sort_values("index").reset_index(drop=True)
     ok = front["success"].astype(bool) & front["kind"].isin(["A", "B", "C", "eps"])
     front["utopia_distance"] = float("nan")
     front.loc[ok, "utopia_distance"] = utopia_distance_n(front.loc[ok, ["J_time", "J_trim", "J_linear"]].to_numpy(),
                                                          utopia, nadir)
-    front.to_csv(front_csv, index=False, float_format="%.12g")
+    table.write(front)
     params = [f.name for f in cfg.free]
     result = IdentificationResult(
         front=front, parameters=params, units={n: cfg.model.parameters.spec(n).unit for n in params},

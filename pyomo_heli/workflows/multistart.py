@@ -33,13 +33,13 @@ import pandas as pd
 
 from ..config import IdentificationConfig
 from .identify import build_problem
-from ..log import Progress, config_and_dataset, format_parameters, info, results_folder
+from ..log import format_parameters, info
 from ..nlp.identification import initialise_at
 from ..pareto.front import FrontPoint, ParetoSolver
 from ..pareto.result import write_csv, write_json
-from .. import interrupts
 from ..pareto.snapshot import Snapshot
-from ..pareto.store import FolderLock, PointStore, claim_folder, fingerprint, variable_values
+from ..pareto.store import fingerprint, variable_values
+from .run_folder import RunFolder
 
 PROBLEMS = ("time", "epsilon")
 
@@ -177,7 +177,6 @@ def run_start(task: StartTask) -> tuple[dict, list | None]:
     return _row(task.k, task.guess, p, p.J_time), values
 
 
-@results_folder("out", config_and_dataset)
 def run_multistart(cfg: IdentificationConfig, out: str | Path, starts: int = 20, seed: int = 0,
                    problem: str = "time", epsilon: float | None = None, rtol: float = 1e-6,
                    restart: bool = False, progress=info, executor=None) -> MultistartResult:
@@ -199,26 +198,24 @@ def run_multistart(cfg: IdentificationConfig, out: str | Path, starts: int = 20,
         raise ValueError(f"--rtol must be a finite number > 0, got {rtol}")
     if epsilon is not None and not (math.isfinite(epsilon) and epsilon >= 0):
         raise ValueError(f"--epsilon must be a finite number >= 0 (J_trim >= 0), got {epsilon}")
-    claim_folder(out, "multi-start", restart)  # another command's folder: refused before anything is written
-    with interrupts.guard(), FolderLock(out, "multi-start"):
-        return _run_multistart(cfg, Path(out), starts, seed, problem, epsilon, rtol, restart, progress, executor)
+    with RunFolder(out, "multi-start", cfg, restart) as run, run.locked():
+        return _run_multistart(cfg, run, starts, seed, problem, epsilon, rtol, progress, executor)
 
 
-def _run_multistart(cfg, out: Path, starts, seed, problem, epsilon, rtol, restart, progress,
+def _run_multistart(cfg, run: RunFolder, starts, seed, problem, epsilon, rtol, progress,
                     executor=None) -> MultistartResult:
+    out = run.root
     key = fingerprint(cfg.raw, cfg.dataset, command="multistart", seed=seed, problem=problem, epsilon=epsilon)
-    store = PointStore(out, key, restart=restart, what="multi-start")
-    if store.keys():
-        progress(f"resuming: {len(store.keys())} finished start(s) in {store.dir}")
+    store = run.store(key, progress, items="start")
     t0 = time.perf_counter()
     eps = math.inf if epsilon is None else float(epsilon)
-    rows, resumed = {}, 0
-    bar = Progress(starts, "starts")
+    resumed = 0
+    starts_csv = run.front("starts.csv", fresh=False, order="start")  # rewritten as each start finishes
+    bar = run.progress_bar(starts, "starts")
     params_of = cfg.model.parameters
 
     def finished(k, guess, row, from_disk):
-        rows[k] = row
-        write_csv(pd.DataFrame([rows[i] for i in sorted(rows)]), out / "starts.csv")
+        starts_csv.add(row)
         shown = format_parameters({n: row[n] for n in guess}, params_of)
         start = format_parameters(guess, params_of)
         progress(f"  start {k:>3}: from {start} -> {shown} objective={row['objective']:.10g} "
@@ -258,8 +255,7 @@ def _run_multistart(cfg, out: Path, starts, seed, problem, epsilon, rtol, restar
             finished(t.k, t.guess, row, False)
 
         run_tasks(run_start, todo, executor, done)
-    rows = [rows[k] for k in sorted(rows)]
-    table = pd.DataFrame(rows)
+    table = starts_csv.table()
     ok = table["success"].astype(bool) & np.isfinite(table["objective"])
     best = None
     table["reached_best"] = False

@@ -73,6 +73,20 @@ def unit_factor(spec, unit: str | None) -> float:
     raise ValueError(f"unit '{unit}' not recognised for {spec.name}; use {' or '.join(allowed)}")
 
 
+def free_parameter_unit(parameters, name: str, unit: str | None, problems, where: str):
+    """(spec, factor of ``unit`` to SI) of the parameter ``name`` a config frees; None when the name or the unit is
+    unknown (the error added to ``problems`` under ``where``)."""
+    if name not in parameters:
+        problems.add(where, parameters._unknown(name))
+        return None
+    spec = parameters.spec(name)
+    try:
+        return spec, unit_factor(spec, unit)
+    except ValueError as exc:
+        problems.add(where, str(exc))
+        return None
+
+
 def load_identification_config(path: str | Path, overrides: dict | None = None,
                                raw: dict | None = None) -> IdentificationConfig:
     """Read and check an identification config. ``overrides`` replace top-level tables (tests, CLI).
@@ -140,15 +154,10 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
     free = []
     for name, p in s.parameters.items():
         where = f"parameters.{name}"
-        if name not in model.parameters:
-            problems.add(where, model.parameters._unknown(name))
+        found = free_parameter_unit(model.parameters, name, p.unit, problems, where)
+        if found is None:
             continue
-        spec = model.parameters.spec(name)
-        try:
-            fac = unit_factor(spec, p.unit)
-        except ValueError as exc:
-            problems.add(where, str(exc))
-            continue
+        spec, fac = found
         lo_d, hi_d = spec.bounds or (None, None)
         initial = spec.value if p.initial is None else p.initial * fac
         lower = lo_d if p.lower is None else p.lower * fac

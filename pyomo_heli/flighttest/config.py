@@ -11,9 +11,8 @@ from pathlib import Path
 
 import re
 
-from ..settings import ConfigError, Problems, validate  # noqa: F401 - ConfigError: the one error type
+from ..settings import ConfigError, Problems, read_settings  # noqa: F401 - ConfigError: the one error type
 from ..settings.generator import SWEEP_KEYS, GeneratorFile  # noqa: F401 - SWEEP_KEYS re-exported
-from ..tomlfile import read_toml
 
 from ..dataset.schema import (G_RANGE_M_S2, INPUT_CHANNELS, MANEUVER_QUANTITIES, MASS_RANGE_KG, MIN_SAMPLES,
                               NAME_PATTERN, RHO_RANGE_KG_M3, SAMPLE_RATE_RANGE_HZ, SPEED_RANGE_KT)
@@ -130,11 +129,7 @@ def load_config(path: str | Path) -> GeneratorConfig:
     """Read and check a generator config (declared in :mod:`pyomo_heli.settings.generator`): every error of the
     fields at once, then every error of the rules against the dataset format, the truth effects and the shapes."""
     path = Path(path)
-    raw = read_toml(path, ConfigError)
-    w = str(path)
-    problems = Problems(w, ConfigError)
-    s = validate(GeneratorFile, raw, problems)
-    problems.raise_if_any()
+    s, problems = read_settings(path, GeneratorFile)
 
     params = dict(s.truth.parameters)
     nominal = bo105()

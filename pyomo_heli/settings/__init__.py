@@ -5,9 +5,10 @@ use). The loaders (pyomo_heli.config, pyomo_heli.flighttest.config, pyomo_heli.w
 file against its declaration, report every error of the file in one pass (:class:`ConfigError`, one line per
 error) and then apply the rules that compare fields. docs/settings.md says why pydantic.
 """
-from .base import ConfigError, Problems, Table, validate
+from .base import ConfigError, Problems, Table, read_settings, validate
 
-__all__ = ["ConfigError", "KINDS", "Problems", "Table", "schema", "schema_text", "validate", "write_schemas"]
+__all__ = ["ConfigError", "KINDS", "Problems", "Table", "read_settings", "schema", "schema_text", "validate",
+           "write_schemas"]
 
 
 def _identification():

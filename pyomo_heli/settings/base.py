@@ -90,6 +90,19 @@ def validate(cls: type[Table], raw: dict, problems: Problems, table: str | None 
         return None
 
 
+def read_settings(path, cls: type[Table], error: type[ConfigError] = ConfigError) -> tuple[Table, Problems]:
+    """The TOML file ``path`` checked against its declaration ``cls``: every error of its fields raised at once
+    (``error``, one line each); else the validated tables and the file's :class:`Problems`, to which the loader
+    adds the errors of its rules across fields before it raises them in turn."""
+    from ..tomlfile import read_toml
+
+    raw = read_toml(path, error)
+    problems = Problems(str(path), error)
+    s = validate(cls, raw, problems)
+    problems.raise_if_any()
+    return s, problems
+
+
 def _sub_table(annotation) -> tuple[type[Table] | None, str]:
     """(the Table type an annotation holds, how: "" a table, "dict" a table per key, "list" a list of tables)."""
     import typing

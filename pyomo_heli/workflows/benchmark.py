@@ -364,6 +364,14 @@ def _fmt(v, digits=3):
     return f"{v:.{digits}g}"
 
 
+def _markdown(header: list, rows: list) -> list[str]:
+    """The lines of a markdown table: the header, its rule, one line per row (an empty cell is one space)."""
+    def line(cells):
+        return "|" + "|".join(f" {c} " if c != "" else " " for c in cells) + "|"
+
+    return [line(header), "|" + "---|" * len(header)] + [line(r) for r in rows]
+
+
 def format_tables(result: dict) -> str:
     """Markdown tables: per size, the front, single shooting, ratios against the targets."""
     lines = ["| size | samples | variables | build [s] | set-up [s] | point A solve [s] | A iterations | s/iteration |",
@@ -394,14 +402,12 @@ def format_tables(result: dict) -> str:
         lines += ["", "Set-up at size " + f"{first['size']}x [s]: " + ", ".join(f"{k} {_fmt(v)}" for k, v in b.items())]
     if first and "front" in first:
         f = first["front"]
-        lines += ["", "| point | kind | J_time | J_trim | warm it | warm [s] | cold it | cold [s] | status |",
-                  "|---|---|---|---|---|---|---|---|---|"]
-        for p in f["points"]:
-            lines.append(f"| {p['index']} | {p['kind']} | {p['J_time']:.7g} | {p['J_trim']:.5g} | {p['iterations']} | "
-                         f"{_fmt(p['wall_time'])} | {_fmt(p['cold_iterations'])} | {_fmt(p['cold_wall_time'])} | "
-                         f"{p['status']} |")
-        lines.append(f"| total | | | | {f['iterations']} | {_fmt(f['solve_time'])} | {f['interior_cold_iterations']} "
-                     f"(interior) | {_fmt(f['interior_cold_time'])} (interior) | |")
+        lines += [""] + _markdown(
+            ["point", "kind", "J_time", "J_trim", "warm it", "warm [s]", "cold it", "cold [s]", "status"],
+            [[p["index"], p["kind"], f"{p['J_time']:.7g}", f"{p['J_trim']:.5g}", p["iterations"], _fmt(p["wall_time"]),
+              _fmt(p["cold_iterations"]), _fmt(p["cold_wall_time"]), p["status"]] for p in f["points"]]
+            + [["total", "", "", "", f["iterations"], _fmt(f["solve_time"]),
+                f"{f['interior_cold_iterations']} (interior)", f"{_fmt(f['interior_cold_time'])} (interior)", ""]])
     nl = result.get("nl_route")
     if nl:
         lines += ["", "The same size with every row through the NL file (no point rows), same process:", "",
@@ -413,17 +419,15 @@ def format_tables(result: dict) -> str:
         lines.append("\nNL-route set-up [s]: " + ", ".join(f"{k} {_fmt(v)}" for k, v in nl["setup_breakdown"].items()))
     sc = result.get("scaling")
     if sc:
+        u, s_ = sc["unscaled"], sc["scaled"]
         lines += ["", f"Unscaled and scaled (IDAES Scaler, solver option scaling), size {sc['size']}x, fresh builds, "
-                  "same process:", "",
-                  "| point | kind | unscaled it | scaled it | unscaled [s] | scaled [s] | J_time unscaled "
-                  "| J_time scaled |",
-                  "|---|---|---|---|---|---|---|---|"]
-        for pu, ps_ in zip(sc["unscaled"]["points"], sc["scaled"]["points"]):
-            lines.append(f"| {pu['index']} | {pu['kind']} | {pu['iterations']} | {ps_['iterations']} | "
-                         f"{_fmt(pu['wall_time'])} | {_fmt(ps_['wall_time'])} | {pu['J_time']:.10g} | "
-                         f"{ps_['J_time']:.10g} |")
-        lines.append(f"| total | | {sc['unscaled']['iterations']} | {sc['scaled']['iterations']} | "
-                     f"{_fmt(sc['unscaled']['solve_time'])} | {_fmt(sc['scaled']['solve_time'])} | | |")
+                  "same process:", ""] + _markdown(
+            ["point", "kind", "unscaled it", "scaled it", "unscaled [s]", "scaled [s]", "J_time unscaled",
+             "J_time scaled"],
+            [[pu["index"], pu["kind"], pu["iterations"], ps_["iterations"], _fmt(pu["wall_time"]),
+              _fmt(ps_["wall_time"]), f"{pu['J_time']:.10g}", f"{ps_['J_time']:.10g}"]
+             for pu, ps_ in zip(u["points"], s_["points"])]
+            + [["total", "", u["iterations"], s_["iterations"], _fmt(u["solve_time"]), _fmt(s_["solve_time"]), "", ""]])
     ss = result.get("single_shooting")
     if ss:
         a = first["point_a"]

@@ -79,19 +79,14 @@ class TrimLoopConfig:
 def load_trim_loop_config(path) -> TrimLoopConfig:
     """Read and check a trim-loop config (declared in :mod:`pyomo_heli.settings.trim_loop`): every error of the
     fields at once, then those of the model's parameters, the solver options and the dataset folder."""
-    from ..config import unit_factor
+    from ..config import free_parameter_unit
     from ..diagnosis.candidates import CANDIDATES
-    from ..settings import Problems, validate
+    from ..settings import read_settings
     from ..settings.trim_loop import TrimLoopFile
     from ..solvers import validate_solver_options
-    from ..tomlfile import read_toml
 
     path = Path(path)
-    raw = read_toml(path, TrimLoopError)
-    f = str(path)
-    problems = Problems(f, TrimLoopError)
-    s = validate(TrimLoopFile, raw, problems)
-    problems.raise_if_any()
+    s, problems = read_settings(path, TrimLoopFile, TrimLoopError)
     ds = Path(s.data.dataset)
     if not ds.is_absolute():
         ds = (path.parent / ds).resolve()
@@ -113,15 +108,10 @@ def load_trim_loop_config(path) -> TrimLoopConfig:
             problems.add(where, "the pitch-attitude datum is freed by the dataset's manifest "
                                 "(conventions.theta_datum_deg = \"estimate\"), not by the config")
             continue
-        if name not in base.parameters:
-            problems.add(where, base.parameters._unknown(name))
+        found = free_parameter_unit(base.parameters, name, p.unit, problems, where)
+        if found is None:
             continue
-        spec = base.parameters.spec(name)
-        try:
-            fac = unit_factor(spec, p.unit)
-        except ValueError as exc:
-            problems.add(where, str(exc))
-            continue
+        spec, fac = found
         lo, hi = spec.bounds or (None, None)
         vals = {}
         for key, default in (("initial", spec.value / fac), ("lower", None if lo is None else lo / fac),

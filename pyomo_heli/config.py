@@ -217,9 +217,6 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
                           f"({len(use) - 1} with [objectives] use = {list(use)}), got {par.points}")
     if isinstance(par.points, list) and "points" in raw.get("linear", {}):
         raise ConfigError(f"{f} [linear]: field 'points': the grid is [pareto] points = {par.points}; give it once")
-    if par.placement == "adaptive" and "linear" in use:
-        raise ConfigError(f"{f} [pareto]: placement = \"adaptive\" applies to the two-objective front (J_time, "
-                          f"J_trim) so far; use placement = \"uniform\" with [objectives] use = [..., \"linear\"]")
     try:
         pareto = ParetoSettings(points=par.points, spacing=par.spacing, warm_start=par.warm_start,
                                 cold_check=par.cold_check, predictor=par.predictor, max_iter=par.max_iter,

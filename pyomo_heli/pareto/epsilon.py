@@ -306,12 +306,13 @@ class EpsilonConstraintSolver:
             start.restore()
         return p
 
-    def solve_at(self, eps, index: int | None = None, key: str | None = None):
+    def solve_at(self, eps, index: int | None = None, key: str | None = None, grid=()):
         """Solve the front point at the bounds ``eps`` (name -> bound, or a sequence over the bounded objectives).
 
         Warm-started from the nearest solved front point (:meth:`nearest_start`); needs the anchors.
         The point is appended to ``points`` and handed to ``on_point``; with a store and a ``key``
-        it is stored (and loaded on a rerun). This is the entry point of adaptive epsilon placement.
+        it is stored (and loaded on a rerun). ``grid``: the point's position on a grid, if any. This is
+        the entry point of adaptive epsilon placement (pareto/placement.py).
         """
         if not self._solved:
             if "A" not in self.anchor_points:
@@ -321,8 +322,8 @@ class EpsilonConstraintSolver:
             eps = dict(zip(self.bounded, np.atleast_1d(np.asarray(eps, float)).tolist()))
         index = index if index is not None else max([p.index for p in self.points] + [0]) + 1
         start = self.nearest_start(eps)
-        p = (self.solve_point(key, lambda: self._solve_from(index, eps, start)) if key
-             else self._solve_from(index, eps, start))
+        p = (self.solve_point(key, lambda: self._solve_from(index, eps, start, grid)) if key
+             else self._solve_from(index, eps, start, grid))
         if p.success:
             self.snapshots[index] = self._solved[-1][1] if not getattr(p, "from_disk", False) else Snapshot(self.m)
             if getattr(p, "from_disk", False):
@@ -342,9 +343,7 @@ class EpsilonConstraintSolver:
         if len(counts) != len(self.bounded):
             raise ValueError(f"a grid needs one count per bounded objective ({len(self.bounded)}), got {counts}")
         self.anchors()
-        a = self.anchor_points["A"]
-        self.axes = [epsilon_grid(_get(a, k), self.minima[k] + margin * (_get(a, k) - self.minima[k]), n,
-                                  self.settings.spacing) for k, n in zip(self.bounded, counts)]
+        self.axes = self.grid_axes(counts, margin)
         self._enter_front()
         index, at = 1, {(0,) * len(counts): self._solved[0]}
         for pos in snake(counts):
@@ -361,6 +360,13 @@ class EpsilonConstraintSolver:
             self.on_point(p)
             index += 1
         return self.points
+
+    def grid_axes(self, counts, margin: float = TIGHT_MARGIN) -> list:
+        """The grid's bounds per bounded objective (needs the anchors): ``counts[k]`` values from J_k at
+        anchor A down to ``margin`` of the anchor range above J_k's minimum, ``settings.spacing``."""
+        a = self.anchor_points["A"]
+        return [epsilon_grid(_get(a, k), self.minima[k] + margin * (_get(a, k) - self.minima[k]), int(n),
+                             self.settings.spacing) for k, n in zip(self.bounded, counts)]
 
     # -------------------------------------------------------------- choosing (Eq. 11)
     def payoff_utopia_nadir(self):

@@ -28,6 +28,9 @@ choice lies. ``[pareto] placement = "adaptive"`` places the points instead:
    (the *bracket* criterion). It also stops at ``max_solves`` (reported as not
    converged) or when an edge cannot be split any more.
 
+Three or more objectives: :mod:`.placement_nd` (anchors and a coarse grid, then the same refinement
+in the plane of epsilon coordinates, with the same settings).
+
 The functions below are pure functions of normalised objective points
 (arrays ``(points, objectives)``); :class:`AdaptiveFront` is the driver that
 solves the points through the narrow interface of a front solver:
@@ -95,6 +98,11 @@ def front_edges(Z) -> list[tuple[int, int]]:
                 for a in range(len(s)):
                     for b in range(a + 1, len(s)):
                         edges.add((int(min(s[a], s[b])), int(max(s[a], s[b]))))
+            # a point Qhull left out (it coincides with a vertex): joined to that vertex and to its neighbours
+            for q, v in np.asarray(tri.coplanar, int).reshape(-1, 3)[:, [0, 2]]:
+                q, v = int(q), int(v)
+                near = {v} | {j if i == v else i for i, j in edges if v in (i, j)}
+                edges |= {(min(q, k), max(q, k)) for k in near if k != q}
             return sorted(edges)
     order = np.lexsort(E.T[::-1])
     return [(int(order[k]), int(order[k + 1])) for k in range(n - 1)]
@@ -130,8 +138,14 @@ def chosen_point(Z) -> int:
 
 
 def neighbours(Z, c: int) -> list[int]:
-    """The points that share a front edge with point ``c``."""
-    return sorted({j if i == c else i for i, j in front_edges(Z) if c in (i, j)})
+    """The points that bracket point ``c`` on the front: for two objectives those sharing a front edge with
+    it, for more its :func:`~.placement_nd.cone_neighbours`."""
+    Z = np.asarray(Z, float)
+    if Z.shape[1] <= 2:
+        return sorted({j if i == c else i for i, j in front_edges(Z) if c in (i, j)})
+    from .placement_nd import cone_neighbours
+
+    return sorted(j for kind, j in cone_neighbours(Z, c) if kind == "point")
 
 
 def distance_in_se(theta_from: dict, theta_to: dict, se: dict) -> float:
@@ -233,9 +247,9 @@ class PlacementSummary:
     def to_dict(self) -> dict:
         return asdict(self)
 
-    def line(self) -> str:
+    def line(self, first: str = "by arc length") -> str:
         last = self.rounds[-1] if self.rounds else None
-        return (f"adaptive placement: {self.solves} front solves ({self.arc_length_solves} by arc length, "
+        return (f"adaptive placement: {self.solves} front solves ({self.arc_length_solves} {first}, "
                 f"{self.refinement_solves} refining around the Eq. 11 choice; cap {self.max_solves}); "
                 + (f"chosen point {last.chosen}, neighbours within {last.bracket_se:.3g} of its standard errors, "
                    if last else "") + f"{'converged' if self.converged else 'NOT converged'}: {self.stop}")
@@ -254,6 +268,8 @@ class AdaptiveFront:
     """
 
     objectives = ("J_time", "J_trim")
+    first_phase = "by arc length"  # the summary line's name of the points before the refinement
+    sort_points = True  # the solver's points by index at the end (A 0, B 1, then in the order solved)
 
     def __init__(self, solver, max_solves: int, standard_errors, spacing: str = "geometric", on_point=None,
                  progress=None):
@@ -340,30 +356,63 @@ class AdaptiveFront:
         self._refine()
         return self._finish()
 
+    def _scaling(self):
+        """(utopia, nadir) for this look at the front: the anchors', fixed."""
+        return self.utopia, self.nadir
+
+    def _taken(self) -> list:
+        """Epsilon coordinates tried, normalised as the front is now."""
+        return self.taken
+
+    def _place(self, e) -> None:
+        """Solve the point at the normalised epsilon coordinates ``e``."""
+        self._solve(denormalise(e, self.utopia, self.nadir, list(range(1, len(self.objectives)))))
+
+    def _bracket(self, Z, c, ok, se):
+        """({neighbour: distance from C in C's standard errors}, [(edge, its estimated distance)]) of C."""
+        return {n: distance_in_se(ok[c].parameters, ok[n].parameters, se) for n in neighbours(Z, c)}, []
+
+    def _probes(self, Z, c, r, gaps, use_model):
+        """(the points to place next, whether they are a model's minimum): the bracket probes."""
+        return refinement_probes(Z, c, r, self._taken()), False
+
     def _normalised(self):
         return normalise(self._F(self._ok()), self.utopia, self.nadir)
 
-    def _refine(self):
+    def _look(self, previous):
+        """One refinement round's look at the front: (converged points, Z, C, {neighbour: SE distance},
+        [(infeasible edge, SE distance)], round)."""
         ps, s = self.ps, self.summary
-        previous = None
+        self._scaling()
+        ok = self._ok()
+        Z = normalise(self._F(ok), self.utopia, self.nadir)
+        c = chosen_point(Z)
+        se = self._se_of(ok[c])
+        r, gaps = self._bracket(Z, c, ok, se)
+        move = None if previous is None else distance_in_se(previous.parameters, ok[c].parameters, se)
+        rnd = RefinementRound(solves=len(ps.points), chosen=ok[c].index, move_se=move,
+                              bracket_se=max(list(r.values()) + [g for _, g in gaps], default=0.0))
+        s.rounds.append(rnd)
+        self.progress(f"  refinement: chosen point {rnd.chosen}"
+                      + (f" moved {move:.3g} standard errors;" if move is not None else ";")
+                      + f" its neighbours lie within {rnd.bracket_se:.3g} of its standard errors")
+        return ok, Z, c, r, gaps, rnd
+
+    def _refine(self):
+        """Rounds until C's neighbours lie within one of its standard errors, each placing :meth:`_probes`.
+        ``use_model`` (for solvers that model the distance, :mod:`.placement_nd`): in the first round, after a
+        round that moved C, and after a model's point that became C."""
+        ps, s = self.ps, self.summary
+        previous, model_point = None, None
         while True:
-            ok = self._ok()
-            Z = normalise(self._F(ok), self.utopia, self.nadir)
-            c = chosen_point(Z)
-            se = self._se_of(ok[c])
-            r = {n: distance_in_se(ok[c].parameters, ok[n].parameters, se) for n in neighbours(Z, c)}
-            move = None if previous is None else distance_in_se(previous.parameters, ok[c].parameters, se)
-            rnd = RefinementRound(solves=len(ps.points), chosen=ok[c].index, move_se=move,
-                                  bracket_se=max(r.values(), default=0.0))
-            s.rounds.append(rnd)
-            self.progress(f"  refinement: chosen point {rnd.chosen}"
-                          + (f" moved {move:.3g} standard errors;" if move is not None else ";")
-                          + f" its neighbours lie within {rnd.bracket_se:.3g} of its standard errors")
-            previous = ok[c]
+            ok, Z, c, r, gaps, rnd = self._look(previous)
+            use_model = (ok[c].index == model_point if model_point is not None
+                         else previous is None or ok[c].index != previous.index)
+            previous, model_point = ok[c], None
             if rnd.bracket_se <= 1.0:
                 s.converged, s.stop = True, "the chosen point's neighbours lie within one of its standard errors"
                 return
-            probes = refinement_probes(Z, c, r, self.taken)
+            probes, from_model = self._probes(Z, c, r, gaps, use_model)
             if not probes:
                 s.stop = "the chosen point's edges cannot be split further"
                 return
@@ -371,7 +420,9 @@ class AdaptiveFront:
                 if len(ps.points) >= self.max_solves:
                     s.stop = f"cap of {self.max_solves} front solves reached"
                     return
-                self._solve(denormalise(e, self.utopia, self.nadir, list(range(1, len(self.objectives)))))
+                self._place(e)
+            if from_model:
+                model_point = ps.points[-1].index
 
     def compare_direct(self, chosen, direct) -> float | None:
         """The direct Eq. 11 solve's distance from the chosen point in the chosen point's standard errors
@@ -387,6 +438,7 @@ class AdaptiveFront:
         s = self.summary
         s.solves = len(self.ps.points)
         s.refinement_solves = s.solves - s.arc_length_solves if s.arc_length_solves else 0
-        self.ps.points.sort(key=lambda p: p.index)
-        self.progress("  " + s.line())
+        if self.sort_points:
+            self.ps.points.sort(key=lambda p: p.index)
+        self.progress("  " + s.line(self.first_phase))
         return self.ps.points

@@ -88,12 +88,25 @@ def run_tri_identification(cfg, run: RunFolder, progress=info) -> Identification
     ps = TriParetoSolver(m, cfg.pareto, cfg.linear.points, on_point=on_point)
     setup = time.perf_counter() - t1
     # anchors A, B, C, the (J_trim points x J_linear points) grid less A itself, and the direct Eq. 11 solve
-    bar = run.progress_bar(ps.counts[0] * ps.counts[1] + 3, "front points")
-    ps.front()
+    placement = None
+    if cfg.pareto.placement == "adaptive":  # anchors, a coarse 3 x 3 grid, refinement (pareto/placement_nd.py)
+        from ..pareto.placement_nd import AdaptiveFrontN
+        from ..uncertainty.front import point_standard_errors
+
+        bar = run.progress_bar(cfg.pareto.max_solves + 1, "front points", at_most=True)
+        placement = AdaptiveFrontN(ps, cfg.pareto.max_solves, lambda p: point_standard_errors(
+            cfg, data, p.parameters, "eps" if p.kind == "C" else p.kind), spacing=cfg.pareto.spacing, progress=progress)
+        placement.run()
+        ps.eps_trim, ps.eps_linear = ps.axes
+    else:
+        bar = run.progress_bar(ps.counts[0] * ps.counts[1] + 3, "front points")
+        ps.front()
     chosen, _, utopia, nadir = ps.choose()
     bi, _, bi_utopia, bi_nadir = ps.choose(("time", "trim"), row_linear=0)
     direct = ps.direct_choice(chosen)
     on_point(direct)
+    if placement is not None:
+        placement.compare_direct(chosen, direct)
     progress(f"  chosen (3 objectives): point {chosen.index} {chosen.kind}; bi-objective choice: point {bi.index}; "
              f"direct Eq. 11 solve: {direct.status}")
     front = pd.DataFrame(table.rows).sort_values("index").reset_index(drop=True)
@@ -110,7 +123,7 @@ def run_tri_identification(cfg, run: RunFolder, progress=info) -> Identification
         info={"config": str(cfg.path), "dataset": str(cfg.dataset), "objectives": list(cfg.objectives),
               "build_time": t_build, "solver_setup_time": setup, "total_time": time.perf_counter() - t0,
               "maneuvers": [mv.name for mv in data.maneuvers], "solver": cfg.pareto.solver,
-              "grid": list(ps.counts),
+              "grid": list(placement.coarse if placement is not None else ps.counts),
               "eps_trim": list(ps.eps_trim), "eps_linear": list(ps.eps_linear),
               "bi_objective": {"chosen": _point_dict(bi), "utopia": list(bi_utopia), "nadir": list(bi_nadir)},
               "failed_points": int((~front["success"].astype(bool)).sum()),
@@ -118,6 +131,7 @@ def run_tri_identification(cfg, run: RunFolder, progress=info) -> Identification
               "mean_iterations_grid": float(front.loc[front.kind == "eps", "iterations"].mean()),
               "max_iterations_grid": int(front.loc[front.kind == "eps", "iterations"].max()),
               # the Eq. 11 choice under both nadir rules ([pareto] nadir picks `chosen`)
-              "eq11_by_nadir": ps.choices(), **provenance_info(cfg)})
+              "eq11_by_nadir": ps.choices(),
+              **({"placement": placement.summary.to_dict()} if placement is not None else {}), **provenance_info(cfg)})
     result.save(out)
     return result

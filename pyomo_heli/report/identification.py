@@ -223,6 +223,20 @@ def _save(fig, path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
+def placement_line(pl: dict, first: str = "by normalised arc length") -> str:
+    """One sentence on an adaptive epsilon placement (``chosen.json`` ``info.placement``): solves, convergence,
+    and the direct Eq. 11 solve's distance from C. ``first``: what placed the points before the refinement."""
+    last = (pl.get("rounds") or [{}])[-1]
+    return (f"Adaptive epsilon placement: {pl['solves']} front solves, anchors included "
+            f"({pl['arc_length_solves']} "
+            f"{first}, {pl['refinement_solves']} refining around C; cap {pl['max_solves']}); "
+            f"{'converged' if pl['converged'] else 'NOT converged'}: {pl['stop']}"
+            + (f" (C's neighbours within {_fmt(last['bracket_se'], 3)} of its standard errors)"
+               if 'bracket_se' in last else "")
+            + (f"; the direct Eq. 11 solve lies {_fmt(pl['direct_se'], 3)} of C's standard errors from C"
+               if pl.get("direct_se") is not None else "") + ".")
+
+
 def write_report(out_dir, cfg, results_dir=None, figure_format: str = "png") -> Path:
     """Write figures, tables, metrics and ``report.md`` of the identification in ``results_dir``
     (default: ``out_dir``) into ``out_dir``; return the path of ``report.md``."""
@@ -309,15 +323,7 @@ def write_report(out_dir, cfg, results_dir=None, figure_format: str = "png") -> 
         L.append(nadir_rule_line(info["eq11_by_nadir"]) + ".  ")
     pl = info.get("placement")
     if pl:  # adaptive epsilon placement (pareto/placement.py)
-        last = (pl.get("rounds") or [{}])[-1]
-        L.append(f"Adaptive epsilon placement: {pl['solves']} front solves, anchors included "
-                 f"({pl['arc_length_solves']} "
-                 f"by normalised arc length, {pl['refinement_solves']} refining around C; cap {pl['max_solves']}); "
-                 f"{'converged' if pl['converged'] else 'NOT converged'}: {pl['stop']}"
-                 + (f" (C's neighbours within {_fmt(last['bracket_se'], 3)} of its standard errors)"
-                    if 'bracket_se' in last else "")
-                 + (f"; the direct Eq. 11 solve lies {_fmt(pl['direct_se'], 3)} of C's standard errors from C"
-                    if pl.get("direct_se") is not None else "") + ".  ")
+        L.append(placement_line(pl) + "  ")
     n_eps = int((result.front["kind"] == "eps").sum())
     L.append(f"Mean iterations per interior front point: {_fmt(mean_it, 4)} "
              f"(over {n_eps} epsilon-constraint solve{'s' if n_eps != 1 else ''}, failed ones included).")

@@ -17,7 +17,7 @@ from ..dataset.frequency_response import load_responses
 from ..pareto.result import IdentificationResult, ResultFileError, check_point_record, is_number
 from ..physics.model import INPUTS, OUTPUTS
 from ..simulation.linearize import linearize_float
-from .identification import _display, markdown_table, nadir_rule_line, read_truth
+from .identification import _display, markdown_table, nadir_rule_line, placement_line, read_truth
 
 ESTIMATES = (("time-domain (A)", "C0", "--"), ("bi-objective", "C2", "-."), ("tri-objective", "C3", "-"))
 
@@ -456,6 +456,8 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png") -> 
             f"{result.info['failed_points']} point(s) not converged"
             + (f", {result.info['infeasible_points']} of them infeasible (status `infeasible`)"
                if result.info.get("infeasible_points") else "") + ".", "",
+            *([placement_line(pl, "on the anchors and a coarse grid"), ""] if (pl := result.info.get("placement"))
+              else []),
             "## Estimates (display units)", "", markdown_table(params, 5), "",
             "## Objective values of the choices", "", markdown_table(objs, 6), "",
             f"utopia (J_time, J_trim, J_linear) = {tuple(round(v, 6) for v in result.utopia)}, "

@@ -189,3 +189,36 @@ def test_tiny_tri_identification_with_adaptive_placement(tmp_path):
     assert int(conv.iloc[chosen_point(Zc)]["index"]) == res.chosen["index"]
     assert s["converged"] and s["rounds"][-1]["bracket_se"] <= 1.0, s["stop"]
     assert s["direct_se"] is not None and s["direct_se"] <= 1.0
+
+
+# --------------------------------------------------------------- the N-objective solver on the analytic box
+@pytest.mark.parametrize("rule", ["payoff", "nondominated"])
+def test_placement_on_the_epsilon_constraint_solver(rule):
+    """The real solver (Ipopt on the box, p = q = 1, no cut) through solve_at: converged, and the choice within
+    one standard error of the direct Eq. 11 solve under the same nadir rule (for the payoff rule that is
+    a = b = t, test_pareto_epsilon.py). With the non-dominated rule the nadir follows the points."""
+    import pyomo.environ as pyo
+
+    from pyomo_heli.pareto.epsilon import EpsilonConstraintSolver
+    from pyomo_heli.pareto.front import ParetoSettings
+
+    m = pyo.ConcreteModel()
+    m.free_parameters = pyo.Set(initialize=["a", "b"], ordered=True)
+    m.theta_s = pyo.Var(m.free_parameters, initialize=0.3, bounds=(-5, 5))
+    m.theta_scale = pyo.Param(m.free_parameters, initialize=1.0)
+    a, b = m.theta_s["a"], m.theta_s["b"]
+    m.J_f1, m.J_f2, m.J_f3 = (pyo.Expression(expr=e) for e in (a**2 + b**2, (a - 1) ** 2, (b - 1) ** 2))
+    settings = ParetoSettings(solver_options={"tol": 1e-10, "constr_viol_tol": 1e-13}, max_iter=100, nadir=rule,
+                              placement="adaptive", max_solves=30)
+    ps = EpsilonConstraintSolver(m, ("f1", "f2", "f3"), settings)
+    se = 0.01
+    ada = AdaptiveFrontN(ps, settings.max_solves, lambda p: {"a": se, "b": se}, progress=lambda *_: None)
+    points = ada.run()
+    assert ada.summary.converged, ada.summary.stop
+    assert all(p.success and p.iterations < 100 for p in points)
+    chosen, _, _, nadir = ps.eq11(rule)
+    assert ada.nadir == pytest.approx(nadir)  # the placement's last look used the nadir of the final choice
+    direct = ps.direct_choice(chosen, rule=rule)
+    assert direct.success and ada.compare_direct(chosen, direct) <= 1.0
+    if rule == "payoff":
+        assert direct.parameters["a"] == pytest.approx(T, abs=1e-5)

@@ -237,7 +237,7 @@ class PlacementSummary:
     placement: str = "adaptive"
     max_solves: int = 0
     solves: int = 0  # front solves, anchors included (the direct Eq. 11 solve is not one of them)
-    arc_length_solves: int = 0  # anchors, seed and arc-length points
+    arc_length_solves: int = 0  # anchors, seed and arc-length points (more objectives: anchors and coarse grid)
     refinement_solves: int = 0
     converged: bool = False  # C's neighbours within one of its standard errors in every parameter
     direct_se: float | None = None  # the direct Eq. 11 solve's distance from C, in C's standard errors

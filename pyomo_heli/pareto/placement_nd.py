@@ -80,14 +80,14 @@ def edge_gaps(Z, c: int, r_neighbours: dict, edges) -> list[tuple[np.ndarray, fl
 
 def model_minimum(Z, c: int, taken=()) -> np.ndarray | None:
     """Three or more objectives: the epsilon coordinates where a model of the Eq. 11 distance is least
-    (the 2-D counterpart of :func:`predicted_minimum`'s parabola).
+    (the 2-D counterpart of :func:`~.placement.predicted_minimum`'s parabola).
 
     The squared distance is ``z_1^2 + sum_k z_k^2``: exact in the epsilon coordinates ``z_2 ..``, with
     ``z_1`` (the minimised objective along the front) modelled by a quadratic in them, fitted (weighted least
     squares, the nearer points weighing more) to C and the points nearest it, six more than the quadratic's
     coefficients. The model is minimised within the distance from C of the farthest fitted point (a trust
-    region). None with too few points, a rank-deficient fit, or a minimiser within
-    ``MIN_STEP`` of a placed point.
+    region). None with too few points, a rank-deficient fit, or a minimiser within ``MIN_STEP`` of a placed
+    point.
     """
     from scipy.optimize import minimize
 

@@ -148,7 +148,7 @@ def test_refinement_converges_within_one_standard_error_of_the_closed_form_choic
 
 
 @pytest.mark.parametrize("p, q, cut", [(1, 1, 1.5), (3, 1, 1.5), (1, 5, 1.2), (0.3, 2, 1.5)])
-@pytest.mark.parametrize("se, cap", [(0.01, 30), (0.03, 24), (0.1, 20)])
+@pytest.mark.parametrize("se, cap", [(0.01, 30), (0.03, 28), (0.1, 24)])
 def test_a_converged_placement_is_within_one_standard_error_of_the_choice(p, q, cut, se, cap):
     """Asymmetric fronts, some with the infeasible cut near the choice: when the placement says converged,
     its choice lies within one standard error of the Eq. 11 point found by the second method."""
@@ -167,19 +167,18 @@ def test_refinement_stops_at_the_cap_and_says_so():
 
 # --------------------------------------------------------------- a tiny tri-objective identification
 def test_tiny_tri_identification_with_adaptive_placement(tmp_path):
-    """tiny_case1_tri.toml (2 s of one record, one frequency response) with adaptive placement: every point
+    """tiny_case1_tri_adaptive.toml (2 s of one record, one frequency response, adaptive placement): every point
     converges or is reported infeasible within the iteration cap, the choice is the Eq. 11 point of
     front.csv, and the direct Eq. 11 solve lies within one standard error of it."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.workflows.identify import run_identification
 
-    cfg = load_identification_config(Path(__file__).parent / "configs" / "tiny_case1_tri.toml",
-                                     {"pareto": {"placement": "adaptive", "max_solves": 20}})
+    cfg = load_identification_config(Path(__file__).parent / "configs" / "tiny_case1_tri_adaptive.toml")
     res = run_identification(cfg, tmp_path, progress=lambda *_: None)
     s = res.info["placement"]
     front = pd.read_csv(tmp_path / "front.csv")
     placed = front[front.kind != "direct"]
-    assert s["solves"] == len(placed) <= 20 and res.info["grid"] == [3, 3]
+    assert s["solves"] == len(placed) <= 30 and res.info["grid"] == [3, 3]
     coarse = placed[placed.i_trim >= 0]
     assert set(zip(coarse.i_trim, coarse.i_linear)) == {(i, j) for i in range(3) for j in range(3)}
     ok = placed.success.astype(bool) | (placed.status == INFEASIBLE)

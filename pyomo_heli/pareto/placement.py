@@ -372,6 +372,10 @@ class AdaptiveFront:
         """({neighbour: distance from C in C's standard errors}, [(edge, its estimated distance)]) of C."""
         return {n: distance_in_se(ok[c].parameters, ok[n].parameters, se) for n in neighbours(Z, c)}, []
 
+    def _confirmation(self, Z, c):
+        """A point that could still beat a bracketed C (placed before the refinement stops), or None: none here."""
+        return None
+
     def _probes(self, Z, c, r, gaps, use_model):
         """(the points to place next, whether they are a model's minimum): the bracket probes."""
         return refinement_probes(Z, c, r, self._taken()), False
@@ -401,18 +405,21 @@ class AdaptiveFront:
     def _refine(self):
         """Rounds until C's neighbours lie within one of its standard errors, each placing :meth:`_probes`.
         ``use_model`` (for solvers that model the distance, :mod:`.placement_nd`): in the first round, after a
-        round that moved C, and after a model's point that became C."""
+        round that moved C, and after a model's point that became C. A bracketed C is first checked once by
+        :meth:`_confirmation` (again only after other points were placed)."""
         ps, s = self.ps, self.summary
-        previous, model_point = None, None
+        previous, model_point, confirming = None, None, False
         while True:
             ok, Z, c, r, gaps, rnd = self._look(previous)
             use_model = (ok[c].index == model_point if model_point is not None
                          else previous is None or ok[c].index != previous.index)
             previous, model_point = ok[c], None
-            if rnd.bracket_se <= 1.0:
+            e = self._confirmation(Z, c) if rnd.bracket_se <= 1.0 and not confirming else None
+            if rnd.bracket_se <= 1.0 and e is None:
                 s.converged, s.stop = True, "the chosen point's neighbours lie within one of its standard errors"
                 return
-            probes, from_model = self._probes(Z, c, r, gaps, use_model)
+            confirming = e is not None  # one check of a bracket, until other points are placed
+            probes, from_model = ([e], True) if e is not None else self._probes(Z, c, r, gaps, use_model)
             if not probes:
                 s.stop = "the chosen point's edges cannot be split further"
                 return

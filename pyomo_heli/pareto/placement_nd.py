@@ -25,7 +25,9 @@ on the N-objective solver :class:`~.epsilon.EpsilonConstraintSolver` (the tri-ob
      distance (:func:`model_minimum`): ``|z|^2 = z_1^2 + sum_k z_k^2`` with ``z_1``, the minimised objective
      over the front, a quadratic fitted to the points nearest C.
 
-   It stops when the bracket holds (converged), at ``max_solves``, or when nothing new can be placed.
+   Before it stops on a bracket, one more model point checks it (a bracket along the compass directions
+   can miss a valley of the distance between them); it stops when the bracket holds after that check
+   (converged), at ``max_solves``, or when nothing new can be placed.
 
 Each point is one :meth:`~.epsilon.EpsilonConstraintSolver.solve_at`: warm from the nearest solved point,
 capped at ``[pareto] max_iter``, infeasible bounds reported as infeasible (a priori or by Ipopt), as on the
@@ -192,6 +194,11 @@ class AdaptiveFrontN(AdaptiveFront):
         cones = cone_neighbours(Z, c, self._normalised_bounds(self.infeasible_tried))
         r = {j: distance_in_se(ok[c].parameters, ok[j].parameters, se) for kind, j in cones if kind == "point"}
         return r, edge_gaps(Z, c, r, [x for kind, x in cones if kind == "edge"])
+
+    def _confirmation(self, Z, c):
+        """The model's minimum (:func:`model_minimum`): a bracket along the compass directions can miss a valley
+        of the distance between them, which the model sees."""
+        return model_minimum(Z, c, self._taken())
 
     def _probes(self, Z, c, r, gaps, use_model):
         taken = self._taken()

@@ -5,7 +5,6 @@
 - the adapter's scaled solve of a two-variable problem gives the analytic solution, objective and the same
   multipliers as the unscaled solve;
 - point A of a small instance solved scaled equals the unscaled estimate to 1e-6 relative;
-- Ipopt's multiplier threshold is translated into the scaled problem's units (analytic numbers);
 - a 3-point front of the tiny instance scaled gives the unscaled estimates in no more iterations.
 """
 from pathlib import Path
@@ -125,21 +124,6 @@ def test_scaled_point_a_equals_unscaled_estimate(tiny):
     for name, v in res[False].parameters.items():
         assert res[True].parameters[name] == pytest.approx(v, rel=1e-6), name
     assert res[True].J_time == pytest.approx(res[False].J_time, rel=1e-9)
-
-
-def test_multiplier_threshold_is_given_in_the_scaled_multipliers_units():
-    """A row scaled by s_g has its multiplier times s_f / s_g: Ipopt's constr_mult_init_max (1000) becomes
-    1000 max(s_f / s_g), so every least-squares estimate the unscaled problem keeps is kept; a user's value stays."""
-    from pyomo_heli.solvers.casadi_scaling import NLPScaling
-
-    sc = NLPScaling(sx=[1.0, 1e-3], sg=[1 / 40, 2.0, 1.0], sf=0.5)
-    assert sc.ipopt_options({"tol": 1e-8}, set())["constr_mult_init_max"] == pytest.approx(1000 * 0.5 * 40)
-    assert sc.ipopt_options({"constr_mult_init_max": 10.0}, set())["constr_mult_init_max"] == pytest.approx(200.0)
-    assert sc.ipopt_options({"constr_mult_init_max": 10.0}, {"constr_mult_init_max"}) == {"constr_mult_init_max": 10.0}
-    # the same estimate, unscaled lam = (900, 900, 900) is kept by the unscaled test (<= 1000); scaled it is
-    # lam * s_f / s_g = (18000, 225, 450): above 1000, within the translated threshold
-    lam_s = 900.0 * sc.sf / sc.sg
-    assert lam_s.max() > 1000 and lam_s.max() <= sc.ipopt_options({}, set())["constr_mult_init_max"]
 
 
 def test_scaled_front_equals_unscaled_front_in_no_more_iterations(tiny):

@@ -420,9 +420,7 @@ class CasadiIpoptSolver(DerivativeFunctions):
             return self._solve(warm_start, options)
 
     def _solve(self, warm_start: str, options: dict | None) -> SolveResult:
-        ipopt_options, verbose, user = resolve_options(self.options, options, warm_start)
-        if self._scaling is not None:  # options in the units of the multipliers, for the scaled problem
-            ipopt_options = self._scaling.ipopt_options(ipopt_options, user)
+        ipopt_options, verbose, _ = resolve_options(self.options, options, warm_start)
         self._check_unchanged()
         solver = self._solver_for(ipopt_options, verbose)
         args = self._numeric_inputs()

@@ -16,14 +16,6 @@ unscaled: x = x_s / s_x, f = f_s / s_f, and the multipliers of the unscaled KKT 
 scaled problem divided by s_f): lam_g = s_g lam_s / s_f, lam_x = s_x lam_x_s / s_f; a multiplier warm
 start goes the other way.
 
-Ipopt's options in the units of the multipliers are translated alike (:meth:`NLPScaling.ipopt_options`):
-Ipopt discards its least-squares estimate of the row multipliers at the start (and starts from 0) when one
-exceeds ``constr_mult_init_max`` (1000). A row scaled by s_g has its multiplier multiplied by s_f / s_g,
-so the scaled problem gets the threshold 1000 max(s_f / s_g): every estimate the unscaled problem would
-keep is kept. Without it, the second stage of anchor B (a primal start at mu 1e-6) lost its estimate
-(the trim rows' multipliers, up to 2e4 unscaled, times up to 40 scaled) and took 25 iterations instead of
-11 on tests/configs/small_case1_noisy.toml (unscaled: 14; docs/performance.md, "Scaling").
-
 The factors are found as Pyomo finds them (``SuffixFinder("scaling_factor")``, the lookup of
 ``core.scale_model``; IDAES's scalers write the same suffixes): the ``scaling_factor`` Suffix of the
 component's block or of a block above it; missing: 1. They are read when the adapter (re)builds.
@@ -90,17 +82,6 @@ class NLPScaling:
                            ["triu_hess_gamma_x_x"])
 
     # ------------------------------------------------------------ numbers
-    #: Ipopt's default of ``constr_mult_init_max`` (the largest least-squares multiplier estimate it keeps)
-    CONSTR_MULT_INIT_MAX = 1000.0
-
-    def ipopt_options(self, options: dict, user: set) -> dict:
-        """Ipopt ``options`` for the scaled problem: ``constr_mult_init_max`` in its multipliers' units
-        (module docstring), unless the user set it (``user``: the keys the user gave)."""
-        if "constr_mult_init_max" in user or not len(self.sg):
-            return options
-        base = float(options.get("constr_mult_init_max", self.CONSTR_MULT_INIT_MAX))
-        return {**options, "constr_mult_init_max": base * float(np.max(self.sf / self.sg))}
-
     def scale_inputs(self, args: dict) -> dict:
         """casadi's solver arguments (x0, bounds, multipliers) of the unscaled problem -> the scaled one's."""
         out = dict(args)

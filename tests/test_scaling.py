@@ -4,7 +4,8 @@
   NLP, with the physics nominals (checked against the numbers written here, not read back from the module);
 - the adapter's scaled solve of a two-variable problem gives the analytic solution, objective and the same
   multipliers as the unscaled solve;
-- point A of a small instance solved scaled equals the unscaled estimate to 1e-6 relative.
+- point A of a small instance solved scaled equals the unscaled estimate to 1e-6 relative;
+- a 3-point front of the tiny instance scaled gives the unscaled estimates in no more iterations.
 """
 from pathlib import Path
 
@@ -123,6 +124,31 @@ def test_scaled_point_a_equals_unscaled_estimate(tiny):
     for name, v in res[False].parameters.items():
         assert res[True].parameters[name] == pytest.approx(v, rel=1e-6), name
     assert res[True].J_time == pytest.approx(res[False].J_time, rel=1e-9)
+
+
+def test_scaled_front_equals_unscaled_front_in_no_more_iterations(tiny):
+    """A 3-point front (A, one interior point, B) of the tiny instance unscaled and scaled: the same estimates at
+    every point (1e-6 relative to max(|value|, scale)) and the scaled solves take no more Ipopt iterations in all."""
+    import dataclasses
+
+    from pyomo_heli.pareto.front import ParetoSolver
+
+    cfg, _ = tiny
+    runs = {}
+    for scaled in (False, True):
+        settings = dataclasses.replace(cfg.pareto, points=3, cold_check=False,
+                                       solver_options={**cfg.pareto.solver_options, "scaling": scaled})
+        runs[scaled] = ParetoSolver(_build(tiny), settings).front()
+        assert all(p.success for p in runs[scaled])
+    scales = {f.name: f.scale for f in cfg.free}
+    for pu, ps_ in zip(runs[False], runs[True]):
+        assert (pu.kind, pu.index) == (ps_.kind, ps_.index)
+        for name, v in pu.parameters.items():
+            assert abs(ps_.parameters[name] - v) <= 1e-6 * max(abs(v), scales.get(name, 1.0)), (pu.kind, name)
+        assert ps_.J_time == pytest.approx(pu.J_time, rel=1e-8)
+    iterations = {s: [p.iterations for p in runs[s]] for s in runs}
+    print(f"iterations per point (A, interior, B): unscaled {iterations[False]}, scaled {iterations[True]}")
+    assert sum(iterations[True]) <= sum(iterations[False]), iterations
 
 
 def test_scaling_is_an_adapter_option():

@@ -6,11 +6,13 @@ them, pruning to the committed files, the command mapping); the slow check parse
 """
 from __future__ import annotations
 
+import json
 import sys
 
 import pytest
 
 from pyomo_heli.studies import regenerate as R
+from pyomo_heli.studies.compare_results import compare_folder
 
 
 def test_inputs_come_first_and_in_list_order():
@@ -54,3 +56,57 @@ def test_unknown_folder_is_one_line_exit_2(capsys):
 def test_every_listed_command_parses_and_its_files_exist(capsys):
     """A regeneration check of the checkout: reads studies/ (configs, scripts); runs nothing."""
     assert R.main(["--check"]) == 0, capsys.readouterr().err
+
+
+def _folder(root, chosen_J, wall_time, n_x, table_cell, status="Solve_Succeeded"):
+    """A tiny results folder: a JSON, a CSV and a Markdown table, plus a figure (never compared)."""
+    root.mkdir()
+    (root / "chosen.json").write_text(json.dumps({
+        "chosen": {"J_time": chosen_J, "status": status, "wall_time": wall_time, "iterations": 5,
+                   "parameters": {"theta_twist": -3.9e-08, "CL_alpha_HT": 6.284}},
+        "dataset": str(root)}))
+    (root / "front.csv").write_text(f"index,J_time,n_x,wall_time\n0,-54368.2,{n_x},{wall_time}\n")
+    (root / "report.md").write_text(f"- total time {wall_time} s\n\n| point | J_trim | wall time [s] |\n|---|---|---|\n"
+                                    f"| C | {table_cell} | {wall_time} |\n")
+    (root / "front.png").write_bytes(b"\x89PNG" + bytes([int(wall_time) % 256]))
+
+
+KEEP = ("chosen.json", "front.csv", "report.md", "front.png")
+
+
+def test_compare_passes_within_1e6_and_skips_timings(tmp_path):
+    ref, new = tmp_path / "ref", tmp_path / "new"
+    _folder(ref, -54271.0, 16.2, 0.005, "0.2008")
+    # J_time 3e-7 relative off; theta_twist (at its bound, ~0) 2e-10 off: under the 1e-9 floor; the table's
+    # 0.2009 is one unit of its last printed digit from 0.2008 (a value on the rounding edge); timings, the
+    # dataset path and the figure differ freely
+    _folder(new, -54271.0 * (1 + 3e-7), 99.9, 0.005, "0.2009")
+    doc = json.loads((new / "chosen.json").read_text())
+    doc["chosen"]["parameters"]["theta_twist"] = -3.92e-08
+    (new / "chosen.json").write_text(json.dumps(doc))
+    c = compare_folder(ref, new, KEEP)
+    assert c.ok, c.mismatches
+    assert c.files == 3
+    # json: J_time, iterations, theta_twist, CL_alpha_HT; csv: index, J_time, n_x; md: 0.2008 (+ none in header)
+    assert c.numbers == 8
+    assert c.worst == pytest.approx(3e-7, rel=1e-6) and c.where == "chosen.json.chosen.J_time"
+
+
+def test_compare_fails_on_a_difference_over_1e6_and_exits_1(tmp_path, capsys):
+    ref, new = tmp_path / "docs_results" / "case2", tmp_path / "out" / "case2"
+    ref.parent.mkdir()
+    new.parent.mkdir()
+    _folder(ref, -54271.0, 16.2, 0.005, "0.2008")
+    _folder(new, -54271.0, 16.2, 0.005 * (1 + 2e-6), "0.2008", status="Maximum_Iterations_Exceeded")
+    c = compare_folder(ref, new, KEEP)
+    assert not c.ok
+    assert c.worst == pytest.approx(2e-6, rel=1e-6) and c.where == "front.csv row 1 n_x"
+    assert len(c.mismatches) == 2 and "Maximum_Iterations_Exceeded" in c.mismatches[0]
+    # a printed number more than one unit of its last digit away
+    (new / "report.md").write_text((ref / "report.md").read_text().replace("0.2008", "0.2010"))
+    assert "report.md row 3 J_trim: 0.2008 -> 0.201" in compare_folder(ref, new, KEEP).mismatches[-1]
+    (new / "report.md").unlink()
+    assert compare_folder(ref, new, KEEP).mismatches[-1] == "report.md: missing"
+    code = R.main(["--compare", "case2", "--out", str(tmp_path / "out"), "--reference", str(tmp_path / "docs_results")])
+    out = capsys.readouterr().out
+    assert code == 1 and "| case2 | 2 | 7 | 2.00e-06 | front.csv row 1 n_x | FAIL (3) |" in out

@@ -4,6 +4,10 @@
     python studies/regenerate_docs.py --check               # list, and check that every config, script and input exists
     python studies/regenerate_docs.py --run case1 case2     # run these entries into docs/results (their inputs first)
     python studies/regenerate_docs.py --run all --out results/docs_results   # everything, elsewhere (hours)
+    python studies/regenerate_docs.py --run case1 --out /tmp/r --compare    # and compare it with docs/results
+
+``--compare`` checks every number of the kept files against the committed folder to 1e-6 relative
+(``pyomo_heli.studies.compare_results``), prints a table per entry and exits 1 if any differs.
 
 Each entry names a folder of ``docs/results``, the commands that write it (from the checkout root; ``{out}``
 is the ``--out`` folder, default ``docs/results``) and the files of it that are committed: after its
@@ -177,12 +181,17 @@ def problems(entry: Entry, out: str) -> list[str]:
     return missing
 
 
+def prune_matches(rel: str, keep: tuple[str, ...]) -> bool:
+    """Whether the file ``rel`` (a path relative to its entry's folder) is one of the kept ones."""
+    return any(fnmatch.fnmatchcase(rel, k) for k in keep)
+
+
 def prune(folder: Path, keep: tuple[str, ...]) -> list[Path]:
     """Delete every file of ``folder`` that matches none of ``keep`` (globs relative to it), then empty folders."""
     removed = []
     for f in sorted(p for p in folder.rglob("*") if p.is_file()):
         rel = f.relative_to(folder).as_posix()
-        if not any(fnmatch.fnmatchcase(rel, k) for k in keep):
+        if not prune_matches(rel, keep):
             f.unlink()
             removed.append(f)
     for d in sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: -len(p.parts)):
@@ -214,7 +223,20 @@ def main(argv=None) -> int:
     ap.add_argument("--check", action="store_true", help="also check that every named config and script exists")
     ap.add_argument("--out", default="docs/results",
                     help="results root, relative to the checkout (default docs/results)")
+    ap.add_argument("--compare", nargs="*", metavar="FOLDER",
+                    help="compare the --out folders of the --run entries (or of these) with --reference, "
+                         "every number to 1e-6 relative; exit 1 if one differs")
+    ap.add_argument("--reference", default="docs/results",
+                    help="committed results root to compare with, relative to the checkout (default docs/results)")
     a = ap.parse_args(argv)
+    if a.compare and a.run:
+        ap.error("--compare: name the folders with --run, or (without --run) with --compare, not both")
+    if a.compare is not None and not a.run:
+        unknown = [n for n in a.compare if n not in BY_NAME]
+        if unknown or not a.compare:
+            ap.error(f"--compare: unknown folder {unknown[0]!r}" if unknown else "--compare: name the folders "
+                     "to compare (or give --run)")
+        return compare([BY_NAME[n] for n in a.compare], a.out, a.reference)
     if a.run:
         unknown = [n for n in a.run if n != "all" and n not in BY_NAME]
         if unknown:
@@ -233,7 +255,21 @@ def main(argv=None) -> int:
         return 2
     if a.run:
         run(entries, a.out)
+        if a.compare is not None:
+            return compare([BY_NAME[n] for n in a.run] if "all" not in a.run else list(ENTRIES), a.out, a.reference)
     return 0
+
+
+def compare(entries: list[Entry], out: str, reference: str) -> int:
+    """Print the comparison of each entry's ``out`` folder with its ``reference`` one; 1 if any differs."""
+    from .compare_results import compare_folder, table
+
+    def root(p: str) -> Path:
+        return Path(p) if Path(p).is_absolute() else ROOT / p
+
+    results = {e.folder: compare_folder(root(reference) / e.folder, root(out) / e.folder, e.keep) for e in entries}
+    print(table(results), flush=True)
+    return 0 if all(c.ok for c in results.values()) else 1
 
 
 if __name__ == "__main__":

@@ -83,9 +83,11 @@ def test_compare_passes_within_1e6_and_skips_timings(tmp_path):
     _folder(new, -54271.0 * (1 + 3e-7), 99.9, 0.005, "0.2009")
     doc = json.loads((new / "chosen.json").read_text())
     doc["chosen"]["parameters"]["theta_twist"] = -3.92e-08
+    doc["chosen"]["unreliable"] = None  # a field newer code writes: listed, not compared
     (new / "chosen.json").write_text(json.dumps(doc))
     c = compare_folder(ref, new, KEEP)
     assert c.ok, c.mismatches
+    assert c.added == ["chosen.json.chosen.unreliable"]
     assert c.files == 3
     # json: J_time, iterations, theta_twist, CL_alpha_HT; csv: index, J_time, n_x; md: 0.2008 (+ none in header)
     assert c.numbers == 8

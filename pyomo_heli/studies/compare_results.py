@@ -8,7 +8,8 @@ Two numbers agree when ``|new - ref| <= max(RTOL * |ref|, ATOL)``; the differenc
 absolute floor ``ATOL`` in the file's own units), and a folder agrees when every one of its numbers is within
 ``RTOL``. What is compared, per file of the committed folder (its kept files; figures are not compared):
 
-- ``.json``: recursively, every number; texts, booleans and null must be equal; keys and list lengths too;
+- ``.json``: recursively, every number; texts, booleans and null must be equal; list lengths too; a key of the
+  committed file must be there (a key it does not have yet, written by newer code, is listed, not compared);
 - ``.csv``: cell by cell under the same header, numbers as numbers, other cells as text;
 - ``.md``: the rows of its tables (lines starting with ``|``); a printed number is rounded, so it may also
   differ by one unit of its last printed digit (``1.08`` vs ``1.09`` when the value sits on a rounding edge;
@@ -35,8 +36,9 @@ IGNORED = frozenset((
     "wall_time", "setup_time", "cold_wall_time", "build_time", "solver_setup_time", "total_time",
     "uncertainty_time", "cpu_time", "time_s", "elapsed",  # timings [s]
     "dataset", "config", "results_dir", "path", "paths",  # paths of this checkout
-    "fingerprint", "extension_forms", "versions", "version", "python", "platform", "host", "hostname",
-    "date", "created", "started", "finished", "provenance",  # code hashes, versions, dates
+    "fingerprint", "model_fingerprint", "extension_forms", "config_sha256", "dataset_sha256", "config_text",
+    "versions", "version", "python", "platform", "host", "hostname", "date", "created", "started", "finished",
+    "provenance",  # hashes and copies of the inputs and the code, versions, dates
 ))
 _NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
@@ -50,6 +52,7 @@ class Comparison:
     worst: float = 0.0
     where: str = ""
     mismatches: list[str] = field(default_factory=list)
+    added: list[str] = field(default_factory=list)  # JSON keys the committed file does not have yet
 
     @property
     def ok(self) -> bool:
@@ -90,8 +93,10 @@ def compare_json(ref, new, where: str, c: Comparison) -> None:
         for k in sorted(set(ref) | set(new)):
             if k in IGNORED:
                 continue
-            if k not in ref or k not in new:
-                c.mismatches.append(f"{where}.{k}: {'missing' if k not in new else 'not in the committed file'}")
+            if k not in new:
+                c.mismatches.append(f"{where}.{k}: missing")
+            elif k not in ref:
+                c.added.append(f"{where}.{k}")
             else:
                 compare_json(ref[k], new[k], f"{where}.{k}", c)
     elif isinstance(ref, list) and isinstance(new, list):
@@ -203,6 +208,11 @@ def table(results: dict[str, Comparison], show: int = 10) -> str:
     for name, c in results.items():
         lines.append(f"| {name} | {c.files} | {c.numbers} | {c.worst:.2e} | {c.where if c.worst else '-'} | "
                      f"{'PASS' if c.ok else f'FAIL ({len(c.mismatches)})'} |")
+    for name, c in results.items():
+        if c.added:
+            more = " ..." if len(c.added) > show else ""
+            lines.append(f"\n{name}: {len(c.added)} fields the committed files do not have (written by code newer "
+                         f"than them; not compared): {', '.join(c.added[:show])}{more}")
     for name, c in results.items():
         if not c.ok:
             lines.append(f"\n{name}: {len(c.mismatches)} mismatches" + (f", the first {show}:" if len(c.mismatches)

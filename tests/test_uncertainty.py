@@ -165,7 +165,26 @@ def test_trim_data_separate_what_the_time_series_cannot_see():
     np.testing.assert_allclose(sv, np.sqrt(np.sort(np.linalg.eigvalsh(F))), rtol=1e-8)
     # the trim points alone cannot see the pitch inertia (a trim is an equilibrium)
     assert abs(ident.weakest("trim")["v_Iyy"]) > 0.99
+    # ... at all: its singular value is round-off of the differences, reported as 0 with an infinite bound
+    assert ident.weakest("trim").singular_value == 0.0 and ident.weakest("trim").se_scaled == np.inf
+    assert ident.condition("trim") == np.inf
     assert "weakest direction" in ident.summary()
+
+
+def test_a_numerically_zero_singular_value_is_reported_as_zero():
+    """Trim sensitivities with known singular values 3 and 2 and a column only round-off reaches (1e-12):
+    the table reports 3, 2 and 0, with an infinite Cramer-Rao bound along e_c; a weak direction the data
+    do see (1e-5) keeps its value."""
+    A = np.zeros((6, 3))
+    A[0, 0], A[1, 1], A[2, 2] = 3.0, 2.0, 1e-12
+    info = PointInformation(names=["a", "b", "c"], values={"a": 1.0, "b": 1.0, "c": 1.0}, scale=np.ones(3),
+                            S_trim={"col": A}, e_trim={"col": np.zeros(6)}, R_trim={"col": 1.0})
+    t = identifiability(info).table
+    assert t.singular_value.tolist() == [3.0, 2.0, 0.0]
+    assert t.se_scaled.tolist() == [pytest.approx(1 / 3), pytest.approx(0.5), np.inf]
+    assert t.direction.iloc[2] == "+1.00 c" and identifiability(info).condition("trim") == np.inf
+    A[2, 2] = 1e-5
+    assert identifiability(info).table.singular_value.iloc[2] == pytest.approx(1e-5, rel=1e-12)
 
 
 def test_swapping_measured_data_equals_building_from_it():

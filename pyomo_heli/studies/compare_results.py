@@ -11,7 +11,8 @@ absolute floor ``ATOL`` in the file's own units), and a folder agrees when every
 - ``.json``: recursively, every number; texts, booleans and null must be equal; list lengths too; a key of the
   committed file must be there (a key it does not have yet, written by newer code, is listed, not compared);
 - ``.csv``: cell by cell under the same header, numbers as numbers, other cells as text;
-- ``.md``: the rows of its tables (lines starting with ``|``); a printed number is rounded, so it may also
+- ``.md``: its tables (lines starting with ``|``), each against the table of the same header (a table newer
+  report code adds is listed, not compared); a printed number is rounded, so it may also
   differ by one unit of its last printed digit (``1.08`` vs ``1.09`` when the value sits on a rounding edge;
   only the part of a difference beyond that unit counts);
   the text around the numbers must be equal. Text outside tables (run times, paths) is not compared. The
@@ -142,35 +143,53 @@ def _last_digit_unit(token: str) -> float:
     return 10.0 ** (int(exp or 0) - decimals)
 
 
-def compare_md(ref: Path, new: Path, name: str, c: Comparison) -> None:
-    def tables(p: Path) -> list[list[str]]:
-        return [[cell.strip() for cell in line.strip().strip("|").split("|")]
-                for line in p.read_text().splitlines() if line.lstrip().startswith("|")]
+def _md_tables(p: Path) -> list[tuple[tuple[str, ...], list[list[str]]]]:
+    """The tables of a Markdown file: (header cells, rows of cells), in order."""
+    out: list = []
+    lines = [ln.strip() for ln in p.read_text().splitlines()]
+    for i, ln in enumerate(lines):
+        if not ln.startswith("|"):
+            continue
+        cells = [x.strip() for x in ln.strip("|").split("|")]
+        if all(set(x) <= set("-: ") for x in cells):
+            continue  # the |---| line under a header
+        nxt = lines[i + 1] if i + 1 < len(lines) else ""
+        if nxt.startswith("|") and all(set(x.strip()) <= set("-: ") for x in nxt.strip("|").split("|")):
+            out.append((tuple(cells), []))
+        elif out:
+            out[-1][1].append(cells)
+    return out
 
-    r, n = tables(ref), tables(new)
-    if len(r) != len(n):
-        c.mismatches.append(f"{name}: {len(r)} table rows -> {len(n)}")
-    header: list[str] = []
-    for i, (rr, nn) in enumerate(zip(r, n), start=1):
-        if all(set(x) <= set("-: ") for x in rr):  # the |---|---| line under a header
+
+def compare_md(ref: Path, new: Path, name: str, c: Comparison) -> None:
+    """Each table of ``ref`` against the table of ``new`` with the same header (the n-th of that header);
+    a table the committed file does not have (newer report code) is listed, not compared."""
+    r, n = _md_tables(ref), _md_tables(new)
+    pool: dict = {}
+    for h, rows in n:
+        pool.setdefault(h, []).append(rows)
+    for h, rows in r:
+        where = f"{name} table '{' | '.join(h)[:60]}'"
+        if not pool.get(h):
+            c.mismatches.append(f"{where}: missing")
             continue
-        if i < len(r) and all(set(x) <= set("-: ") for x in r[i]):  # a header: the next row is |---|
-            header = rr
-            c.text(rr, nn, f"{name} table row {i}")
-            continue
-        if len(rr) != len(nn):
-            c.mismatches.append(f"{name} table row {i}: {len(rr)} cells -> {len(nn)}")
-            continue
-        for j, (a, b) in enumerate(zip(rr, nn)):
-            col = header[j] if j < len(header) else str(j)
-            if _ignored_header(col):
+        rows_n = pool[h].pop(0)
+        if len(rows) != len(rows_n):
+            c.mismatches.append(f"{where}: {len(rows)} rows -> {len(rows_n)}")
+        for i, (rr, nn) in enumerate(zip(rows, rows_n), start=1):
+            if len(rr) != len(nn):
+                c.mismatches.append(f"{where} row {i}: {len(rr)} cells -> {len(nn)}")
                 continue
-            ta, tb = _NUMBER.findall(a), _NUMBER.findall(b)
-            c.text(_NUMBER.sub("#", a), _NUMBER.sub("#", b), f"{name} row {i} {col}")
-            if len(ta) == len(tb):
-                for x, y in zip(ta, tb):
-                    c.number(float(x), float(y), f"{name} row {i} {col}",
-                             slack=max(_last_digit_unit(x), _last_digit_unit(y)))
+            for col, a, b in zip(h, rr, nn):
+                if _ignored_header(col):
+                    continue
+                at = f"{name} row {i} {col}"
+                ta, tb = _NUMBER.findall(a), _NUMBER.findall(b)
+                c.text(_NUMBER.sub("#", a), _NUMBER.sub("#", b), at)
+                if len(ta) == len(tb):
+                    for x, y in zip(ta, tb):
+                        c.number(float(x), float(y), at, slack=max(_last_digit_unit(x), _last_digit_unit(y)))
+    c.added += [f"{name} table '{' | '.join(h)[:60]}'" for h, left in pool.items() for _ in left]
 
 
 def compare_folder(ref: Path, new: Path, keep: tuple[str, ...]) -> Comparison:
@@ -211,7 +230,7 @@ def table(results: dict[str, Comparison], show: int = 10) -> str:
     for name, c in results.items():
         if c.added:
             more = " ..." if len(c.added) > show else ""
-            lines.append(f"\n{name}: {len(c.added)} fields the committed files do not have (written by code newer "
+            lines.append(f"\n{name}: {len(c.added)} fields or tables the committed files lack (written by code newer "
                          f"than them; not compared): {', '.join(c.added[:show])}{more}")
     for name, c in results.items():
         if not c.ok:

@@ -201,7 +201,12 @@ def prune(folder: Path, keep: tuple[str, ...]) -> list[Path]:
 
 
 def run(entries: list[Entry], out: str) -> None:
+    import shutil
+
     for e in entries:
+        folder = (Path(out) if Path(out).is_absolute() else ROOT / out) / e.folder
+        if folder.is_dir():  # written afresh: `uncertainty --out` refuses a folder holding other results
+            shutil.rmtree(folder)
         for i, command in enumerate(e.commands):
             print(f"[{e.folder}] {command.format(out=out)}", flush=True)
             if i in e.stdout:

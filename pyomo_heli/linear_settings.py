@@ -15,14 +15,19 @@ Example (studies/case1_tri.toml):
     omega_max_rad_s = 20.0
     points = 3                               # epsilon grid points on J_linear (the front is points x this)
     weighting = "bins"                       # or "tischler_remple": composite responses of the sweep records
+    # with "tischler_remple", the composite estimator (unset: SWEEP_SETTINGS, TR_POINTS), e.g. studies/case1_tri.toml:
+    sweep_windows_s = [5, 10, 20, 30, 45, 60]
+    sweep_min_periods = 4
+    sweep_points = 20                        # cost frequencies per response
 
 The table is declared (fields, defaults, domains) in :class:`pyomo_heli.settings.identification.LinearTable`.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
-from .dataset.frequency_response import DEFAULT_PAIRS, SpectralSettings
+from .dataset.frequency_response import DEFAULT_PAIRS, SWEEP_SETTINGS, TR_POINTS, CompositeSettings, SpectralSettings
 from .settings import Problems, validate
 from .settings.identification import MAX_LINEAR_POINTS as MAX_POINTS  # noqa: F401 - re-exported
 from .settings.identification import LinearTable
@@ -31,6 +36,10 @@ from .units import KT
 #: [linear] key -> SpectralSettings field
 _SPECTRAL = (("coherence_min", "coherence_min"), ("input_power_min", "input_power_min"), ("window_s", "window_s"),
              ("overlap", "overlap"), ("omega_min_rad_s", "omega_min"), ("omega_max_rad_s", "omega_max"))
+#: [linear] key -> CompositeSettings field (the sweep records' estimator)
+_COMPOSITE = (("sweep_min_periods", "min_periods"), ("sweep_record_periods", "record_periods"),
+              ("sweep_overlap", "overlap"), ("sweep_coherence_min", "coherence_min"),
+              ("sweep_omega_min_rad_s", "omega_min"), ("sweep_omega_max_rad_s", "omega_max"))
 
 
 @dataclass
@@ -40,6 +49,8 @@ class LinearSettings:
     spectral: SpectralSettings = field(default_factory=SpectralSettings)
     points: int = 3
     weighting: str = "bins"  # or "tischler_remple" (docs/linear.md section 3)
+    composite: CompositeSettings = field(default_factory=lambda: SWEEP_SETTINGS)  # "tischler_remple": the estimator
+    sweep_points: int = TR_POINTS  # "tischler_remple": cost frequencies per response
 
     @classmethod
     def from_table(cls, t: "dict | LinearTable") -> "LinearSettings":
@@ -50,5 +61,15 @@ class LinearSettings:
             if problems:
                 raise ValueError("; ".join(line.removeprefix("[linear]: ") for line in problems.lines))
         kw = {name: float(getattr(t, key)) for key, name in _SPECTRAL if getattr(t, key) is not None}
+        ckw = {name: float(getattr(t, key)) for key, name in _COMPOSITE if getattr(t, key) is not None}
+        if t.sweep_windows_s is not None:
+            ckw["windows_s"] = tuple(float(w) for w in t.sweep_windows_s)
+        if t.sweep_n_omega is not None:
+            ckw["n_omega"] = int(t.sweep_n_omega)
+        try:
+            composite = dataclasses.replace(SWEEP_SETTINGS, **ckw)
+        except ValueError as exc:
+            raise ValueError(f"sweep_*: {exc}") from None
         return cls(pairs=tuple((o, i) for o, i in t.pairs), speeds=tuple(float(v) * KT for v in t.speeds_kt),
-                   spectral=SpectralSettings(**kw), points=t.points, weighting=t.weighting)
+                   spectral=SpectralSettings(**kw), points=t.points, weighting=t.weighting, composite=composite,
+                   sweep_points=int(t.sweep_points) if t.sweep_points is not None else TR_POINTS)

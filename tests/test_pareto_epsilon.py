@@ -211,3 +211,26 @@ def test_bi_objective_front_and_solve_at_on_the_closed_form():
     assert chosen.J_time == pytest.approx(min(p.J_time for p in ps.points if p.success
                                               and math.isclose(utopia_distance_n([[p.J_time, p.J_trim]], utopia,
                                                                                  nadir)[0], d.min())))
+
+
+def test_row_minima_settle_the_infeasible_grid_points_without_solving_them():
+    """The discs f2 <= e2 around (0, 1) and f3 <= e3 around (-1, 0), centres sqrt(2) apart: under f2 <= e2
+    the least f3 is (sqrt(2) - sqrt(e2))^2 (closed form). Each grid row solves that once; a point of the row
+    with e3 below it is infeasible a priori (0 iterations), every other point converges."""
+    m = _model(lambda a, b: ((a - 1) ** 2 + b**2 + 1.0, a**2 + (b - 1) ** 2, (a + 1) ** 2 + b**2))
+    ps = EpsilonConstraintSolver(m, NAMES, SETTINGS)
+    ps.grid_front((3, 3))
+    e2_axis, e3_axis = ps.axes
+    for i, e2 in enumerate(e2_axis):
+        lo = max(math.sqrt(2) - math.sqrt(e2), 0.0) ** 2
+        assert ps.row_minima[i] == pytest.approx(lo, rel=1e-5, abs=1e-8)
+    assert [r["row"] for r in ps.row_solves] == [1, 2]  # row 0: anchor C's minimum, no solve
+    grid = [p for p in ps.points if p.kind == "eps"]
+    assert len(grid) == 8
+    for p in grid:
+        i, j = p.grid
+        if e3_axis[j] < ps.row_minima[i]:
+            assert p.status == INFEASIBLE and p.iterations == 0 and "under J_f2 <=" in p.note
+        else:
+            assert p.success and 0 < p.iterations < SETTINGS.max_iter
+    assert sum(p.status == INFEASIBLE for p in grid) == 3  # (1, 2), (2, 1), (2, 2)

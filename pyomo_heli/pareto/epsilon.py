@@ -28,8 +28,9 @@ re-solve, never a rewrite.
   post hoc over the converged points and as one NLP, with either nadir rule (:data:`NADIR_RULES`).
 
 Infeasible points (:data:`INFEASIBLE`) are found without an iteration-limit solve: a bound below
-the anchor minimum of its objective, or at most as loose as a grid point already found infeasible in
-every bound, is infeasible a priori (not solved); an Ipopt solve that ends in
+the anchor minimum of its objective, below the least J_2 under a grid row's J_1 bound (two bounded
+objectives: one solve per row, :meth:`~EpsilonConstraintSolver.row_minimum`), or at most as loose as
+a grid point already found infeasible in every bound, is infeasible a priori (not solved); an Ipopt solve that ends in
 ``Infeasible_Problem_Detected`` or ``Restoration_Failed`` under active bounds is recorded as
 infeasible, with Ipopt's status in the point's ``note``. ``settings.max_iter`` caps the iterations of
 each front solve.
@@ -113,6 +114,9 @@ class EpsilonConstraintSolver:
         self.anchor_points: dict = {}
         self._solved: list = []  # (bounds tuple, snapshot at the front's scale) of every converged front point
         self._infeasible: list = []  # bounds tuples of points found infeasible
+        self.row_minima: dict = {}  # grid row -> least J_2 under that row's J_1 bound (two bounded objectives)
+        self.row_solves: list = []  # the solves that found them (records for the run's info)
+        self._row_snapshots: dict = {}
         self.front_scale = self.scale[self.primary]
 
     # -------------------------------------------------------------- one solve
@@ -140,6 +144,13 @@ class EpsilonConstraintSolver:
             lo = self.minima.get(k)
             if lo is not None and math.isfinite(v) and v < lo - 1e-12 * max(abs(lo), 1.0):
                 return f"eps_{k} = {v:.6g} is below the minimum of J_{k}, {lo:.6g} (its anchor)"
+        if len(self.bounded) == 2 and self.row_minima:
+            (k1, k2), e1, e2 = self.bounded, eps.get(self.bounded[0], math.inf), eps.get(self.bounded[1], math.inf)
+            for i, lo in self.row_minima.items():
+                bound = float(self.axes[0][i])
+                if e1 <= bound * (1 + 1e-12) and math.isfinite(e2) and e2 < lo - 1e-9 * max(abs(lo), 1.0):
+                    return (f"eps_{k2} = {e2:.6g} is below the minimum of J_{k2} under J_{k1} <= {bound:.6g}, "
+                            f"{lo:.6g}")
         vec = self.bounds_vector(eps)
         for bad in self._infeasible:
             if all(v <= b for v, b in zip(vec, bad)):
@@ -242,6 +253,7 @@ class EpsilonConstraintSolver:
         Raises RuntimeError naming the anchor when one fails: everything after rests on them.
         """
         self.minima, self._infeasible, self._solved = {}, [], []
+        self.row_minima, self.row_solves, self._row_snapshots = {}, [], {}
         out = self.solve_once(self.primary, warm_start="none")
         a = self._point(0, "A", {}, out, "none", (0,) * len(self.bounded))
         if not a.success:
@@ -346,10 +358,13 @@ class EpsilonConstraintSolver:
         self.axes = self.grid_axes(counts, margin)
         self._enter_front()
         index, at = 1, {(0,) * len(counts): self._solved[0]}
+        self.row_minima = {}
         for pos in snake(counts):
             if not any(pos):
                 continue  # anchor A itself (every bound inactive)
             eps = {k: float(ax[i]) for k, ax, i in zip(self.bounded, self.axes, pos)}
+            if len(self.bounded) == 2 and pos[0] not in self.row_minima:
+                self.row_minima[pos[0]] = self.row_minimum(pos[0])
             # nearest solved neighbour on the grid (index distance), the latest on ties
             near = min(at, key=lambda q: (sum(abs(x - y) for x, y in zip(q, pos)), -list(at).index(q)))
             p = self._solve_from(index, eps, at[near][1], pos)
@@ -367,6 +382,34 @@ class EpsilonConstraintSolver:
         a = self.anchor_points["A"]
         return [epsilon_grid(_get(a, k), self.minima[k] + margin * (_get(a, k) - self.minima[k]), int(n),
                              self.settings.spacing) for k, n in zip(self.bounded, counts)]
+
+    def row_minimum(self, i: int) -> float:
+        """The least value of the second bounded objective under the first one's bound on grid row ``i``.
+
+        With two bounded objectives (J_1 on the grid's rows, J_2 on its columns) the bounds (e_1, e_2) are
+        feasible exactly when min J_2 s.t. J_1 <= e_1 is at most e_2, whatever J_0 does: one solve per row
+        (row 0: anchor C's first stage; row i: from row i - 1's solution, a continuation along the J_1-J_2
+        front) settles every point of the row, and a point below it is reported infeasible without a solve
+        (:meth:`a_priori_infeasible`). The solve is ``settings.max_iter``-capped; if it fails, nothing is
+        known a priori (returns -inf) and the row's points are solved as they come.
+        """
+        k1, k2 = self.bounded
+        if i == 0:
+            return self.minima[k2]
+        snap = self._row_snapshots.get(i - 1) or self.snapshots[ANCHOR_NAMES[2]]  # anchor C: min J_2, J_1 free
+        here = Snapshot(self.m)
+        snap.restore()
+        bound = float(self.axes[0][i])
+        out = self.solve_once(k2, {k1: bound}, "primal", self.capped(dict(LEAVE_ANCHOR_OPTIONS)))
+        self.row_solves.append({"row": i, f"epsilon_{k1}": bound, f"min_J_{k2}": out.J[k2], "status": out.status,
+                                "iterations": out.iterations, "wall_time": out.wall_time})
+        get_logger("pareto").info(f"row {i}: min J_{k2} under J_{k1} <= {bound:.6g} is {out.J[k2]:.6g} "
+                                  f"[{out.status}, {out.iterations} it, {out.wall_time:.1f} s]")
+        value = out.J[k2] if out.success else -math.inf
+        if out.success:
+            self._row_snapshots[i] = Snapshot(self.m)
+        here.restore()
+        return value
 
     # -------------------------------------------------------------- choosing (Eq. 11)
     def payoff_utopia_nadir(self):

@@ -231,6 +231,21 @@ class LinearTable(Table):
     weighting: Literal["bins", "tischler_remple"] = Field("bins", description="J_linear frequencies: every coherent "
                                                           "bin of the identification maneuvers, or Tischler-Remple "
                                                           "(20 log-spaced frequencies of the sweep records)")
+    # the composite estimator of the sweep records (weighting = "tischler_remple"); unset: its defaults
+    # (pyomo_heli.dataset.frequency_response.SWEEP_SETTINGS, TR_POINTS). A study pins them to keep its numbers.
+    sweep_windows_s: Optional[list[Finite]] = Field(None, min_length=1, description="composite window lengths [s]")
+    sweep_min_periods: Optional[Finite] = Field(None, gt=0, description="a window counts where it holds this many "
+                                                                        "periods")
+    sweep_record_periods: Optional[Finite] = Field(None, ge=0, description="lowest frequency: this many periods in "
+                                                                           "the longest record")
+    sweep_overlap: Optional[Finite] = Field(None, ge=0, lt=1, description="Welch segment overlap, fraction")
+    sweep_coherence_min: Optional[Finite] = Field(None, gt=0, lt=1, description="coherent band: composite "
+                                                                                "coherence at least this")
+    sweep_omega_min_rad_s: Optional[Finite] = Field(None, gt=0, description="lowest grid frequency [rad/s]")
+    sweep_omega_max_rad_s: Optional[Finite] = Field(None, gt=0, description="highest grid frequency [rad/s]")
+    sweep_n_omega: Optional[int] = Field(None, ge=2, le=10000, description="logarithmic grid points")
+    sweep_points: Optional[int] = Field(None, ge=2, le=1000, description="Tischler-Remple cost frequencies per "
+                                                                         "response")
 
     @field_validator("pairs")
     @classmethod

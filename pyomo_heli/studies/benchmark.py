@@ -9,6 +9,7 @@
     python studies/benchmark.py --quick                       # seconds; what the test suite runs
     python studies/benchmark.py --no-shooting --compare-nl-route   # + set-up and point A with every row in the NL file
     python studies/benchmark.py --no-front --no-shooting --compare-scaling   # A + 5-point front unscaled vs scaled
+    python studies/benchmark.py --tri-vs-bi --out results/tri_vs_bi   # Case 1 bi- then tri-objective, one process
 
 Prints markdown tables and writes JSON (default results/benchmark.json) after
 every finished part. Bad options exit with status 2 and a one-line message.
@@ -72,8 +73,17 @@ def main(argv=None) -> int:
                          "Scaler (solver option scaling), each from a fresh build; prints iterations and time ratios")
     ap.add_argument("--scaling-points", type=int, default=5, help="front points of --compare-scaling (default 5)")
     ap.add_argument("--quick", action="store_true", help="tiny instance in seconds (ignores --config/--size)")
+    ap.add_argument("--tri-vs-bi", action="store_true",
+                    help="run --config (default studies/case1.toml) and --tri-config (default studies/case1_tri.toml) "
+                         "in this process and print both CPU and wall times and the ratio; --out is then a folder")
+    ap.add_argument("--tri-config", type=Path, default=ROOT / "studies" / "case1_tri.toml",
+                    help="the tri-objective config of --tri-vs-bi")
+    ap.add_argument("--tri-out", type=Path, help="--tri-vs-bi: the tri-objective run's results folder (default: "
+                                                 "OUT/tri; the bi-objective run goes to OUT/bi)")
     ap.add_argument("--out", type=Path, default=Path("results") / "benchmark.json", help="JSON output")
     args = ap.parse_args(argv)
+    if args.tri_vs_bi:
+        return _tri_vs_bi(ap, args)
     from .args import out_file
     out_file(ap, args.out)  # before the benchmark runs, not after
     overrides: dict = {}
@@ -112,6 +122,28 @@ def main(argv=None) -> int:
     print()
     print(format_tables(result))
     print(f"\nwritten: {args.out}")
+    return 0
+
+
+def _tri_vs_bi(ap, args) -> int:
+    from pyomo_heli.workflows.tri_vs_bi import format_tri_vs_bi, run_tri_vs_bi
+
+    if args.out.suffix == ".json":
+        ap.exit(2, f"benchmark: --tri-vs-bi writes a folder; --out {args.out} names a .json file\n")
+    overrides = {}
+    if args.max_duration is not None:
+        if args.max_duration <= 0:
+            ap.exit(2, f"benchmark: --max-duration must be positive, got {args.max_duration}\n")
+        overrides["data"] = {"max_duration_s": args.max_duration}
+    try:
+        result = run_tri_vs_bi(args.config, args.tri_config, args.out, overrides,
+                               progress=lambda msg: print(msg, flush=True), tri_out=args.tri_out)
+    except ConfigError as exc:
+        print(f"benchmark: {exc}", file=sys.stderr)
+        return 2
+    print()
+    print(format_tri_vs_bi(result))
+    print(f"\nwritten: {args.out / 'tri_vs_bi.json'}")
     return 0
 
 

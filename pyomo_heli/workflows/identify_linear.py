@@ -43,13 +43,16 @@ def _point_dict(p) -> dict:
 def data_responses(cfg, ft):
     """Frequency responses of the config's identification maneuvers (full record rate); with
     ``[linear] weighting = "tischler_remple"`` the composite responses of the sweep records (role
-    "frequency"), each band cut to 20 logarithmically spaced frequencies."""
+    "frequency", estimator ``[linear] sweep_*``), each band cut to ``sweep_points`` (20) logarithmically spaced
+    frequencies."""
     if cfg.linear.weighting == "tischler_remple":
         sweeps = ft.frequency()
         if not sweeps:
             raise ValueError(f"{cfg.path} [linear]: weighting = 'tischler_remple' needs sweep records (role "
                              f"'frequency') in {cfg.dataset}; it has none")
-        return [tischler_remple_points(r) for r in sweep_responses(sweeps, cfg.linear.pairs, cfg.linear.speeds)]
+        lin = cfg.linear
+        return [tischler_remple_points(r, lin.sweep_points)
+                for r in sweep_responses(sweeps, lin.pairs, lin.speeds, lin.composite)]
     if cfg.maneuvers == "identification":
         mans = ft.identification()
     else:
@@ -128,6 +131,7 @@ def run_tri_identification(cfg, run: RunFolder, progress=info) -> Identification
               "bi_objective": {"chosen": _point_dict(bi), "utopia": list(bi_utopia), "nadir": list(bi_nadir)},
               "failed_points": int((~front["success"].astype(bool)).sum()),
               "infeasible_points": int((front["status"] == INFEASIBLE).sum()),
+              "row_minima": ps.row_solves,  # least J_linear under each row's J_trim bound (a priori infeasibility)
               "mean_iterations_grid": float(front.loc[front.kind == "eps", "iterations"].mean()),
               "max_iterations_grid": int(front.loc[front.kind == "eps", "iterations"].max()),
               # the Eq. 11 choice under both nadir rules ([pareto] nadir picks `chosen`)

@@ -183,6 +183,36 @@ def estimates(result: IdentificationResult) -> dict[str, dict]:
             "tri-objective": result.chosen["parameters"]}
 
 
+def standard_errors(cfg, est: dict[str, dict], data=None) -> dict[str, dict]:
+    """Label -> parameter -> Cramer-Rao standard error (SI; nan at a bound) of each estimate.
+
+    The information is that of the time series and the trims at the estimate
+    (:mod:`pyomo_heli.uncertainty.cramer_rao`): the time-domain estimate A from the time series alone, the
+    bi-objective choice from the sandwich of the weighted sum it is stationary for (as ``pyomo-heli
+    identify`` gives it), the tri-objective choice with the bi-objective choice's weights at its own
+    estimate. The frequency responses' information is not counted (a tri-objective point is stationary
+    for a sum with J_linear, whose curvature this does not hold), so every SE is that of the data the
+    two-objective fit also has.
+    """
+    from ..nlp.identification import identification_data
+    from ..uncertainty.cramer_rao import cramer_rao
+    from ..uncertainty.front import _information
+
+    data = data if data is not None else identification_data(cfg)
+    out, weights = {}, None
+    for label, p in est.items():
+        info = _information(cfg, data, p)
+        if label == "time-domain (A)":
+            u = cramer_rao(info, cfg.free, kind="A")
+        elif label == "bi-objective":
+            u = cramer_rao(info, cfg.free, kind="eps")
+            weights = u.weights
+        else:
+            u = cramer_rao(info, cfg.free, kind="eps", weights=weights)
+        out[label] = dict(u.se)
+    return out
+
+
 def plot_front_projections(front: pd.DataFrame, result: IdentificationResult) -> Figure:
     """The three 2-D projections of the (J_time, J_trim, J_linear) front."""
     fig = Figure(figsize=(13, 4.2))
@@ -403,9 +433,10 @@ def band_errors(responses, curves: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png") -> Path:
+def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png", standard_error: bool = True) -> Path:
     """Figures and ``report_linear.md`` of a tri-objective results folder; the folder must agree with ``cfg``
-    (:func:`pyomo_heli.provenance.check_results_match`; ``warn`` gets its notes on records the folder lacks)."""
+    (:func:`pyomo_heli.provenance.check_results_match`; ``warn`` gets its notes on records the folder lacks).
+    ``standard_error``: the estimates' Cramer-Rao standard errors (:func:`standard_errors`) in the table."""
     from ..provenance import check_results_match
 
     out = Path(out_dir)
@@ -430,6 +461,7 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png") -> 
     errs = band_errors(responses, band_curves)
     errs.to_csv(out / "band_errors.csv", index=False, float_format="%.6g")
 
+    se = standard_errors(cfg, est) if standard_error else {}
     rows = []
     for name in result.parameters:
         unit, fac = _display(cfg.model, name)
@@ -440,6 +472,11 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png") -> 
             row[label] = p[name] * fac
             if "truth" in row and row["truth"]:
                 row[f"{label} error %"] = 100 * (p[name] * fac - row["truth"]) / abs(row["truth"])
+            if label in se:
+                row[f"{label} SE"] = se[label][name] * fac
+                if "truth" in row:
+                    row[f"{label} error/SE"] = (p[name] * fac - row["truth"]) / row[f"{label} SE"] \
+                        if se[label][name] > 0 else float("nan")
         rows.append(row)
     params = pd.DataFrame(rows)
     params.to_csv(out / "parameters_tri.csv", index=False, float_format="%.6g")
@@ -459,6 +496,9 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png") -> 
             *([placement_line(pl, "on the anchors and a coarse grid"), ""] if (pl := result.info.get("placement"))
               else []),
             "## Estimates (display units)", "", markdown_table(params, 5), "",
+            *(["SE: Cramer-Rao standard error from the time series and trims at the estimate (A: time series; "
+               "bi: the weighted sum it is stationary for; tri: the bi choice's weights; the frequency responses' "
+               "information not counted); error/SE = (estimate - truth) / SE.", ""] if se else []),
             "## Objective values of the choices", "", markdown_table(objs, 6), "",
             f"utopia (J_time, J_trim, J_linear) = {tuple(round(v, 6) for v in result.utopia)}, "
             f"nadir = {tuple(round(v, 6) for v in result.nadir)}", "",

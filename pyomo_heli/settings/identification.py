@@ -244,6 +244,9 @@ class LinearTable(Table):
     sweep_omega_min_rad_s: Optional[Finite] = Field(None, gt=0, description="lowest grid frequency [rad/s]")
     sweep_omega_max_rad_s: Optional[Finite] = Field(None, gt=0, description="highest grid frequency [rad/s]")
     sweep_n_omega: Optional[int] = Field(None, ge=2, le=10000, description="logarithmic grid points")
+    sweep_max_window_fraction: Optional[Finite] = Field(None, gt=0, le=1, description="longest window / record "
+                                                                                      "length (records shorter are "
+                                                                                      "left out of that window)")
     sweep_points: Optional[int] = Field(None, ge=2, le=1000, description="Tischler-Remple cost frequencies per "
                                                                          "response")
 

@@ -74,7 +74,7 @@ ENTRIES: tuple[Entry, ...] = (
                         "pyomo-heli report-linear studies/case1_tri.toml --out {out}/case1_tri"),
           TRI_FILES + ("tri_vs_bi.txt", "timing/tri_vs_bi.json"), minutes=20, stdout={0: "tri_vs_bi.txt"}),
     Entry("case2_tri", ("pyomo-heli identify studies/case2_tri.toml --out {out}/case2_tri --restart",), TRI_FILES,
-          minutes=30),
+          minutes=15),
     Entry("close_loop", ("pyomo-heli close-loop studies/close_loop.toml --out {out}/close_loop --restart",),
           LOOP_FILES + ("loop_trim_vs_speed.png",), minutes=9),
     Entry("close_loop_eiv", ("pyomo-heli close-loop studies/close_loop_eiv.toml --out {out}/close_loop_eiv "

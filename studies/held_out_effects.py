@@ -5,12 +5,15 @@
         [--data-config data/bo105_synthetic.toml]
 
 For every held-out effect (pyomo_heli/flighttest/held_out_effects.py, at its nominal strength) and every seed
-(20261122 + k, k = 0..SEEDS-1): the bundled flight test's generator config with its truth effect replaced by the
-held-out one (same maneuvers, trims and noise levels) -> ``OUT/<effect>_<seed>/data``; the closed loop with
-``[loop] discovery = true`` (CONFIG) -> ``OUT/<effect>_<seed>/loop``. A finished loop is not rerun.
-``--effects none`` is M0 plus noise only.
+(20261122 + k, k = FIRST..FIRST+SEEDS-1): the bundled flight test's generator config with its truth effect
+replaced by the held-out one (same maneuvers, trims and noise levels) -> ``OUT/<effect>_<seed>/data``; the
+closed loop with ``[loop] discovery = true`` (CONFIG) -> ``OUT/<effect>_<seed>/loop``; its table row ->
+``OUT/<effect>_<seed>/row.json``. A finished loop is not rerun (a stopped one resumes), so a rerun of the same
+command resumes row by row.
+``--effects none`` is M0 plus noise only; ``--first-seed K`` starts at seed 20261122 + K.
 
-Written: ``OUT/held_out.csv`` and ``OUT/held_out.md``, one row per effect and seed: truth, verdict, what was added,
+Written after every case: ``OUT/held_out.csv`` and ``OUT/held_out.md``, one row per effect and seed of every
+``OUT/*/row.json`` (also rows of earlier runs into the same OUT): truth, verdict, what was added,
 pooled trim / identification / validation RMS of iteration 0 and of the kept model, a significant validation rise,
 parameter errors against truth before and after, wrong acceptance (a physical library candidate kept although the
 truth holds none), and for a discovered or described generic term whether its shape matches the truth term (sign
@@ -32,6 +35,7 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
 
 from pyomo_heli.cli import main as cli_main  # noqa: E402
+from pyomo_heli.cli.options import nonneg_int  # noqa: E402
 from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS  # noqa: E402
 from pyomo_heli.studies.args import in_file, out_folder, positive_int  # noqa: E402
 
@@ -251,7 +255,10 @@ def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=positive_int, default=3, help="noise seeds per effect (20261122 + k)")
+    ap.add_argument("--seeds", type=positive_int, default=3,
+                    help="noise seeds per effect (20261122 + k, k from --first-seed)")
+    ap.add_argument("--first-seed", type=nonneg_int, default=0,
+                    help="start at seed 20261122 + FIRST_SEED (default 0: the bundled flight test's own seed)")
     ap.add_argument("--effects", nargs="+", default=list(HELD_OUT_EFFECTS),
                     help=f"held-out effects (or none): {', '.join(HELD_OUT_EFFECTS)}")
     ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
@@ -273,17 +280,33 @@ def main(argv=None) -> int:
     if bad:
         ap.error(f"--effects: unknown held-out effect(s) {bad}; choose from {', '.join(HELD_OUT_EFFECTS)} or none")
     template = gen.read_text()
-    rows = []
     for effect in a.effects:
-        for k in range(a.seeds):
-            seed = 20261122 + k
+        for seed in seeds_of(a.first_seed, a.seeds):
             loop = run_case(effect, seed, out, config, template)
-            rows.append(evaluate(effect, seed, loop))
-            tab = pd.DataFrame(rows)
-            tab.to_csv(out / "held_out.csv", index=False)
-            (out / "held_out.md").write_text(markdown(tab))
+            save_row(loop.parent, evaluate(effect, seed, loop))
+            write_table(out)
     print((out / "held_out.md").read_text())
     return 0
+
+
+def seeds_of(first: int, n: int) -> list[int]:
+    """The noise seeds 20261122 + k, k = first .. first + n - 1 (k = 0: the bundled flight test's own seed)."""
+    return [20261122 + k for k in range(first, first + n)]
+
+
+def save_row(case: Path, row: dict) -> None:
+    """``case/row.json``: one evaluated case (numpy scalars as plain numbers)."""
+    plain = json.dumps(row, indent=1, default=lambda o: o.item() if hasattr(o, "item") else str(o))
+    (case / "row.json").write_text(plain)
+
+
+def write_table(out: Path) -> pd.DataFrame:
+    """``OUT/held_out.csv`` and ``OUT/held_out.md`` from every ``OUT/*/row.json``, sorted by truth and seed."""
+    rows = [json.loads(f.read_text()) for f in sorted(out.glob("*/row.json"))]
+    tab = pd.DataFrame(rows).sort_values(["truth", "seed"], kind="stable").reset_index(drop=True)
+    tab.to_csv(out / "held_out.csv", index=False)
+    (out / "held_out.md").write_text(markdown(tab))
+    return tab
 
 
 def markdown(tab: pd.DataFrame) -> str:

@@ -75,3 +75,28 @@ def test_held_out_effects_are_usable_in_a_generator_config(tmp_path):
     f.write_text(f.read_text().replace("tau_a =", "tau_x ="))
     with pytest.raises(ConfigError, match=r"\[truth.effects.actuator_lag\]: unknown parameter name 'tau_x'"):
         load_config(f)
+
+
+def test_held_out_study_keeps_every_finished_row_on_disk(tmp_path):
+    """studies/held_out_effects.py resumes row by row: each case's row.json (numpy scalars as plain numbers) and
+    the table of every row in OUT, also rows of an earlier run (other seeds), sorted by truth and seed."""
+    import importlib.util
+
+    import numpy as np
+
+    spec = importlib.util.spec_from_file_location("held_out_study", ROOT / "studies" / "held_out_effects.py")
+    study = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(study)
+    assert study.seeds_of(1, 4) == [20261123, 20261124, 20261125, 20261126]
+    assert study.seeds_of(0, 1) == [20261122]
+    for effect, seed, wrong in (("none", 20261124, False), ("drag_rise", 20261122, np.bool_(True)),
+                                ("none", 20261122, False)):
+        case = tmp_path / f"{effect}_{seed}"
+        case.mkdir()
+        study.save_row(case, {"truth": effect, "seed": seed, "trim change %": np.float64(-12.5),
+                              "wrong acceptance": wrong, "criterion met": False})
+    tab = study.write_table(tmp_path)
+    assert list(zip(tab["truth"], tab["seed"])) == [("drag_rise", 20261122), ("none", 20261122), ("none", 20261124)]
+    assert tab["trim change %"].tolist() == [-12.5] * 3
+    assert "wrong acceptances: 1 of 3; criterion met: 0 of 3" in (tmp_path / "held_out.md").read_text()
+    assert len((tmp_path / "held_out.csv").read_text().splitlines()) == 4

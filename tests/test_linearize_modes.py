@@ -9,7 +9,7 @@ import pytest
 
 from pyomo_heli.cli import main
 from pyomo_heli.physics.model import HelicopterModel
-from pyomo_heli.report.linear import gain_unit, labelled_matrices, mode_table
+from pyomo_heli.report.linearization import gain_unit, labelled_matrices, mode_table
 from pyomo_heli.simulation.linearize import LinearModel, linearize_float
 from pyomo_heli.units import KT
 

@@ -101,7 +101,7 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_linearize(args) -> int:
-    from ..report.linear import linearization_dict, linearization_text
+    from ..report.linearization import linearization_dict, linearization_text
     from ..simulation.linearize import linearize_float
 
     model = _speeds_and_model(args)

@@ -114,14 +114,20 @@ def main(argv=None) -> int:
                                  overrides=overrides, command=command.strip(), repeats=args.repeat,
                                  compare_nl_route=args.compare_nl_route, nl_route=args.nl_route,
                                  compare_scaling=args.compare_scaling, scaling_points=args.scaling_points)
+    return _run_and_print(lambda progress: run_benchmark(settings, args.out, progress=progress), format_tables,
+                          args.out)
+
+
+def _run_and_print(run, format_result, written) -> int:
+    """Run ``run(progress)`` printing its progress, then its formatted result; a bad config is exit 2."""
     try:
-        result = run_benchmark(settings, args.out, progress=lambda msg: print(msg, flush=True))
+        result = run(lambda msg: print(msg, flush=True))
     except ConfigError as exc:
         print(f"benchmark: {exc}", file=sys.stderr)
         return 2
     print()
-    print(format_tables(result))
-    print(f"\nwritten: {args.out}")
+    print(format_result(result))
+    print(f"\nwritten: {written}")
     return 0
 
 
@@ -135,16 +141,9 @@ def _tri_vs_bi(ap, args) -> int:
         if args.max_duration <= 0:
             ap.exit(2, f"benchmark: --max-duration must be positive, got {args.max_duration}\n")
         overrides["data"] = {"max_duration_s": args.max_duration}
-    try:
-        result = run_tri_vs_bi(args.config, args.tri_config, args.out, overrides,
-                               progress=lambda msg: print(msg, flush=True), tri_out=args.tri_out)
-    except ConfigError as exc:
-        print(f"benchmark: {exc}", file=sys.stderr)
-        return 2
-    print()
-    print(format_tri_vs_bi(result))
-    print(f"\nwritten: {args.out / 'tri_vs_bi.json'}")
-    return 0
+    return _run_and_print(lambda progress: run_tri_vs_bi(args.config, args.tri_config, args.out, overrides,
+                                                         progress=progress, tri_out=args.tri_out),
+                          format_tri_vs_bi, args.out / "tri_vs_bi.json")
 
 
 if __name__ == "__main__":

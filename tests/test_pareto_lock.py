@@ -21,10 +21,11 @@ ROOT = Path(__file__).parent.parent
 TINY = ROOT / "tests" / "configs" / "tiny_case1_noisy.toml"
 
 
-def _holder(folder: Path):
-    """Another process holding the folder's lock until killed."""
-    code = ("import sys, time; from pyomo_heli.pareto.store import FolderLock\n"
-            f"with FolderLock({str(folder)!r}, 'identification'):\n"
+def _holder(folder: Path, imports: str = "from pyomo_heli.pareto.store import FolderLock",
+            holding: str = "FolderLock({folder!r}, 'identification')"):
+    """Another process holding the folder (by default its lock, ``holding`` a with-item) until killed."""
+    code = (f"import sys, time; {imports}\n"
+            f"with {holding.format(folder=str(folder))}:\n"
             "    print('locked', flush=True); time.sleep(600)\n")
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen([sys.executable, "-c", code, "identify", "cfg.toml"], env=env, stdout=subprocess.PIPE,

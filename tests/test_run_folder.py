@@ -4,10 +4,7 @@ Small and fast: no NLP is built. The end-to-end runs of identify, multistart and
 tests/test_pareto_store.py, tests/test_pareto_resume.py, tests/test_pareto_lock.py and tests/test_interrupts.py.
 """
 import json
-import os
 import signal
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -17,20 +14,15 @@ import pytest
 from pyomo_heli.log import info
 from pyomo_heli.pareto.store import LOCK_FILE, FolderBusyError, StoreMismatchError
 from pyomo_heli.workflows.run_folder import FrontWriter, RunFolder
+from test_pareto_lock import _holder as lock_holder
 
 ROOT = Path(__file__).parent.parent
 
 
 def _holder(folder: Path):
     """Another process running in ``folder`` (claimed and locked) until killed."""
-    code = ("import time; from pyomo_heli.workflows.run_folder import RunFolder\n"
-            f"with RunFolder({str(folder)!r}, 'identification') as run, run.locked():\n"
-            "    print('locked', flush=True); time.sleep(600)\n")
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-c", code, "identify", "cfg.toml"], env=env, stdout=subprocess.PIPE,
-                            text=True)
-    assert proc.stdout.readline().strip() == "locked"
-    return proc
+    return lock_holder(folder, "from pyomo_heli.workflows.run_folder import RunFolder",
+                       "RunFolder({folder!r}, 'identification') as run, run.locked()")
 
 
 def test_a_second_run_on_a_busy_folder_is_refused_in_one_line_and_writes_nothing(tmp_path):

@@ -40,7 +40,7 @@ _SPECTRAL = (("coherence_min", "coherence_min"), ("input_power_min", "input_powe
 _COMPOSITE = (("sweep_min_periods", "min_periods"), ("sweep_record_periods", "record_periods"),
               ("sweep_overlap", "overlap"), ("sweep_coherence_min", "coherence_min"),
               ("sweep_omega_min_rad_s", "omega_min"), ("sweep_omega_max_rad_s", "omega_max"),
-              ("sweep_max_window_fraction", "max_window_fraction"))
+              ("sweep_max_window_fraction", "max_window_fraction"), ("sweep_coherence_span", "coherence_span"))
 
 
 @dataclass

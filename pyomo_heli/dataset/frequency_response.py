@@ -209,6 +209,18 @@ class CompositeSettings:
     logarithmic grid of ``n_omega`` points in [omega_min, omega_max] with the weights 1 / eps_r^2
     (random error from coherence, below). A bin is coherent where the composite (partial) coherence
     gamma^2 >= ``coherence_min`` (the usual 0.6 guideline).
+
+    Coherence over the resolution bandwidth (``coherence_span``): a window's estimate at omega is not a
+    measurement at omega alone but the Guu-weighted average of the data over its spectral kernel, and it
+    is only as good as the data it averages. So a window's (multiple and partial) coherence at omega is
+    the SMALLEST of its Welch bins within +-``coherence_span`` / T_w [Hz] of omega (2: the main lobe of
+    the Hann kernel, whose first zeros are 2 / T_w either side; the same main lobe that sets
+    SWEEP_SETTINGS' 4 periods), and that coherence sets both its random error (its weight in the
+    composite) and the composite coherence, hence the band. Where the input autospectrum has a notch (a
+    stabilising pilot puts one at each unstable bare-airframe pole, where the response also varies
+    fastest) the bins in the notch lose coherence, and the bins on its flanks, whose H1 ratio is set by
+    leakage from the notch's other side, leave the band with them. 0: the coherence at omega itself
+    (interpolated between bins), as before this rule.
     """
 
     windows_s: tuple = (5.0, 10.0, 15.0, 20.0, 30.0)  # [s]
@@ -221,6 +233,7 @@ class CompositeSettings:
     min_periods: float = 2.0
     record_periods: float = 5.0
     max_window_fraction: float = 1.0  # longest window / record length (SWEEP_SETTINGS: 0.5, CIFER's T_rec / 2)
+    coherence_span: float = 2.0  # [1/T_w Hz]: a window's coherence at omega is its smallest this near omega
 
     def __post_init__(self):
         self.windows_s = tuple(float(w) for w in self.windows_s)
@@ -237,6 +250,8 @@ class CompositeSettings:
                              f"{self.min_periods}")
         if not 0 < self.max_window_fraction <= 1:
             raise ValueError(f"composite max_window_fraction must be in (0, 1], got {self.max_window_fraction}")
+        if not 0 <= self.coherence_span <= 10:
+            raise ValueError(f"composite coherence_span must be in [0, 10] (units of 1/T_w), got {self.coherence_span}")
 
 
 @dataclass
@@ -352,6 +367,18 @@ def _interp_complex(x, xp, fp):
     return np.interp(x, xp, fp.real) + 1j * np.interp(x, xp, fp.imag)
 
 
+def span_minimum(x, xp, fp, half: float, interpolated):
+    """At each x, the smallest of ``interpolated`` (fp interpolated at x) and fp at the points xp within
+    +-``half`` of x (xp ascending); with ``half`` 0, ``interpolated`` itself."""
+    out = np.array(interpolated, dtype=float)
+    if half > 0:
+        lo = np.searchsorted(xp, x - half, side="left")
+        hi = np.searchsorted(xp, x + half, side="right")
+        for k in np.flatnonzero(hi > lo):
+            out[k] = min(out[k], fp[lo[k]:hi[k]].min())
+    return out
+
+
 def composite_responses(records, output: str, inputs, settings: CompositeSettings | None = None,
                         speed: float | None = None) -> list[FrequencyResponse]:
     """Composite-window frequency responses of ``output`` to each of ``inputs`` (conditioned on the others).
@@ -397,11 +424,13 @@ def composite_responses(records, output: str, inputs, settings: CompositeSetting
         valid = (omega >= s.min_periods * 2 * np.pi / w) & (omega <= wo[-1]) & (omega >= omega_record)
         if not ok_native.any():
             continue
-        # interpolate the window's spectra-derived quantities onto the composite grid
-        m_i = np.interp(omega, wo[ok_native], mult[ok_native])
+        # onto the composite grid: T interpolated; coherences the smallest over the resolution bandwidth
+        # (bins where the inputs are not separable count with coherence 0)
+        half = s.coherence_span * 2 * np.pi / w  # [rad/s]
+        m_i = span_minimum(omega, wo, mult, half, np.interp(omega, wo[ok_native], mult[ok_native]))
         for i in range(q):
             T_i = _interp_complex(omega, wo[ok_native], H[ok_native, i])
-            p_i = np.interp(omega, wo[ok_native], part[ok_native, i])
+            p_i = span_minimum(omega, wo, part[:, i], half, np.interp(omega, wo[ok_native], part[ok_native, i]))
             e_i = random_error(np.minimum(m_i, WEIGHT_COHERENCE_CAP), np.minimum(p_i, WEIGHT_COHERENCE_CAP),
                                sp.n_d, q)
             wt = np.where(valid & np.isfinite(e_i), 1.0 / e_i ** 2, 0.0)

@@ -247,6 +247,9 @@ class LinearTable(Table):
     sweep_max_window_fraction: Optional[Finite] = Field(None, gt=0, le=1, description="longest window / record "
                                                                                       "length (records shorter are "
                                                                                       "left out of that window)")
+    sweep_coherence_span: Optional[Finite] = Field(None, ge=0, le=10, description="a window's coherence at omega is "
+                                                   "its smallest within this many 1/T_w of omega (2: the Hann "
+                                                   "main lobe; 0: at omega alone)")
     sweep_points: Optional[int] = Field(None, ge=2, le=1000, description="Tischler-Remple cost frequencies per "
                                                                          "response")
 

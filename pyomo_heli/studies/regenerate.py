@@ -115,6 +115,8 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("multistart_case1_eps", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "
                                    "--epsilon 0.2008495658274336 --out {out}/multistart_case1_eps --restart",),
           ("multistart.json", "starts.csv"), minutes=20),
+    Entry("noise_only", ("python studies/held_out_effects.py --effects none --seeds 5 --out {out}/noise_only",),
+          ("held_out.csv", "held_out.md"), minutes=140),
     Entry("bo105_flight_trims", ("pyomo-heli trim-loop studies/bo105_flight_trims.toml "
                                  "--out {out}/bo105_flight_trims",),
           ("report.md", "trim_curves.png", "trim_loop.json", "trim_residuals.png"), minutes=2),

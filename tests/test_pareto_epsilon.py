@@ -73,7 +73,9 @@ def test_front_points_match_the_closed_form(box_front):
     assert [p.grid for p in grid] == [q for q in snake((4, 4)) if any(q)]
     for p in grid:
         e2, e3 = p.epsilon["f2"], p.epsilon["f3"]
-        a, b = 1 - math.sqrt(e2), 1 - math.sqrt(e3)
+        # column 0 leaves f3 free (inf); row 0 bounds f2 by its value at A, 1
+        assert (e3 == math.inf) == (p.grid[1] == 0) and e2 == pytest.approx(axis[p.grid[0]])
+        a, b = 1 - math.sqrt(e2), 1 - math.sqrt(min(e3, 1.0))  # f3 free: b = 0, as under f3 <= f3(A) = 1
         # 1e-5: on row/column 0 the bound sits where f1's gradient vanishes (a weakly active constraint, zero
         # multiplier), and the barrier keeps the iterate ~sqrt(tol) inside
         np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], [a, b], atol=1e-5)
@@ -234,3 +236,25 @@ def test_row_minima_settle_the_infeasible_grid_points_without_solving_them():
         else:
             assert p.success and 0 < p.iterations < SETTINGS.max_iter
     assert sum(p.status == INFEASIBLE for p in grid) == 3  # (1, 2), (2, 1), (2, 2)
+
+
+def test_column_0_leaves_the_last_objective_free_where_it_rises_above_its_value_at_A():
+    """f1 = (a - 1)^2 + b^2 + 1, f2 = a^2 + (b - 1)^2, f3 = (a - 1)^2 + (b + 1)^2: A = (1, 0) with f3(A) = 1, and
+    f3 rises towards B = (0, 1). Under f2 <= e2 the least f3 is (sqrt(5) - sqrt(e2))^2 > 1 on rows 1, 2, so
+    every bounded column there is infeasible; column 0 (f3 free) is the f1-f2 front, in closed form
+    (0, 1) + sqrt(e2) (1, -1) / sqrt(2), with f3 above f3(A) (bounded at f3(A) it would be infeasible)."""
+    m = _model(lambda a, b: ((a - 1) ** 2 + b**2 + 1.0, a**2 + (b - 1) ** 2, (a - 1) ** 2 + (b + 1) ** 2))
+    ps = EpsilonConstraintSolver(m, NAMES, SETTINGS)
+    ps.grid_front((3, 3))
+    e2_axis, _ = ps.axes
+    grid = {p.grid: p for p in ps.points if p.kind == "eps"}
+    for i in (1, 2):
+        assert ps.row_minima[i] == pytest.approx((math.sqrt(5) - math.sqrt(e2_axis[i])) ** 2, rel=1e-5)
+        p = grid[(i, 0)]
+        assert p.success and p.epsilon["f3"] == math.inf and 0 < p.iterations < SETTINGS.max_iter
+        r = math.sqrt(e2_axis[i] / 2)
+        np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], [r, 1 - r], atol=1e-5)
+        assert p.J_f3 > 1.5  # above f3(A) = 1
+    converged = sorted(q for q, p in grid.items() if p.success)
+    assert converged == [(1, 0), (2, 0)]
+    assert all(p.status == INFEASIBLE for q, p in grid.items() if q not in converged)

@@ -231,20 +231,49 @@ class EpsilonConstraintSolver:
             self.store.save(key, asdict(p), self.m, duals=self.settings.warm_start in MULTIPLIER_MODES)
 
     # -------------------------------------------------------------- anchors (payoff table)
+    def _near_start_options(self) -> dict | None:
+        """A solve from a feasible solution (no multipliers for the new objective): with ``continuation`` the
+        barrier starts at 100 tol instead of 0.1. Measured on Case 1 (full size, one run), anchor B of the
+        two-objective front: first stage 9 iterations instead of 17, second 11 instead of 16 (tol/10: 16)."""
+        if self.settings.warm_start != "continuation":
+            return None
+        return {"mu_init": 100.0 * float(self.settings.solver_options.get("tol", 1e-8))}
+
     def _lexicographic(self, objective: str, kind: str, index: int, start: Snapshot):
-        """Min ``objective``, then min J_0 keeping it at its minimum (a non-dominated anchor)."""
+        """Min ``objective``, then min J_0 keeping it at its minimum (a non-dominated anchor).
+
+        Both stages start from a feasible solution (``start``, anchor A's, then the first stage's), with
+        :meth:`_near_start_options`, as anchor B of the two-objective front; if that fails, the anchor is
+        solved once more from ``start`` with Ipopt's default barrier start (both attempts counted)."""
+        options = self._near_start_options()
+        p = self._two_stages(objective, kind, index, start, options)
+        if not p.success and options is not None:
+            retry = self._two_stages(objective, kind, index, start, None)
+            retry.iterations += max(p.iterations, 0)
+            retry.wall_time += p.wall_time
+            retry.warm_start = f"primal, mu_init {options['mu_init']:g} ({p.status}), then primal"
+            p = retry
+        if not p.success:
+            raise RuntimeError(f"anchor {kind} failed: {p.status}")
+        return p
+
+    def _two_stages(self, objective: str, kind: str, index: int, start: Snapshot, options):
         start.restore()
-        first = self.solve_once(objective, warm_start="primal")
-        if not first.success:
-            raise RuntimeError(f"anchor {kind} (J_{objective} alone) failed: {first.status}")
+        first = self.solve_once(objective, warm_start="primal", options=options)
         bound = first.J[objective] * (1 + self.settings.lexicographic_tol) + 1e-12
-        out = self.solve_once(self.primary, {objective: bound}, "primal")
+        if first.success:
+            out = self.solve_once(self.primary, {objective: bound}, "primal", options)
+        else:
+            out = Outcome(**{**asdict(first), "status": f"first stage (J_{objective} alone): {first.status}",
+                             "iterations": 0, "wall_time": 0.0})
         p = self._point(index, kind, {objective: bound}, out, "primal", ())
-        p.iterations += first.iterations
+        p.iterations += max(first.iterations, 0)
         p.wall_time += first.wall_time
         p.first_stage_min = first.J[objective]
-        if not p.success:
-            raise RuntimeError(f"anchor {kind}, second stage, failed: {p.status}")
+        if options:
+            p.warm_start = f"primal, mu_init {options['mu_init']:g}"
+        if first.success and not p.success:
+            p.status = f"second stage: {p.status}"
         return p
 
     def anchors(self) -> list:
@@ -349,7 +378,8 @@ class EpsilonConstraintSolver:
 
         Axis k runs from J_k at anchor A (inactive) down to ``margin`` of the anchor range above J_k's
         minimum, with ``settings.spacing``: with every bound at its minimum the corner is infeasible or
-        degenerate, and the anchors already hold the minima. Position (0, ..., 0) is anchor A itself.
+        degenerate, and the anchors already hold the minima. Position (0, ..., 0) is anchor A itself; position 0
+        of every axis after the first is no bound at all (:meth:`grid_bounds`).
         """
         counts = tuple(int(c) for c in counts)
         if len(counts) != len(self.bounded):
@@ -362,7 +392,7 @@ class EpsilonConstraintSolver:
         for pos in snake(counts):
             if not any(pos):
                 continue  # anchor A itself (every bound inactive)
-            eps = {k: float(ax[i]) for k, ax, i in zip(self.bounded, self.axes, pos)}
+            eps = self.grid_bounds(pos)
             if len(self.bounded) == 2 and pos[0] not in self.row_minima:
                 self.row_minima[pos[0]] = self.row_minimum(pos[0])
             # nearest solved neighbour on the grid (index distance), the latest on ties
@@ -375,6 +405,14 @@ class EpsilonConstraintSolver:
             self.on_point(p)
             index += 1
         return self.points
+
+    def grid_bounds(self, pos) -> dict:
+        """The bounds at grid position ``pos`` (name -> bound): ``axes[k][pos[k]]``, except that position 0 of every
+        axis after the first leaves that objective free (inf). Column 0 of a two-bound grid is then the
+        two-objective front of J_0 and J_1 wherever it goes, not only as far as J_2 stays below its value at A
+        (bounded there, the rows where the least J_2 exceeds J_2(A) would be infeasible in every column)."""
+        return {k: (math.inf if n > 0 and i == 0 else float(ax[i]))
+                for n, (k, ax, i) in enumerate(zip(self.bounded, self.axes, pos))}
 
     def grid_axes(self, counts, margin: float = TIGHT_MARGIN) -> list:
         """The grid's bounds per bounded objective (needs the anchors): ``counts[k]`` values from J_k at

@@ -248,8 +248,13 @@ def test_column_0_leaves_the_last_objective_free_where_it_rises_above_its_value_
     ps.grid_front((3, 3))
     e2_axis, _ = ps.axes
     grid = {p.grid: p for p in ps.points if p.kind == "eps"}
-    for i in (1, 2):
+    # C = (1, -1) has f2 = 5 > f2(A) = 2: row 0's bound is active at C, so its minimum is solved too
+    assert [r["row"] for r in ps.row_solves] == [0, 1, 2]
+    for i in (0, 1, 2):
         assert ps.row_minima[i] == pytest.approx((math.sqrt(5) - math.sqrt(e2_axis[i])) ** 2, rel=1e-5)
+    for j in (1, 2):  # e3 = 0.224, 0.05 below row 0's least f3 0.675: infeasible without a solve
+        assert grid[(0, j)].status == INFEASIBLE and grid[(0, j)].iterations == 0
+    for i in (1, 2):
         p = grid[(i, 0)]
         assert p.success and p.epsilon["f3"] == math.inf and 0 < p.iterations < SETTINGS.max_iter
         r = math.sqrt(e2_axis[i] / 2)

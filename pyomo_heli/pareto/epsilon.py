@@ -426,14 +426,15 @@ class EpsilonConstraintSolver:
 
         With two bounded objectives (J_1 on the grid's rows, J_2 on its columns) the bounds (e_1, e_2) are
         feasible exactly when min J_2 s.t. J_1 <= e_1 is at most e_2, whatever J_0 does: one solve per row
-        (row 0: anchor C's first stage; row i: from row i - 1's solution, a continuation along the J_1-J_2
-        front) settles every point of the row, and a point below it is reported infeasible without a solve
+        (row 0: anchor C's first stage when C keeps J_1 <= J_1(A), else a solve from C; row i: from row i - 1's
+        solution, a continuation along the J_1-J_2 front) settles every point of the row, and a point below it is reported infeasible without a solve
         (:meth:`a_priori_infeasible`). The solve is ``settings.max_iter``-capped; if it fails, nothing is
         known a priori (returns -inf) and the row's points are solved as they come.
         """
         k1, k2 = self.bounded
-        if i == 0:
-            return self.minima[k2]
+        c = self.anchor_points[ANCHOR_NAMES[2]]
+        if i == 0 and _get(c, k1) <= float(self.axes[0][0]) * (1 + 1e-12):
+            return self.minima[k2]  # row 0's bound J_1(A) is inactive at C
         snap = self._row_snapshots.get(i - 1) or self.snapshots[ANCHOR_NAMES[2]]  # anchor C: min J_2, J_1 free
         here = Snapshot(self.m)
         snap.restore()

@@ -22,7 +22,7 @@ import numpy as np
 import pyomo.environ as pyo
 import pytest
 
-from pyomo_heli.pareto.epsilon import (INFEASIBLE, EpsilonConstraintSolver, nondominated, nondominated_nadir,
+from pyomo_heli.pareto.epsilon import (INFEASIBLE, EpsilonConstraintSolver, GridStart, nondominated, nondominated_nadir,
                                        snake, utopia_distance_n)
 from pyomo_heli.pareto.front import ParetoSettings
 
@@ -263,3 +263,53 @@ def test_column_0_leaves_the_last_objective_free_where_it_rises_above_its_value_
     converged = sorted(q for q, p in grid.items() if p.success)
     assert converged == [(1, 0), (2, 0)]
     assert all(p.status == INFEASIBLE for q, p in grid.items() if q not in converged)
+
+
+def test_grid_start_is_the_distance_to_the_bounds_where_a_start_is_a_solution(box_front):
+    """By hand, in the box problem's anchor ranges (f2, f3: 1 - 0 = 1 each): a start is still a solution where its
+    objective vector meets the new bounds and no bound active at it is loosened; the distance to that set is the
+    violation plus the loosening (bounds above the value at A read as that value)."""
+    ps = box_front
+    s = GridStart("s", {"f2": 0.5, "f3": 0.2}, {"f2": 0.5, "f3": 0.6}, snapshot=None)  # f2 active, f3 not
+    assert ps.start_distance(s, {"f2": 0.4, "f3": 0.9}) == pytest.approx(0.1)  # f2 exceeds 0.4 by 0.1
+    assert ps.start_distance(s, {"f2": 0.7, "f3": 0.1}) == pytest.approx(0.2 + 0.1)  # f2 loosened, f3 exceeded
+    assert ps.start_distance(s, {"f2": math.inf, "f3": 0.3}) == pytest.approx(0.5)  # free f2: up to f2(A) = 1
+    assert ps.start_distance(s, {"f2": 0.5, "f3": 0.25}) == 0.0  # f3 inactive at s: tightening it to 0.25 is free
+    free = GridStart("free", {"f2": 0.3, "f3": 0.3}, {"f2": math.inf, "f3": math.inf}, snapshot=None)
+    assert ps.start_distance(free, {"f2": 0.9, "f3": 0.9}) == 0.0 and ps.start_violation(free, {"f2": 0.2}) == \
+        pytest.approx(0.1)
+    saved = ps.starts
+    try:
+        ps.starts = [free, s]
+        assert ps.grid_start({"f2": 0.45, "f3": 0.9}) is free  # 0.0 against 0.05
+        assert ps.grid_start({"f2": 0.5, "f3": 0.25}) is s  # free: 0.05 against 0 for s
+        assert ps.grid_start({"f2": 0.25, "f3": 0.25}) is free  # 0.1 against 0.25
+        assert ps.grid_start({"f2": 0.45, "f3": 0.25}) is s  # a tie (0.05, 0.05): the latest
+        assert ps.known_feasible({"f2": 0.3, "f3": 0.3}) and not ps.known_feasible({"f2": 0.29, "f3": 0.9})
+    finally:
+        ps.starts = saved
+
+
+def test_every_grid_point_records_its_start_and_the_rows_are_solved_only_where_needed():
+    """On the disc problem each grid point's ``start`` is the least :meth:`start_distance` over A, the grid points
+    solved before it and the row minima solved before it (recomputed here), and a start at distance 0 is already
+    the answer: the solve confirms it in at most 2 iterations, at the same parameters."""
+    m = _model(lambda a, b: ((a - 1) ** 2 + b**2 + 1.0, a**2 + (b - 1) ** 2, (a + 1) ** 2 + b**2))
+    ps = EpsilonConstraintSolver(m, NAMES, SETTINGS)
+    ps.grid_front((4, 4))
+    grid = [p for p in ps.points if p.kind == "eps"]
+    by_label = {s.label: s for s in ps.starts}
+    for n, p in enumerate(grid):
+        before = [by_label["anchor A"]] + [by_label[f"point {q.index} {q.grid}"] for q in grid[:n] if q.success]
+        before += [s for s in ps.starts if s.label.startswith("row") and s.label in by_label]
+        if p.status == INFEASIBLE and p.iterations == 0:
+            continue
+        d = {s.label: ps.start_distance(s, p.epsilon) for s in before if s.label.startswith(("anchor", "point"))
+             or int(s.label.split()[1]) <= p.grid[0]}
+        assert d[p.start] == pytest.approx(min(d.values()), abs=1e-12), (p.grid, p.start, d)
+        if d[p.start] == 0.0 and p.start.startswith("point"):
+            q = next(q for q in grid if f"point {q.index} {q.grid}" == p.start)
+            assert p.iterations <= 2 and p.parameters == pytest.approx(q.parameters, abs=1e-6)
+    # a row's least f3 is solved only when one of its points is neither infeasible a priori nor met by a solution
+    solved_rows = [r["row"] for r in ps.row_solves]
+    assert len(solved_rows) == len(set(solved_rows)) and set(solved_rows) <= set(range(4))

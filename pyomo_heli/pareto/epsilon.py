@@ -57,8 +57,10 @@ from .steps import (ANCHOR_NAMES, FRONT_STEP_OPTIONS, INFEASIBLE, IPOPT_INFEASIB
                     pin_objective_settings, snake, solve_with_fallback)
 
 
-#: a start whose objective vector exceeds the new bounds by at most this (in anchor ranges) counts as feasible
-FEASIBLE_TOL = 1e-6
+#: a start whose objective vector exceeds the new bounds by at most this (in anchor ranges) counts as feasible, a
+#: bound it exceeds by at most this as active: Ipopt keeps an active bound only to its relaxation (bound_relax_factor
+#: 1e-8), so a solution exceeds its own J_linear bound by ~3e-7 = 2e-6 of Case 1's range
+FEASIBLE_TOL = 1e-4
 
 
 @dataclass

@@ -310,6 +310,39 @@ def test_every_grid_point_records_its_start_and_the_rows_are_solved_only_where_n
         if d[p.start] == 0.0 and p.start.startswith("point"):
             q = next(q for q in grid if f"point {q.index} {q.grid}" == p.start)
             assert p.iterations <= 2 and p.parameters == pytest.approx(q.parameters, abs=1e-6)
-    # a row's least f3 is solved only when one of its points is neither infeasible a priori nor met by a solution
-    solved_rows = [r["row"] for r in ps.row_solves]
-    assert len(solved_rows) == len(set(solved_rows)) and set(solved_rows) <= set(range(4))
+    assert [r["row"] for r in ps.row_solves] == [1, 2, 3]  # row 0: anchor C's minimum
+
+
+def test_a_solution_that_meets_the_bounds_is_the_start_and_no_row_minimum_is_needed():
+    """f1 = a^2 + b^2, f2 = (a - 1)^2, f3 = (a - 1)^2 + (b - 1)^2. Closed form of min f1 s.t. f2 <= e2, f3 <= e3:
+    a = b = 1 - sqrt(e3 / 2) while e3 / 2 <= e2 (f2 inactive); a = 1 - sqrt(e2), b = 0 while e2 + 1 <= e3 (f3
+    inactive); else a = 1 - sqrt(e2), b = 1 - sqrt(e3 - e2). Anchor C = (1, 1) lies in the grid's box (its f2 is
+    0), so row 0's least f3 is C's; every later row meets its first point with a solution already at hand (the
+    f3-tightest column keeps f2 = 0.05, below every row's bound but the last), so no row minimum is solved. A
+    point whose start is at distance 0, f2 inactive there, gets it back in one or two iterations."""
+    m = _model(lambda a, b: (a**2 + b**2, (a - 1) ** 2, (a - 1) ** 2 + (b - 1) ** 2))
+    ps = EpsilonConstraintSolver(m, NAMES, SETTINGS)
+    ps.grid_front((4, 4))
+
+    def closed(e2, e3):
+        e3 = min(e3, 2.0)  # free: f3(A) = 2
+        if e3 / 2 <= e2:
+            return [1 - math.sqrt(e3 / 2)] * 2
+        if e2 + 1 <= e3:
+            return [1 - math.sqrt(e2), 0.0]
+        return [1 - math.sqrt(e2), 1 - math.sqrt(e3 - e2)]
+
+    grid = [p for p in ps.points if p.kind == "eps"]
+    assert len(grid) == 15 and all(p.success and p.iterations < SETTINGS.max_iter for p in grid)
+    for p in grid:
+        np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], closed(p.epsilon["f2"], p.epsilon["f3"]),
+                                   atol=1e-5)
+    assert ps.row_solves == []
+    by_label = {s.label: s for s in ps.starts}
+    # distance 0 with f2 clear of the new bound (on the diagonal e3 / 2 = e2 both bounds are just active there)
+    exact = [p for p in grid if ps.start_distance(by_label[p.start], p.epsilon) == 0.0
+             and by_label[p.start].J["f2"] < p.epsilon["f2"] - 1e-3]
+    assert sorted(p.grid for p in exact) == [(1, 2), (1, 3), (2, 3)]
+    for p in exact:
+        q = next(q for q in grid if f"point {q.index} {q.grid}" == p.start)
+        assert p.iterations <= 2 and p.parameters == pytest.approx(q.parameters, abs=1e-6)

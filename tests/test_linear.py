@@ -218,3 +218,24 @@ def test_linearize_command_prints_the_documented_poles(capsys):
     assert "poles [1/s]: -5.8486, -3.6994, -0.7155, 0.0099-0.2918j, 0.0099+0.2918j" in out
     assert main(["linearize", "--speeds-kt", "200"]) == 2
     assert "--speeds-kt" in capsys.readouterr().err
+
+
+def test_truth_lines_name_the_parameters_beyond_two_standard_errors_and_the_lacking_truth_effect():
+    """The report's line against the truth: within / beyond 2 SE from the table's error/SE column; beyond, the
+    effects of the bundled data's truth model (truth.json: wake_on_tail) that the identification model lacks."""
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from pyomo_heli.physics.model import HelicopterModel
+    from pyomo_heli.report.linear import truth_lines
+
+    params = pd.DataFrame({"parameter": ["theta_twist", "CL_alpha_HT"], "tri-objective error/SE": [1.25, 4.7]})
+    data = Path(__file__).resolve().parents[1] / "data" / "bo105_synthetic"
+    cfg = SimpleNamespace(model=HelicopterModel(), dataset=data)
+    line = truth_lines(params, cfg)[0]
+    assert "within 2: theta_twist (+1.2)" in line and "beyond: CL_alpha_HT (+4.7)" in line
+    assert "has wake_on_tail (truth.json), which the identification model lacks" in line
+    assert truth_lines(params.assign(**{"tri-objective error/SE": [0.5, -1.9]}), cfg)[0].endswith("beyond: none.")
+    assert truth_lines(params.drop(columns="tri-objective error/SE"), cfg) == []

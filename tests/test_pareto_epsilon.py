@@ -22,7 +22,7 @@ import numpy as np
 import pyomo.environ as pyo
 import pytest
 
-from pyomo_heli.pareto.epsilon import (INFEASIBLE, EpsilonConstraintSolver, nondominated, nondominated_nadir,
+from pyomo_heli.pareto.epsilon import (INFEASIBLE, EpsilonConstraintSolver, GridStart, nondominated, nondominated_nadir,
                                        snake, utopia_distance_n)
 from pyomo_heli.pareto.front import ParetoSettings
 
@@ -73,7 +73,9 @@ def test_front_points_match_the_closed_form(box_front):
     assert [p.grid for p in grid] == [q for q in snake((4, 4)) if any(q)]
     for p in grid:
         e2, e3 = p.epsilon["f2"], p.epsilon["f3"]
-        a, b = 1 - math.sqrt(e2), 1 - math.sqrt(e3)
+        # column 0 leaves f3 free (inf); row 0 bounds f2 by its value at A, 1
+        assert (e3 == math.inf) == (p.grid[1] == 0) and e2 == pytest.approx(axis[p.grid[0]])
+        a, b = 1 - math.sqrt(e2), 1 - math.sqrt(min(e3, 1.0))  # f3 free: b = 0, as under f3 <= f3(A) = 1
         # 1e-5: on row/column 0 the bound sits where f1's gradient vanishes (a weakly active constraint, zero
         # multiplier), and the barrier keeps the iterate ~sqrt(tol) inside
         np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], [a, b], atol=1e-5)
@@ -234,3 +236,113 @@ def test_row_minima_settle_the_infeasible_grid_points_without_solving_them():
         else:
             assert p.success and 0 < p.iterations < SETTINGS.max_iter
     assert sum(p.status == INFEASIBLE for p in grid) == 3  # (1, 2), (2, 1), (2, 2)
+
+
+def test_column_0_leaves_the_last_objective_free_where_it_rises_above_its_value_at_A():
+    """f1 = (a - 1)^2 + b^2 + 1, f2 = a^2 + (b - 1)^2, f3 = (a - 1)^2 + (b + 1)^2: A = (1, 0) with f3(A) = 1, and
+    f3 rises towards B = (0, 1). Under f2 <= e2 the least f3 is (sqrt(5) - sqrt(e2))^2 > 1 on rows 1, 2, so
+    every bounded column there is infeasible; column 0 (f3 free) is the f1-f2 front, in closed form
+    (0, 1) + sqrt(e2) (1, -1) / sqrt(2), with f3 above f3(A) (bounded at f3(A) it would be infeasible)."""
+    m = _model(lambda a, b: ((a - 1) ** 2 + b**2 + 1.0, a**2 + (b - 1) ** 2, (a - 1) ** 2 + (b + 1) ** 2))
+    ps = EpsilonConstraintSolver(m, NAMES, SETTINGS)
+    ps.grid_front((3, 3))
+    e2_axis, _ = ps.axes
+    grid = {p.grid: p for p in ps.points if p.kind == "eps"}
+    # C = (1, -1) has f2 = 5 > f2(A) = 2: row 0's bound is active at C, so its minimum is solved too
+    assert [r["row"] for r in ps.row_solves] == [0, 1, 2]
+    for i in (0, 1, 2):
+        assert ps.row_minima[i] == pytest.approx((math.sqrt(5) - math.sqrt(e2_axis[i])) ** 2, rel=1e-5)
+    for j in (1, 2):  # e3 = 0.224, 0.05 below row 0's least f3 0.675: infeasible without a solve
+        assert grid[(0, j)].status == INFEASIBLE and grid[(0, j)].iterations == 0
+    for i in (1, 2):
+        p = grid[(i, 0)]
+        assert p.success and p.epsilon["f3"] == math.inf and 0 < p.iterations < SETTINGS.max_iter
+        r = math.sqrt(e2_axis[i] / 2)
+        np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], [r, 1 - r], atol=1e-5)
+        assert p.J_f3 > 1.5  # above f3(A) = 1
+    converged = sorted(q for q, p in grid.items() if p.success)
+    assert converged == [(1, 0), (2, 0)]
+    assert all(p.status == INFEASIBLE for q, p in grid.items() if q not in converged)
+
+
+def test_grid_start_is_the_distance_to_the_bounds_where_a_start_is_a_solution(box_front):
+    """By hand, in the box problem's anchor ranges (f2, f3: 1 - 0 = 1 each): a start is still a solution where its
+    objective vector meets the new bounds and no bound active at it is loosened; the distance to that set is the
+    violation plus the loosening (bounds above the value at A read as that value)."""
+    ps = box_front
+    s = GridStart("s", {"f2": 0.5, "f3": 0.2}, {"f2": 0.5, "f3": 0.6}, snapshot=None)  # f2 active, f3 not
+    assert ps.start_distance(s, {"f2": 0.4, "f3": 0.9}) == pytest.approx(0.1)  # f2 exceeds 0.4 by 0.1
+    assert ps.start_distance(s, {"f2": 0.7, "f3": 0.1}) == pytest.approx(0.2 + 0.1)  # f2 loosened, f3 exceeded
+    assert ps.start_distance(s, {"f2": math.inf, "f3": 0.3}) == pytest.approx(0.5)  # free f2: up to f2(A) = 1
+    assert ps.start_distance(s, {"f2": 0.5, "f3": 0.25}) == 0.0  # f3 inactive at s: tightening it to 0.25 is free
+    free = GridStart("free", {"f2": 0.3, "f3": 0.3}, {"f2": math.inf, "f3": math.inf}, snapshot=None)
+    assert ps.start_distance(free, {"f2": 0.9, "f3": 0.9}) == 0.0 and ps.start_violation(free, {"f2": 0.2}) == \
+        pytest.approx(0.1)
+    saved = ps.starts
+    try:
+        ps.starts = [free, s]
+        assert ps.grid_start({"f2": 0.45, "f3": 0.9}) is free  # 0.0 against 0.05
+        assert ps.grid_start({"f2": 0.5, "f3": 0.25}) is s  # free: 0.05 against 0 for s
+        assert ps.grid_start({"f2": 0.25, "f3": 0.25}) is free  # 0.1 against 0.25
+        assert ps.grid_start({"f2": 0.45, "f3": 0.25}) is s  # a tie (0.05, 0.05): the latest
+        assert ps.known_feasible({"f2": 0.3, "f3": 0.3}) and not ps.known_feasible({"f2": 0.29, "f3": 0.9})
+    finally:
+        ps.starts = saved
+
+
+def test_every_grid_point_records_its_start_and_the_rows_are_solved_only_where_needed():
+    """On the disc problem each grid point's ``start`` is the least :meth:`start_distance` over A, the grid points
+    solved before it and the row minima solved before it (recomputed here), and a start at distance 0 is already
+    the answer: the solve confirms it in at most 2 iterations, at the same parameters."""
+    m = _model(lambda a, b: ((a - 1) ** 2 + b**2 + 1.0, a**2 + (b - 1) ** 2, (a + 1) ** 2 + b**2))
+    ps = EpsilonConstraintSolver(m, NAMES, SETTINGS)
+    ps.grid_front((4, 4))
+    grid = [p for p in ps.points if p.kind == "eps"]
+    by_label = {s.label: s for s in ps.starts}
+    for n, p in enumerate(grid):
+        before = [by_label["anchor A"]] + [by_label[f"point {q.index} {q.grid}"] for q in grid[:n] if q.success]
+        before += [s for s in ps.starts if s.label.startswith("row") and s.label in by_label]
+        if p.status == INFEASIBLE and p.iterations == 0:
+            continue
+        d = {s.label: ps.start_distance(s, p.epsilon) for s in before if s.label.startswith(("anchor", "point"))
+             or int(s.label.split()[1]) <= p.grid[0]}
+        assert d[p.start] == pytest.approx(min(d.values()), abs=1e-12), (p.grid, p.start, d)
+        if d[p.start] == 0.0 and p.start.startswith("point"):
+            q = next(q for q in grid if f"point {q.index} {q.grid}" == p.start)
+            assert p.iterations <= 2 and p.parameters == pytest.approx(q.parameters, abs=1e-6)
+    assert [r["row"] for r in ps.row_solves] == [1, 2, 3]  # row 0: anchor C's minimum
+
+
+def test_a_solution_that_meets_the_bounds_is_the_start_and_no_row_minimum_is_needed():
+    """f1 = a^2 + b^2, f2 = (a - 1)^2, f3 = (a - 1)^2 + (b - 1)^2. Closed form of min f1 s.t. f2 <= e2, f3 <= e3:
+    a = b = 1 - sqrt(e3 / 2) while e3 / 2 <= e2 (f2 inactive); a = 1 - sqrt(e2), b = 0 while e2 + 1 <= e3 (f3
+    inactive); else a = 1 - sqrt(e2), b = 1 - sqrt(e3 - e2). Anchor C = (1, 1) lies in the grid's box (its f2 is
+    0), so row 0's least f3 is C's; every later row meets its first point with a solution already at hand (the
+    f3-tightest column keeps f2 = 0.05, below every row's bound but the last), so no row minimum is solved. A
+    point whose start is at distance 0, f2 inactive there, gets it back in one or two iterations."""
+    m = _model(lambda a, b: (a**2 + b**2, (a - 1) ** 2, (a - 1) ** 2 + (b - 1) ** 2))
+    ps = EpsilonConstraintSolver(m, NAMES, SETTINGS)
+    ps.grid_front((4, 4))
+
+    def closed(e2, e3):
+        e3 = min(e3, 2.0)  # free: f3(A) = 2
+        if e3 / 2 <= e2:
+            return [1 - math.sqrt(e3 / 2)] * 2
+        if e2 + 1 <= e3:
+            return [1 - math.sqrt(e2), 0.0]
+        return [1 - math.sqrt(e2), 1 - math.sqrt(e3 - e2)]
+
+    grid = [p for p in ps.points if p.kind == "eps"]
+    assert len(grid) == 15 and all(p.success and p.iterations < SETTINGS.max_iter for p in grid)
+    for p in grid:
+        np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], closed(p.epsilon["f2"], p.epsilon["f3"]),
+                                   atol=1e-5)
+    assert ps.row_solves == []
+    by_label = {s.label: s for s in ps.starts}
+    # distance 0 with f2 clear of the new bound (on the diagonal e3 / 2 = e2 both bounds are just active there)
+    exact = [p for p in grid if ps.start_distance(by_label[p.start], p.epsilon) == 0.0
+             and by_label[p.start].J["f2"] < p.epsilon["f2"] - 1e-3]
+    assert sorted(p.grid for p in exact) == [(1, 2), (1, 3), (2, 3)]
+    for p in exact:
+        q = next(q for q in grid if f"point {q.index} {q.grid}" == p.start)
+        assert p.iterations <= 2 and p.parameters == pytest.approx(q.parameters, abs=1e-6)

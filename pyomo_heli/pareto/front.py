@@ -201,14 +201,6 @@ class ParetoSolver(EpsilonConstraintSolver):
                                                           **obj),
                                    self.settings.warm_start, start)
 
-    def _near_start_options(self) -> dict | None:
-        """Anchor B's stages start from a feasible solution (no multipliers for the new objective):
-        with ``continuation`` the barrier starts at 100 tol instead of 0.1. Measured on Case 1 (full
-        size, one run): first stage 9 iterations instead of 17, second 11 instead of 16 (tol/10: 16)."""
-        if self.settings.warm_start != "continuation":
-            return None
-        return {"mu_init": 100.0 * float(self.settings.solver_options.get("tol", 1e-8))}
-
     def solve_objective(self, objective: str = "time", epsilon: float = math.inf, index: int = 0,
                         kind: str = "single", warm_start: str = "none") -> FrontPoint:
         """One solve of min J_time (``"time"``) or J_trim (``"trim"``) s.t. J_trim <= epsilon, from the

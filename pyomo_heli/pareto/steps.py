@@ -130,6 +130,7 @@ class EpsilonPoint:
     grid: tuple = ()
     note: str = ""
     first_stage_min: float = math.nan  # anchors of bounded objectives: the objective's own minimum
+    start: str = ""  # grid points: the solution the solve started from (EpsilonConstraintSolver.grid_start)
 
     def __getattr__(self, name):
         if name.startswith("J_") and "J" in self.__dict__ and name[2:] in self.__dict__["J"]:

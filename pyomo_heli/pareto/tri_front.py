@@ -6,8 +6,9 @@ from the unconstrained values at anchor A (min J_time) down to the anchors'
 minima: eps_trim from J_trim(A) towards J_trim(B), eps_linear from J_linear(A)
 towards J_linear(C), stopping :data:`~.epsilon.TIGHT_MARGIN` of the range short
 of each minimum. Points are visited along a snake path (row 0 left to right,
-row 1 right to left, ...), each warm-started from its nearest solved neighbour
-on the grid. A grid point whose bounds are infeasible is reported as
+row 1 right to left, ...), each warm-started from the solved solution nearest
+to being one at its bounds (:meth:`~.epsilon.EpsilonConstraintSolver.grid_start`,
+recorded in the point's ``start``). A grid point whose bounds are infeasible is reported as
 ``infeasible`` (found a priori, or by Ipopt) and the sweep goes on.
 
 Row ``i_linear = 0`` (J_linear bound inactive) is the bi-objective front of
@@ -35,6 +36,7 @@ class TriFrontPoint(FrontPoint):
     i_trim: int = -1  # grid position (-1: anchors and choices off the grid)
     i_linear: int = -1
     note: str = ""  # why a point is infeasible (Ipopt's status, or the a-priori reason)
+    start: str = ""  # grid points: the solution the solve started from (EpsilonConstraintSolver.grid_start)
 
 
 class TriParetoSolver(EpsilonConstraintSolver):

@@ -17,7 +17,8 @@ from ..dataset.frequency_response import load_responses
 from ..pareto.result import IdentificationResult, ResultFileError, check_point_record, is_number
 from ..physics.model import INPUTS, OUTPUTS
 from ..simulation.linearize import linearize_float
-from .identification import _display, markdown_table, nadir_rule_line, placement_line, read_truth
+from .identification import (_display, markdown_table, nadir_rule_line, placement_line, read_truth,
+                             read_truth_effects)
 from .linearization import gain_unit
 
 ESTIMATES = (("time-domain (A)", "C0", "--"), ("bi-objective", "C2", "-."), ("tri-objective", "C3", "-"))
@@ -175,6 +176,29 @@ def check_tri_objective(out: Path, cfg, result: IdentificationResult) -> None:
         if len(getattr(result, key)) != 3:
             raise ResultFileError(f"{ch}: key '{key}' must hold the 3 objectives (J_time, J_trim, J_linear), "
                                   f"got {list(getattr(result, key))}")
+
+
+def truth_lines(params: pd.DataFrame, cfg, label: str = "tri-objective", limit: float = 2.0) -> list[str]:
+    """Which parameters of the ``label`` estimate lie within ``limit`` standard errors of the truth, and, for those
+    beyond, the effects of the data's truth model (``truth.json``) that the identification model lacks: a model
+    error, which the standard errors (noise only) do not count. Empty without truth or standard errors."""
+    col = f"{label} error/SE"
+    if col not in params:
+        return []
+    rated = [(r.parameter, float(r[col])) for _, r in params.iterrows() if np.isfinite(r[col])]
+    ok = [f"{n} ({z:+.2g})" for n, z in rated if abs(z) <= limit]
+    off = [f"{n} ({z:+.2g})" for n, z in rated if abs(z) > limit]
+    lines = [f"Against the truth, the {label} estimate in standard errors: within {limit:g}: "
+             f"{', '.join(ok) or 'none'}; beyond: {', '.join(off) or 'none'}."]
+    if off:
+        have = {e.name for e in getattr(cfg.model, "extensions", ())}
+        lacking = [n for n in (read_truth_effects(cfg.dataset) or {}) if n not in have]
+        lines[0] += (f" The data's truth model has {', '.join(lacking)} (truth.json), which the identification model "
+                     f"lacks: a model error, not counted in the standard errors (measurement noise only), that the "
+                     f"noise alone would not explain." if lacking else
+                     " The identification model has every effect of the data's truth model: no model error of that "
+                     "kind explains it.")
+    return [*lines, ""]
 
 
 def estimates(result: IdentificationResult) -> dict[str, dict]:
@@ -375,6 +399,7 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png", sta
             *(["SE: Cramer-Rao standard error from the time series and trims at the estimate (A: time series; "
                "bi: the weighted sum it is stationary for; tri: the bi choice's weights; the frequency responses' "
                "information not counted); error/SE = (estimate - truth) / SE.", ""] if se else []),
+            *truth_lines(params, cfg),
             "## Objective values of the choices", "", markdown_table(objs, 6), "",
             f"utopia (J_time, J_trim, J_linear) = {tuple(round(v, 6) for v in result.utopia)}, "
             f"nadir = {tuple(round(v, 6) for v in result.nadir)}", "",

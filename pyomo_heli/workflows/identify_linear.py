@@ -85,7 +85,8 @@ def run_tri_identification(cfg, run: RunFolder, progress=info) -> Identification
         note = f"; {p.note}" if p.note else ""
         progress(f"  point {p.index:>2} {p.kind:<3} ({p.i_trim},{p.i_linear}) J_time={p.J_time:.6g} "
                  f"J_trim={p.J_trim:.6g} J_linear={p.J_linear:.6g} {params} "
-                 f"[{p.status}{note}, {p.iterations} it, {p.wall_time:.1f} s]" + bar.tick())
+                 f"[{p.status}{note}, {p.iterations} it, {p.wall_time:.1f} s{', from ' + p.start if p.start else ''}]"
+                 + bar.tick())
 
     t1 = time.perf_counter()
     ps = TriParetoSolver(m, cfg.pareto, cfg.linear.points, on_point=on_point)

@@ -198,7 +198,9 @@ def test_scaled_primal_resolve_keeps_the_multiplier_estimate():
 @pytest.mark.slow
 def test_scaled_anchors_of_small_instance_in_no_more_iterations():
     """Anchors A and B of tests/configs/small_case1_noisy.toml (three maneuvers, hover included) unscaled and scaled:
-    the same estimates (1e-6 relative to max(|value|, scale)) and no more iterations at either anchor. Anchor B's
+    the same estimates and no more iterations at either anchor. The estimates agree to 1e-5 of max(|value|, scale):
+    A's twist sits at its bound 0 within the barrier's distance, -1.0e-7 rad/m unscaled and -1.9e-7 scaled (5e-6 of
+    its scale, 1 deg/m); CL_alpha_HT and J_time agree to 1e-8. Anchor B's
     second stage is the re-solve whose multiplier estimate the scaled problem kept only with the translated
     constr_mult_init_max (before: B 32 iterations scaled against 23 unscaled)."""
     import dataclasses
@@ -218,7 +220,7 @@ def test_scaled_anchors_of_small_instance_in_no_more_iterations():
     scales = {f.name: f.scale for f in cfg.free}
     for pu, ps_ in zip(runs[False], runs[True]):
         for name, v in pu.parameters.items():
-            assert abs(ps_.parameters[name] - v) <= 1e-6 * max(abs(v), scales.get(name, 1.0)), (pu.kind, name)
+            assert abs(ps_.parameters[name] - v) <= 1e-5 * max(abs(v), scales.get(name, 1.0)), (pu.kind, name)
         assert ps_.J_time == pytest.approx(pu.J_time, rel=1e-8)
     iterations = {s: [p.iterations for p in runs[s]] for s in runs}
     print(f"iterations (A, B): unscaled {iterations[False]}, scaled {iterations[True]}")

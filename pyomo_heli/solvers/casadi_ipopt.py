@@ -421,6 +421,8 @@ class CasadiIpoptSolver(DerivativeFunctions):
 
     def _solve(self, warm_start: str, options: dict | None) -> SolveResult:
         ipopt_options, verbose, _ = resolve_options(self.options, options, warm_start)
+        if self._scaling is not None and warm_start == "primal":  # Ipopt's multiplier bound in scaled units
+            ipopt_options = self._scaling.primal_restart_options(ipopt_options)
         self._check_unchanged()
         solver = self._solver_for(ipopt_options, verbose)
         args = self._numeric_inputs()

@@ -113,13 +113,16 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
     # ... the same standard errors as the loop computed itself at the diagnosed point (its own model, not rebuilt)
     assert it1["standard_errors"] == pytest.approx(se, rel=1e-9)
     assert "iter 1 error / SE" in report
-    # --restart identifies afresh what the changed setting refused above
-    cfg.path.write_text(text.replace("resample_hz = 25\n", f'resample_hz = 25\nresample_inputs = "{other}"\n'))
+    # --restart identifies afresh what the changed setting refused above (iteration 0 only: what --restart
+    # decides is whether iter_0 is reused, and a second iteration would only repeat the loop checked above)
+    cfg.path.write_text(text.replace("resample_hz = 25\n", f'resample_hz = 25\nresample_inputs = "{other}"\n')
+                        .replace("max_iterations = 1\n", "max_iterations = 0\n"))
     capsys.readouterr()
     assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop"), "--restart"]) == 0
     out = capsys.readouterr().out
     assert "reusing" not in out
     fresh = json.loads((tmp_path / "loop" / "loop.json").read_text())
+    assert len(fresh["iterations"]) == 1 and fresh["stopped"].startswith("iteration limit 0 reached")
     assert fresh["iterations"][0]["attribution"]["accepted"] == "rotor_wake_on_tail"
     assert fresh["iterations"][0]["parameters"] != it0["parameters"]  # the other inputs, another fit
 

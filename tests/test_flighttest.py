@@ -87,6 +87,44 @@ def _write(tmp_path: Path, text: str, name: str = "cfg.toml") -> Path:
 
 
 # ============================================================== 1. reproducible bundled datasets
+def _compare_regenerated(committed_root: Path, fresh_root: Path, files) -> None:
+    """Metadata byte-identical; numbers to 1e-6 of each column's largest magnitude (see below)."""
+    n = committed_root.name
+    for f in files:
+        old, new = (committed_root / f).read_bytes(), (fresh_root / f).read_bytes()
+        if not f.endswith(".csv"):
+            assert new == old, f"{n}/{f}: regenerated file differs from the committed one"
+            continue
+        old_lines, new_lines = old.decode().splitlines(), new.decode().splitlines()
+        meta = [i for i, line in enumerate(old_lines) if line.startswith("#")]
+        assert [new_lines[i] for i in meta] == [old_lines[i] for i in meta], f"{n}/{f}: comment lines differ"
+        a = pd.read_csv(committed_root / f, comment="#")
+        b = pd.read_csv(fresh_root / f, comment="#")
+        assert list(a.columns) == list(b.columns) and a.shape == b.shape, f"{n}/{f}: columns or length differ"
+        for col in a.select_dtypes("number").columns:
+            scale = max(float(a[col].abs().max()), 1e-12)
+            err = float((a[col] - b[col]).abs().max())
+            assert err <= 1e-6 * scale, f"{n}/{f}: column {col} differs by {err:g} (scale {scale:g})"
+        for col in a.columns.difference(a.select_dtypes("number").columns):
+            assert a[col].equals(b[col]), f"{n}/{f}: column {col} differs"
+
+
+def _regenerate_with_cli(names, tmp_path):
+    """`pyomo-heli generate-data` on the committed configs of ``names``, side by side (2 cores)."""
+    procs = {n: subprocess.Popen([sys.executable, "-m", "pyomo_heli.cli", "generate-data", "--config",
+                                  str(DATA / f"{n}.toml"), "--out", str(tmp_path / n)],
+                                 cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for n in names}
+    return procs
+
+
+def _check_whole(n, tmp_path):
+    committed, fresh = _files(DATA / n), _files(tmp_path / n)
+    assert "truth.json" in committed and "manifest.json" in committed and "trims.csv" in committed
+    assert sorted(fresh) == sorted(committed), n
+    _compare_regenerated(DATA / n, tmp_path / n, committed)
+
+
 def test_bundled_datasets_regenerate_identically(tmp_path):
     """`pyomo-heli generate-data` on the committed configs reproduces every committed file.
 
@@ -96,40 +134,44 @@ def test_bundled_datasets_regenerate_identically(tmp_path):
     between machines, so a stored digit may flip. Numbers therefore must agree
     to 1e-6 of each column's largest magnitude (a few units in the last stored
     digit), which is far below the sensor noise and any identification tolerance.
+
+    Default run: bo105_clean whole, and bo105_synthetic's first 12 maneuvers (the 10 identification maneuvers
+    and the two 80 kt validation doublets) with its trims and truth. Each maneuver has its own noise stream and
+    the trims theirs (``trim_stream = 12``), so this prefix of the config regenerates those files exactly as
+    the whole config does (test_appended_maneuvers_keep_the_trims_with_trim_stream). The whole synthetic set
+    (10 more validation doublets, the four 95 s sweeps) is test_bundled_synthetic_dataset_regenerates_whole
+    (slow).
     """
-    names = ("bo105_synthetic", "bo105_clean")
-    # the two generations are independent: run them side by side (2 cores)
-    procs = {n: subprocess.Popen([sys.executable, "-m", "pyomo_heli.cli", "generate-data", "--config",
-                                  str(DATA / f"{n}.toml"), "--out", str(tmp_path / n)],
-                                 cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for n in names}
-    for n, proc in procs.items():
+    import dataclasses
+    import json
+
+    procs = _regenerate_with_cli(["bo105_clean"], tmp_path)
+    n, k = "bo105_synthetic", 12
+    cfg = load_config(SYNTHETIC_TOML)
+    assert cfg.trim_stream == 12 and {p.role for p in cfg.maneuvers[:10]} == {"identification"}
+    generate(dataclasses.replace(cfg, maneuvers=cfg.maneuvers[:k]), tmp_path / n)
+    committed = json.loads((DATA / n / "manifest.json").read_text())
+    fresh = json.loads((tmp_path / n / "manifest.json").read_text())
+    assert fresh.pop("maneuvers") == committed.pop("maneuvers")[:k] and fresh == committed
+    files = ["trims.csv", "truth.json"] + [f"maneuvers/{p.name}.csv" for p in cfg.maneuvers[:k]]
+    assert sorted(_files(tmp_path / n)) == sorted(files + ["manifest.json"])
+    _compare_regenerated(DATA / n, tmp_path / n, files)
+    for name, proc in procs.items():
         out, err = proc.communicate(timeout=600)
-        assert proc.returncode == 0, f"{n}: {err}"
-    for n in names:
-        committed, fresh = _files(DATA / n), _files(tmp_path / n)
-        assert "truth.json" in committed and "manifest.json" in committed and "trims.csv" in committed
-        assert sorted(fresh) == sorted(committed), n
-        if n == "bo105_synthetic":  # the sweep set (role "frequency") is regenerated and compared too
-            assert {f"maneuvers/{s}.csv" for s in ("lonsweep_hover", "colsweep_hover", "lonsweep_80kt",
-                                                   "colsweep_80kt")} <= set(committed)
-        for f in committed:
-            if not f.endswith(".csv"):
-                assert fresh[f] == committed[f], f"{n}/{f}: regenerated file differs from the committed one"
-                continue
-            old_lines = committed[f].decode().splitlines()
-            new_lines = fresh[f].decode().splitlines()
-            meta = [i for i, line in enumerate(old_lines) if line.startswith("#")]
-            assert [new_lines[i] for i in meta] == [old_lines[i] for i in meta], f"{n}/{f}: comment lines differ"
-            a = pd.read_csv(DATA / n / f, comment="#")
-            b = pd.read_csv(tmp_path / n / f, comment="#")
-            assert list(a.columns) == list(b.columns) and a.shape == b.shape, f"{n}/{f}: columns or length differ"
-            for col in a.select_dtypes("number").columns:
-                scale = max(float(a[col].abs().max()), 1e-12)
-                err = float((a[col] - b[col]).abs().max())
-                assert err <= 1e-6 * scale, f"{n}/{f}: column {col} differs by {err:g} (scale {scale:g})"
-            for col in a.columns.difference(a.select_dtypes("number").columns):
-                assert a[col].equals(b[col]), f"{n}/{f}: column {col} differs"
+        assert proc.returncode == 0, f"{name}: {err}"
+        _check_whole(name, tmp_path)
+
+
+@pytest.mark.slow
+def test_bundled_synthetic_dataset_regenerates_whole(tmp_path):
+    """The whole bo105_synthetic flight test from its committed config, the sweep set (role "frequency") too."""
+    n = "bo105_synthetic"
+    procs = _regenerate_with_cli([n], tmp_path)
+    out, err = procs[n].communicate(timeout=900)
+    assert procs[n].returncode == 0, f"{n}: {err}"
+    assert {f"maneuvers/{s}.csv" for s in ("lonsweep_hover", "colsweep_hover", "lonsweep_80kt",
+                                           "colsweep_80kt")} <= set(_files(DATA / n))
+    _check_whole(n, tmp_path)
 
 
 # ============================================================== 2. check-data and the dataset's shape

@@ -54,7 +54,7 @@ from .eq11 import (NADIR_RULES, nondominated, nondominated_nadir, payoff_nadir, 
 from .snapshot import Snapshot
 from .steps import (ANCHOR_NAMES, FRONT_STEP_OPTIONS, INFEASIBLE, IPOPT_INFEASIBLE,  # noqa: F401 - re-exported
                     LEAVE_ANCHOR_OPTIONS, TIGHT_MARGIN, EpsilonPoint, Outcome, _value, epsilon_grid,
-                    pin_objective_settings, snake, solve_with_fallback)
+                    pin_objective_settings, retried, snake, solve_with_fallback)
 
 
 #: a start whose objective vector exceeds the new bounds by at most this (in anchor ranges) counts as feasible, a
@@ -270,11 +270,8 @@ class EpsilonConstraintSolver:
         options = self._near_start_options()
         p = self._two_stages(objective, kind, index, start, options)
         if not p.success and options is not None:
-            retry = self._two_stages(objective, kind, index, start, None)
-            retry.iterations += max(p.iterations, 0)
-            retry.wall_time += p.wall_time
-            retry.warm_start = f"primal, mu_init {options['mu_init']:g} ({p.status}), then primal"
-            p = retry
+            p = retried(p, self._two_stages(objective, kind, index, start, None),
+                        f"primal, mu_init {options['mu_init']:g} ({p.status}), then primal")
         if not p.success:
             raise RuntimeError(f"anchor {kind} failed: {p.status}")
         return p
@@ -370,11 +367,8 @@ class EpsilonConstraintSolver:
             p = self.solve_eps(index, eps, "primal", self.capped(near), grid)
             if not p.success and p.status != INFEASIBLE and near is not None:
                 start.restore()
-                retry = self.solve_eps(index, eps, "primal", self.capped(None), grid)
-                retry.iterations += max(p.iterations, 0)
-                retry.wall_time += p.wall_time
-                retry.warm_start = f"primal, mu_init {near['mu_init']:g} ({p.status}), then primal"
-                p = retry
+                p = retried(p, self.solve_eps(index, eps, "primal", self.capped(None), grid),
+                            f"primal, mu_init {near['mu_init']:g} ({p.status}), then primal")
             elif near is not None:
                 p.warm_start = f"primal, mu_init {near['mu_init']:g}"
         vec = self.bounds_vector(eps)

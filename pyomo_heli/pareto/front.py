@@ -65,6 +65,7 @@ from .epsilon import (FRONT_STEP_OPTIONS, INFEASIBLE, LEAVE_ANCHOR_OPTIONS, NADI
                       pin_objective_settings, solve_with_fallback, utopia_distance_n, _value)
 from .epsilon import epsilon_grid as _grid
 from .snapshot import Snapshot as _Snapshot
+from .steps import retried
 
 
 @dataclass
@@ -414,8 +415,4 @@ class ParetoSolver(EpsilonConstraintSolver):
 
 def _retried(first: FrontPoint, retry: FrontPoint, how: str) -> FrontPoint:
     """The retry of a failed anchor, with both attempts' iterations and times; ``warm_start`` names them."""
-    retry.iterations += max(first.iterations, 0)
-    retry.wall_time += first.wall_time
-    retry.setup_time += first.setup_time
-    retry.warm_start = f"{first.warm_start} ({first.status}), then {how}"
-    return retry
+    return retried(first, retry, f"{first.warm_start} ({first.status}), then {how}")

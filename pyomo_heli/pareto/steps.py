@@ -69,11 +69,16 @@ def solve_with_fallback(solve, mode: str, start: Snapshot):
     if p.success or mode not in MULTIPLIER_MODES or p.status == INFEASIBLE:
         return p
     start.restore()
-    retry = solve("primal")
-    retry.iterations += max(p.iterations, 0)
-    retry.wall_time += p.wall_time
-    retry.setup_time += p.setup_time
-    retry.warm_start = f"{mode} ({p.status}), then primal"
+    return retried(p, solve("primal"), f"{mode} ({p.status}), then primal")
+
+
+def retried(first, retry, warm_start: str):
+    """``retry`` (a point or outcome) carrying the failed ``first`` attempt's iterations and times, its
+    ``warm_start`` saying what happened: the one bookkeeping of every retry of a front or anchor solve."""
+    retry.iterations += max(first.iterations, 0)
+    retry.wall_time += first.wall_time
+    retry.setup_time += first.setup_time
+    retry.warm_start = warm_start
     return retry
 
 

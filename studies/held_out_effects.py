@@ -131,7 +131,7 @@ def shape_match(effect: str, fit: dict | None, kept_model=None, params=None) -> 
 def evaluate(effect: str, seed: int, loop: Path) -> dict:
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.report.identification import read_truth
-    from pyomo_heli.report.loop import final_index
+    from pyomo_heli.report.loop import final_index, rejected_discovery
 
     doc = json.loads((loop / "loop.json").read_text())
     its = doc["iterations"]
@@ -166,15 +166,17 @@ def evaluate(effect: str, seed: int, loop: Path) -> dict:
     row["wrong acceptance"] = bool(physical)
     disc = next(((it["discovery"].get("discovered")) for it in its[:final_index(doc)]
                  if (it.get("discovery") or {}).get("decision") == "discovered"), None)
-    described = disc or last_disc.get("best_generic")
+    not_kept = rejected_discovery(doc)  # discovered, then rejected by the validation rule: reported unexplained
+    described = disc or (not_kept[1] if not_kept else None) or last_disc.get("best_generic")
     row["generic term"] = (f"{described['name']}: c = {described['estimate']:.3g} +- {described['se']:.2g}"
                            if described else "-")
     row["shape matches truth"] = shape_match(effect, described)
-    # "unexplained": the step said so (best generic term significant on its own) or the residual analysis did
+    # "unexplained": the step said so (best generic term significant on its own), the residual analysis did, or the
+    # discovered term's step was rejected by the validation rule (the loop stops with its shape reported)
     alpha = doc["settings"].get("alpha", 0.01)
     best = last_disc.get("best_generic") or {}
     row["unexplained verdict"] = (bool(last_disc.get("unexplained")) or best.get("p", 1.0) < alpha
-                                  or row["final residual"] == "unexplained residual")
+                                  or row["final residual"] == "unexplained residual" or not_kept is not None)
     row["criterion met"] = (not row["wrong acceptance"] and not sig_rise
                             and ((disc is not None and row["trim change %"] <= -50.0)
                                  or (row["unexplained verdict"] and row["shape matches truth"] == "yes")))

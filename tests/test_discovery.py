@@ -197,3 +197,37 @@ def test_bundled_flight_test_names_the_wake_through_encompassing(tmp_path):
     truth = json.loads((root / "data" / "bo105_synthetic" / "truth.json").read_text())["parameters"]
     for n in ("theta_twist", "CL_alpha_HT", "Iyy"):
         assert kept["parameters"][n] == pytest.approx(truth[n], rel=0.05), n
+
+
+def test_a_rejected_discovered_term_is_reported_unexplained_with_its_shape(tmp_path):
+    """A loop document whose iteration 1 added a discovered dX ~ mu^4 and was rejected by the validation rule: the
+    kept model is iteration 0's, and the report says the residual stays unexplained, with the rejected iteration's
+    estimate and a figure of the term, which is a drag growing with speed (negative X, |dX| rising with mu)."""
+    from types import SimpleNamespace
+
+    from pyomo_heli.report.loop import (discovered_curve, discovery_summary, iteration_model, rejected_discovery,
+                                        unexplained_statement)
+
+    fit = {"name": "dX_mu4", "formula": "dX = c m g (mu/0.3)^4", "strength": "c_dX_mu4", "estimate": -0.0148,
+           "se": 0.00095}
+    its = [{"iteration": 0, "extensions": [], "parameters": {"Iyy": 4900.0},
+            "discovery": {"decision": "discovered", "added": "dX_mu4", "discovered": fit}},
+           {"iteration": 1, "extensions": ["dX_mu4"], "parameters": {"Iyy": 4890.0, "c_dX_mu4": -0.0221},
+            "standard_errors": {"c_dX_mu4": 0.0018},
+            "rejected": "made the validation error rise significantly on beta_0 (+1.9 %, p = 0.00097)"}]
+    doc = {"iterations": its, "final_iteration": 0}
+    rejected, found = rejected_discovery(doc)
+    assert rejected is its[1] and found is fit
+    line = unexplained_statement(rejected, found)
+    assert "unexplained" in line and "c = -0.0221 +- 0.0018" in line and "iteration 1" in line
+    L = discovery_summary(doc, SimpleNamespace(model=HelicopterModel()), tmp_path)
+    text = "\n".join(L)
+    assert "## Discovered, not kept (validation rule): the residual stays unexplained" in text
+    assert "rise significantly on beta_0" in text
+    assert (tmp_path / "loop_discovered_dX_mu4.png").is_file()
+    tab = discovered_curve(iteration_model(HelicopterModel(), rejected), rejected["parameters"], "dX_mu4",
+                           [0, 40, 80, 120])
+    assert (tab["value"] <= 0).all() and (np.diff(np.abs(tab["value"])) > 0).all()
+    # kept (no rejection) or no discovery: nothing to report as unexplained
+    assert rejected_discovery({"iterations": its[:1], "final_iteration": 0}) is None
+    assert rejected_discovery({"iterations": [its[0], {**its[1], "rejected": None}], "final_iteration": 1}) is None

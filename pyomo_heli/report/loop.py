@@ -368,46 +368,82 @@ def discovered_curve(model: HelicopterModel, params: dict, term, speeds_kt) -> p
     return pd.DataFrame(rows)
 
 
+def rejected_discovery(doc: dict) -> tuple[dict, dict] | None:
+    """(rejected iteration record, fit) of a generic term the loop discovered but did not keep, or None.
+
+    When the validation rule rejects the step that added a discovered term, the loop stops with the model before it
+    and the residual unexplained; the discovered term is then what the missing effect looks like (its shape, its
+    estimate in the rejected iteration), reported as such."""
+    its = doc["iterations"]
+    k = final_index(doc)
+    if k + 1 >= len(its) or not its[k + 1].get("rejected"):
+        return None
+    d = its[k].get("discovery") or {}
+    if d.get("decision") != "discovered" or not d.get("discovered"):
+        return None
+    return its[k + 1], d["discovered"]
+
+
+def unexplained_statement(rejected: dict, fit: dict) -> str:
+    """One line: the residual stays unexplained, with the shape of the discovered term that was not kept."""
+    c = rejected["parameters"].get(fit["strength"], fit["estimate"])
+    se = (rejected.get("standard_errors") or {}).get(fit["strength"]) or fit["se"]
+    return (f"the residual stays unexplained: not explained by any library effect; discovered {fit['formula']}, "
+            f"c = {c:.4g} +- {se:.2g} (estimate of the rejected iteration {rejected['iteration']}), not kept")
+
+
 STATE_OF = {"alpha": "alpha [deg]", "w": "w [m/s]", "lam": "lambda_i", "col": "col [deg]", "lon": "lon [deg]"}
 
 
 def discovery_summary(doc: dict, cfg, out) -> list[str]:
-    """What the loop discovered and kept: the statement, and a figure of the force or moment vs airspeed and vs the
-    state it depends on (``loop_discovered_<term>.png``)."""
+    """What the loop discovered: the statement, and a figure of the force or moment vs airspeed and vs the state it
+    depends on (``loop_discovered_<term>.png``), for every term it kept and for a term whose step was rejected."""
     found = discovered_terms(doc)
-    if not found:
+    rejected = rejected_discovery(doc)
+    L = []
+    if found:
+        kept = doc["iterations"][final_index(doc)]
+        model = iteration_model(cfg.model, kept)
+        L += ["## Discovered, not explained by any library effect", ""]
+        for it, fit in found:
+            c = kept["parameters"].get(fit["strength"], fit["estimate"])
+            se = (kept.get("standard_errors") or {}).get(fit["strength"]) or fit["se"]
+            L += [f"- iteration {it['iteration']}: not explained by any library effect; discovered {fit['formula']}, "
+                  f"c = {c:.4g} +- {se:.2g} (the kept model's estimate and standard error)", ""]
+            L += _discovered_figure(model, kept["parameters"], fit, c, se, out)
+    if rejected:
+        it, fit = rejected
+        c = it["parameters"].get(fit["strength"], fit["estimate"])
+        se = (it.get("standard_errors") or {}).get(fit["strength"]) or fit["se"]
+        L += ["## Discovered, not kept (validation rule): the residual stays unexplained", "",
+              f"- {unexplained_statement(it, fit)}; rejected because adding it {it['rejected']}", ""]
+        L += _discovered_figure(iteration_model(cfg.model, it), it["parameters"], fit, c, se, out)
+    return L
+
+
+def _discovered_figure(model: HelicopterModel, params: dict, fit: dict, c: float, se: float, out) -> list[str]:
+    """``loop_discovered_<term>.png`` and its table: the term's force or moment along the level trims."""
+    if fit["name"][:2] not in ("dX", "dZ", "dM"):
         return []
     from matplotlib.figure import Figure
 
-    kept = doc["iterations"][final_index(doc)]
-    model = iteration_model(cfg.model, kept)
-    L = ["## Discovered, not explained by any library effect", ""]
-    for it, fit in found:
-        c = kept["parameters"].get(fit["strength"], fit["estimate"])
-        se = (kept.get("standard_errors") or {}).get(fit["strength"])
-        se = se if se else fit["se"]
-        unit = "N m" if fit["name"].startswith("dM") else "N"
-        L += [f"- iteration {it['iteration']}: not explained by any library effect; discovered {fit['formula']}, "
-              f"c = {c:.4g} +- {se:.2g} (the kept model's estimate and standard error)", ""]
-        if fit["name"][:2] not in ("dX", "dZ", "dM"):
-            continue
-        tab = discovered_curve(model, kept["parameters"], fit["name"], list(range(0, 121, 10)))
-        reg = fit["name"][3:]
-        xcol = STATE_OF.get(reg, "mu")
-        fig = Figure(figsize=(9, 3.6))
-        ax1, ax2 = fig.subplots(1, 2)
-        for ax, xc in ((ax1, "V [kt]"), (ax2, xcol)):
-            ax.plot(tab[xc], tab["value"], "o-", label=f"c = {c:.3g}")
-            ax.fill_between(tab[xc], tab["value"] * (1 - 2 * se / abs(c)) if c else tab["value"],
-                            tab["value"] * (1 + 2 * se / abs(c)) if c else tab["value"], alpha=0.25, label="+- 2 SE")
-            ax.set_xlabel(xc)
-            ax.set_ylabel(f"{fit['name'][:2]} [{unit}]")
-            ax.axhline(0.0, color="k", lw=0.5)
-            ax.grid(alpha=0.3)
-        ax1.legend()
-        fig.suptitle(f"Discovered {fit['formula']} along the level trims")
-        fig.tight_layout()
-        name = f"loop_discovered_{fit['name']}.png"
-        fig.savefig(Path(out) / name, dpi=90)
-        L += [f"![{fit['name']} vs airspeed]({name})", "", markdown_table(tab, digits=4), ""]
-    return L
+    unit = "N m" if fit["name"].startswith("dM") else "N"
+    tab = discovered_curve(model, params, fit["name"], list(range(0, 121, 10)))
+    reg = fit["name"][3:]
+    xcol = STATE_OF.get(reg, "mu")
+    fig = Figure(figsize=(9, 3.6))
+    ax1, ax2 = fig.subplots(1, 2)
+    for ax, xc in ((ax1, "V [kt]"), (ax2, xcol)):
+        ax.plot(tab[xc], tab["value"], "o-", label=f"c = {c:.3g}")
+        ax.fill_between(tab[xc], tab["value"] * (1 - 2 * se / abs(c)) if c else tab["value"],
+                        tab["value"] * (1 + 2 * se / abs(c)) if c else tab["value"], alpha=0.25, label="+- 2 SE")
+        ax.set_xlabel(xc)
+        ax.set_ylabel(f"{fit['name'][:2]} [{unit}]")
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.grid(alpha=0.3)
+    ax1.legend()
+    fig.suptitle(f"Discovered {fit['formula']} along the level trims")
+    fig.tight_layout()
+    name = f"loop_discovered_{fit['name']}.png"
+    fig.savefig(Path(out) / name, dpi=90)
+    return [f"![{fit['name']} vs airspeed]({name})", "", markdown_table(tab, digits=4), ""]

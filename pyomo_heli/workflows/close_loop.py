@@ -56,7 +56,7 @@ from ..pareto.result import write_json
 from ..pareto.store import read_checkpoint
 from ..settings import Problems, validate
 from ..settings.identification import LoopTable
-from ..report.loop import LOOP_FILE, load_loop  # noqa: F401 - load_loop re-exported (studies)
+from ..report.loop import LOOP_FILE, load_loop, rejected_discovery, unexplained_statement  # noqa: F401 - load_loop re-exported (studies)
 from .loop_steps import (_with_candidate, _without, backward_check, errors_of,  # noqa: F401 (tests)
                          select_shape, validation_check)
 from .run_folder import RunFolder
@@ -264,6 +264,9 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                 doc["final_iteration"] = i - 1
                 doc["stopped"] = (f"step rejected: adding {names[-1]} {check['message']}; the model of iteration "
                                   f"{i - 1} is kept")
+                unexplained = rejected_discovery(doc)
+                if unexplained:
+                    doc["stopped"] += "; " + unexplained_statement(*unexplained)
                 write_json(out / LOOP_FILE, doc)
                 progress(f"stopped: {doc['stopped']}")
                 return doc

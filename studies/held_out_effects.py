@@ -18,7 +18,9 @@ pooled trim / identification / validation RMS of iteration 0 and of the kept mod
 parameter errors against truth before and after, wrong acceptance (a physical library candidate kept although the
 truth holds none), and for a discovered or described generic term whether its shape matches the truth term (sign
 and speed dependence of the same force or moment along the truth's level trims; n/a when the truth adds no
-steady force or moment). Evaluation only: this script reads truth.json and the held-out module; the loop does not.
+steady force or moment); with an "unexplained" verdict, the shape it reports (a discovered term the validation
+rule rejected, else the last step's best generic term) and whether that matches. Evaluation only: this script
+reads truth.json and the held-out module; the loop does not.
 """
 from __future__ import annotations
 
@@ -177,9 +179,14 @@ def evaluate(effect: str, seed: int, loop: Path) -> dict:
     best = last_disc.get("best_generic") or {}
     row["unexplained verdict"] = (bool(last_disc.get("unexplained")) or best.get("p", 1.0) < alpha
                                   or row["final residual"] == "unexplained residual" or not_kept is not None)
+    # the shape the final "unexplained" verdict reports: the rejected discovered term, else the last step's best
+    # generic term (after a kept discovered term this is what is left, not the kept term)
+    left = (not_kept[1] if not_kept else best) if row["unexplained verdict"] else None
+    row["unexplained shape"] = (f"{left['name']}: c = {left['estimate']:.3g} +- {left['se']:.2g}" if left else "-")
+    row["unexplained shape matches truth"] = shape_match(effect, left) if left else "-"
     row["criterion met"] = (not row["wrong acceptance"] and not sig_rise
                             and ((disc is not None and row["trim change %"] <= -50.0)
-                                 or (row["unexplained verdict"] and row["shape matches truth"] == "yes")))
+                                 or row["unexplained shape matches truth"] == "yes"))
     return row
 
 

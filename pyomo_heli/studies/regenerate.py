@@ -117,6 +117,8 @@ ENTRIES: tuple[Entry, ...] = (
           ("multistart.json", "starts.csv"), minutes=20),
     Entry("noise_only", ("python studies/held_out_effects.py --effects none --seeds 5 --out {out}/noise_only",),
           ("held_out.csv", "held_out.md"), minutes=140),
+    Entry("held_out", ("python studies/held_out_effects.py --seeds 3 --out {out}/held_out",),
+          ("held_out.csv", "held_out.md"), minutes=480),
     Entry("bo105_flight_trims", ("pyomo-heli trim-loop studies/bo105_flight_trims.toml "
                                  "--out {out}/bo105_flight_trims",),
           ("report.md", "trim_curves.png", "trim_loop.json", "trim_residuals.png"), minutes=2),

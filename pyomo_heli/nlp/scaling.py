@@ -19,7 +19,9 @@ scaling factors into the model's ``scaling_factor`` suffixes (IDAES's convention
   the noise-covariance rows (Cholesky, mean squares) keep 1 (tried: by 1 / (L_aa L_bb) Case 1's point A
   took 38 iterations instead of 26); the other rows (flapping
   equations, the linear-model rows) by IDAES's ``inverseMaximum`` nominal-value walk over those variable
-  nominals, once per equation family (the walk expands the shared intermediates: 0.4 s per row);
+  nominals, once per equation family (the walk expands the shared intermediates: 0.4 s per row); the Pareto
+  solver's epsilon row J_trim / J_trim(theta_0) <= eps by the largest factor of its variables
+  (:meth:`IdentificationScaler.epsilon_row_factor`; the adapter applies it only while the row has a finite bound);
 - objective: 1 / max(|value at the start|, 1), the optimizer-level objective scale of the paper (Fig. 4;
   the Pareto solver's objective is already divided by |J_time(theta_0)|, so its factor is 1).
 
@@ -29,7 +31,8 @@ from __future__ import annotations
 
 import pyomo.environ as pyo
 from pyomo.common.gc_manager import PauseGC
-from idaes.core.scaling import CustomScalerBase
+from pyomo.core.expr.visitor import identify_variables
+from idaes.core.scaling import CustomScalerBase, get_scaling_factor
 from idaes.core.scaling.custom_scaler_base import ConstraintScalingScheme
 from idaes.core.scaling.util import get_scaling_factor_suffix
 
@@ -129,9 +132,21 @@ class IdentificationScaler(CustomScalerBase):
             # 1 / (L_aa L_bb) at the start (the residuals of the initial guess) Case 1's point A took 38
             # Ipopt iterations instead of 26; with factor 1, 26 (docs/performance.md, "Scaling")
             return 1.0
-        if comp == "eps_con":
-            return 1.0  # J_trim / J_trim(theta_0) <= eps (pareto.front): order one
         return None
+
+    @staticmethod
+    def epsilon_row_factor(c) -> float:
+        """Factor of an epsilon row J_k / J_k(theta_0) <= eps (pareto.epsilon): the largest factor of its variables.
+
+        The row is no physics equation with a nominal residual: it depends on the variables only through
+        J_k, so scaling them by s_x shrinks its derivatives by 1 / s_x (J_trim's by 1 / 20 for the trim
+        inputs), while the model rows that hold the same variables keep theirs. With the largest factor of
+        its variables the row keeps about the size of derivative it has unscaled. Measured on Case 1's
+        anchor B, second stage (docs/performance.md, "Scaling"): factor 1 took 14 Ipopt iterations against
+        11 unscaled; 20, and every factor from 10 to 1000, 10.
+        """
+        factors = [get_scaling_factor(v, default=1.0) for v in identify_variables(c.body, include_fixed=False)]
+        return max(factors, default=1.0)
 
     def constraint_scaling_routine(self, model, overwrite: bool = False, submodel_scalers=None):
         # Rows without a physics factor: one nominal-value walk per equation family, a family being one
@@ -147,7 +162,8 @@ class IdentificationScaler(CustomScalerBase):
                 for idx, c in comp.items():
                     if not c.active or not (overwrite or c not in sfx):
                         continue
-                    factor = self.constraint_factor(name, blk, idx)
+                    factor = (self.epsilon_row_factor(c) if name == "eps_con"
+                              else self.constraint_factor(name, blk, idx))
                     if factor is not None:
                         sfx[c] = factor
                     else:

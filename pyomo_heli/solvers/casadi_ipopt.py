@@ -60,6 +60,9 @@ from .errors import ModelChangedError, SolverFailedError, SolverUnavailableError
 from .point_rows import PointRowsAssembly, find_point_rows
 from .result import IPOPT_EXIT_MESSAGES, SUCCESS_STATUSES, SolveResult
 
+#: Ipopt's default ``nlp_lower_bound_inf`` / ``nlp_upper_bound_inf`` magnitude: a bound beyond it is none
+IPOPT_INFINITY = 1e19
+
 
 @dataclass(frozen=True)
 class CasadiSettings:
@@ -237,17 +240,22 @@ class CasadiIpoptSolver(DerivativeFunctions):
         self._jac_g = self._jacobian_function(x, g)
         if self._assembly is not None:
             self._jac_g = self._full_jacobian(self._jac_g)
-        #: the scaling the solves use (None: unscaled), read from the suffixes at this build
-        self._scaling = None
+        #: the scaling the solves use (None: unscaled), read from the suffixes at this build; a solve uses it with
+        #: factor 1 on the rows that have no finite bound at that solve (:meth:`_select_scaling`)
+        self._scaling = self._scaling_read = None
         if self.settings.scaling:
             scaling = NLPScaling.from_suffixes(self.model, self.variables, self.constraints, self.objective)
-            self._scaling = None if scaling.trivial else scaling
-        if self._scaling is not None and self._jac_g is not None:
-            self._jac_g = self._scaling.jacobian_function(ca, self._jac_g)
+            self._scaling_read = None if scaling.trivial else scaling
         self._hess_lag = False  # not built yet; built at the first exact-Hessian solve
         self._hessian_split = None  # block sizes {"S", "D2", "D1"} once a custom Hessian is built
         self._solvers = {}
-        self._nlp_function = None  # the NLP as one casadi Function, made with the first solver
+        self._nlp_function = self._grad_f = None  # the NLP as one casadi Function, made with the first solver
+        # scaled: the unscaled functions (the Hessian and the NLP made with the first solver), and the scaled
+        # function sets by the rows left unscaled (key), the current one under self._scaling_key
+        self._jac_unscaled, self._hess_unscaled, self._nlp_unscaled = self._jac_g, False, None
+        self._scaled_sets, self._scaling_key = {}, None
+        if self._scaling_read is not None:
+            self._select_scaling(self._g_lb, self._g_ub)
         t_end = time.perf_counter()
         self._pending_setup += t_end - t0
         b = self.setup_breakdown
@@ -310,9 +318,13 @@ class CasadiIpoptSolver(DerivativeFunctions):
             if self.settings.custom_hessian and str(ipopt.get("hessian_approximation", "exact")) == "exact":
                 if self._hess_lag is False:
                     t_h = time.perf_counter()
-                    self._hess_lag = self._hessian_function()
-                    if self._hess_lag is not None and self._scaling is not None:
-                        self._hess_lag = self._scaling.hessian_function(self._ca, self._hess_lag)
+                    if self._scaling is None:
+                        self._hess_lag = self._hessian_function()
+                    else:
+                        if self._hess_unscaled is False:
+                            self._hess_unscaled = self._hessian_function()
+                        self._hess_lag = (None if self._hess_unscaled is None
+                                          else self._scaling.hessian_function(self._ca, self._hess_unscaled))
                     self.setup_breakdown["hessian"] += time.perf_counter() - t_h
                 if self._hess_lag is not None:
                     opts["hess_lag"] = self._hess_lag
@@ -321,10 +333,12 @@ class CasadiIpoptSolver(DerivativeFunctions):
                 # One NLP Function and one objective gradient for every option set: from the
                 # expression dict, each nlpsol sorted the whole graph again and derived its own
                 # gradient (docs/performance.md, "What was done" 7).
-                self._nlp_function, self._grad_f = self._nlp_functions()
-                if self._scaling is not None:  # casadi derives what is not given from the scaled NLP
-                    self._nlp_function, self._grad_f = self._scaling.nlp_functions(self._ca, self._nlp_function,
-                                                                                   self._grad_f)
+                if self._scaling is None:
+                    self._nlp_function, self._grad_f = self._nlp_functions()
+                else:  # casadi derives what is not given from the scaled NLP
+                    if self._nlp_unscaled is None:
+                        self._nlp_unscaled = self._nlp_functions()
+                    self._nlp_function, self._grad_f = self._scaling.nlp_functions(self._ca, *self._nlp_unscaled)
             opts["grad_f"] = self._grad_f
             self._solvers[key] = self._ca.nlpsol("solver", "ipopt", self._nlp_function, opts)
             self.setup_breakdown["nlpsol"] += time.perf_counter() - t_n
@@ -419,13 +433,53 @@ class CasadiIpoptSolver(DerivativeFunctions):
         with PauseGC():  # per-variable Python lists in and out (see rebuild)
             return self._solve(warm_start, options)
 
+    def unscaled_derivative_functions(self):
+        """The Lagrangian Hessian (upper triangle; built if needed; None: none of the adapter's own) and the row
+        Jacobian function (None: none) of the unscaled NLP, whatever the solves use (the reduced Hessian's)."""
+        if self._scaling_read is None:
+            if self._hess_lag is False:
+                self._hess_lag = self._hessian_function()
+            return self._hess_lag, self._jac_g
+        if self._hess_unscaled is False:
+            self._hess_unscaled = self._hessian_function()
+        return self._hess_unscaled, self._jac_unscaled
+
+    def _select_scaling(self, lbg, ubg) -> None:
+        """Use the suffixes' scaling with factor 1 on the rows that have no finite bound at this solve.
+
+        Such a row constrains nothing (the Pareto solver's epsilon rows J_k / J_k(theta_0) <= eps with
+        eps = 1e20, Ipopt's infinity being 1e19), but Ipopt still carries it with a free slack, and its
+        factor changes the solve: the epsilon row's factor 20 (nlp/scaling.py) took Case 1's anchor A to 73
+        Ipopt iterations instead of 26. Each set of rows left unscaled keeps its own scaled functions and
+        solvers (made on first use)."""
+        sg = self._scaling_read.sg
+        free = (np.asarray(lbg) <= -IPOPT_INFINITY) & (np.asarray(ubg) >= IPOPT_INFINITY) & (sg != 1.0)
+        key = tuple(np.flatnonzero(free).tolist())
+        if key == self._scaling_key:
+            return
+        if self._scaling_key is not None:
+            self._scaled_sets[self._scaling_key] = (self._scaling, self._jac_g, self._hess_lag, self._nlp_function,
+                                                    self._grad_f, self._solvers)
+        if key in self._scaled_sets:
+            (self._scaling, self._jac_g, self._hess_lag, self._nlp_function, self._grad_f,
+             self._solvers) = self._scaled_sets.pop(key)
+        else:
+            read = self._scaling_read
+            self._scaling = read if not key else NLPScaling(read.sx, np.where(free, 1.0, sg), read.sf)
+            self._jac_g = (None if self._jac_unscaled is None
+                           else self._scaling.jacobian_function(self._ca, self._jac_unscaled))
+            self._hess_lag, self._nlp_function, self._grad_f, self._solvers = False, None, None, {}
+        self._scaling_key = key
+
     def _solve(self, warm_start: str, options: dict | None) -> SolveResult:
         ipopt_options, verbose, _ = resolve_options(self.options, options, warm_start)
+        self._check_unchanged()
+        args = self._numeric_inputs()
+        if self._scaling_read is not None:
+            self._select_scaling(args["lbg"], args["ubg"])
         if self._scaling is not None and warm_start == "primal":  # Ipopt's multiplier bound in scaled units
             ipopt_options = self._scaling.primal_restart_options(ipopt_options)
-        self._check_unchanged()
         solver = self._solver_for(ipopt_options, verbose)
-        args = self._numeric_inputs()
         if warm_start in MULTIPLIER_MODES:
             args.update(self._multipliers_from_model())
         if self._scaling is not None:

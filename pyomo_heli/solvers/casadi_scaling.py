@@ -24,6 +24,10 @@ max(s_f / s_g) (:meth:`NLPScaling.primal_restart_options`): an estimate kept uns
 start keeps Ipopt's bound: there the estimate at the initial guess is a poor one (translated, Case 1's
 anchor A took 38 iterations instead of 26).
 
+A row without a finite bound at a solve (an epsilon row at eps = 1e20) constrains nothing; the adapter solves with
+factor 1 on it (``CasadiIpoptSolver._select_scaling``): Ipopt still carries the row, and its factor would change
+the solve (docs/performance.md, "Scaling").
+
 The factors are found as Pyomo finds them (``SuffixFinder("scaling_factor")``, the lookup of
 ``core.scale_model``; IDAES's scalers write the same suffixes): the ``scaling_factor`` Suffix of the
 component's block or of a block above it; missing: 1. They are read when the adapter (re)builds.

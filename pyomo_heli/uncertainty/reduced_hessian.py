@@ -48,22 +48,21 @@ def reduced_hessian_covariance(m, solver, objective_weight: float, bound_tol: fl
     args = solver._numeric_inputs()
     x = np.array([v.value for v in solver.variables], dtype=float)
     lam_g = solver._multipliers_from_model()["lam_g0"]
-    if solver._hess_lag is False:
-        solver._hess_lag = solver._hessian_function()
-    if solver._hess_lag is None:  # no dense columns: casadi's own Hessian of the Lagrangian
+    hess_lag, jac_g = solver.unscaled_derivative_functions()
+    if hess_lag is None:  # no dense columns: casadi's own Hessian of the Lagrangian
         lf, lg = ca.SX.sym("lf"), ca.SX.sym("lg", len(solver.constraints))
         xs, f, g = solver._nlp["x"], solver._nlp["f"], solver._nlp["g"]
         hess = ca.Function("h", [xs, lf, lg], [ca.triu(ca.hessian(lf * f + ca.dot(lg, g), xs)[0])])
         H = _sparse(hess(x, 1.0, lam_g))
     else:
-        H = _sparse(solver._hess_lag(x, [], 1.0, lam_g))
+        H = _sparse(hess_lag(x, [], 1.0, lam_g))
     H = H + sp.triu(H, k=1).T  # the adapter gives the upper triangle
-    if solver._jac_g is None:
+    if jac_g is None:
         jac = ca.Function("j", [solver._nlp["x"]], [ca.jacobian(solver._nlp["g"], solver._nlp["x"])])
         A = _sparse(jac(x))
         g = np.asarray(ca.Function("g", [solver._nlp["x"]], [solver._nlp["g"]])(x)).ravel()
     else:
-        g_dm, jac_dm = solver._jac_g(x, [])
+        g_dm, jac_dm = jac_g(x, [])
         A, g = _sparse(jac_dm), np.asarray(g_dm).ravel()
 
     lbx, ubx, lbg, ubg = args["lbx"], args["ubx"], args["lbg"], args["ubg"]

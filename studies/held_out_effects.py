@@ -10,7 +10,8 @@ replaced by the held-out one (same maneuvers, trims and noise levels) -> ``OUT/<
 closed loop with ``[loop] discovery = true`` (CONFIG) -> ``OUT/<effect>_<seed>/loop``; its table row ->
 ``OUT/<effect>_<seed>/row.json``. A finished loop is not rerun (a stopped one resumes), so a rerun of the same
 command resumes row by row.
-``--effects none`` is M0 plus noise only; ``--first-seed K`` starts at seed 20261122 + K.
+``--effects none`` is M0 plus noise only; ``--first-seed K`` starts at seed 20261122 + K; ``--evaluate-only`` runs
+nothing and re-evaluates every finished loop in OUT (rows and table).
 
 Written after every case: ``OUT/held_out.csv`` and ``OUT/held_out.md``, one row per effect and seed of every
 ``OUT/*/row.json`` (also rows of earlier runs into the same OUT): truth, verdict, what was added,
@@ -279,8 +280,20 @@ def main(argv=None) -> int:
                          "-> OUT/bundled/cost.json")
     ap.add_argument("--modes", nargs="+", choices=["on", "off"], default=["on", "off"],
                     help="with --bundled: the loops to run (default both, in this order)")
+    ap.add_argument("--evaluate-only", action="store_true",
+                    help="run nothing: re-evaluate every finished loop in OUT (OUT/<effect>_<seed>/loop) and rewrite "
+                         "its row.json and the table")
     a = ap.parse_args(argv)
     out = out_folder(ap, a.out)
+    if a.evaluate_only:
+        for loop in sorted(out.glob("*_*/loop")):
+            doc = loop / "loop.json"
+            if doc.is_file() and json.loads(doc.read_text()).get("stopped"):
+                effect, seed = loop.parent.name.rsplit("_", 1)
+                save_row(loop.parent, evaluate(effect, int(seed), loop))
+        write_table(out)
+        print((out / "held_out.md").read_text())
+        return 0
     config, gen = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
     if a.bundled:
         run_bundled(out, config, ROOT / "data" / "bo105_synthetic", a.modes)

@@ -4,6 +4,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS
@@ -100,3 +101,25 @@ def test_held_out_study_keeps_every_finished_row_on_disk(tmp_path):
     assert tab["trim change %"].tolist() == [-12.5] * 3
     assert "wrong acceptances: 1 of 3; criterion met: 0 of 3" in (tmp_path / "held_out.md").read_text()
     assert len((tmp_path / "held_out.csv").read_text().splitlines()) == 4
+
+
+def test_the_sweep_pilot_flies_through_an_actuator_lag():
+    """flighttest.pilot.pilot_gains on the truth model with the held-out actuator lag: dq'/dlon is zero directly (the
+    rotor sees the lagged cyclic), and the quasi-steady control power through the lag state gives the gains of the
+    model without it; an extension state q' does not see (the n_z filter) leaves the direct rule's gains bit for bit."""
+    from pyomo_heli.flighttest.pilot import pilot_gains
+    from pyomo_heli.simulation.linearize import linearize_float
+
+    base = HelicopterModel()
+    for v in (0.0, 41.2):
+        want = pilot_gains(linearize_float(base, v, trim_float(base, v)))
+        lag = HelicopterModel(extensions=(HELD_OUT_EFFECTS["actuator_lag"](),)).with_parameters(tau_a=0.06)
+        lin = linearize_float(lag, v, trim_float(lag, v))
+        assert lin.B[lin.states.index("q"), lin.inputs.index("lon")] == 0.0
+        np.testing.assert_allclose(pilot_gains(lin), want, rtol=1e-6)
+        filt = HelicopterModel(extensions=(HELD_OUT_EFFECTS["accelerometer_filter"](),)).with_parameters(tau_nz=0.08)
+        lin = linearize_float(filt, v, trim_float(filt, v))
+        iq = lin.states.index("q")
+        assert lin.A[iq, lin.states.index("nz_filt")] == 0.0
+        m_q, m_lon = lin.A[iq, iq], lin.B[iq, lin.inputs.index("lon")]
+        assert pilot_gains(lin) == (4.0 / m_lon, max(0.0, (2.8 + m_q) / m_lon))  # omega_p 2, zeta_p 0.7: unchanged

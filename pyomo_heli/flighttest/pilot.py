@@ -15,7 +15,10 @@ s^2 + (M_lon K_q - M_q) s + M_lon K_theta = 0; the pilot places it at omega_p, z
 
     K_theta = omega_p^2 / M_lon,   K_q = max(0, (2 zeta_p omega_p + M_q) / M_lon)
 
-with omega_p = 2 rad/s and zeta_p = 0.7. At low frequency the loop holds theta/sweep near M_lon/omega_p^2
+with omega_p = 2 rad/s and zeta_p = 0.7. States of model extensions that drive q' (an actuator lag between the
+cyclic and the rotor) are residualised first (quasi-steady: x_E' = 0), so M_q and M_lon are the short-term
+model's through them; extension states that q' does not see change nothing.
+At low frequency the loop holds theta/sweep near M_lon/omega_p^2
 (about 11 deg per deg of cyclic for the Bo-105 at hover and 80 kt): a 0.2 deg sweep moves the attitude by
 less than 3 deg, where the response is still linear (with omega_p = 1 rad/s it is four times that).
 r(t) is the pilot's remnant: seeded white noise at 10 Hz through a first-order lag of REMNANT_TAU,
@@ -30,6 +33,8 @@ from typing import Callable
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+
+from ..physics.model import STATES
 
 #: attitude-loop natural frequency [rad/s] and damping of the pilot's gain rule
 PILOT_OMEGA, PILOT_ZETA = 2.0, 0.7
@@ -53,8 +58,14 @@ class AttitudeHold:
 
 def pilot_gains(lin, omega: float = PILOT_OMEGA, zeta: float = PILOT_ZETA) -> tuple[float, float]:
     """(K_theta, K_q) of the gain rule from a linear model ``lin`` (simulation.linearize.LinearModel)."""
-    iq = lin.states.index("q")
-    M_q, M_lon = float(lin.A[iq, iq]), float(lin.B[iq, lin.inputs.index("lon")])
+    iq, il = lin.states.index("q"), lin.inputs.index("lon")
+    M_q, M_lon = float(lin.A[iq, iq]), float(lin.B[iq, il])
+    ext = [k for k, s in enumerate(lin.states) if s not in STATES]
+    if ext and np.any(lin.A[iq, ext] != 0.0):  # residualise the extension states q' depends on
+        A_qE = lin.A[iq, ext]
+        A_EE_inv = np.linalg.inv(lin.A[np.ix_(ext, ext)])
+        M_q -= float(A_qE @ A_EE_inv @ lin.A[ext, iq])
+        M_lon -= float(A_qE @ A_EE_inv @ lin.B[ext, il])
     if not M_lon > 0:
         raise ValueError(f"pilot model: pitch control power dq'/dlon = {M_lon:g} 1/s^2 at {lin.V:g} m/s is not "
                          f"positive; aft cyclic must pitch the nose up")

@@ -81,13 +81,7 @@ def test_held_out_effects_are_usable_in_a_generator_config(tmp_path):
 def test_held_out_study_keeps_every_finished_row_on_disk(tmp_path):
     """studies/held_out_effects.py resumes row by row: each case's row.json (numpy scalars as plain numbers) and
     the table of every row in OUT, also rows of an earlier run (other seeds), sorted by truth and seed."""
-    import importlib.util
-
-    import numpy as np
-
-    spec = importlib.util.spec_from_file_location("held_out_study", ROOT / "studies" / "held_out_effects.py")
-    study = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(study)
+    study = _study()
     assert study.seeds_of(1, 4) == [20261123, 20261124, 20261125, 20261126]
     assert study.seeds_of(0, 1) == [20261122]
     for effect, seed, wrong in (("none", 20261124, False), ("drag_rise", 20261122, np.bool_(True)),
@@ -123,3 +117,55 @@ def test_the_sweep_pilot_flies_through_an_actuator_lag():
         assert lin.A[iq, lin.states.index("nz_filt")] == 0.0
         m_q, m_lon = lin.A[iq, iq], lin.B[iq, lin.inputs.index("lon")]
         assert pilot_gains(lin) == (4.0 / m_lon, max(0.0, (2.8 + m_q) / m_lon))  # omega_p 2, zeta_p 0.7: unchanged
+
+
+def _study():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("held_out_study", ROOT / "studies" / "held_out_effects.py")
+    study = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(study)
+    return study
+
+
+def _loop_doc(tmp_path, iterations, final):
+    """A minimal loop.json (the fields the study's evaluation reads) over a dataset with a truth.json."""
+    import json
+
+    (tmp_path / "data").mkdir(parents=True)
+    (tmp_path / "data" / "truth.json").write_text(json.dumps({"parameters": {"theta_twist": -0.14, "Iyy": 4973.0}}))
+    common = {"trim_rms": {"col": 0.004, "lon": 0.003, "theta": 0.002}, "identification_rms": {"q": 0.01},
+              "validation_rms": {"q": 0.01}, "parameters": {"theta_twist": -0.13, "Iyy": 4900.0}}
+    its = [{**common, **it} for it in iterations]
+    loop = tmp_path / "loop"
+    loop.mkdir()
+    (loop / "loop.json").write_text(json.dumps({"dataset": str(tmp_path / "data"), "settings": {"alpha": 0.01},
+                                                "iterations": its, "final_iteration": final, "stopped": "x"}))
+    return loop
+
+
+def test_the_study_reads_the_shape_an_unexplained_verdict_reports(tmp_path):
+    """studies/held_out_effects.evaluate against the drag-rise truth (a drag growing with speed): a discovered
+    dX ~ mu^4 whose step the validation rule rejected is the unexplained verdict's shape, and it matches; a kept
+    discovered term is not the unexplained verdict's shape, the last step's best generic term is (here a
+    nose-up moment bump at hover, no drag: it does not match)."""
+    study = _study()
+    mu4 = {"name": "dX_mu4", "formula": "dX = c m g (mu/0.3)^4", "strength": "c_dX_mu4", "estimate": -0.0148,
+           "se": 0.001, "p": 1e-17}
+    loop = _loop_doc(tmp_path / "a", [
+        {"iteration": 0, "extensions": [], "discovery": {"decision": "discovered", "added": "dX_mu4",
+                                                         "discovered": mu4}},
+        {"iteration": 1, "extensions": ["dX_mu4"], "rejected": "made the validation error rise on beta_0"}], 0)
+    row = study.evaluate("drag_rise", 20261122, loop)
+    assert row["unexplained verdict"] and row["unexplained shape matches truth"] == "yes"
+    assert row["criterion met"] and not row["wrong acceptance"] and row["added (kept)"] == "-"
+    bump = {"name": "dM_bump00", "estimate": 0.004, "se": 0.001, "p": 0.0002}
+    loop = _loop_doc(tmp_path / "b", [
+        {"iteration": 0, "extensions": [], "discovery": {"decision": "discovered", "added": "dX_mu4",
+                                                         "discovered": mu4}},
+        {"iteration": 1, "extensions": ["dX_mu4"], "residual_diagnosis": {"status": "unexplained residual"},
+         "discovery": {"decision": "none", "best_generic": bump, "unexplained": True}}], 1)
+    row = study.evaluate("drag_rise", 20261122, loop)
+    assert row["generic term"].startswith("dX_mu4") and row["shape matches truth"] == "yes"  # the kept term
+    assert row["unexplained shape"].startswith("dM_bump00") and row["unexplained shape matches truth"] == "n/a"
+    assert row["added (kept)"] == "dX_mu4" and row["trim change %"] == 0.0 and not row["criterion met"]

@@ -117,9 +117,9 @@ def test_adapter_scaled_solve_matches_analytic_solution_and_multipliers():
 
 
 def test_adapter_leaves_a_row_without_bound_unscaled():
-    """min (x - 3)^2 s.t. 2 x <= eps, the row's factor 20: while eps = 1e20 (beyond Ipopt's infinity, no constraint)
-    the solve uses factor 1 on the row, x = 3; at eps = 4 the factor 20, x = 2 with multiplier 1 (2 (x - 3) + 2 lam = 0);
-    back at 1e20 the first scaled functions and solver again."""
+    """min (x - 3)^2 s.t. 2 x <= eps, the row's factor 20: while eps = 1e20 (beyond Ipopt's infinity, no
+    constraint) the solve uses factor 1 on the row, x = 3; at eps = 4 the factor 20, x = 2 with multiplier 1
+    (2 (x - 3) + 2 lam = 0); back at 1e20 the first scaled functions and solver again."""
     from pyomo_heli.solvers.casadi_ipopt import CasadiIpoptSolver, CasadiSettings
 
     m = pe.ConcreteModel()
@@ -166,10 +166,10 @@ def test_scaled_point_a_equals_unscaled_estimate(tiny):
     assert res[True].J_time == pytest.approx(res[False].J_time, rel=1e-9)
 
 
-#: anchor B's J_time, scaled against unscaled: B's row J_trim <= J_trim_min (1 + 1e-6) holds to Ipopt's bound relaxation,
-#: 1e-8 of max(1, |bound|) in the units Ipopt sees; the scaled epsilon row (factor 20, bound about 19) makes that 1e-8 of
-#: J_trim, unscaled (bound 0.96) 1.04e-8, and the front is steep enough at B that J_time follows by 1e-8 (tiny) to 2.4e-7
-#: (Case 1) relative (docs/performance.md, "Scaling")
+#: anchor B's J_time, scaled against unscaled: B's row J_trim <= J_trim_min (1 + 1e-6) holds to Ipopt's bound
+#: relaxation, 1e-8 of max(1, |bound|) in the units Ipopt sees; the scaled epsilon row (factor 20, bound about 19)
+#: makes that 1e-8 of J_trim, unscaled (bound 0.96) 1.04e-8, and the front is steep enough at B that J_time follows
+#: by 1e-8 (tiny) to 2.4e-7 (Case 1) relative (docs/performance.md, "Scaling")
 B_J_TIME_REL = 1e-6
 
 

@@ -384,10 +384,15 @@ def rejected_discovery(doc: dict) -> tuple[dict, dict] | None:
     return its[k + 1], d["discovered"]
 
 
+def term_estimate(it: dict, fit: dict) -> tuple[float, float]:
+    """(estimate, standard error) of a discovered term in iteration ``it``; the discovery step's when it has none."""
+    c = it["parameters"].get(fit["strength"], fit["estimate"])
+    return c, (it.get("standard_errors") or {}).get(fit["strength"]) or fit["se"]
+
+
 def unexplained_statement(rejected: dict, fit: dict) -> str:
     """One line: the residual stays unexplained, with the shape of the discovered term that was not kept."""
-    c = rejected["parameters"].get(fit["strength"], fit["estimate"])
-    se = (rejected.get("standard_errors") or {}).get(fit["strength"]) or fit["se"]
+    c, se = term_estimate(rejected, fit)
     return (f"the residual stays unexplained: not explained by any library effect; discovered {fit['formula']}, "
             f"c = {c:.4g} +- {se:.2g} (estimate of the rejected iteration {rejected['iteration']}), not kept")
 
@@ -406,15 +411,13 @@ def discovery_summary(doc: dict, cfg, out) -> list[str]:
         model = iteration_model(cfg.model, kept)
         L += ["## Discovered, not explained by any library effect", ""]
         for it, fit in found:
-            c = kept["parameters"].get(fit["strength"], fit["estimate"])
-            se = (kept.get("standard_errors") or {}).get(fit["strength"]) or fit["se"]
+            c, se = term_estimate(kept, fit)
             L += [f"- iteration {it['iteration']}: not explained by any library effect; discovered {fit['formula']}, "
                   f"c = {c:.4g} +- {se:.2g} (the kept model's estimate and standard error)", ""]
             L += _discovered_figure(model, kept["parameters"], fit, c, se, out)
     if rejected:
         it, fit = rejected
-        c = it["parameters"].get(fit["strength"], fit["estimate"])
-        se = (it.get("standard_errors") or {}).get(fit["strength"]) or fit["se"]
+        c, se = term_estimate(it, fit)
         L += ["## Discovered, not kept (validation rule): the residual stays unexplained", "",
               f"- {unexplained_statement(it, fit)}; rejected because adding it {it['rejected']}", ""]
         L += _discovered_figure(iteration_model(cfg.model, it), it["parameters"], fit, c, se, out)

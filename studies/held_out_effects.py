@@ -334,7 +334,8 @@ def write_table(out: Path) -> pd.DataFrame:
 def markdown(tab: pd.DataFrame) -> str:
     cols = [c for c in ("truth", "seed", "verdict", "added (kept)", "generic term", "shape matches truth",
                         "trim RMS before [deg]", "trim RMS after [deg]", "trim change %",
-                        "significant val rise (kept steps)", "unexplained verdict", "wrong acceptance", "criterion met",
+                        "significant val rise (kept steps)", "unexplained verdict", "unexplained shape",
+                        "unexplained shape matches truth", "wrong acceptance", "criterion met",
                         "theta_twist err0 %", "theta_twist err1 %", "CL_alpha_HT err0 %", "CL_alpha_HT err1 %",
                         "Iyy err0 %", "Iyy err1 %") if c in tab]
 

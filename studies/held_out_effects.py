@@ -142,6 +142,10 @@ def evaluate(effect: str, seed: int, loop: Path) -> dict:
     truth = read_truth(Path(doc["dataset"]))
     physical = [n for n in ik["extensions"] if n in CANDIDATES]
     last_disc = next((it.get("discovery") for it in reversed(its) if it.get("discovery")), None) or {}
+    if last_disc.get("decision") == "ambiguous" and "best_generic" not in last_disc:
+        # loops run before the ambiguous record carried it: the generic term its message names (largest LR)
+        gen = [f for f in (last_disc.get("screen") or {}).get("fits", {}).values() if f["generic"] and f["success"]]
+        last_disc = {**last_disc, "best_generic": max(gen, key=lambda f: f["LR"]) if gen else None}
     decisions = [f"{(it.get('discovery') or {}).get('decision', '-')}"
                  + (f" {it['discovery']['added']}" if (it.get("discovery") or {}).get("added") else "") for it in its]
     rejected = [it["rejected"] for it in its if it.get("rejected")]

@@ -231,3 +231,48 @@ def test_a_rejected_discovered_term_is_reported_unexplained_with_its_shape(tmp_p
     # kept (no rejection) or no discovery: nothing to report as unexplained
     assert rejected_discovery({"iterations": its[:1], "final_iteration": 0}) is None
     assert rejected_discovery({"iterations": [its[0], {**its[1], "rejected": None}], "final_iteration": 1}) is None
+
+
+def test_an_ambiguous_step_says_what_the_generic_term_left_looks_like(monkeypatch):
+    """discovery_step's decision with the score test and the NLP screen stubbed: a physical candidate significant
+    (LR 24.4), the best generic term not significant over the library (LR 6) but adding to the physical one (LR 7.5
+    given it, p = 0.006 < 0.01): nothing is added ("ambiguous"), and the record and message carry the generic
+    term's formula and estimate, so the report says what the missing effect looks like."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+    from scipy.stats import chi2
+
+    from pyomo_heli.diagnosis import discovery
+
+    names = ["lon_rigging", "col_delay"]
+    scores = pd.DataFrame({"name": names, "p_value": [1e-6, 0.01], "LM": [49.4, 29.2], "LM_white": [49.4, 29.2],
+                           "df": [np.inf, np.inf]})
+    monkeypatch.setattr(discovery.attr, "attribute",
+                        lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
+    J0 = -117175.06
+
+    def fit(name, generic, lr, estimate, formula):
+        return {"name": name, "generic": generic, "success": True, "LR": lr, "J": J0 - lr / 2, "estimate": estimate,
+                "formula": formula, "shape": {}, "p": float(chi2.sf(lr, 1))}
+
+    fits = {"col_delay": fit("col_delay", True, 6.0, 0.0016, "c d(col_d)/dt = col - col_d"),
+            "lon_rigging": fit("lon_rigging", False, 24.37, -0.0022, "lon offset")}
+
+    def screen(cfg, start, terms, pairs=(), **kw):
+        assert set(terms) == set(names)
+        assert pairs(fits) == [("lon_rigging", "col_delay")]
+        return {"J0": J0, "fits": fits, "pairs": {"lon_rigging+col_delay": {"success": True,
+                                                                             "J": fits["lon_rigging"]["J"] - 3.75}}}
+
+    monkeypatch.setattr(discovery, "nlp_screen", screen)
+    cfg = SimpleNamespace(free=[SimpleNamespace(name="Iyy")],
+                          nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=True))
+    model = SimpleNamespace(extensions=(), parameters={"Omega": 44.4, "R": 4.91})
+    out = discovery.discovery_step(cfg, model, {}, None, physical=["lon_rigging"], generic=["col_delay"],
+                                   progress=lambda s: None)
+    assert out["decision"] == "ambiguous" and out["added"] is None
+    row, = out["encompassing"]
+    assert row["LR_G_given_P"] == pytest.approx(7.5) and row["p_G_given_P"] < 0.01 and not row["encompasses"]
+    assert out["best_generic"] is fits["col_delay"]
+    assert "what is left looks like c d(col_d)/dt = col - col_d, c = 0.0016 +-" in out["message"]

@@ -321,9 +321,10 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
                                + (f" (the best, {G['name']}, p = {G['p']:.2g}, is equivalent to it "
                                                        "on these data)" if G else "") + ": taken by the library")
             return out
-        out.update(decision="ambiguous", message="physical candidates significant ("
-                   + ", ".join(f["name"] for f in p_sig) + f") but the best generic term {G['name']} adds to each of "
-                   "them: none added")
+        out.update(decision="ambiguous", best_generic=G,
+                   message="physical candidates significant (" + ", ".join(f["name"] for f in p_sig)
+                   + f") but the best generic term {G['name']} adds to each of them: none added; what is left "
+                   f"looks like {describe_fit(G)}, p = {G['p']:.2g}")
         return out
     if named:
         best = min(named, key=lambda r: r["J_P"])

@@ -33,7 +33,8 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
    the data cannot name the physics. Of several such P, the one of lowest J is named. Otherwise G is kept and
    reported as *not explained by any library effect*. A significant physical candidate with no
    significant generic term is tested against the best generic term all the same: named if it
-   encompasses it, taken (lowest J) if the two are equivalent, nothing added otherwise ("ambiguous").
+   encompasses it, taken (lowest J) if the two are equivalent, nothing added otherwise ("ambiguous", with
+   the best generic term reported as what is left).
 4. **Nothing significant**: nothing is added; the best generic term's NLP estimate is still reported
    as the shape of what is left.
 

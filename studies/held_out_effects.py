@@ -133,6 +133,7 @@ def shape_match(effect: str, fit: dict | None, kept_model=None, params=None) -> 
 
 def evaluate(effect: str, seed: int, loop: Path) -> dict:
     from pyomo_heli.diagnosis.candidates import CANDIDATES
+    from pyomo_heli.diagnosis.discovery import best_fit
     from pyomo_heli.report.identification import read_truth
     from pyomo_heli.report.loop import final_index, rejected_discovery
 
@@ -144,8 +145,7 @@ def evaluate(effect: str, seed: int, loop: Path) -> dict:
     last_disc = next((it.get("discovery") for it in reversed(its) if it.get("discovery")), None) or {}
     if last_disc.get("decision") == "ambiguous" and "best_generic" not in last_disc:
         # loops run before the ambiguous record carried it: the generic term its message names (largest LR)
-        gen = [f for f in (last_disc.get("screen") or {}).get("fits", {}).values() if f["generic"] and f["success"]]
-        last_disc = {**last_disc, "best_generic": max(gen, key=lambda f: f["LR"]) if gen else None}
+        last_disc = {**last_disc, "best_generic": best_fit((last_disc.get("screen") or {}).get("fits", {}), True)}
     decisions = [f"{(it.get('discovery') or {}).get('decision', '-')}"
                  + (f" {it['discovery']['added']}" if (it.get("discovery") or {}).get("added") else "") for it in its]
     rejected = [it["rejected"] for it in its if it.get("rejected")]

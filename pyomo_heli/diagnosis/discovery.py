@@ -242,12 +242,12 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
 
     def pairs_of(fits):
         """(P, G) for every significant physical candidate and the best generic term, when that one is significant."""
-        g = _best(fits, True)
+        g = best_fit(fits, True)
         for n, f in fits.items():  # the deciding p-values (the pairs are asked for before they are set below)
             f.setdefault("p_LR", f["p"])
             f["p"] = (robust_p(f["LR"], sc.set_index("name").loc[n], getattr(make_candidate(n), "one_sided", False))[0]
                       if cfg.nlp.input_errors else float(sc.set_index("name").loc[n, "p_value"]))
-        g = _best(fits, True)
+        g = best_fit(fits, True)
         if g is None:
             return []
         # every significant physical candidate against the best generic term (significant or not)
@@ -268,7 +268,7 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
             f["p_robust_LR"], f["p"] = f["p"], float(rows_by.loc[n, "p_value"])
         # standard error from the corrected profile likelihood's curvature: LR_robust = (c / se)^2
         f["se"] = abs(f["estimate"]) / math.sqrt(f["LR_robust"]) if f["LR_robust"] > 0 else float("nan")
-    G = _best(fits, True)
+    G = best_fit(fits, True)
     g_sig = G is not None and G["p"] < level
     p_sig = [f for f in fits.values() if not f["generic"] and f["success"] and f["p"] < level]
     if not g_sig and not p_sig:
@@ -411,6 +411,7 @@ def robust_p(lr: float, row, one_sided: bool = False) -> tuple[float, float, flo
     return (p / 2 if one_sided else p), adj, df
 
 
-def _best(fits: dict, generic: bool):
+def best_fit(fits: dict, generic: bool):
+    """The fit of largest likelihood ratio among the solved generic (or physical) terms of an NLP screen, or None."""
     ok = [f for f in fits.values() if f["generic"] == generic and f["success"] and not math.isnan(f["LR"])]
     return max(ok, key=lambda f: f["LR"]) if ok else None

@@ -144,7 +144,17 @@ def _loop_doc(tmp_path, iterations, final):
     return loop
 
 
-def test_the_study_reads_the_shape_an_unexplained_verdict_reports(tmp_path):
+@pytest.fixture
+def trim_floor(monkeypatch):
+    """The truth model's trim RMS the study reads (report.identification.truth_trim_rms), here half of the minimal
+    loop's M0 trim RMS per channel: a 50 % cut is possible, no more."""
+    import pyomo_heli.report.identification as rep
+
+    half = {"col": 0.002, "lon": 0.0015, "theta": 0.001}
+    monkeypatch.setattr(rep, "truth_trim_rms", lambda dataset, trims=None: {"all": half})
+
+
+def test_the_study_reads_the_shape_an_unexplained_verdict_reports(tmp_path, trim_floor):
     """studies/held_out_effects.evaluate against the drag-rise truth (a drag growing with speed): a discovered
     dX ~ mu^4 whose step the validation rule rejected is the unexplained verdict's shape, and it matches; a kept
     discovered term is not the unexplained verdict's shape, the last step's best generic term is (here a
@@ -169,3 +179,40 @@ def test_the_study_reads_the_shape_an_unexplained_verdict_reports(tmp_path):
     assert row["generic term"].startswith("dX_mu4") and row["shape matches truth"] == "yes"  # the kept term
     assert row["unexplained shape"].startswith("dM_bump00") and row["unexplained shape matches truth"] == "n/a"
     assert row["added (kept)"] == "dX_mu4" and row["trim change %"] == 0.0 and not row["criterion met"]
+    assert row["trim change possible %"] == pytest.approx(-50.0) and row["share of possible trim cut %"] == 0.0
+
+
+def _tiny_flight_test(out, noise: bool):
+    """A tiny generated flight test with the canted tail rotor (held out): two level trims, one short maneuver."""
+    from pyomo_heli.flighttest.generate import generate_from_file
+
+    cfg = out.parent / f"{out.name}.toml"
+    cfg.write_text('[dataset]\nname = "x"\naircraft = "a"\nseed = 7\n[truth]\nparameters = {}\n'
+                   '[truth.effects.canted_tail_rotor]\nk_tr = 0.1\n'
+                   f'[sensors]\nnoise = {"true" if noise else "false"}\n[trims]\nspeeds_kt = [20, 80]\n'
+                   '[[maneuvers]]\nname = "m"\nrole = "identification"\nspeed_kt = 80\nchannel = "lon"\n'
+                   'shape = "doublet"\namplitude_deg = 0.5\nstep_s = 0.5\nduration_s = 2\nt_start_s = 0.5\n')
+    return generate_from_file(cfg, out)
+
+
+def test_the_truth_models_trim_rms_is_the_trim_noise(tmp_path):
+    """report.identification.truth_trim_rms rebuilds the truth model from truth.json (a held-out effect included):
+    on noise-free data it leaves nothing; on noisy data exactly the trim noise (noisy minus noise-free trims of the
+    same flight test); M0 misses the noise-free trims; without truth.json it names the file."""
+    from pyomo_heli.dataset import load_flight_test
+    from pyomo_heli.flighttest.generate import truth_model_of
+    from pyomo_heli.report.identification import predict, trim_rms, truth_trim_rms
+
+    clean, noisy = _tiny_flight_test(tmp_path / "clean", False), _tiny_flight_test(tmp_path / "noisy", True)
+    assert [e.name for e in truth_model_of(clean).extensions] == ["canted_tail_rotor"]
+    assert max(truth_trim_rms(clean)["all"].values()) < 1e-7  # [rad]
+    a, b = load_flight_test(noisy).trims, load_flight_test(clean).trims
+    floor = truth_trim_rms(noisy)["all"]
+    for c in ("col", "lon", "theta"):
+        assert floor[c] == pytest.approx(float(np.sqrt(np.mean((a[c] - b[c]) ** 2))), abs=1e-7)
+        assert floor[c] > 0
+    m0 = trim_rms(predict("M0", HelicopterModel(), {}, list(b["V"]), []), b)["all"]
+    assert m0["theta"] > 1e-3  # [rad]: M0 misses the canted tail rotor's trims, which the truth model meets
+    (clean / "truth.json").unlink()
+    with pytest.raises(FileNotFoundError, match="truth.json"):
+        truth_trim_rms(clean)

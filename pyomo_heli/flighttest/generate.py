@@ -47,6 +47,18 @@ def truth_model(cfg: GeneratorConfig) -> HelicopterModel:
     return model.with_parameters(**values)
 
 
+def truth_model_of(dataset: str | Path) -> HelicopterModel:
+    """The truth model of a generated flight test: M0 plus the effects of its ``truth.json``, at the parameter
+    values recorded there (SI). FileNotFoundError naming ``truth.json`` for a dataset without one (measured
+    data has no truth)."""
+    f = Path(dataset) / "truth.json"
+    if not f.is_file():
+        raise FileNotFoundError(f"{f}: no truth.json (only a generated flight test has a truth model)")
+    truth = json.loads(f.read_text())
+    model = HelicopterModel(extensions=[make_effect(n) for n in truth.get("effects", {})])
+    return model.with_parameters(**truth["parameters"])
+
+
 def simulate_maneuvers(cfg: GeneratorConfig, model: HelicopterModel):
     """Truth trims and noise-free maneuver histories at the simulation rate."""
     speeds = sorted({p.speed for p in cfg.maneuvers} | set(cfg.trim_speeds))

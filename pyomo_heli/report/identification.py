@@ -88,6 +88,21 @@ def trim_rms(pred: Prediction, trims: pd.DataFrame, channels=TRIM_CHANNELS) -> d
     return out
 
 
+def truth_trim_rms(dataset: str | Path, trims: pd.DataFrame | None = None) -> dict:
+    """:func:`trim_rms` of the truth model of a generated flight test (:func:`~pyomo_heli.flighttest.generate.
+    truth_model_of`) against its trim points (``trims``: the dataset's own by default), SI.
+
+    The truth model at the truth parameters leaves only the trim noise and offsets of the sensors: the floor below
+    which no identified model's trim RMS can be expected to fall. FileNotFoundError without ``truth.json``.
+    """
+    from ..flighttest.generate import truth_model_of
+
+    model = truth_model_of(dataset)
+    if trims is None:
+        trims = load_flight_test(dataset).trims.reset_index(drop=True)
+    return trim_rms(predict("truth", model, {}, list(trims["V"]), []), trims)
+
+
 # ---------------------------------------------------------------- tables
 def _display(model: HelicopterModel, name: str) -> tuple[str, float]:
     spec = model.parameters.spec(name)

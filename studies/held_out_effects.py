@@ -23,7 +23,9 @@ steady force or moment); with an "unexplained" verdict, the shape it reports (a 
 rule rejected, else the last step's best generic term) and whether that matches. The trim RMS of the truth
 model (M0 + the held-out effect at the truth parameters: only the trim noise and offsets are left) is the floor;
 "trim change possible %" is the cut from iteration 0 to that floor, and "share of possible trim cut %" the part
-of it the loop achieved (shown where at least 5 % is possible). Evaluation only: this script reads truth.json and
+of it the loop achieved (shown where at least 5 % is possible). On the validation maneuvers (as CONFIG prepares
+them), each output's RMS over the truth model's, before and after (1: as good as the truth), and in the md table
+the output worst before. Evaluation only: this script reads truth.json and
 the held-out module; the loop does not.
 """
 from __future__ import annotations
@@ -49,6 +51,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PARAMETERS = ("theta_twist", "CL_alpha_HT", "Iyy")
 #: a possible trim cut smaller than this [%] is within the noise: no share of it is reported
 POSSIBLE_CUT_MIN = 5.0
+CONFIG = ROOT / "studies" / "held_out_discovery.toml"
 TRIM = ("col", "lon", "theta")
 OUTPUTS = ("q", "theta", "n_x", "n_z", "TAS", "beta_0")
 SPEEDS_KT = (0, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120)
@@ -136,10 +139,24 @@ def shape_match(effect: str, fit: dict | None, kept_model=None, params=None) -> 
     return "yes" if corr > 0.7 and np.sign(vals[k]) == np.sign(truth[k]) else f"no (corr {corr:+.2f})"
 
 
-def evaluate(effect: str, seed: int, loop: Path) -> dict:
+def truth_model_errors(dataset: Path, config: Path) -> dict:
+    """The truth model's errors (report.identification.truth_model_errors) on the trims and on the validation maneuvers
+    as the loop's ``config`` prepares them (its validation selection and input reference)."""
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.dataset import load_flight_test
+    from pyomo_heli.nlp.identification import prepare_data
+    from pyomo_heli.report.identification import truth_model_errors as errors
+
+    cfg = load_identification_config(config, overrides={"data": {"dataset": str(dataset)}})
+    ft = load_flight_test(dataset)
+    val = prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers if cfg.validation else []
+    return errors(dataset, val, ft.trims.reset_index(drop=True))
+
+
+def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.diagnosis.discovery import best_fit
-    from pyomo_heli.report.identification import read_truth, truth_trim_rms
+    from pyomo_heli.report.identification import read_truth
     from pyomo_heli.report.loop import final_index, rejected_discovery
 
     doc = json.loads((loop / "loop.json").read_text())
@@ -163,8 +180,9 @@ def evaluate(effect: str, seed: int, loop: Path) -> dict:
     row["trim RMS before [deg]"] = np.degrees(pooled(i0["trim_rms"], TRIM))
     row["trim RMS after [deg]"] = np.degrees(pooled(ik["trim_rms"], TRIM))
     row["trim change %"] = 100 * (row["trim RMS after [deg]"] / row["trim RMS before [deg]"] - 1)
-    # the floor: the truth model at the truth parameters leaves only the trim noise and offsets
-    floor = np.degrees(pooled(truth_trim_rms(Path(doc["dataset"]))["all"], TRIM))
+    # the floor: the truth model at the truth parameters leaves only the noise (and the trims' offsets)
+    truth_err = truth_model_errors(Path(doc["dataset"]), config)
+    floor = np.degrees(pooled(truth_err["trim_rms"]["all"], TRIM))
     row["trim RMS truth model [deg]"] = floor
     row["trim change possible %"] = 100 * (floor / row["trim RMS before [deg]"] - 1)
     row["share of possible trim cut %"] = (100 * row["trim change %"] / row["trim change possible %"] + 0.0
@@ -174,6 +192,17 @@ def evaluate(effect: str, seed: int, loop: Path) -> dict:
             a, b = (i0.get(key) or {}).get(o), (ik.get(key) or {}).get(o)
             if a and b:
                 row[f"{lab} {o} change %"] = 100 * (b / a - 1)
+    worst = {}
+    for when, it in (("before", i0), ("after", ik)):
+        ratios = {o: it["validation_rms"][o] / truth_err["maneuver_rms"]["all"][o] for o in OUTPUTS
+                  if (it.get("validation_rms") or {}).get(o) and truth_err["maneuver_rms"]["all"].get(o)}
+        for o, r in ratios.items():
+            row[f"val {o} / truth model {when}"] = r
+        worst[when] = max(ratios, key=ratios.get) if ratios else None
+    if worst["before"]:
+        o = worst["before"]
+        row["val RMS / truth model's, worst output"] = (f"{o}: {row[f'val {o} / truth model before']:.3f} -> "
+                                                         f"{row[f'val {o} / truth model after']:.3f}")
     sig_rise = [r["output"] for it in its[1:final_index(doc) + 1] for r in (it.get("validation_check") or [])
                 if r["significant rise"]]
     row["significant val rise (kept steps)"] = ",".join(sig_rise) or "none"
@@ -286,7 +315,7 @@ def main(argv=None) -> int:
                     help="start at seed 20261122 + FIRST_SEED (default 0: the bundled flight test's own seed)")
     ap.add_argument("--effects", nargs="+", default=list(HELD_OUT_EFFECTS),
                     help=f"held-out effects (or none): {', '.join(HELD_OUT_EFFECTS)}")
-    ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
+    ap.add_argument("--config", default=str(CONFIG))
     ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
     ap.add_argument("--out", required=True)
     ap.add_argument("--bundled", action="store_true",
@@ -300,16 +329,17 @@ def main(argv=None) -> int:
                          "its row.json and the table")
     a = ap.parse_args(argv)
     out = out_folder(ap, a.out)
+    config = in_file(ap, a.config, "--config")
     if a.evaluate_only:
         for loop in sorted(out.glob("*_*/loop")):
             doc = loop / "loop.json"
             if doc.is_file() and json.loads(doc.read_text()).get("stopped"):
                 effect, seed = loop.parent.name.rsplit("_", 1)
-                save_row(loop.parent, evaluate(effect, int(seed), loop))
+                save_row(loop.parent, evaluate(effect, int(seed), loop, config))
         write_table(out)
         print((out / "held_out.md").read_text())
         return 0
-    config, gen = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
+    gen = in_file(ap, a.data_config, "--data-config")
     if a.bundled:
         run_bundled(out, config, ROOT / "data" / "bo105_synthetic", a.modes)
         return 0
@@ -320,7 +350,7 @@ def main(argv=None) -> int:
     for effect in a.effects:
         for seed in seeds_of(a.first_seed, a.seeds):
             loop = run_case(effect, seed, out, config, template)
-            save_row(loop.parent, evaluate(effect, seed, loop))
+            save_row(loop.parent, evaluate(effect, seed, loop, config))
             write_table(out)
     print((out / "held_out.md").read_text())
     return 0
@@ -350,6 +380,7 @@ def markdown(tab: pd.DataFrame) -> str:
     cols = [c for c in ("truth", "seed", "verdict", "added (kept)", "generic term", "shape matches truth",
                         "trim RMS before [deg]", "trim RMS after [deg]", "trim change %",
                         "trim RMS truth model [deg]", "trim change possible %", "share of possible trim cut %",
+                        "val RMS / truth model's, worst output",
                         "significant val rise (kept steps)", "unexplained verdict", "unexplained shape",
                         "unexplained shape matches truth", "wrong acceptance", "criterion met",
                         "theta_twist err0 %", "theta_twist err1 %", "CL_alpha_HT err0 %", "CL_alpha_HT err1 %",

@@ -1,5 +1,6 @@
 """The held-out truth effects (pyomo_heli.flighttest.held_out_effects): independent of the diagnosis, M0 at zero
 strength, and each one moves the data the way its equation says."""
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -145,21 +146,21 @@ def _loop_doc(tmp_path, iterations, final):
 
 
 @pytest.fixture
-def trim_floor(monkeypatch):
-    """The truth model's trim RMS the study reads (report.identification.truth_trim_rms), here half of the minimal
-    loop's M0 trim RMS per channel: a 50 % cut is possible, no more."""
-    import pyomo_heli.report.identification as rep
-
+def study(monkeypatch):
+    """The study module with the truth model's errors it reads (its truth_model_errors) stubbed: trim RMS half of the
+    minimal loop's M0 trim RMS per channel (a 50 % cut is possible, no more), validation q RMS 0.005."""
+    study = _study()
     half = {"col": 0.002, "lon": 0.0015, "theta": 0.001}
-    monkeypatch.setattr(rep, "truth_trim_rms", lambda dataset, trims=None: {"all": half})
+    monkeypatch.setattr(study, "truth_model_errors", lambda dataset, config: {"trim_rms": {"all": half},
+                                                                        "maneuver_rms": {"all": {"q": 0.005}}})
+    return study
 
 
-def test_the_study_reads_the_shape_an_unexplained_verdict_reports(tmp_path, trim_floor):
+def test_the_study_reads_the_shape_an_unexplained_verdict_reports(tmp_path, study):
     """studies/held_out_effects.evaluate against the drag-rise truth (a drag growing with speed): a discovered
     dX ~ mu^4 whose step the validation rule rejected is the unexplained verdict's shape, and it matches; a kept
     discovered term is not the unexplained verdict's shape, the last step's best generic term is (here a
     nose-up moment bump at hover, no drag: it does not match)."""
-    study = _study()
     mu4 = {"name": "dX_mu4", "formula": "dX = c m g (mu/0.3)^4", "strength": "c_dX_mu4", "estimate": -0.0148,
            "se": 0.001, "p": 1e-17}
     loop = _loop_doc(tmp_path / "a", [
@@ -180,6 +181,8 @@ def test_the_study_reads_the_shape_an_unexplained_verdict_reports(tmp_path, trim
     assert row["unexplained shape"].startswith("dM_bump00") and row["unexplained shape matches truth"] == "n/a"
     assert row["added (kept)"] == "dX_mu4" and row["trim change %"] == 0.0 and not row["criterion met"]
     assert row["trim change possible %"] == pytest.approx(-50.0) and row["share of possible trim cut %"] == 0.0
+    assert row["val q / truth model before"] == pytest.approx(2.0)  # the minimal loop's 0.01 over the truth's 0.005
+    assert row["val RMS / truth model's, worst output"] == "q: 2.000 -> 2.000"
 
 
 def _tiny_flight_test(out, noise: bool):
@@ -195,24 +198,33 @@ def _tiny_flight_test(out, noise: bool):
     return generate_from_file(cfg, out)
 
 
-def test_the_truth_models_trim_rms_is_the_trim_noise(tmp_path):
-    """report.identification.truth_trim_rms rebuilds the truth model from truth.json (a held-out effect included):
-    on noise-free data it leaves nothing; on noisy data exactly the trim noise (noisy minus noise-free trims of the
-    same flight test); M0 misses the noise-free trims; without truth.json it names the file."""
+def test_the_truth_models_errors_are_the_noise(tmp_path):
+    """report.identification.truth_model_errors rebuilds the truth model from truth.json (a held-out effect included):
+    on noise-free data it leaves nothing in the trims; on noisy data exactly the trim noise (noisy minus noise-free
+    trims of the same flight test); its replay of the maneuver meets the noise-free record and misses the noisy
+    one by about the recorded noise; M0 misses the noise-free trims; without truth.json it names the
+    file."""
     from pyomo_heli.dataset import load_flight_test
     from pyomo_heli.flighttest.generate import truth_model_of
-    from pyomo_heli.report.identification import predict, trim_rms, truth_trim_rms
+    from pyomo_heli.nlp.identification import prepare_data
+    from pyomo_heli.report.identification import predict, trim_rms, truth_model_errors
 
     clean, noisy = _tiny_flight_test(tmp_path / "clean", False), _tiny_flight_test(tmp_path / "noisy", True)
     assert [e.name for e in truth_model_of(clean).extensions] == ["canted_tail_rotor"]
-    assert max(truth_trim_rms(clean)["all"].values()) < 1e-7  # [rad]
+    assert max(truth_model_errors(clean)["trim_rms"]["all"].values()) < 1e-7  # [rad]
     a, b = load_flight_test(noisy).trims, load_flight_test(clean).trims
-    floor = truth_trim_rms(noisy)["all"]
+    floor = truth_model_errors(noisy)["trim_rms"]["all"]
     for c in ("col", "lon", "theta"):
         assert floor[c] == pytest.approx(float(np.sqrt(np.mean((a[c] - b[c]) ** 2))), abs=1e-7)
         assert floor[c] > 0
+    q_rms = {}
+    for name, ds in (("clean", clean), ("noisy", noisy)):
+        mans = prepare_data(load_flight_test(ds), ["m"]).maneuvers
+        q_rms[name] = truth_model_errors(ds, mans)["maneuver_rms"]["all"]["q"]
+    sigma_q = json.loads((noisy / "truth.json").read_text())["sensor_sigma_si"]["q"]
+    assert q_rms["clean"] < 1e-6 and 0.5 * sigma_q < q_rms["noisy"] < 3 * sigma_q  # [rad/s]; vibration adds
     m0 = trim_rms(predict("M0", HelicopterModel(), {}, list(b["V"]), []), b)["all"]
     assert m0["theta"] > 1e-3  # [rad]: M0 misses the canted tail rotor's trims, which the truth model meets
     (clean / "truth.json").unlink()
     with pytest.raises(FileNotFoundError, match="truth.json"):
-        truth_trim_rms(clean)
+        truth_model_errors(clean)

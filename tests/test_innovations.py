@@ -16,9 +16,7 @@ import pytest
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.diagnosis.analysis import diagnose
 from pyomo_heli.diagnosis.residuals import Residuals, compute_residuals
-from pyomo_heli.flighttest.truth_effects import make_effect
-from pyomo_heli.physics.model import HelicopterModel
-from pyomo_heli.report.identification import read_truth, read_truth_effects
+from pyomo_heli.flighttest.generate import truth_model_of
 
 ROOT = Path(__file__).resolve().parent.parent
 EIV = ROOT / "tests" / "configs" / "close_loop_eiv.toml"
@@ -33,9 +31,8 @@ def _cfg(maneuvers, model=None, input_errors=True):
 
 
 def _truth(cfg):
-    truth, effects = read_truth(cfg.dataset), read_truth_effects(cfg.dataset)
-    model = HelicopterModel(extensions=tuple(make_effect(n) for n in effects))
-    return model, {k: v for k, v in truth.items() if k in model.parameters}
+    model = truth_model_of(cfg.dataset)
+    return model, model.parameters.to_dict()
 
 
 @pytest.fixture(scope="module")

@@ -88,19 +88,28 @@ def trim_rms(pred: Prediction, trims: pd.DataFrame, channels=TRIM_CHANNELS) -> d
     return out
 
 
-def truth_trim_rms(dataset: str | Path, trims: pd.DataFrame | None = None) -> dict:
-    """:func:`trim_rms` of the truth model of a generated flight test (:func:`~pyomo_heli.flighttest.generate.
-    truth_model_of`) against its trim points (``trims``: the dataset's own by default), SI.
-
-    The truth model at the truth parameters leaves only the trim noise and offsets of the sensors: the floor below
-    which no identified model's trim RMS can be expected to fall. FileNotFoundError without ``truth.json``.
-    """
+def truth_prediction(dataset: str | Path, trim_speeds=(), maneuvers=()) -> Prediction:
+    """:func:`predict` with the truth model of a generated flight test (M0 + the effects of its ``truth.json`` at
+    the truth parameters, :func:`~pyomo_heli.flighttest.generate.truth_model_of`). FileNotFoundError without
+    ``truth.json``. Evaluation only."""
     from ..flighttest.generate import truth_model_of
 
-    model = truth_model_of(dataset)
+    return predict("truth", truth_model_of(dataset), {}, list(trim_speeds), list(maneuvers))
+
+
+def truth_model_errors(dataset: str | Path, maneuvers=(), trims: pd.DataFrame | None = None) -> dict:
+    """The truth model's errors (SI): ``trim_rms`` (:func:`trim_rms`) against ``trims`` (the dataset's own by
+    default) and ``maneuver_rms`` (:func:`validation_rms`) on ``maneuvers`` (prepared records of the dataset, e.g.
+    the validation ones), with the ``problems`` of its replay.
+
+    The truth model at the truth parameters leaves only the sensor noise and the trims' offsets: the floor below
+    which no identified model's errors can be expected to fall. FileNotFoundError without ``truth.json``.
+    """
     if trims is None:
         trims = load_flight_test(dataset).trims.reset_index(drop=True)
-    return trim_rms(predict("truth", model, {}, list(trims["V"]), []), trims)
+    pred = truth_prediction(dataset, trims["V"], maneuvers)
+    return {"trim_rms": trim_rms(pred, trims), "maneuver_rms": validation_rms(pred, maneuvers),
+            "problems": pred.problems}
 
 
 # ---------------------------------------------------------------- tables

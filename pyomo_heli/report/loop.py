@@ -27,7 +27,7 @@ from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
 from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
-                             read_truth, read_truth_effects, validation_rms)
+                             read_truth, truth_prediction, validation_rms)
 
 
 #: the closed loop's record in its results folder (written by :mod:`pyomo_heli.workflows.close_loop`)
@@ -154,13 +154,9 @@ def truth_replay_errors(cfg, doc: dict, val_mans) -> tuple[list[dict], dict] | N
     model's own data-minus-model RMS. None without ``truth.json``. Evaluation only."""
     import numpy as np
 
-    from ..flighttest.truth_effects import make_effect
-
-    truth, effects = read_truth(cfg.dataset), read_truth_effects(cfg.dataset)
-    if truth is None or effects is None or not val_mans:
+    if read_truth(cfg.dataset) is None or not val_mans:
         return None
-    tmodel = HelicopterModel(extensions=tuple(make_effect(n) for n in effects))
-    tpred = predict("truth", tmodel, {k: v for k, v in truth.items() if k in tmodel.parameters}, [], val_mans)
+    tpred = truth_prediction(cfg.dataset, [], val_mans)
     out = []
     for it in doc["iterations"]:
         pred = predict(label(it), iteration_model(cfg.model, it), it["parameters"], [], val_mans)

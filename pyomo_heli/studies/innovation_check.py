@@ -25,9 +25,9 @@ import pandas as pd
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.diagnosis.analysis import diagnose
 from pyomo_heli.diagnosis.residuals import compute_residuals
-from pyomo_heli.flighttest.truth_effects import make_effect
+from pyomo_heli.flighttest.generate import truth_model_of
 from pyomo_heli.physics.model import HelicopterModel
-from pyomo_heli.report.identification import read_truth, read_truth_effects
+from pyomo_heli.report.identification import read_truth
 from pyomo_heli.report.loop import iteration_model
 
 ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, data/
@@ -37,11 +37,10 @@ def cases(cfg, loop: Path | None) -> list[tuple[str, HelicopterModel, dict, bool
     """(name, model, parameters, shift): the truth model at its parameters (no parameter shift in the trim
     shape test: nothing was identified), and each loop iteration at its diagnosed point (the shift of its
     free parameters allowed, as the loop's own verdict does)."""
-    truth, effects = read_truth(cfg.dataset), read_truth_effects(cfg.dataset)
-    if truth is None or effects is None:
+    if read_truth(cfg.dataset) is None:
         raise SystemExit(f"{cfg.dataset}: no truth.json; this study needs the truth simulator's parameters")
-    tm = HelicopterModel(extensions=tuple(make_effect(n) for n in effects))
-    out = [("truth model", tm, {k: v for k, v in truth.items() if k in tm.parameters}, False)]
+    tm = truth_model_of(cfg.dataset)
+    out = [("truth model", tm, tm.parameters.to_dict(), False)]
     if loop is not None:
         f = loop / "loop.json"
         if not f.is_file():

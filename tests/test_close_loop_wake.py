@@ -76,6 +76,13 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
     report = (tmp_path / "loop" / "loop_report.md").read_text()
     assert "## Error before and after" in report and "## Parameters vs truth" in report
     assert "minus the truth simulator replayed the same way" in report
+    # the kept model's trims are as close to the data as the truth model's (the trim noise floor the report shows)
+    from pyomo_heli.report.identification import truth_model_errors
+
+    floor = truth_model_errors(cfg.dataset)["trim_rms"]["all"]
+    print("trim RMS floor:", floor, "kept:", it1["trim_rms"])
+    assert _pooled_trim(it1["trim_rms"]) <= 1.2 * _pooled_trim(floor)
+    assert "Trim RMS of the truth model at the truth parameters" in report
     assert "Diebold-Mariano" in report and "Shape of rotor_wake_on_tail" in report
     assert (tmp_path / "loop" / "loop_trim_vs_speed.png").is_file()
     assert (tmp_path / "loop" / "loop_validation.png").is_file()

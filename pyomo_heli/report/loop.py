@@ -27,7 +27,8 @@ from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
 from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
-                             read_truth, truth_prediction, validation_rms)
+                             read_truth, truth_model_errors, truth_prediction,
+                             validation_rms)
 
 
 #: the closed loop's record in its results folder (written by :mod:`pyomo_heli.workflows.close_loop`)
@@ -243,6 +244,10 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
             L += ["Validation RMS of each model minus the truth simulator replayed the same way (the model error "
                   "without the sensor noise; the last row is the truth model's own data-minus-model RMS, the "
                   "floor of the table above):", "", markdown_table(pd.DataFrame(rows), digits=4), ""]
+        floor = truth_model_errors(cfg.dataset)["trim_rms"]["all"]
+        L += ["Trim RMS of the truth model at the truth parameters (data minus truth: the trims' noise and offsets, "
+              "the floor of the trim columns of \"Error before and after\") [deg]: "
+              + ", ".join(f"{c} {_fmt(math.degrees(v), 4)}" for c, v in floor.items() if v is not None) + ".", ""]
     L += ["## Iterations", ""]
     for it in its:
         L += [f"### {label(it)}", "", f"Results: `{it['results_dir']}/` (front, report). "

@@ -25,8 +25,7 @@ model (M0 + the held-out effect at the truth parameters: only the trim noise and
 "trim change possible %" is the cut from iteration 0 to that floor, and "share of possible trim cut %" the part
 of it the loop achieved (shown where at least 5 % is possible). On the validation maneuvers (as CONFIG prepares
 them), each output's RMS over the truth model's, before and after (1: as good as the truth), and in the md table
-the output worst before. Evaluation only: this script reads truth.json and
-the held-out module; the loop does not.
+the output worst before. Evaluation only: this script reads truth.json and the held-out module; the loop does not.
 """
 from __future__ import annotations
 

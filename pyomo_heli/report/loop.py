@@ -27,8 +27,7 @@ from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
 from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
-                             read_truth, truth_model_errors, truth_prediction,
-                             validation_rms)
+                             read_truth, truth_model_errors, truth_prediction, validation_rms)
 
 
 #: the closed loop's record in its results folder (written by :mod:`pyomo_heli.workflows.close_loop`)

@@ -228,9 +228,9 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     left = (not_kept[1] if not_kept else best) if row["unexplained verdict"] else None
     row["unexplained shape"] = (f"{left['name']}: c = {left['estimate']:.3g} +- {left['se']:.2g}" if left else "-")
     row["unexplained shape matches truth"] = shape_match(effect, left) if left else "-"
-    row["criterion met"] = (not row["wrong acceptance"] and not sig_rise
-                            and ((disc is not None and row["trim change %"] <= -50.0)
-                                 or row["unexplained shape matches truth"] == "yes"))
+    row["criterion met"] = "n/a" if effect == "none" else (  # the criterion is about a truth effect
+        not row["wrong acceptance"] and not sig_rise
+        and ((disc is not None and row["trim change %"] <= -50.0) or row["unexplained shape matches truth"] == "yes"))
     return row
 
 
@@ -390,11 +390,19 @@ def markdown(tab: pd.DataFrame) -> str:
 
     L = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     L += ["| " + " | ".join(fmt(v) for v in r) + " |" for r in tab[cols].itertuples(index=False)]
-    L += ["", f"wrong acceptances: {int(tab['wrong acceptance'].sum())} of {len(tab)}; "
-              f"criterion met: {int(tab['criterion met'].sum())} of {len(tab)}"
-          + (f"; a trim cut of 50 % possible at all (truth model's trim RMS <= half of M0's): "
-             f"{int((tab['trim change possible %'] <= -50.0).sum())} of {len(tab)}"
-             if "trim change possible %" in tab else ""), ""]
+    L.append("")
+    held, none = tab[tab["truth"] != "none"], tab[tab["truth"] == "none"]
+    if len(held):
+        L.append(f"wrong acceptances: {int(held['wrong acceptance'].astype(bool).sum())} of {len(held)}; "
+                 f"criterion met: {int(held['criterion met'].astype(bool).sum())} of {len(held)}"
+                 + (f"; a trim cut of 50 % possible at all (truth model's trim RMS <= half of M0's): "
+                    f"{int((pd.to_numeric(held['trim change possible %']) <= -50.0).sum())} of {len(held)}"
+                    if "trim change possible %" in held else ""))
+    if len(none):
+        L.append(f"M0 + noise only: wrong acceptances: {int(none['wrong acceptance'].astype(bool).sum())} of "
+                 f"{len(none)}" + (f"; nothing added: {int((none['added (kept)'] == '-').sum())} of {len(none)}"
+                                   if "added (kept)" in none else ""))
+    L.append("")
     return "\n".join(L)
 
 

@@ -94,7 +94,9 @@ def test_held_out_study_keeps_every_finished_row_on_disk(tmp_path):
     tab = study.write_table(tmp_path)
     assert list(zip(tab["truth"], tab["seed"])) == [("drag_rise", 20261122), ("none", 20261122), ("none", 20261124)]
     assert tab["trim change %"].tolist() == [-12.5] * 3
-    assert "wrong acceptances: 1 of 3; criterion met: 0 of 3" in (tmp_path / "held_out.md").read_text()
+    md = (tmp_path / "held_out.md").read_text()
+    assert "wrong acceptances: 1 of 1; criterion met: 0 of 1" in md
+    assert "M0 + noise only: wrong acceptances: 0 of 2" in md
     assert len((tmp_path / "held_out.csv").read_text().splitlines()) == 4
 
 

@@ -138,18 +138,17 @@ def shape_match(effect: str, fit: dict | None, kept_model=None, params=None) -> 
     return "yes" if corr > 0.7 and np.sign(vals[k]) == np.sign(truth[k]) else f"no (corr {corr:+.2f})"
 
 
-def truth_model_errors(dataset: Path, config: Path) -> dict:
-    """The truth model's errors (report.identification.truth_model_errors) on the trims and on the validation maneuvers
-    as the loop's ``config`` prepares them (its validation selection and input reference)."""
+def truth_floor(dataset: Path, config: Path) -> dict:
+    """The truth model's errors (report.identification.truth_model_errors) on the trims and on the validation
+    records as the loop's ``config`` replays them."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.dataset import load_flight_test
-    from pyomo_heli.nlp.identification import prepare_data
-    from pyomo_heli.report.identification import truth_model_errors as errors
+    from pyomo_heli.nlp.identification import validation_maneuvers
+    from pyomo_heli.report.identification import truth_model_errors
 
     cfg = load_identification_config(config, overrides={"data": {"dataset": str(dataset)}})
     ft = load_flight_test(dataset)
-    val = prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers if cfg.validation else []
-    return errors(dataset, val, ft.trims.reset_index(drop=True))
+    return truth_model_errors(dataset, validation_maneuvers(cfg, ft), ft.trims.reset_index(drop=True))
 
 
 def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
@@ -180,7 +179,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     row["trim RMS after [deg]"] = np.degrees(pooled(ik["trim_rms"], TRIM))
     row["trim change %"] = 100 * (row["trim RMS after [deg]"] / row["trim RMS before [deg]"] - 1)
     # the floor: the truth model at the truth parameters leaves only the noise (and the trims' offsets)
-    truth_err = truth_model_errors(Path(doc["dataset"]), config)
+    truth_err = truth_floor(Path(doc["dataset"]), config)
     floor = np.degrees(pooled(truth_err["trim_rms"]["all"], TRIM))
     row["trim RMS truth model [deg]"] = floor
     row["trim change possible %"] = 100 * (floor / row["trim RMS before [deg]"] - 1)

@@ -149,11 +149,11 @@ def _loop_doc(tmp_path, iterations, final):
 
 @pytest.fixture
 def study(monkeypatch):
-    """The study module with the truth model's errors it reads (its truth_model_errors) stubbed: trim RMS half of the
+    """The study module with the truth model's errors it reads (its truth_floor) stubbed: trim RMS half of the
     minimal loop's M0 trim RMS per channel (a 50 % cut is possible, no more), validation q RMS 0.005."""
     study = _study()
     half = {"col": 0.002, "lon": 0.0015, "theta": 0.001}
-    monkeypatch.setattr(study, "truth_model_errors", lambda dataset, config: {"trim_rms": {"all": half},
+    monkeypatch.setattr(study, "truth_floor", lambda dataset, config: {"trim_rms": {"all": half},
                                                                         "maneuver_rms": {"all": {"q": 0.005}}})
     return study
 

@@ -353,6 +353,15 @@ def prepare_data(ft, maneuvers="identification", resample_hz: float | None = Non
     return IdentificationData(maneuvers=out, trims=ft.trims)
 
 
+def validation_maneuvers(cfg, ft) -> list:
+    """The validation records of a config as the reports and the closed loop replay them: its ``validation``
+    selection of the loaded FlightTest ``ft`` at the recorded rate, inputs referred as the identification refers
+    them (``input_reference_s``); [] when the config names none."""
+    if not cfg.validation:
+        return []
+    return list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
+
+
 def identification_data(cfg, ft=None) -> IdentificationData:
     """The identification maneuvers of a config as the NLP fits them (its maneuvers, ``resample_hz``,
     ``resample_inputs``, ``max_duration_s``, ``input_reference_s``); ``ft`` a loaded FlightTest, else the

@@ -29,7 +29,7 @@ import pandas as pd
 
 from ..channels import OUTPUTS, TRIM_CHANNELS
 from ..dataset import load_flight_test
-from ..nlp.identification import prepare_data
+from ..nlp.identification import validation_maneuvers
 from ..pareto.epsilon import utopia_distance_n
 from ..pareto.result import IdentificationResult, write_json
 from ..physics.model import HelicopterModel
@@ -270,7 +270,7 @@ def write_report(out_dir, cfg, results_dir=None, figure_format: str = "png") -> 
     ft = load_flight_test(cfg.dataset)
     truth = read_truth(cfg.dataset)
     # full records at the recorded rate
-    val_mans = list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
+    val_mans = validation_maneuvers(cfg, ft)
     trims = ft.trims.reset_index(drop=True)
 
     speeds = list(CURVE_SPEEDS) + list(trims["V"])

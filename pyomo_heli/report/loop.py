@@ -22,7 +22,7 @@ import pandas as pd
 
 from ..dataset import load_flight_test
 from ..diagnosis.candidates import model_with_candidates
-from ..nlp.identification import prepare_data
+from ..nlp.identification import validation_maneuvers
 from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
@@ -182,8 +182,7 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
     doc = load_loop(out)
     ft = load_flight_test(cfg.dataset)
     trims = ft.trims.reset_index(drop=True)
-    val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
-                if cfg.validation else [])
+    val_mans = validation_maneuvers(cfg, ft)
     its = doc["iterations"]
     preds = {label(it): predict(label(it), iteration_model(cfg.model, it), it["parameters"],
                                 list(CURVE_SPEEDS) + list(trims["V"]), val_mans) for it in its}

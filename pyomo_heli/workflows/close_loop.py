@@ -51,7 +51,7 @@ from ..diagnosis import attribution as attr
 from ..diagnosis.candidates import CANDIDATES, make_candidate
 from ..log import info
 from .identify import run_identification, shape_values
-from ..nlp.identification import identification_data, prepare_data
+from ..nlp.identification import identification_data, validation_maneuvers
 from ..pareto.result import write_json
 from ..pareto.store import read_checkpoint
 from ..settings import Problems, validate
@@ -198,8 +198,7 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
     with RunFolder(out, "close-loop", cfg, restart) as run:
         ft = load_flight_test(cfg.dataset)
         id_data = identification_data(cfg, ft)
-        val_mans = (list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
-                    if cfg.validation else [])
+        val_mans = validation_maneuvers(cfg, ft)
         # the folder only once the data loaded (a bad dataset leaves no folder behind), locked for the loop's life;
         # SIGINT/SIGTERM stop it with Interrupted (finished iterations and points stay on disk, a rerun resumes)
         with run.locked():

@@ -76,3 +76,88 @@ def test_input_time_shift_lags_the_response_and_leaves_the_trim():
     q0, q1 = (simulate(mm, tp, t_, sig, max_step=0.01)["q"].to_numpy() for mm, tp in ((HelicopterModel(), a), (m, b)))
     k = np.searchsorted(t_, 0.6)  # 0.1 s after the step: the delayed rotor has seen 63 % of it
     assert abs(q1[k]) < 0.8 * abs(q0[k]) and np.sign(q1[k]) == np.sign(q0[k])
+
+
+@pytest.mark.parametrize("name,out", [("nz_delay", "n_z"), ("TAS_delay", "TAS"), ("beta0_delay", "beta_0")])
+def test_output_time_shift_is_a_first_order_lag_of_the_output(name, out):
+    """c d(y_d)/dt = y - y_d, the record holds y_d: the trim is M0's, and the recorded output is M0's output passed
+    through 1/(c s + 1) (scipy.signal.lsim: a second method); the states are M0's. The float simulator and the
+    compiled RK4 replay agree."""
+    from scipy import signal
+
+    from pyomo_heli.simulation.compiled import simulate_outputs
+    from pyomo_heli.simulation.inputs import InputSignal
+    from pyomo_heli.simulation.integrate import sampled, simulate
+
+    tau = 0.08
+    t_ = np.linspace(0.0, 3.0, 601)
+    t = generic_term(name)
+    m = HelicopterModel(extensions=[t]).with_parameters(**{t.strength: tau})
+    a, b = trim_float(HelicopterModel(), 60 * KT), trim_float(m, 60 * KT)
+    assert (b.col, b.lon, b.theta) == pytest.approx((a.col, a.lon, a.theta), abs=1e-12)
+    assert b.extra_states[f"{out}_delayed"] == pytest.approx(HelicopterModel().outputs(a.state(), a.inputs())[out],
+                                                             rel=1e-12)  # at trim the lag state is the output
+    dlon = InputSignal("lon", "3211", 0.5 * DEG, 0.4, t_start=0.3, ramp=0.1)(t_)
+    y0 = simulate(HelicopterModel(), a, t_, {"lon": sampled(t_, dlon)}, max_step=0.002)
+    y1 = simulate(m, b, t_, {"lon": sampled(t_, dlon)}, max_step=0.002)
+    _, lagged, _ = signal.lsim(([1.0], [tau, 1.0]), y0[out].to_numpy() - y0[out].iloc[0], t_)
+    span = np.ptp(y0[out].to_numpy())
+    shift = np.max(np.abs(y1[out].to_numpy() - y0[out].to_numpy()))
+    assert shift > 0.03 * span  # it acts
+    assert np.max(np.abs(y1[out].to_numpy() - y0[out].iloc[0] - lagged)) < 0.002 * shift
+    q0 = y0["q"].to_numpy()
+    assert np.max(np.abs(y1["q"].to_numpy() - q0)) < 1e-6 * np.ptp(q0)  # the dynamics are M0's
+    comp = simulate_outputs(m, b, t_, {"lon": dlon}, [out], substeps=2)[out]
+    assert np.max(np.abs(comp - y1[out].to_numpy())) < 1e-3 * span
+
+
+def test_output_time_shift_in_the_collocation_nlp_equals_the_float_simulation():
+    """nz_delay at c = 0.08 s: a trim block and a 3-2-1-1 maneuver as a square collocation NLP (parameters fixed)
+    give the float simulator's recorded n_z, the lag state starting at the trim's n_z."""
+    import pyomo.environ as pyo
+
+    from pyomo_heli.nlp.maneuver_block import build_maneuver_block
+    from pyomo_heli.nlp.parameters import add_parameters
+    from pyomo_heli.nlp.trim_block import build_trim_block
+    from pyomo_heli.simulation.inputs import InputSignal
+    from pyomo_heli.simulation.integrate import sampled, simulate
+    from pyomo_heli.solvers import make_solver
+
+    t = generic_term("nz_delay")
+    model = HelicopterModel(extensions=[t]).with_parameters(c_nz_delay=0.08)
+    V = 80 * KT
+    tp = trim_float(model, V)
+    ts = np.arange(0.0, 3.0 + 1e-9, 0.02)
+    dlon = InputSignal("lon", "3211", 0.5 * DEG, 0.4, t_start=0.5, ramp=0.1)(ts)
+    ref = simulate(model, tp, ts, {"lon": sampled(ts, dlon)}, max_step=0.01)
+    m = pyo.ConcreteModel()
+    pmap = add_parameters(m, model.parameters, [])
+    m.trim = pyo.Block()
+    build_trim_block(m.trim, model, pmap, V, guess={**tp.to_dict(), **tp.extra_states})
+    m.man = pyo.Block()
+    build_maneuver_block(m.man, model, pmap, ts, {"lon": dlon}, m.trim, ncp=3)
+    for (s, tt), v in m.man.x.items():
+        v.set_value({**tp.state(), **tp.extra_states}[s])
+    m.obj = pyo.Objective(expr=0.0)
+    assert make_solver(m).solve(warm_start="none").success
+    assert pyo.value(m.trim.n_z_delayed) == pytest.approx(ref["n_z"].iloc[0], abs=1e-8)
+    y = np.array([pyo.value(m.man.y["n_z", tt]) for tt in m.man.samples])
+    r = ref["n_z"].to_numpy()
+    assert np.max(np.abs(y - r)) <= 2e-3 * np.ptp(r)
+
+
+def test_the_float_simulator_refuses_a_sensor_effect_on_a_state_output():
+    """q and theta are states and outputs, one column each in the simulator's frame: an extension that changes the
+    recorded q is refused with a clear error, not silently dropped."""
+    from pyomo_heli.physics.extensions import Extension
+    from pyomo_heli.simulation.integrate import simulate
+
+    class QBias(Extension):
+        name, strength = "q_bias", ""
+
+        def adjust_outputs(self, ctx):
+            ctx.outputs["q"] = ctx.outputs["q"] + 0.01
+
+    tp = trim_float(HelicopterModel(), 40 * KT)
+    with pytest.raises(ValueError, match="changes the recorded q"):
+        simulate(HelicopterModel(extensions=[QBias()]), tp, np.linspace(0, 0.1, 3))

@@ -25,9 +25,13 @@ Sensor side (data compatibility of flight-path reconstruction), per channel:
     beta0_bias       beta_0,meas = beta_0 + c [rad]
     lon_delay,       c d(u_d)/dt = u - u_d, the rotor sees u_d: a time shift c [s] of the measured
       col_delay      control (first order), a lag state added only when c is not zero
+    nx_delay, nz_delay, c d(y_d)/dt = y - y_d, the record holds y_d: a time shift c [s] of the output
+      TAS_delay,     (first order, the same lag state; y before any other sensor effect, which
+      beta0_delay    then acts on y_d)
 
-(No time shifts of the outputs: their rates are not all available at the seam; no n_x / n_z
-bias: the candidate library already holds those as named sensor effects.)
+(No n_x / n_z bias: the candidate library already holds those as named sensor effects. No time shift
+of q or theta: they are states as well as outputs, and the float simulator's frame holds one column
+for each, the state; :func:`pyomo_heli.simulation.integrate.simulate` refuses a sensor effect on them.)
 
 A term's name is ``d<channel>_<regressor>`` (e.g. ``dM_bump05``), its coefficient
 ``c_<channel>_<regressor>``; :func:`generic_term` builds one, :func:`generic_names` lists the
@@ -36,6 +40,7 @@ the structure determination frees it (:mod:`pyomo_heli.diagnosis.discovery`).
 """
 from __future__ import annotations
 
+from ..channels import INPUTS
 from .extensions import Extension
 from .parameters import ParameterSpec
 
@@ -72,6 +77,9 @@ SENSOR_TERMS = {
     "beta0_bias": ("beta_0", "bias", "beta_0,meas = beta_0 + c [rad]"),
     "lon_delay": ("lon", "delay", "c d(lon_d)/dt = lon - lon_d, the rotor sees lon_d (input time shift c [s])"),
     "col_delay": ("col", "delay", "c d(col_d)/dt = col - col_d, the rotor sees col_d (input time shift c [s])"),
+    **{f"{k}_delay": (out, "delay", f"c d({out}_d)/dt = {out} - {out}_d, the record holds {out}_d "
+                                    "(output time shift c [s])")
+       for k, out in (("nx", "n_x"), ("nz", "n_z"), ("TAS", "TAS"), ("beta0", "beta_0"))},
 }
 #: coefficient bounds and scale: force (X, Z: fraction of W), moment (fraction of W R), sensor
 BOUNDS = {"X": (-0.2, 0.2, 0.005), "Z": (-0.2, 0.2, 0.005), "M": (-0.02, 0.02, 0.001),
@@ -138,8 +146,12 @@ class GenericTerm(Extension):
         d = self.value(ctx)
         return (d, 0.0, 0.0) if self.channel == "X" else (0.0, d, 0.0) if self.channel == "Z" else (0.0, 0.0, d)
 
+    @property
+    def delays_input(self) -> bool:
+        return self.kind == "delay" and SENSOR_TERMS[self.regressor][0] in INPUTS
+
     def adjust_controls(self, ctx):
-        if self.kind != "delay":
+        if not self.delays_input:
             return
         inp = SENSOR_TERMS[self.regressor][0]
         setattr(ctx, f"{inp}_commanded", getattr(ctx, inp))
@@ -148,13 +160,17 @@ class GenericTerm(Extension):
     def state_equations(self, ctx):
         if self.kind != "delay":
             return {}
-        inp = SENSOR_TERMS[self.regressor][0]
-        return {self.states[0]: (ctx.p[self.strength], getattr(ctx, f"{inp}_commanded") - ctx.x[self.states[0]])}
+        ch, d = SENSOR_TERMS[self.regressor][0], ctx.x[self.states[0]]
+        return {self.states[0]: (ctx.p[self.strength],
+                                 (getattr(ctx, f"{ch}_commanded") if self.delays_input else ctx.true_outputs[ch]) - d)}
 
     def adjust_outputs(self, ctx):
-        if self.channel != "sensor" or self.kind == "delay":
+        if self.channel != "sensor" or self.delays_input:
             return
         out, kind, _ = SENSOR_TERMS[self.regressor]
+        if kind == "delay":  # the record holds the lagged output; other sensor effects act on it as on the output
+            ctx.outputs[out] = ctx.outputs[out] + (ctx.x[self.states[0]] - ctx.true_outputs[out])
+            return
         c = ctx.p[self.strength]
         ctx.outputs[out] = ctx.outputs[out] * (1 + c) if kind == "scale" else ctx.outputs[out] + c
 

@@ -11,7 +11,8 @@ each extension's hooks at fixed points of the calculation, in this order:
 5. ``tail_downwash(ctx)``    returns a downwash at the tail [m/s] (summed)
 6. ``extra_forces(ctx)``     returns (dX, dZ, dM) [N, N, N m] (summed)
 7. ``state_equations(ctx)``  for extra states: name -> (coef, rhs) meaning
-                             coef * d(state)/dt = rhs
+                             coef * d(state)/dt = rhs (``ctx.true_outputs``: the outputs
+                             before any sensor effect, e.g. for a sensor lag)
 8. ``adjust_outputs(ctx)``   may change entries of ``ctx.outputs`` (sensors)
 
 The same extension object serves the float simulator, Pyomo collocation and

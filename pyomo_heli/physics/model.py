@@ -101,13 +101,13 @@ def evaluate(x: Mapping, inputs: Mapping, p: Mapping, ops=NUMPY, beta: Sequence 
 
     du, dw, dq, dtheta = eom.rigid_body_rates(X, Z, M, u, w, q, theta, p, ops)
     ctx.rates = {"u": du, "w": dw, "q": dq, "theta": dtheta, "lambda_i": dlambda}
-    ctx.state_eqs = {k: (1.0, v) for k, v in ctx.rates.items()}
-    for e in extensions:
-        ctx.state_eqs.update(e.state_equations(ctx))
-
     n_x, n_z = eom.load_factors(X, Z, p)
     ctx.outputs = {"q": q, "theta": theta, "n_x": n_x, "n_z": n_z,
                    "TAS": fuselage.airspeed(u, w, p, ops), "beta_0": beta[0]}
+    ctx.true_outputs = dict(ctx.outputs)  # before any sensor effect
+    ctx.state_eqs = {k: (1.0, v) for k, v in ctx.rates.items()}
+    for e in extensions:
+        ctx.state_eqs.update(e.state_equations(ctx))
     for e in extensions:
         e.adjust_outputs(ctx)
     return ctx

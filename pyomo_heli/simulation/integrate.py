@@ -15,6 +15,9 @@ from scipy.integrate import solve_ivp
 from ..physics.model import FLAPPING, INPUTS, HelicopterModel
 from .trim import TrimPoint
 
+#: outputs that are states too (q, theta): the frame holds the state
+STATE_OUTPUTS = ("q", "theta")
+
 Increment = Callable[[float], float]
 
 
@@ -104,6 +107,11 @@ def simulate(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mappin
         u = inputs_at(t, ys[:, i])
         ctx = model.evaluate(x, u)
         row = {"t": t, **x, **u, **dict(zip(FLAPPING, (float(b) for b in ctx.beta)))}
-        row.update({k: float(v) for k, v in ctx.outputs.items() if k not in ("q", "theta")})
+        for k in STATE_OUTPUTS:  # one column each: the state, so a sensor effect on the output would be lost
+            if float(ctx.outputs[k]) != x[k]:
+                raise ValueError(f"simulate: an extension changes the recorded {k} ({float(ctx.outputs[k]):.6g} "
+                                 f"against the state {x[k]:.6g} at t = {t:g} s); the frame's {k} column is the "
+                                 f"state, so sensor effects on {', '.join(STATE_OUTPUTS)} are not supported here")
+        row.update({k: float(v) for k, v in ctx.outputs.items() if k not in STATE_OUTPUTS})
         rows.append(row)
     return pd.DataFrame(rows)

@@ -23,9 +23,9 @@ from pyomo_heli.physics.model import HelicopterModel
 GENERIC = ["dM_one", "dM_mu2", "dM_bump00", "dM_bump05", "dM_bump10", "dX_mu4", "dZ_one", "dZ_bump00", "TAS_scale"]
 
 
-def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iterations: int = 0):
+def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iterations: int = 0, generic=GENERIC):
     loop = ('\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\ndiscovery = true\nuncertainty = "none"\n'
-            f"max_iterations = {max_iterations}\ngeneric = {json.dumps(GENERIC)}\n{extra}")
+            f"max_iterations = {max_iterations}\ngeneric = {json.dumps(list(generic))}\n{extra}")
     cfg = make_case(tmp_path, effect_table, seed=seed, points=2, loop=loop, maneuvers=WAKE_MANEUVERS,
                     input_reference_s=1.9)
     assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
@@ -74,6 +74,20 @@ def test_held_out_fuselage_download_is_discovered_with_its_shape(tmp_path, itera
         report = (tmp_path / "loop" / "loop_report.md").read_text()
         assert "## Discovered, not explained by any library effect" in report
         assert (tmp_path / "loop" / f"loop_discovered_{fit['name']}.png").is_file()
+
+
+def test_held_out_accelerometer_filter_is_discovered_as_an_output_time_shift(tmp_path):
+    """Truth: the n_z record passed through a first-order filter, tau 0.08 s (held out). Offered the output and
+    input time shifts with the short library, the step discovers nz_delay (not the input shift col_delay, which the
+    full-size loops took for it before the family had output shifts), not explained by any library effect, with
+    the truth's time constant within three standard errors."""
+    _cfg, doc = _loop(tmp_path, "[truth.effects.accelerometer_filter]\ntau_nz = 0.08\n", seed=5,
+                      generic=[*GENERIC, "nz_delay", "nx_delay", "col_delay", "lon_delay"])
+    d = doc["iterations"][0]["discovery"]
+    print(d["message"])
+    assert d["decision"] == "discovered" and d["discovered"]["name"] == "nz_delay", d["message"]
+    assert "not explained by any library effect" in d["message"]
+    assert abs(d["discovered"]["estimate"] - 0.08) < 3 * d["discovered"]["se"], d["discovered"]
 
 
 def test_wake_on_tail_is_still_named_through_encompassing(tmp_path):

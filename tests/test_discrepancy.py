@@ -161,3 +161,15 @@ def test_the_float_simulator_refuses_a_sensor_effect_on_a_state_output():
     tp = trim_float(HelicopterModel(), 40 * KT)
     with pytest.raises(ValueError, match="changes the recorded q"):
         simulate(HelicopterModel(extensions=[QBias()]), tp, np.linspace(0, 0.1, 3))
+
+
+def test_output_time_shifts_are_scored_only_when_listed():
+    """The default library leaves out the output time shifts (a slow NLP-screen fit); a config's [loop] generic
+    list offers them, and the settings accept their names."""
+    from pyomo_heli.diagnosis.discovery import library
+    from pyomo_heli.physics.discrepancy import ON_REQUEST, default_generic_names
+
+    assert set(ON_REQUEST) <= set(generic_names()) and not set(ON_REQUEST) & set(default_generic_names())
+    assert len(default_generic_names()) == len(generic_names()) - len(ON_REQUEST)
+    assert not set(ON_REQUEST) & set(library(HelicopterModel()))
+    assert "nz_delay" in library(HelicopterModel(), generic=["nz_delay", "dM_one"])

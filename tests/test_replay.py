@@ -76,3 +76,25 @@ def test_model_trims_fall_back_to_one_speed_at_a_time(monkeypatch):
     assert trims[rp.speed_key(bad)] is None
     for v in (0.0, 20 * KT, 60 * KT):
         assert trims[rp.speed_key(v)].theta == pytest.approx(real(model, [v])[0].theta, abs=1e-8)  # trim tolerance
+
+
+def test_a_fast_lag_gets_enough_rk4_steps_and_matches_a_stiff_integrator(maneuver):
+    """A discovered input time shift of 1 ms (tau dx/dt = col - x) is far below the sample interval: four RK4
+    steps per sample diverge, the replay takes enough of them and agrees with scipy's Radau."""
+    from pyomo_heli.physics.discrepancy import generic_term
+
+    term = generic_term("col_delay")
+    model = HelicopterModel(extensions=(term,)).with_parameters(**{term.strength: 1e-3})
+    tp = trim_float(model, maneuver.trim_speed)
+    assert model.lag_rates(tp.state(), tp.inputs())[term.states[0]] == pytest.approx(1e3, rel=1e-5)
+    t = maneuver.data["t"].to_numpy()
+    inc = {k: sampled(t, v) for k, v in maneuver.increments().items()}
+    dt = float(np.max(np.diff(t)))
+    assert rp.stable_substeps(model, tp, dt, 4) >= dt / 1e-3
+    with np.errstate(all="ignore"), pytest.raises(RuntimeError, match="diverged"):
+        simulate(model, tp, t, inc, method="rk4", substeps=4)
+    got = rp.replay(model, maneuver, tp)
+    ref = simulate(model, tp, t, inc, method="Radau", rtol=1e-8, atol=1e-10)
+    for c in ("q", "theta", "n_z", "TAS"):
+        np.testing.assert_allclose(got[c].to_numpy(), ref[c].to_numpy(), rtol=0,
+                                   atol=1e-4 * max(1.0, float(np.max(np.abs(ref[c])))), err_msg=c)

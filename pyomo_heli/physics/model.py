@@ -160,6 +160,17 @@ class HelicopterModel:
         ctx = self.evaluate(x, inputs)
         return {k: rhs / coef for k, (coef, rhs) in ctx.state_eqs.items()}
 
+    def lag_rates(self, x: Mapping, inputs: Mapping, h: float = 1e-7) -> dict:
+        """|d(dx_k/dt)/dx_k| [1/s] of every extension state k at ``(x, inputs)``, by a central difference: the
+        inverse time constant 1/tau of a lag state (tau dx/dt = target - x). An explicit integrator's step must
+        stay below about tau; a lag of a few milliseconds makes the float model stiff."""
+        out = {}
+        for k in self.state_names[len(STATES):]:
+            hi, lo = dict(x), dict(x)
+            hi[k], lo[k] = x[k] + h, x[k] - h
+            out[k] = abs(self.rates(hi, inputs)[k] - self.rates(lo, inputs)[k]) / (2 * h)
+        return out
+
     def rhs_vector(self, xvec: np.ndarray, inputs: Mapping) -> np.ndarray:
         x = dict(zip(self.state_names, xvec))
         r = self.rates(x, inputs)

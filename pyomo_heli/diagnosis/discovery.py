@@ -99,7 +99,7 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
     ``cfg``: the current identification config (its model and free parameters); ``start``: values of its free
     parameters to start from (the diagnosed point). Returns ``{"J0", "base", "fits": {name: {...}}, "pairs":
     {"P+G": {...}}}`` with each fit's estimate, standard error, J, LR against the base, p (chi-square(1)), solve
-    status and parameters.
+    status, Ipopt iterations, solve wall seconds and parameters.
     """
     import pyomo.environ as pyo
 
@@ -140,11 +140,15 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
             m.theta_s[n].setub(v)
             m.theta_s[n].set_value(v)
 
+    effort = {}  # the last solve's Ipopt iterations and wall seconds (recorded with each fit)
+
     def solve(ws):
         try:
             r = solver.solve(warm_start=ws)
+            effort.update(iterations=int(r.iterations), wall_time=float(r.wall_time))
             return r.success, r.status
         except SolverError as exc:
+            effort.update(iterations=None, wall_time=None)
             return False, f"{type(exc).__name__}: {exc}"
 
     for names in own.values():
@@ -155,7 +159,7 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
     J0_tr = float(pyo.value(m.discovery_trim_nll))
     base = free_parameter_values(m)
     snap = Snapshot(m)
-    progress(f"    NLP screen: base J = {J0:.6g} ({status})")
+    progress(f"    NLP screen: base J = {J0:.6g} ({status}, {effort.get('iterations')} iterations)")
 
     def fit(group):
         for name in group:
@@ -179,11 +183,12 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
                           "shape": {n: vals[n] for n in own[name][1:]}}
         res = {"J": J, "LR": lr, "LR_trim": 2.0 * (J0_tr - J_tr), "LR_time": 2.0 * (J0 - J0_tr - J + J_tr),
                "p": float(stats.chi2.sf(lr, len(group))) if not math.isnan(lr) else float("nan"),
-               "success": bool(ok_k), "status": status_k, "terms": rows,
+               "success": bool(ok_k), "status": status_k, **effort, "terms": rows,
                "parameters": {f.name: vals[f.name] for f in cfg.free}}
         progress(f"    NLP screen: {'+'.join(group)}: "
                  + ", ".join(f"{r['strength']} = {r['estimate']:.4g}" for r in rows.values())
-                 + f", J = {J:.6g}, LR = {lr:.4g} (time {res['LR_time']:.3g}, trim {res['LR_trim']:.3g}; {status_k})")
+                 + f", J = {J:.6g}, LR = {lr:.4g} (time {res['LR_time']:.3g}, trim {res['LR_trim']:.3g}; {status_k}, "
+                 + f"{effort.get('iterations')} iterations, {effort.get('wall_time') or 0.0:.0f} s)")
         for name in group:
             for n in own[name]:
                 pin(n, False)

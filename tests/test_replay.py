@@ -10,6 +10,7 @@ import pytest
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.physics.model import HelicopterModel
 from pyomo_heli.simulation import replay as rp
+from pyomo_heli.simulation.compiled import simulate_outputs
 from pyomo_heli.simulation.integrate import sampled, simulate
 from pyomo_heli.simulation.trim import trim_float
 from pyomo_heli.units import DEG, KT
@@ -80,7 +81,8 @@ def test_model_trims_fall_back_to_one_speed_at_a_time(monkeypatch):
 
 def test_a_fast_lag_gets_enough_rk4_steps_and_matches_a_stiff_integrator(maneuver):
     """A discovered input time shift of 1 ms (tau dx/dt = col - x) is far below the sample interval: four RK4
-    steps per sample diverge, the replay takes enough of them and agrees with scipy's Radau."""
+    steps per sample diverge, the replay takes enough of them and agrees with scipy's Radau, and the compiled
+    (casadi) RK4 of the diagnosis takes the same steps."""
     from pyomo_heli.physics.discrepancy import generic_term
 
     term = generic_term("col_delay")
@@ -95,6 +97,8 @@ def test_a_fast_lag_gets_enough_rk4_steps_and_matches_a_stiff_integrator(maneuve
         simulate(model, tp, t, inc, method="rk4", substeps=4)
     got = rp.replay(model, maneuver, tp)
     ref = simulate(model, tp, t, inc, method="Radau", rtol=1e-8, atol=1e-10)
+    fast = simulate_outputs(model, tp, t, maneuver.increments(), ("q", "theta", "n_z", "TAS"), substeps=2)
     for c in ("q", "theta", "n_z", "TAS"):
         np.testing.assert_allclose(got[c].to_numpy(), ref[c].to_numpy(), rtol=0,
                                    atol=1e-4 * max(1.0, float(np.max(np.abs(ref[c])))), err_msg=c)
+        np.testing.assert_allclose(fast[c], got[c].to_numpy(), rtol=1e-9, atol=1e-9, err_msg=c)  # casadi's RK4

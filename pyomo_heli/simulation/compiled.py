@@ -25,7 +25,7 @@ import numpy as np
 
 from ..physics.model import INPUTS, HelicopterModel, evaluate
 from ..physics.ops import get_ops
-from .integrate import rk4_step
+from .integrate import rk4_step, stable_substeps
 from .trim import TrimPoint
 
 #: (structure, substeps) -> (step function, output function, output names); structure keeps the
@@ -95,6 +95,11 @@ def _functions(model: HelicopterModel, substeps: int):
     return step, outputs, out_names
 
 
+def _substeps(model: HelicopterModel, trim: TrimPoint, t_eval: np.ndarray, substeps: int) -> int:
+    """``substeps``, or more for a fast lag state (:func:`~.integrate.stable_substeps`)."""
+    return stable_substeps(model, trim, float(np.max(np.diff(t_eval))), substeps) if len(t_eval) > 1 else substeps
+
+
 def simulate_outputs(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mapping[str, np.ndarray],
                      outputs, substeps: int = 4) -> dict[str, np.ndarray]:
     """Outputs at ``t_eval`` of ``simulate(model, trim, t_eval, sampled increments, method="rk4")``.
@@ -106,6 +111,7 @@ def simulate_outputs(model: HelicopterModel, trim: TrimPoint, t_eval, increments
     unknown = set(increments) - set(INPUTS)
     if unknown:
         raise ValueError(f"unknown input channel(s) {sorted(unknown)}; choose from {', '.join(INPUTS)}")
+    substeps = _substeps(model, trim, t_eval, substeps)
     step, out_fun, out_names = _functions(model, substeps)
     missing = [o for o in outputs if o not in out_names]
     if missing:
@@ -176,6 +182,7 @@ def input_sensitivities(model: HelicopterModel, trim: TrimPoint, t_eval, increme
     if bad:
         raise ValueError(f"unknown input channel(s) {bad}; choose from {', '.join(INPUTS)}")
     y = simulate_outputs(model, trim, t_eval, increments, outputs, substeps)  # checks outputs, divergence
+    substeps = _substeps(model, trim, t_eval, substeps)
     step, out_fun, out_names = _functions(model, substeps)
     step_jac, out_jac = _jacobian_functions(model, substeps)
     n, ni, nc = len(t_eval), len(INPUTS), len(channels)

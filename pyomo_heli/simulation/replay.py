@@ -32,7 +32,7 @@ from ..dataset.schema import MANEUVER_QUANTITIES
 from ..physics.model import HelicopterModel
 from ..units import KT
 from .compiled import simulate_outputs
-from .integrate import sampled, simulate
+from .integrate import sampled, simulate, stable_substeps
 from .trim import TrimPoint, trim_float, trim_sweep
 
 #: |value| beyond which a replayed output counts as diverged: the dataset's plausibility limits (SI)
@@ -88,15 +88,6 @@ def maneuver_increments(maneuver, offsets: dict | None = None) -> dict:
     """Channel -> measured input increment [rad] at the maneuver's samples (+ a constant ``offsets``)."""
     offsets = offsets or {}
     return {k: v + offsets.get(k, 0.0) for k, v in maneuver.increments().items()}
-
-
-def stable_substeps(model: HelicopterModel, trim: TrimPoint, dt: float, substeps: int) -> int:
-    """RK4 steps per sample interval ``dt`` [s]: ``substeps``, or more where a lag state of the model is faster,
-    so that each step is at most the shortest time constant (:meth:`HelicopterModel.lag_rates` at the trim);
-    RK4 diverges beyond about 2.8 of them."""
-    rates = model.lag_rates(trim.state(), trim.inputs())
-    fastest = max(rates.values(), default=0.0)
-    return max(substeps, int(np.ceil(dt * fastest))) if np.isfinite(fastest) else substeps
 
 
 def replay(model: HelicopterModel, maneuver, trim: TrimPoint, substeps: int = 4, offsets: dict | None = None,

@@ -290,3 +290,24 @@ def test_an_ambiguous_step_says_what_the_generic_term_left_looks_like(monkeypatc
     assert row["LR_G_given_P"] == pytest.approx(7.5) and row["p_G_given_P"] < 0.01 and not row["encompasses"]
     assert out["best_generic"] is fits["col_delay"]
     assert "what is left looks like c d(col_d)/dt = col - col_d, c = 0.0016 +-" in out["message"]
+
+
+def test_the_screen_warm_start_from_the_base_multipliers_gives_the_primal_warm_starts_estimates(tmp_path):
+    """nlp_screen frees each term from the base solution: warm from its multipliers with a small barrier parameter
+    (the fronts' continuation) it reaches the estimate and LR that the primal-only warm start reaches, in fewer
+    Ipopt iterations."""
+    from pyomo_heli.diagnosis.discovery import nlp_screen
+
+    cfg = make_case(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, points=2,
+                    maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+    start = {f.name: f.initial for f in cfg.free}
+    terms = ["dM_bump00", "dZ_one"]
+    got = {ws: nlp_screen(cfg, start, terms, progress=lambda s: None, warm_start=ws)
+           for ws in ("continuation", "primal")}
+    for t in terms:
+        a, b = got["continuation"]["fits"][t], got["primal"]["fits"][t]
+        assert a["success"] and b["success"]
+        assert a["estimate"] == pytest.approx(b["estimate"], rel=1e-3, abs=1e-3 * b["se"])
+        assert a["LR"] == pytest.approx(b["LR"], rel=1e-3, abs=0.05)
+    its = {ws: sum(f["iterations"] for f in r["fits"].values()) for ws, r in got.items()}
+    assert its["continuation"] < its["primal"], its

@@ -14,7 +14,10 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
        J = J_time + sum_c (N/2) ln(mean_i r_ic^2)     (J_time: output error, Eq. 5-6; r_ic: trim
                                                        residual of channel c at point i, N points)
 
-   then each term is freed by its bounds alone, solved warm from that solution and pinned again:
+   then each term is freed by its bounds alone, solved warm from that solution (its primal values and
+   multipliers, the barrier parameter from tol / 10: the fronts' ``continuation``; a few Ipopt
+   iterations, where the primal values alone and Ipopt's default barrier took 30 to 540; if that fails,
+   from the primal values alone) and pinned again:
    its estimate, ``LR = 2 (J_0 - J_term)`` and a standard error |c| / sqrt(LR) (the curvature of the
    profile likelihood). The LR is corrected for coloured residuals (:func:`robust_p`: times the score
    test's robust-over-white ratio, capped at 1, referred to F(1, df)). **Significant: p < alpha / L**
@@ -92,7 +95,8 @@ def _joint_objective(m, data, trim_outputs):
     return m.discovery_objective
 
 
-def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = True, progress=print) -> dict:
+def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = True, progress=print,
+               warm_start: str = "continuation") -> dict:
     """Estimate each of ``terms`` alone, and each pair of ``pairs`` together, in one identification NLP, freed by
     their bounds (module docstring, step 2).
 
@@ -161,15 +165,27 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
     snap = Snapshot(m)
     progress(f"    NLP screen: base J = {J0:.6g} ({status}, {effort.get('iterations')} iterations)")
 
-    def fit(group):
+    def start_one_sided(group):
         for name in group:
-            for n in own[name]:
-                pin(n, True)
             e = ext_by[name]
             if getattr(e, "one_sided", False):  # start a one-sided strength inside its bounds
                 f = by[e.strength]
                 m.theta_s[e.strength].set_value((f.lower + 0.05 * (f.upper - f.lower)) / m.theta_scale[e.strength])
-        ok_k, status_k = solve("primal")
+
+    def fit(group):
+        for name in group:
+            for n in own[name]:
+                pin(n, True)
+        start_one_sided(group)
+        ok_k, status_k = solve(warm_start)
+        if not ok_k and warm_start != "primal":  # the base's multipliers did not carry it: from its primal alone
+            progress(f"    NLP screen: {'+'.join(group)}: {warm_start} warm start failed ({status_k}); primal")
+            snap.restore()
+            for name in group:
+                for n in own[name]:
+                    pin(n, True)
+            start_one_sided(group)
+            ok_k, status_k = solve("primal")
         J = float(pyo.value(m.discovery_objective))
         J_tr = float(pyo.value(m.discovery_trim_nll))
         vals = free_parameter_values(m)

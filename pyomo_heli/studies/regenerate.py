@@ -117,8 +117,9 @@ ENTRIES: tuple[Entry, ...] = (
           ("multistart.json", "starts.csv"), minutes=20),
     Entry("noise_only", ("python studies/held_out_effects.py --effects none --seeds 5 --out {out}/noise_only",),
           ("held_out.csv", "held_out.md"), minutes=140),
-    Entry("held_out", ("python studies/held_out_effects.py --seeds 3 --out {out}/held_out",),
-          ("held_out.csv", "held_out.md"), minutes=480),
+    Entry("held_out", ("python studies/held_out_effects.py --seeds 3 --out {out}/held_out",
+                       "python studies/held_out_effects.py --bundled --out {out}/held_out"),
+          ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=500),
     Entry("held_out_output_shifts", (
         "python studies/held_out_effects.py --config studies/held_out_output_shifts.toml --effects "
         "accelerometer_filter --seeds 3 --out {out}/held_out_output_shifts",

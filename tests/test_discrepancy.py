@@ -163,13 +163,11 @@ def test_the_float_simulator_refuses_a_sensor_effect_on_a_state_output():
         simulate(HelicopterModel(extensions=[QBias()]), tp, np.linspace(0, 0.1, 3))
 
 
-def test_output_time_shifts_are_scored_only_when_listed():
-    """The default library leaves out the output time shifts (a slow NLP-screen fit); a config's [loop] generic
-    list offers them, and the settings accept their names."""
+def test_the_default_library_offers_the_whole_family_and_a_config_can_narrow_it():
+    """With no [loop] generic list, discovery scores every term of the family, output time shifts included;
+    a list narrows it."""
     from pyomo_heli.diagnosis.discovery import library
-    from pyomo_heli.physics.discrepancy import ON_REQUEST, default_generic_names
 
-    assert set(ON_REQUEST) <= set(generic_names()) and not set(ON_REQUEST) & set(default_generic_names())
-    assert len(default_generic_names()) == len(generic_names()) - len(ON_REQUEST)
-    assert not set(ON_REQUEST) & set(library(HelicopterModel()))
-    assert "nz_delay" in library(HelicopterModel(), generic=["nz_delay", "dM_one"])
+    lib = library(HelicopterModel())
+    assert set(generic_names()) <= set(lib) and {"nz_delay", "nx_delay", "TAS_delay", "beta0_delay"} <= set(lib)
+    assert library(HelicopterModel(), physical=[], generic=["nz_delay", "dM_one"]) == ["nz_delay", "dM_one"]

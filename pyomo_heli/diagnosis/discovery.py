@@ -54,7 +54,7 @@ import time
 import numpy as np
 from scipy import stats
 
-from ..physics.discrepancy import BUMP_CENTRES, FORCE_CHANNELS, default_generic_names, is_generic
+from ..physics.discrepancy import BUMP_CENTRES, FORCE_CHANNELS, generic_names, is_generic
 from ..units import KT
 from . import attribution as attr
 from .candidates import CANDIDATES, make_candidate
@@ -69,7 +69,7 @@ def library(model, physical=None, generic=None) -> list[str]:
     """The names scored at a step: physical candidates then generic terms, minus those already in ``model``."""
     have = {e.name for e in model.extensions}
     phys = list(physical) if physical is not None else list(CANDIDATES)
-    gen = list(generic) if generic is not None else default_generic_names()
+    gen = list(generic) if generic is not None else generic_names()
     return [n for n in phys + gen if n not in have]
 
 

@@ -27,8 +27,7 @@ Sensor side (data compatibility of flight-path reconstruction), per channel:
       col_delay      control (first order), a lag state added only when c is not zero
     nx_delay, nz_delay, c d(y_d)/dt = y - y_d, the record holds y_d: a time shift c [s] of the output
       TAS_delay,     (first order, the same lag state; y before any other sensor effect, which
-      beta0_delay    then acts on y_d). Offered on request only (:data:`ON_REQUEST`): in the full-size
-                     NLP screen one such fit took 23 min, which breaks the loop's cost limit
+      beta0_delay    then acts on y_d)
 
 (No n_x / n_z bias: the candidate library already holds those as named sensor effects. No time shift
 of q or theta: they are states as well as outputs, and the float simulator's frame holds one column
@@ -82,8 +81,6 @@ SENSOR_TERMS = {
                                     "(output time shift c [s])")
        for k, out in (("nx", "n_x"), ("nz", "n_z"), ("TAS", "TAS"), ("beta0", "beta_0"))},
 }
-#: terms of the family that discovery scores only when a config lists them ([loop] generic): the output time shifts
-ON_REQUEST = ("nx_delay", "nz_delay", "TAS_delay", "beta0_delay")
 #: coefficient bounds and scale: force (X, Z: fraction of W), moment (fraction of W R), sensor
 BOUNDS = {"X": (-0.2, 0.2, 0.005), "Z": (-0.2, 0.2, 0.005), "M": (-0.02, 0.02, 0.001),
           "scale": (-0.2, 0.2, 0.01), "bias": (-0.05, 0.05, 0.005), "delay": (0.0, 0.3, 0.05)}
@@ -181,11 +178,6 @@ class GenericTerm(Extension):
 def generic_names() -> list[str]:
     """Every term of the family: the force and moment terms, then the sensor terms."""
     return [f"d{ch}_{r}" for ch in FORCE_CHANNELS for r in REGRESSORS] + list(SENSOR_TERMS)
-
-
-def default_generic_names() -> list[str]:
-    """The terms discovery scores when a config names none: the family without :data:`ON_REQUEST`."""
-    return [n for n in generic_names() if n not in ON_REQUEST]
 
 
 def is_generic(name: str) -> bool:

@@ -329,8 +329,8 @@ class LoopTable(Table):
     generic: Optional[Names(generic_names(), empty=NON_EMPTY,
                             unknown="field 'generic': unknown discrepancy term {one!r}; choose from {choices}")] = \
         Field(
-        None, description="the generic terms offered with discovery (default the whole family except the output "
-                          "time shifts nx_delay, nz_delay, TAS_delay, beta0_delay, offered only when listed)")
+        None, description="the generic terms offered with discovery (default the whole family, "
+                          "pyomo_heli.physics.discrepancy.generic_names())")
     validation_rule: bool = Field(True, description="reject a step whose model makes the validation error rise "
                                                     "significantly on any output")
 

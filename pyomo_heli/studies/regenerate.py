@@ -115,6 +115,11 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("multistart_case1_eps", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "
                                    "--epsilon 0.2008495658274336 --out {out}/multistart_case1_eps --restart",),
           ("multistart.json", "starts.csv"), minutes=20),
+    Entry("held_out_small", ("python studies/held_out_effects.py --seeds 1 --effects fuselage_download drag_rise "
+                             "canted_tail_rotor vertical_drag control_mixing actuator_lag accelerometer_filter none "
+                             "--config studies/held_out_small.toml --data-config studies/held_out_small_gen.toml "
+                             "--out {out}/held_out_small",),
+          ("held_out.csv", "held_out.md"), minutes=30),
     Entry("noise_only", ("python studies/held_out_effects.py --effects none --seeds 5 --out {out}/noise_only",),
           ("held_out.csv", "held_out.md"), minutes=140),
     Entry("held_out", ("python studies/held_out_effects.py --seeds 3 --out {out}/held_out",

@@ -15,9 +15,8 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
                                                        residual of channel c at point i, N points)
 
    then each term is freed by its bounds alone, solved warm from that solution (its primal values and
-   multipliers, the barrier parameter from tol / 10: the fronts' ``continuation``; a few Ipopt
-   iterations, where the primal values alone and Ipopt's default barrier took 30 to 540; if that fails,
-   from the primal values alone) and pinned again:
+   multipliers, the barrier parameter from tol / 10: the fronts' ``continuation``, a few Ipopt
+   iterations; if that fails, from the primal values alone) and pinned again:
    its estimate, ``LR = 2 (J_0 - J_term)`` and a standard error |c| / sqrt(LR) (the curvature of the
    profile likelihood). The LR is corrected for coloured residuals (:func:`robust_p`: times the score
    test's robust-over-white ratio, capped at 1, referred to F(1, df)). **Significant: p < alpha / L**
@@ -165,26 +164,22 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
     snap = Snapshot(m)
     progress(f"    NLP screen: base J = {J0:.6g} ({status}, {effort.get('iterations')} iterations)")
 
-    def start_one_sided(group):
+    def free(group):
         for name in group:
+            for n in own[name]:
+                pin(n, True)
             e = ext_by[name]
             if getattr(e, "one_sided", False):  # start a one-sided strength inside its bounds
                 f = by[e.strength]
                 m.theta_s[e.strength].set_value((f.lower + 0.05 * (f.upper - f.lower)) / m.theta_scale[e.strength])
 
     def fit(group):
-        for name in group:
-            for n in own[name]:
-                pin(n, True)
-        start_one_sided(group)
+        free(group)
         ok_k, status_k = solve(warm_start)
         if not ok_k and warm_start != "primal":  # the base's multipliers did not carry it: from its primal alone
             progress(f"    NLP screen: {'+'.join(group)}: {warm_start} warm start failed ({status_k}); primal")
             snap.restore()
-            for name in group:
-                for n in own[name]:
-                    pin(n, True)
-            start_one_sided(group)
+            free(group)
             ok_k, status_k = solve("primal")
         J = float(pyo.value(m.discovery_objective))
         J_tr = float(pyo.value(m.discovery_trim_nll))

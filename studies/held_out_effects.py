@@ -9,7 +9,8 @@ For every held-out effect (pyomo_heli/flighttest/held_out_effects.py, at its nom
 replaced by the held-out one (same maneuvers, trims and noise levels) -> ``OUT/<effect>_<seed>/data``; the
 closed loop with ``[loop] discovery = true`` (CONFIG) -> ``OUT/<effect>_<seed>/loop``; its table row ->
 ``OUT/<effect>_<seed>/row.json``. A finished loop is not rerun (a stopped one resumes), so a rerun of the same
-command resumes row by row.
+command resumes row by row. ``--workers N`` runs the cases on N local processes (``--scheduler ADDRESS``: on a Dask
+cluster whose workers see OUT); the rows are the same as one after the other.
 ``--effects none`` is M0 plus noise only; ``--first-seed K`` starts at seed 20261122 + K; ``--evaluate-only`` runs
 nothing and re-evaluates every finished loop in OUT (rows and table); ``--rescore`` runs nothing and re-scores
 ``OUT/held_out.csv`` alone (shape columns and criterion, from the terms the table reports).
@@ -474,6 +475,11 @@ def main(argv=None) -> int:
     ap.add_argument("--evaluate-only", action="store_true",
                     help="run nothing: re-evaluate every finished loop in OUT (OUT/<effect>_<seed>/loop) and rewrite "
                          "its row.json and the table")
+    ap.add_argument("--workers", type=nonneg_int, default=0,
+                    help="run the cases on a Dask LocalCluster of this many processes (default 0: one after the "
+                         "other in this process); each finished case's row.json and the table are written as it ends")
+    ap.add_argument("--scheduler", metavar="ADDRESS",
+                    help="run the cases on the Dask cluster of this scheduler (its workers must see --out)")
     ap.add_argument("--rescore", action="store_true",
                     help="run nothing: re-score OUT/held_out.csv (shape columns and criterion) from the terms it "
                          "reports, for a table whose loops are not at hand")
@@ -502,14 +508,36 @@ def main(argv=None) -> int:
     bad = [e for e in a.effects if e != "none" and e not in HELD_OUT_EFFECTS]
     if bad:
         ap.error(f"--effects: unknown held-out effect(s) {bad}; choose from {', '.join(HELD_OUT_EFFECTS)} or none")
+    from pyomo_heli.parallel import dask_executor, run_tasks
+
     template = gen.read_text()
-    for effect in a.effects:
-        for seed in seeds_of(a.first_seed, a.seeds):
-            loop = run_case(effect, seed, out, config, template)
-            save_row(loop.parent, evaluate(effect, seed, loop, config))
-            write_table(out)
-    print((out / "held_out.md").read_text())
+    tasks = [(effect, seed, out.resolve(), config.resolve(), template)
+             for effect in a.effects for seed in seeds_of(a.first_seed, a.seeds)]
+    # one case per task: here one after the other (--workers 0), on a LocalCluster of --workers processes or on the
+    # cluster of --scheduler; a case's files depend on nothing else, so its row is the same wherever it ran
+    with dask_executor(a.workers, a.scheduler, paths=[str(Path(__file__).resolve().parent)]) as ex:
+        done = run_tasks(case_task, tasks, ex, on_result=lambda task, res: res[1] == 0 and write_table(out))
+    failed = [(t[0], t[1], code) for t, (_, code) in zip(tasks, done) if code != 0]
+    if (out / "held_out.md").is_file():
+        print((out / "held_out.md").read_text())
+    if failed:
+        print("failed (see their messages above): " + ", ".join(f"{e} {s}" for e, s, _ in failed), file=sys.stderr)
+        return failed[0][2]
     return 0
+
+
+def case_task(task: tuple) -> tuple[dict | None, int]:
+    """One case of the study (effect, seed, OUT, CONFIG, generator template): its flight test, its loop (resumed if
+    stopped part-way) and its evaluated row, written to ``OUT/<effect>_<seed>/row.json``. Returns (row, 0), or
+    (None, exit status) where a command failed (it has printed why); the other cases go on."""
+    effect, seed, out, config, template = task
+    try:
+        loop = run_case(effect, seed, out, config, template)
+    except SystemExit as exc:
+        return None, int(exc.code) if isinstance(exc.code, int) else 1
+    row = evaluate(effect, seed, loop, config)
+    save_row(loop.parent, row)
+    return row, 0
 
 
 def seeds_of(first: int, n: int) -> list[int]:

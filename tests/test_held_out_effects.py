@@ -100,6 +100,26 @@ def test_held_out_study_keeps_every_finished_row_on_disk(tmp_path):
     assert len((tmp_path / "held_out.csv").read_text().splitlines()) == 4
 
 
+@pytest.mark.parametrize("workers", [0, 2])
+def test_held_out_study_runs_every_case_and_names_each_that_failed(tmp_path, workers):
+    """Serially or on a Dask LocalCluster (--workers 2), every case gets its own generator config with its truth
+    effect; a case whose command fails (here a bad key in the generator template) does not stop the others, and
+    the study exits with that command's status, naming each failed case."""
+    bad = tmp_path / "gen.toml"
+    bad.write_text((ROOT / "data" / "bo105_synthetic.toml").read_text().replace("[sensors]",
+                                                                               "[sensors]\nbogus_option = 1", 1))
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, str(ROOT / "studies" / "held_out_effects.py"), "--effects", "drag_rise",
+                        "none", "--seeds", "1", "--data-config", str(bad), "--workers", str(workers), "--out",
+                        str(out)], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert "failed (see their messages above): drag_rise 20261122, none 20261122" in r.stderr
+    assert r.stderr.count("unknown key 'bogus_option'") == 2
+    assert "[truth.effects.drag_rise]" in (out / "drag_rise_20261122" / "gen.toml").read_text()
+    assert "[truth.effects" not in (out / "none_20261122" / "gen.toml").read_text()
+    assert not list(out.glob("*/row.json"))
+
+
 def test_the_sweep_pilot_flies_through_an_actuator_lag():
     """flighttest.pilot.pilot_gains on the truth model with the held-out actuator lag: dq'/dlon is zero directly (the
     rotor sees the lagged cyclic), and the quasi-steady control power through the lag state gives the gains of the

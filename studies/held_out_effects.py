@@ -515,8 +515,12 @@ def main(argv=None) -> int:
              for effect in a.effects for seed in seeds_of(a.first_seed, a.seeds)]
     # one case per task: here one after the other (--workers 0), on a LocalCluster of --workers processes or on the
     # cluster of --scheduler; a case's files depend on nothing else, so its row is the same wherever it ran
+    def finished(task, result):  # the table of every row in OUT, as each case ends
+        if result[1] == 0:
+            write_table(out)
+
     with dask_executor(a.workers, a.scheduler, paths=[str(Path(__file__).resolve().parent)]) as ex:
-        done = run_tasks(case_task, tasks, ex, on_result=lambda task, res: res[1] == 0 and write_table(out))
+        done = run_tasks(case_task, tasks, ex, on_result=finished)
     failed = [(t[0], t[1], code) for t, (_, code) in zip(tasks, done) if code != 0]
     if (out / "held_out.md").is_file():
         print((out / "held_out.md").read_text())

@@ -47,6 +47,39 @@ def test_false_alarm_rate_under_equal_accuracy_is_near_alpha(samples):
     assert 8 <= fired <= 32  # 20 expected, binomial sd 4.4
 
 
+def test_false_alarm_rate_with_noise_coloured_over_seconds_is_near_alpha():
+    """The noise of a replayed output is coloured far beyond a second (measured-input noise integrated through
+    the dynamics). Twelve 13.5 s records of AR(1) noise with a 3 s correlation time, model errors of equal
+    energy e0 = -e1 (so D = -4 mean(n e0) has mean zero): with whole records as batches (the default) the test
+    fires at about its level; 1 s batches underestimate se(D) and fire several times as often (Monte Carlo,
+    400 seeds)."""
+    from scipy.signal import lfilter
+
+    dt, n_rec, n_s, tau = 0.02, 12, 675, 3.0
+    t = np.arange(n_s) * dt
+    e0 = 0.05 * np.sin(2 * np.pi * t / 13.5)
+    phi = np.exp(-dt / tau)
+    alpha, fired, fired_1s = 0.05, 0, 0
+    for seed in range(400):
+        w = np.random.default_rng(seed).normal(0, 0.2 * (1 - phi**2) ** 0.5, (n_rec, n_s))
+        n = lfilter([1.0], [1.0, -phi], w, axis=1)
+        r0, r1 = [x + e0 for x in n], [x - e0 for x in n]
+        c = mean_square_change(r0, r1, alpha=alpha)
+        assert c.segments == n_rec
+        fired += c.rise_significant
+        fired_1s += mean_square_change(r0, r1, 50, alpha=alpha).rise_significant
+    assert 8 <= fired <= 32  # 20 expected, binomial sd 4.4
+    assert fired_1s > 60
+
+
+@pytest.mark.parametrize("records, batches", [(1, 6), (2, 6), (4, 8), (6, 6), (12, 12)])
+def test_few_records_are_cut_into_equal_batches(records, batches):
+    rng = np.random.default_rng(4)
+    r0 = [rng.normal(0, 0.2, 301) for _ in range(records)]
+    c = mean_square_change(r0, [x + 0.01 for x in r0])
+    assert c.segments == batches
+
+
 def test_bad_records_are_named():
     with pytest.raises(ValueError, match="record 0 has 3 samples for model 0, 2 for 1"):
         mean_square_change([np.zeros(3)], [np.zeros(2)], 1)

@@ -6,11 +6,15 @@ same n for both models), r1^2 - r0^2 = (e1^2 - e0^2) + 2 n (e1 - e0): the noise 
 a sensor-noise floor a change of a fraction of a percent in RMS can be the second term alone. Whether D
 is larger than that is the question of the Diebold-Mariano test for equal predictive accuracy
 (Diebold & Mariano 1995, J. Bus. Econ. Stat. 13(3)) with squared-error loss: z = D / se(D), the loss
-differential d(t) = r1^2 - r0^2 being autocorrelated, se(D) is estimated by batch means over segments
-of ``segment_s`` seconds of each record (the same batch means as the robust score test,
-:mod:`pyomo_heli.diagnosis.attribution`). With few segments that variance estimate is itself uncertain, so z
-is referred to Student's t with (segments - 1) degrees of freedom, the small-sample correction of Harvey,
-Leybourne & Newbold (1997, Int. J. Forecasting 13(2)). A rise is significant when the one-sided p < alpha.
+differential d(t) = r1^2 - r0^2 being autocorrelated, se(D) is estimated by batch means. The batches are
+whole records: the records are separate flights with independent noise, while within one record the
+noise term is coloured far beyond a second (the measured-input noise integrates through the dynamics
+into theta, TAS and n_z), so shorter batches underestimate se(D). With fewer than ``min_batches``
+records each record is cut into equal batches, ``min_batches`` in all (a liberal test when the noise
+stays correlated over a batch: it then flags a rise more often than alpha). With few batches the
+variance estimate is itself uncertain, so z is referred to Student's t with (batches - 1) degrees of
+freedom, the small-sample correction of Harvey, Leybourne & Newbold (1997, Int. J. Forecasting 13(2)).
+A rise is significant when the one-sided p < alpha.
 
 Evaluation needs no truth; on synthetic data the model-minus-truth-replay error (report.loop) is the
 noise-free counterpart (the expectation of D over the noise is mean(e1^2 - e0^2)).
@@ -40,17 +44,27 @@ class MeanSquareChange:
         return asdict(self)
 
 
-def mean_square_change(r0, r1, n_segment: int | list[int], alpha: float = 0.01) -> MeanSquareChange:
+#: fewer validation records than this: each record is cut into equal batches, this many in all
+MIN_BATCHES = 6
+
+
+def mean_square_change(r0, r1, n_segment: int | list[int] | None = None, alpha: float = 0.01,
+                       min_batches: int = MIN_BATCHES) -> MeanSquareChange:
     """Paired test of ``r1`` against ``r0``: lists of residual arrays, one pair per record (same samples).
 
-    ``n_segment``: samples per batch-means segment (one number, or one per record); a record's last
-    partial segment is merged into the one before it. Raises ValueError for records of unequal length or
+    ``n_segment``: None (default) for whole records as batches (cut into equal parts when there are fewer
+    than ``min_batches`` records); or samples per batch (one number, or one per record), a record's last
+    partial batch merged into the one before it. Raises ValueError for records of unequal length or
     without finite samples.
     """
     r0, r1 = [np.asarray(a, float) for a in r0], [np.asarray(a, float) for a in r1]
     if len(r0) != len(r1) or not r0:
         raise ValueError("mean_square_change: need the same non-empty list of records for both models")
-    segs = n_segment if isinstance(n_segment, list) else [n_segment] * len(r0)
+    if n_segment is None:
+        cuts = -(-min_batches // len(r0))  # batches per record
+        segs = [max(a.size // cuts, 1) if len(r0) < min_batches else a.size for a in r0]
+    else:
+        segs = n_segment if isinstance(n_segment, list) else [n_segment] * len(r0)
     d_all, batches = [], []
     for k, (a, b) in enumerate(zip(r0, r1)):
         if a.shape != b.shape:

@@ -118,9 +118,11 @@ def truth_errors(doc: dict, base: HelicopterModel, truth: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def validation_change_table(pred0, pred1, val_mans, segment_s: float = 1.0, alpha: float = 0.01) -> pd.DataFrame:
+def validation_change_table(pred0, pred1, val_mans, segment_s: float | None = None,
+                            alpha: float = 0.01) -> pd.DataFrame:
     """Per output: validation RMS of data minus model for two predictions and the paired test of the change
-    (Diebold-Mariano with batch means over ``segment_s`` segments, :mod:`pyomo_heli.diagnosis.validation_change`)."""
+    (Diebold-Mariano with batch means, :mod:`pyomo_heli.diagnosis.validation_change`: whole records as batches by
+    default, or ``segment_s`` segments)."""
     import numpy as np
 
     from ..diagnosis.validation_change import mean_square_change
@@ -135,11 +137,12 @@ def validation_change_table(pred0, pred1, val_mans, segment_s: float = 1.0, alph
             y = mv.data[o].to_numpy(dtype=float)
             r0.append(y - a[o].to_numpy(dtype=float))
             r1.append(y - b[o].to_numpy(dtype=float))
-            seg.append(max(int(round(segment_s / float(np.median(np.diff(mv.t))))), 1))
+            if segment_s is not None:
+                seg.append(max(int(round(segment_s / float(np.median(np.diff(mv.t))))), 1))
         else:
             if not r0:
                 continue
-            c = mean_square_change(r0, r1, seg, alpha)
+            c = mean_square_change(r0, r1, seg or None, alpha)
             unit = plots.UNITS[o][0]
             rows.append({"output": o, "RMS before": float(plots.shown(o, c.ms0**0.5)),
                          "RMS after": float(plots.shown(o, c.ms1**0.5)), "unit": unit,
@@ -216,11 +219,12 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
     if val_mans and len(its) > 1 and kept is not its[0]:
         first, last = preds[label(its[0])], preds[label(kept)]
         L += [f"Is a change of the validation error a real one? Paired test of iteration {kept['iteration']} "
-              "against iteration 0 on the same records (Diebold-Mariano, squared error, batch means over 1 s "
-              "segments; `pyomo_heli/diagnosis/validation_change.py`): a rise counts as significant when its "
-              "one-sided p < 0.01. At the sensor-noise floor the same noise enters both models' residuals and "
-              "does not cancel, so small changes of either sign are expected without any change of the model "
-              "error.", "", markdown_table(validation_change_table(first, last, val_mans), digits=4), ""]
+              "against iteration 0 on the same records (Diebold-Mariano, squared error, batch means over whole "
+              "records, `segments` of them; `pyomo_heli/diagnosis/validation_change.py`): a rise counts as "
+              "significant when its one-sided p < 0.01. At the sensor-noise floor the same noise enters both "
+              "models' residuals and does not cancel, so small changes of either sign are expected without any "
+              "change of the model error.", "",
+              markdown_table(validation_change_table(first, last, val_mans), digits=4), ""]
     L += [f"![Trim vs speed before and after](loop_trim_vs_speed.{figure_format})", ""]
     L += discovery_summary(doc, cfg, out)
     if val_mans:

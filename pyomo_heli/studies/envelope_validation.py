@@ -12,7 +12,7 @@ on any output" is decided by the noise draw of two records. This study replays t
 noise seed; generated into ``OUT/data`` unless ``--data`` names a folder), and reports per output:
 
 - the RMS of data minus model before and after, pooled over every maneuver, with the loop report's paired
-  test of the change (Diebold-Mariano, batch means over 1 s segments, one-sided p of a rise);
+  test of the change (Diebold-Mariano, batch means over whole records, one-sided p of a rise);
 - the same per speed;
 - evaluation only (reads the data's ``truth.json``): the RMS of model minus the truth simulator replayed
   the same way (the model error without the sensor noise), and the truth model's own data-minus-model RMS.

@@ -107,6 +107,9 @@ ENTRIES: tuple[Entry, ...] = (
         "python studies/score_test_level.py --seeds 101-140 --truth wake --variance white_offsets "
         "--out {out}/score_test_level"),
         ("*/summary*.csv",), minutes=30),
+    Entry("validation_test_level", ("python studies/validation_test_level.py --seeds 20261122-20261147 "
+                                    "--out {out}/validation_test_level",),
+          ("summary.csv", "summary.md"), minutes=30),
     Entry("monte_carlo", ("python studies/monte_carlo.py --realizations 20 --out {out}/monte_carlo",),
           ("monte_carlo.json", "monte_carlo.png", "realizations.csv", "summary.csv", "summary.md"), minutes=45),
     Entry("multistart_case1", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "

@@ -1,0 +1,124 @@
+"""How often does the validation rule's paired test fire when no output got worse? Monte Carlo on the bundled records.
+
+    python studies/validation_test_level.py --seeds 20261122-20261147 --out results/validation_test_level \
+        [--config studies/held_out_discovery.toml] [--data-config data/bo105_synthetic.toml]
+
+Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
+**M0 with sensor noise only** (its truth effects removed, its seed replaced) into ``OUT/data/<seed>``. On the
+config's validation records, as the loop replays them, the noise of each output is n = data - truth replay
+(:func:`~pyomo_heli.report.identification.truth_prediction`), and e0 = truth replay - M0 at the config's
+initial parameters (a model error of realistic shape). Two models with residuals r0 = n + e0 and r1 = n - e0
+have errors of equal energy, so a rise of the validation error from one to the other is pure noise:
+the one-sided p of the rule's test (:func:`~pyomo_heli.diagnosis.validation_change.mean_square_change`, in
+both directions) should fall below alpha at a rate alpha. It is computed with the rule's batches (whole
+records) and, for comparison, with 1 s batches, which ignore the colour of the noise beyond a second. Each
+seed's p-values go to ``OUT/seed_<n>.json`` as it finishes (a rerun reuses them).
+
+Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per batch choice and output (and all outputs pooled), the
+number of tests (seeds x 2 directions) and the fraction with p < 0.05 and p < 0.01. The two directions of one
+seed are not independent draws (p and 1 - p).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pyomo_heli.config import load_identification_config
+from pyomo_heli.dataset import load_flight_test
+from pyomo_heli.diagnosis.validation_change import mean_square_change
+from pyomo_heli.flighttest.config import load_config
+from pyomo_heli.flighttest.generate import generate
+from pyomo_heli.nlp.identification import validation_maneuvers
+from pyomo_heli.report.identification import VALIDATION_OUTPUTS, markdown_table, predict, truth_prediction
+
+from .args import in_file, out_folder
+from .score_test_level import seeds_of
+
+ROOT = Path(__file__).resolve().parents[2]
+#: batch choices: name -> batch length [s] (None: whole records, the rule's)
+BATCHES = {"whole records": None, "1 s": 1.0}
+LEVELS = (0.05, 0.01)
+
+
+def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
+    """The p-values of one seed (read back from ``OUT/seed_<seed>.json`` when it is there)."""
+    f = out / f"seed_{seed}.json"
+    if f.is_file():
+        return json.loads(f.read_text())
+    data = out / "data" / str(seed)
+    if not (data / "truth.json").is_file():
+        gen = dataclasses.replace(load_config(data_config), seed=seed, effects={})
+        generate(gen, data, force=True)
+    cfg = load_identification_config(config, overrides={"data": {**_data_table(config), "dataset": str(data)}})
+    val = validation_maneuvers(cfg, load_flight_test(data))
+    if not val:
+        raise ValueError(f"{config}: [data] validation selects no records")
+    truth = truth_prediction(data, [], val)
+    m0 = predict("initial", cfg.model, {f.name: f.initial for f in cfg.free}, [], val)
+    dt = float(np.median(np.diff(val[0].t)))
+    doc = {"seed": seed, "records": len(val), "p": {}}
+    for o in VALIDATION_OUTPUTS:
+        n = [mv.data[o].to_numpy(float) - truth.maneuvers[mv.name][o].to_numpy(float) for mv in val]
+        e0 = [truth.maneuvers[mv.name][o].to_numpy(float) - m0.maneuvers[mv.name][o].to_numpy(float) for mv in val]
+        r0, r1 = [a + b for a, b in zip(n, e0)], [a - b for a, b in zip(n, e0)]
+        for name, seg_s in BATCHES.items():
+            seg = None if seg_s is None else max(int(round(seg_s / dt)), 1)
+            doc["p"][f"{name}|{o}"] = [mean_square_change(r0, r1, seg).p_rise, mean_square_change(r1, r0, seg).p_rise]
+    f.write_text(json.dumps(doc, indent=1))
+    return doc
+
+
+def _data_table(config: Path) -> dict:
+    import tomllib
+
+    return dict(tomllib.loads(config.read_text()).get("data", {}))
+
+
+def summary(docs: list[dict]) -> pd.DataFrame:
+    rows = []
+    for name in BATCHES:
+        for o in list(VALIDATION_OUTPUTS) + ["all"]:
+            ps = np.array([p for d in docs for k, v in d["p"].items() for p in v
+                           if k.split("|")[0] == name and (o == "all" or k.split("|")[1] == o)])
+            if ps.size:
+                rows.append({"batches": name, "output": o, "tests": int(ps.size),
+                             **{f"p < {a:g} [%]": 100.0 * float(np.mean(ps < a)) for a in LEVELS}})
+    return pd.DataFrame(rows)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", required=True, help="e.g. 20261122-20261147")
+    ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
+    ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
+    ap.add_argument("--out", required=True)
+    a = ap.parse_args(argv)
+    try:
+        seeds = seeds_of(a.seeds)
+    except ValueError as exc:
+        ap.error(f"--seeds: {exc}")
+    config, data_config = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
+    out = out_folder(ap, a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    docs = []
+    for s in seeds:
+        docs.append(one_seed(s, config.resolve(), data_config.resolve(), out))
+        print(f"seed {s} done", flush=True)
+    tab = summary(docs)
+    tab.to_csv(out / "summary.csv", index=False)
+    (out / "summary.md").write_text(
+        f"Paired validation test under equal error energy, {len(docs)} seeds of M0 + noise "
+        f"({docs[0]['records']} validation records each); expected: p < alpha in alpha of the tests.\n\n"
+        + markdown_table(tab, digits=3) + "\n")
+    print(tab.to_string(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

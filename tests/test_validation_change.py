@@ -80,6 +80,14 @@ def test_few_records_are_cut_into_equal_batches(records, batches):
     assert c.segments == batches
 
 
+def test_batches_are_cut_from_the_finite_samples():
+    """A record with dropouts (NaN) is cut into six batches of its finite samples, not of its length."""
+    rng = np.random.default_rng(5)
+    r0 = rng.normal(0, 0.2, 301)
+    r0[100:131] = np.nan
+    assert mean_square_change([r0], [r0 + 0.01]).segments == 6
+
+
 def test_bad_records_are_named():
     with pytest.raises(ValueError, match="record 0 has 3 samples for model 0, 2 for 1"):
         mean_square_change([np.zeros(3)], [np.zeros(2)], 1)

@@ -60,11 +60,8 @@ def mean_square_change(r0, r1, n_segment: int | list[int] | None = None, alpha: 
     r0, r1 = [np.asarray(a, float) for a in r0], [np.asarray(a, float) for a in r1]
     if len(r0) != len(r1) or not r0:
         raise ValueError("mean_square_change: need the same non-empty list of records for both models")
-    if n_segment is None:
-        cuts = -(-min_batches // len(r0))  # batches per record
-        segs = [max(a.size // cuts, 1) if len(r0) < min_batches else a.size for a in r0]
-    else:
-        segs = n_segment if isinstance(n_segment, list) else [n_segment] * len(r0)
+    cuts = -(-min_batches // len(r0)) if len(r0) < min_batches else 1  # batches per record (n_segment None)
+    segs = n_segment if isinstance(n_segment, list) else [n_segment] * len(r0)
     d_all, batches = [], []
     for k, (a, b) in enumerate(zip(r0, r1)):
         if a.shape != b.shape:
@@ -73,7 +70,7 @@ def mean_square_change(r0, r1, n_segment: int | list[int] | None = None, alpha: 
         d = b[ok] ** 2 - a[ok] ** 2
         if d.size == 0:
             raise ValueError(f"mean_square_change: record {k} has no finite samples")
-        n = max(int(segs[k]), 1)
+        n = max(d.size // cuts if segs[k] is None else int(segs[k]), 1)
         edges = list(range(0, d.size, n))
         if len(edges) > 1 and d.size - edges[-1] < n:
             edges.pop()  # merge the last partial segment

@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_level_study_writes_each_seed_and_its_two_directions_are_complementary(tmp_path):
     """One seed of M0 + noise with the small test's single validation doublet (cut into six batches). The two
     directions of one pair are the same z with opposite signs: their one-sided p-values add up to 1 (Student's t
-    is symmetric). A rerun reads the seed back instead of computing it."""
+    is symmetric). A rerun reads the seed back instead of computing it, and computes a damaged one again."""
     argv = ["--seeds", "7", "--config", str(ROOT / "studies" / "held_out_small.toml"),
             "--data-config", str(ROOT / "studies" / "held_out_small_gen.toml"), "--out", str(tmp_path)]
     assert main(argv) == 0
@@ -24,3 +24,5 @@ def test_level_study_writes_each_seed_and_its_two_directions_are_complementary(t
     assert summary[0].startswith("batches,output,tests") and len(summary) == 1 + 2 * 7
     (tmp_path / "seed_7.json").write_text(json.dumps({**doc, "records": 99}))
     assert main(argv) == 0 and "(99 validation records each)" in (tmp_path / "summary.md").read_text()
+    (tmp_path / "seed_7.json").write_text('{"seed": 7, "rec')
+    assert main(argv) == 0 and json.loads((tmp_path / "seed_7.json").read_text()) == doc

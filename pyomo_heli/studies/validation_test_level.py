@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pyomo_heli.config import load_identification_config
+from pyomo_heli.config import ConfigError, load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.validation_change import mean_square_change
 from pyomo_heli.flighttest.config import load_config
@@ -50,12 +50,15 @@ def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
     """The p-values of one seed (read back from ``OUT/seed_<seed>.json`` when it is there)."""
     f = out / f"seed_{seed}.json"
     if f.is_file():
-        return json.loads(f.read_text())
+        try:
+            return json.loads(f.read_text())
+        except ValueError:  # cut short by a kill: compute it again
+            pass
     data = out / "data" / str(seed)
     if not (data / "truth.json").is_file():
         gen = dataclasses.replace(load_config(data_config), seed=seed, effects={})
         generate(gen, data, force=True)
-    cfg = load_identification_config(config, overrides={"data": {**_data_table(config), "dataset": str(data)}})
+    cfg = load_identification_config(config, overrides={"data": {"dataset": str(data)}})
     val = validation_maneuvers(cfg, load_flight_test(data))
     if not val:
         raise ValueError(f"{config}: [data] validation selects no records")
@@ -72,12 +75,6 @@ def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
             doc["p"][f"{name}|{o}"] = [mean_square_change(r0, r1, seg).p_rise, mean_square_change(r1, r0, seg).p_rise]
     f.write_text(json.dumps(doc, indent=1))
     return doc
-
-
-def _data_table(config: Path) -> dict:
-    import tomllib
-
-    return dict(tomllib.loads(config.read_text()).get("data", {}))
 
 
 def summary(docs: list[dict]) -> pd.DataFrame:
@@ -104,6 +101,11 @@ def main(argv=None) -> int:
     except ValueError as exc:
         ap.error(f"--seeds: {exc}")
     config, data_config = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
+    try:  # both configs checked before any work
+        load_config(data_config)
+        load_identification_config(config)
+    except ConfigError as exc:
+        ap.error(str(exc))
     out = out_folder(ap, a.out)
     out.mkdir(parents=True, exist_ok=True)
     docs = []

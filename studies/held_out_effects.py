@@ -277,7 +277,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.diagnosis.discovery import best_fit
     from pyomo_heli.report.identification import read_truth
-    from pyomo_heli.report.loop import final_index, rejected_discovery
+    from pyomo_heli.report.loop import discovered_terms, final_index, rejected_discovery
 
     doc = json.loads((loop / "loop.json").read_text())
     its = doc["iterations"]
@@ -323,16 +323,15 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
         o = worst["before"]
         row["val RMS / truth model's, worst output"] = (f"{o}: {row[f'val {o} / truth model before']:.3f} -> "
                                                          f"{row[f'val {o} / truth model after']:.3f}")
-    sig_rise = [r["output"] for it in its[1:final_index(doc) + 1] for r in (it.get("validation_check") or [])
-                if r["significant rise"]]
+    sig_rise = [r["output"] for it in its[1:final_index(doc) + 1] if not it.get("rejected")
+                for r in (it.get("validation_check") or []) if r["significant rise"]]
     row["significant val rise (kept steps)"] = ",".join(sig_rise) or "none"
     for n in PARAMETERS:
         if truth and n in truth:
             row[f"{n} err0 %"] = 100 * (i0["parameters"][n] - truth[n]) / abs(truth[n])
             row[f"{n} err1 %"] = 100 * (ik["parameters"][n] - truth[n]) / abs(truth[n])
     row["wrong acceptance"] = bool(physical)
-    disc = next(((it["discovery"].get("discovered")) for it in its[:final_index(doc)]
-                 if (it.get("discovery") or {}).get("decision") == "discovered"), None)
+    disc = next((fit for _it, fit in discovered_terms(doc)), None)  # the first discovered term the model kept
     not_kept = rejected_discovery(doc)  # discovered, then rejected by the validation rule: reported unexplained
     described = disc or (not_kept[1] if not_kept else None) or last_disc.get("best_generic")
     row["generic term"] = (f"{described['name']}: c = {described['estimate']:.3g} +- {described['se']:.2g}"

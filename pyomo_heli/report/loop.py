@@ -319,9 +319,12 @@ def discovery_section(it: dict) -> list[str]:
     d = it.get("discovery")
     if not d:
         return []
-    L = [f"Structure determination over a library of {d['library_size']} terms (physical candidates and generic "
-         f"discrepancy terms; the score test below ranks them, the likelihood ratio of the NLP decides at p < "
-         f"{d['level']:.3g}, Bonferroni over the library):", ""]
+    back = it.get("step_from")
+    L = ([f"Step rejected: back to the model of iteration {back['iteration']}; its structure determination again "
+          f"without {', '.join(back['without'])} (`[loop] after_rejection`).", ""] if back else [])
+    L += [f"Structure determination over a library of {d['library_size']} terms (physical candidates and generic "
+          f"discrepancy terms; the score test below ranks them, the likelihood ratio of the NLP decides at p < "
+          f"{d['level']:.3g}, Bonferroni over the library):", ""]
     sc = d.get("screen") or {}
     fits = sc.get("fits", {})
     if fits:
@@ -371,20 +374,29 @@ def discovered_curve(model: HelicopterModel, params: dict, term, speeds_kt) -> p
     return pd.DataFrame(rows)
 
 
-def rejected_discovery(doc: dict) -> tuple[dict, dict] | None:
-    """(rejected iteration record, fit) of a generic term the loop discovered but did not keep, or None.
+def rejected_discoveries(doc: dict) -> list[tuple[dict, dict]]:
+    """(rejected iteration record, fit) of every generic term the loop discovered at the kept model and did not keep.
 
-    When the validation rule rejects the step that added a discovered term, the loop stops with the model before it
-    and the residual unexplained; the discovered term is then what the missing effect looks like (its shape, its
-    estimate in the rejected iteration), reported as such."""
+    When the validation rule rejects the step that added a discovered term, the loop goes back to the model before
+    it and tries the next significant term (``[loop] after_rejection``); the terms rejected there, in the order they
+    were tried, are what the missing effect looks like (shape, estimate in the rejected iteration) when nothing is
+    kept after them. Rejections at models the loop went on from are not listed (a later step explained more)."""
     its = doc["iterations"]
     k = final_index(doc)
-    if k + 1 >= len(its) or not its[k + 1].get("rejected"):
-        return None
-    d = its[k].get("discovery") or {}
-    if d.get("decision") != "discovered" or not d.get("discovered"):
-        return None
-    return its[k + 1], d["discovered"]
+    out = []
+    for j in range(k + 1, len(its)):
+        if not its[j].get("rejected"):
+            continue
+        d = its[j - 1].get("discovery") or {}  # the step that proposed it: the kept model's, or a retry's there
+        if d.get("decision") == "discovered" and d.get("discovered") and d.get("added") in its[j]["extensions"]:
+            out.append((its[j], d["discovered"]))
+    return out
+
+
+def rejected_discovery(doc: dict) -> tuple[dict, dict] | None:
+    """The first of :func:`rejected_discoveries` (the best-ranked term rejected at the kept model), or None."""
+    found = rejected_discoveries(doc)
+    return found[0] if found else None
 
 
 def term_estimate(it: dict, fit: dict) -> tuple[float, float]:
@@ -407,7 +419,7 @@ def discovery_summary(doc: dict, cfg, out) -> list[str]:
     """What the loop discovered: the statement, and a figure of the force or moment vs airspeed and vs the state it
     depends on (``loop_discovered_<term>.png``), for every term it kept and for a term whose step was rejected."""
     found = discovered_terms(doc)
-    rejected = rejected_discovery(doc)
+    rejected = rejected_discoveries(doc)
     L = []
     if found:
         kept = doc["iterations"][final_index(doc)]
@@ -419,11 +431,11 @@ def discovery_summary(doc: dict, cfg, out) -> list[str]:
                   f"c = {c:.4g} +- {se:.2g} (the kept model's estimate and standard error)", ""]
             L += _discovered_figure(model, kept["parameters"], fit, c, se, out)
     if rejected:
-        it, fit = rejected
-        c, se = term_estimate(it, fit)
-        L += ["## Discovered, not kept (validation rule): the residual stays unexplained", "",
-              f"- {unexplained_statement(it, fit)}; rejected because adding it {it['rejected']}", ""]
-        L += _discovered_figure(iteration_model(cfg.model, it), it["parameters"], fit, c, se, out)
+        L += ["## Discovered, not kept (validation rule): the residual stays unexplained", ""]
+        for it, fit in rejected:
+            c, se = term_estimate(it, fit)
+            L += [f"- {unexplained_statement(it, fit)}; rejected because adding it {it['rejected']}", ""]
+            L += _discovered_figure(iteration_model(cfg.model, it), it["parameters"], fit, c, se, out)
     return L
 
 

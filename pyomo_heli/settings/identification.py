@@ -307,6 +307,7 @@ class LoopTable(Table):
         "uncertainty": "field 'uncertainty' must be \"chosen\" or \"none\", got {v!r}",
         "score_inputs": "field 'score_inputs' must be \"eliminated\" or \"measured\", got {v!r}",
         "generic": ("field 'generic' must be a non-empty list of names", None),
+        "after_rejection": "field 'after_rejection' must be \"next\" or \"stop\", got {v!r}",
     }
 
     max_iterations: int = Field(3, ge=0, description="most loop iterations after the first identification")
@@ -333,6 +334,9 @@ class LoopTable(Table):
                           "pyomo_heli.physics.discrepancy.generic_names())")
     validation_rule: bool = Field(True, description="reject a step whose model makes the validation error rise "
                                                     "significantly on any output")
+    after_rejection: Literal["next", "stop"] = Field(
+        "next", description="after a step the validation rule rejected: back to the kept model and the next "
+                            "significant term, the rejected ones left out (next), or stop there (stop)")
 
 
 class IdentificationFile(Table):

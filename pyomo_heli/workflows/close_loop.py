@@ -50,6 +50,7 @@ from ..dataset import load_flight_test
 from ..diagnosis import attribution as attr
 from ..diagnosis.candidates import CANDIDATES, make_candidate
 from ..log import info
+from ..physics.discrepancy import generic_names
 from .identify import run_identification, shape_values
 from ..nlp.identification import identification_data, validation_maneuvers
 from ..pareto.result import write_json
@@ -83,6 +84,9 @@ class LoopSettings:
     generic: list | None = None
     #: reject a step whose model makes the validation error rise significantly on any output (paired test)
     validation_rule: bool = True
+    #: after a rejected step: back to the kept model and its next significant term, the rejected terms left out for
+    #: the rest of the loop ("next"), or stop with the kept model ("stop", the loops before 2026-11-27)
+    after_rejection: str = "next"
 
 
 def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
@@ -214,7 +218,9 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
     i = 0
     added_shape = None  # the shape rule's record for the candidate added last
     bar = run.progress_bar(settings.max_iterations + 1, "loop iterations", at_most=True)
-    models = []  # the model of every finished iteration (the validation rule compares the last two)
+    added = None  # the term the current iteration added (None: the first, or a backward-check drop)
+    kept = None  # (config, record) of the model kept so far: the validation rule's reference
+    rejected = []  # terms whose step the validation rule rejected: not offered again in this loop
     base_names = [e.name for e in cfg.model.extensions]  # declared by the config: never dropped by the loop
     while True:
         t0 = time.perf_counter()
@@ -241,9 +247,6 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         chosen = {**{f.name: point["parameters"][f.name] for f in cfg.free if f.name in point["parameters"]},
                   **point["parameters"]}
         errs = errors_of(cfg.model, chosen, id_data.maneuvers, val_mans, trims, f"iteration {i}")
-        model = cfg.model.with_parameters(**chosen)
-        pool = settings.candidates or list(CANDIDATES)
-        left = [n for n in pool if n not in names]
         record = {
             "iteration": i, "extensions": names, "results_dir": f"iter_{i}",
             "free": [f.name for f in cfg.free], "parameters": chosen,
@@ -256,23 +259,39 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         doc["iterations"].append(record)
         # the validation rule: a step whose model validates significantly worse on any output is rejected
         if i > 0 and settings.validation_rule and val_mans:
-            check = validation_check(models[-1], doc["iterations"][-2]["parameters"], cfg.model, chosen, val_mans)
+            kcfg, krec = kept
+            check = validation_check(kcfg.model, krec["parameters"], cfg.model, chosen, val_mans)
             record["validation_check"] = check["rows"]
             if check["rise"]:
                 record["rejected"] = check["message"]
-                doc["final_iteration"] = i - 1
-                doc["stopped"] = (f"step rejected: adding {names[-1]} {check['message']}; the model of iteration "
-                                  f"{i - 1} is kept")
-                unexplained = rejected_discovery(doc)
-                if unexplained:
-                    doc["stopped"] += "; " + unexplained_statement(*unexplained)
-                write_json(out / LOOP_FILE, doc)
-                progress(f"stopped: {doc['stopped']}")
-                return doc
-        doc["final_iteration"] = i
+                if added is not None:
+                    rejected.append(added)
+                what = f"adding {added}" if added else "the step"
+                if settings.after_rejection == "stop":
+                    doc["stopped"] = (f"step rejected: {what} {check['message']}; the model of iteration "
+                                      f"{krec['iteration']} is kept")
+                    unexplained = rejected_discovery(doc)
+                    if unexplained:
+                        doc["stopped"] += "; " + unexplained_statement(*unexplained)
+                    write_json(out / LOOP_FILE, doc)
+                    progress(f"stopped: {doc['stopped']}")
+                    return doc
+                # back to the kept model: its structure determination again, the rejected terms left out
+                progress(f"step rejected: {what} {check['message']}; back to the model of iteration "
+                         f"{krec['iteration']}, without {', '.join(rejected)}")
+                record["step_from"] = {"iteration": krec["iteration"], "without": list(rejected)}
+                cfg, chosen = kcfg, krec["parameters"]
+        if not record.get("rejected"):
+            kept = (cfg, record)
+            doc["final_iteration"] = i
+        names = [e.name for e in cfg.model.extensions]
+        model = cfg.model.with_parameters(**chosen)
+        pool = settings.candidates or list(CANDIDATES)
+        left = [n for n in pool if n not in names and n not in rejected]
         att, add, init = None, None, None
-        models.append(cfg.model)
-        backward = backward_check(cfg, record, base_names, settings.alpha) if settings.discovery else []
+        # the backward check once per kept model (not again after a rejected step)
+        backward = (backward_check(cfg, record, base_names, settings.alpha)
+                    if settings.discovery and not record.get("rejected") else [])
         if backward:
             record["backward_check"] = backward
         dropped = [b["name"] for b in backward if not b["significant"]]
@@ -283,13 +302,14 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             write_json(out / LOOP_FILE, doc)
             progress(record["decision"]["message"] + "; removed")
             cfg = _without(cfg, chosen, dropped[0])
-            added_shape = None
+            added_shape, added = None, None
             i += 1
             continue
         if settings.discovery:
             from ..diagnosis.discovery import discovery_step
 
-            step = discovery_step(cfg, model, chosen, id_data, physical=left, generic=settings.generic,
+            generic = [n for n in (settings.generic or generic_names()) if n not in rejected]
+            step = discovery_step(cfg, model, chosen, id_data, physical=left, generic=generic,
                                   alpha=settings.alpha, ratio=settings.ratio, confound_corr=settings.confound_corr,
                                   robust=settings.robust, score_kw=_score_inputs(cfg, settings), progress=progress)
             att = attr.Attribution.from_dict(step["attribution"])
@@ -314,9 +334,13 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         if att is not None and add is None:
             record["residual_diagnosis"] = residual_verdict(cfg, chosen, progress)
         if att is None:
-            doc["stopped"] = "every candidate of the library is in the model"
+            doc["stopped"] = "every candidate of the library is in the model" + (
+                f" or was rejected ({', '.join(rejected)})" if rejected else "")
         elif add is None:
             doc["stopped"] = f"nothing accepted ({decision}): {message}"
+            unexplained = rejected_discovery(doc)
+            if unexplained:
+                doc["stopped"] += "; " + unexplained_statement(*unexplained)
         elif i >= settings.max_iterations:
             doc["stopped"] = f"iteration limit {settings.max_iterations} reached; {add} would be added next"
         write_json(out / LOOP_FILE, doc)
@@ -326,6 +350,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             return doc
         progress(f"adding {add} with {make_candidate(add).strength} free (estimate {init:.4g})")
         cfg = _with_candidate(cfg, chosen, add, init)
+        added = add
         cand = cfg.model.extensions[-1]
         added_shape = None
         if cand.shape_parameters and settings.shape == "time_domain":

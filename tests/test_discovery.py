@@ -102,6 +102,44 @@ def test_wake_on_tail_is_still_named_through_encompassing(tmp_path):
     assert doc["stopped"].startswith("iteration limit 0 reached; rotor_wake_on_tail would be added next")
 
 
+
+def test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model(tmp_path, monkeypatch):
+    """The wake instance (the wake is named at iteration 0) with the validation rule made to reject the step that
+    adds it (the test's stand-in for a real rise; the paired test itself runs): the loop goes back to iteration 0's
+    model and runs its structure determination again without the wake, on the same base (same J0, one term fewer),
+    adds what that step finds, and judges that step against iteration 0's model, not the rejected one."""
+    import pyomo_heli.workflows.close_loop as cl
+
+    real, calls = cl.validation_check, []
+
+    def check(model0, params0, model1, params1, val_mans, alpha=0.01):
+        out = real(model0, params0, model1, params1, val_mans, alpha)
+        added = [e.name for e in model1.extensions]
+        calls.append((dict(params0), [e.name for e in model0.extensions], added))
+        if "rotor_wake_on_tail" in added:
+            out = {**out, "rise": True, "message": "made the validation error rise significantly on theta (test)"}
+        return out
+
+    monkeypatch.setattr(cl, "validation_check", check)
+    _cfg, doc = _loop(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
+                      max_iterations=2)
+    its = doc["iterations"]
+    print([(it["extensions"], (it.get("discovery") or {}).get("message")) for it in its])
+    assert its[0]["discovery"]["added"] == "rotor_wake_on_tail"
+    assert its[1]["extensions"] == ["rotor_wake_on_tail"] and "(test)" in its[1]["rejected"]
+    assert its[1]["step_from"] == {"iteration": 0, "without": ["rotor_wake_on_tail"]}
+    retry = its[1]["discovery"]
+    assert retry["library_size"] == its[0]["discovery"]["library_size"] - 1
+    assert "rotor_wake_on_tail" not in [r["name"] for r in its[1]["attribution"]["scores"]]
+    assert retry["screen"]["J0"] == pytest.approx(its[0]["discovery"]["screen"]["J0"], rel=1e-6)
+    assert doc["final_iteration"] in (0, 2)
+    if retry["added"]:  # the next term was identified and judged against iteration 0's model
+        assert len(its) == 3 and its[2]["extensions"] == [retry["added"]]
+        assert calls[1][1] == [] and calls[1][0] == its[0]["parameters"] and calls[1][2] == [retry["added"]]
+    report = (tmp_path / "loop" / "loop_report.md").read_text()
+    assert "Step rejected: back to the model of iteration 0; its structure determination again without " \
+           "rotor_wake_on_tail" in report
+
 @pytest.mark.slow
 def test_held_out_drag_rise_gives_no_wrong_acceptance(tmp_path):
     """Truth: M0 + a drag rise above 80 kt (held out): whatever the loop decides, no library effect is kept."""
@@ -135,6 +173,7 @@ def test_validation_rule_flags_a_worse_model_and_passes_a_better_one():
     ('generic = ["dM_bump99"]', "[loop]: field 'generic': unknown discrepancy term 'dM_bump99'"),
     ("generic = []", "[loop]: field 'generic' must be a non-empty list of names"),
     ("validation_rule = 1", "[loop]: field 'validation_rule' must be true or false"),
+    ('after_rejection = "retry"', "[loop]: field 'after_rejection' must be \"next\" or \"stop\", got 'retry'"),
 ])
 def test_bad_discovery_fields_are_one_line_exit_2(tmp_path, capsys, loop, message):
     from pathlib import Path

@@ -338,11 +338,11 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                 f" or was rejected ({', '.join(rejected)})" if rejected else "")
         elif add is None:
             doc["stopped"] = f"nothing accepted ({decision}): {message}"
-            unexplained = rejected_discovery(doc)
-            if unexplained:
-                doc["stopped"] += "; " + unexplained_statement(*unexplained)
         elif i >= settings.max_iterations:
             doc["stopped"] = f"iteration limit {settings.max_iterations} reached; {add} would be added next"
+        unexplained = rejected_discovery(doc) if doc["stopped"] else None
+        if unexplained:  # nothing kept after a rejected discovered term: what the missing effect looks like
+            doc["stopped"] += "; " + unexplained_statement(*unexplained)
         write_json(out / LOOP_FILE, doc)
         progress(f"iteration {i} finished" + bar.tick(from_disk=reused))
         if doc["stopped"]:

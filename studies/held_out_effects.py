@@ -288,10 +288,12 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     if last_disc.get("decision") == "ambiguous" and "best_generic" not in last_disc:
         # loops run before the ambiguous record carried it: the generic term its message names (largest LR)
         last_disc = {**last_disc, "best_generic": best_fit((last_disc.get("screen") or {}).get("fits", {}), True)}
+    # each step's decision and the term it added, "(rejected)" where the validation rule rejected that term's step
     decisions = [f"{(it.get('discovery') or {}).get('decision', '-')}"
-                 + (f" {it['discovery']['added']}" if (it.get("discovery") or {}).get("added") else "") for it in its]
-    rejected = [it["rejected"] for it in its if it.get("rejected")]
-    row = {"truth": effect, "seed": seed, "verdict": "; ".join(decisions) + ("; step rejected" if rejected else ""),
+                 + (f" {it['discovery']['added']}" if (it.get("discovery") or {}).get("added") else "")
+                 + (" (rejected)" if j + 1 < len(its) and its[j + 1].get("rejected") else "")
+                 for j, it in enumerate(its)]
+    row = {"truth": effect, "seed": seed, "verdict": "; ".join(decisions),
            "added (kept)": "+".join(ik["extensions"]) or "-",
            "final residual": (its[-1].get("residual_diagnosis") or {}).get("status", "-")}
     def pooled(d, keys):

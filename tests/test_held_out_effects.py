@@ -212,6 +212,32 @@ def test_the_study_reads_the_shape_an_unexplained_verdict_reports(tmp_path, stud
     assert row["val RMS / truth model's, worst output"] == "q: 2.000 -> 2.000"
 
 
+
+def test_the_study_reads_a_loop_that_went_on_after_a_rejected_step(tmp_path, study):
+    """A loop that discovered dX_mu4 at iteration 0, had that step rejected, went back to iteration 0's model,
+    discovered dX_mu2 there and kept it: the kept discovered term is dX_mu2 (not the rejected one), the verdict
+    marks the rejected step, the rejected step's significant rise is not one of a kept step, and with a term kept
+    after the rejection nothing is reported unexplained from it."""
+    mu4 = {"name": "dX_mu4", "formula": "dX = c m g (mu/0.3)^4", "strength": "c_dX_mu4", "estimate": -0.0148,
+           "se": 0.001, "p": 1e-17}
+    mu2 = {**mu4, "name": "dX_mu2", "formula": "dX = c m g (mu/0.3)^2", "strength": "c_dX_mu2", "estimate": -0.0055}
+    rise = [{"output": "beta_0", "significant rise": True}]
+    loop = _loop_doc(tmp_path, [
+        {"iteration": 0, "extensions": [], "discovery": {"decision": "discovered", "added": "dX_mu4",
+                                                         "discovered": mu4}},
+        {"iteration": 1, "extensions": ["dX_mu4"], "rejected": "made the validation error rise on beta_0",
+         "validation_check": rise, "step_from": {"iteration": 0, "without": ["dX_mu4"]},
+         "discovery": {"decision": "discovered", "added": "dX_mu2", "discovered": mu2}},
+        {"iteration": 2, "extensions": ["dX_mu2"], "discovery": {"decision": "none"},
+         "validation_check": [{"output": "beta_0", "significant rise": False}]}], 2)
+    row = study.evaluate("drag_rise", 20261122, loop)
+    assert row["verdict"] == "discovered dX_mu4 (rejected); discovered dX_mu2; none"
+    assert row["added (kept)"] == "dX_mu2" and row["kept discovered term"] == "dX_mu2"
+    assert row["generic term"].startswith("dX_mu2") and row["shape matches truth"] == "yes"
+    assert row["significant val rise (kept steps)"] == "none" and not row["unexplained verdict"]
+    assert row["criterion met"] and not row["wrong acceptance"]
+
+
 def _tiny_flight_test(out, noise: bool):
     """A tiny generated flight test with the canted tail rotor (held out): two level trims, one short maneuver."""
     from pyomo_heli.flighttest.generate import generate_from_file

@@ -303,7 +303,7 @@ def iteration_checks(it: dict) -> list[str]:
     """The validation rule's paired test against the previous iteration, the rejection and the backward check."""
     L = []
     if it.get("validation_check"):
-        L += [f"Validation rule (paired test against the previous iteration's model; a significant rise rejects the "
+        L += [f"Validation rule (paired test against the model kept so far; a significant rise rejects the "
               f"step): **{'rejected: ' + it['rejected'] if it.get('rejected') else 'passed'}**", "",
               markdown_table(pd.DataFrame(it["validation_check"]), digits=4), ""]
     if it.get("backward_check"):

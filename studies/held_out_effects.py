@@ -138,10 +138,14 @@ def shape_match(effect: str, fit: dict | None, kept_model=None, params=None) -> 
         vals.append(float(t.value(m.evaluate(x, {"col": tp.col, "lon": tp.lon}))))
     vals = np.array(vals)
     k = int(np.argmax(np.abs(truth)))
-    if np.std(vals) > 0 and np.std(truth) > 0:
-        corr = float(np.corrcoef(truth, vals)[0, 1])
-    else:
+    # constant over speed (to rounding): a correlation is not defined, and a constant has no speed dependence to match
+    flat = [np.ptp(a) <= 1e-9 * np.max(np.abs(a)) for a in (vals, truth)]
+    if all(flat):
         corr = float(np.sign(truth[k] * vals[k]))
+    elif any(flat):
+        return "no (" + ("the term" if flat[0] else "the truth") + " is constant over speed)"
+    else:
+        corr = float(np.corrcoef(truth, vals)[0, 1])
     return "yes" if corr > 0.7 and np.sign(vals[k]) == np.sign(truth[k]) else f"no (corr {corr:+.2f})"
 
 
@@ -356,6 +360,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
 
 
 TERM = re.compile(r"^(\S+): c = (\S+) \+- (\S+)$")
+NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
 def parse_term(text) -> dict | None:
@@ -370,6 +375,8 @@ def rescore(out: Path) -> pd.DataFrame:
     tab = pd.read_csv(out / "held_out.csv", keep_default_na=False)
     rows = []
     for r in tab.to_dict("records"):
+        # a column that mixes numbers and "-" is read as text: its numbers back to numbers (the md formats them)
+        r = {k: (float(v) if isinstance(v, str) and NUMBER.match(v) else v) for k, v in r.items()}
         described, left = parse_term(r["generic term"]), parse_term(r["unexplained shape"])
         kept = described["name"] if described and described["name"] in str(r["added (kept)"]).split("+") else "-"
         r["kept discovered term"] = kept

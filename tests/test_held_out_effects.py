@@ -310,9 +310,24 @@ def test_the_table_rescores_from_the_terms_it_reports(tmp_path, study):
            "generic term": "dX_mu4: c = -0.0151 +- 0.00084", "shape matches truth": "?", "trim change %": -48.4,
            "significant val rise (kept steps)": "none", "wrong acceptance": False, "unexplained verdict": False,
            "unexplained shape": "-", "unexplained shape matches truth": "?", "criterion met": False}
-    pd.DataFrame([row]).to_csv(tmp_path / "held_out.csv", index=False)
+    other = {**row, "seed": 2, "share of possible trim cut %": "-"}  # a column of numbers and "-"
+    pd.DataFrame([{**row, "share of possible trim cut %": 86.72038471212868}, other]).to_csv(
+        tmp_path / "held_out.csv", index=False)
     assert study.main(["--rescore", "--out", str(tmp_path)]) == 0
     got = pd.read_csv(tmp_path / "held_out.csv", keep_default_na=False).iloc[0]
     assert got["shape matches truth"] == "yes" and got["unexplained shape matches truth"] == "-"
+    assert "| +86.7 |" in (tmp_path / "held_out.md").read_text()  # formatted as the study's own table does
     assert got["kept discovered term"] == "dX_mu4" and bool(got["criterion met"])
     assert study.parse_term("-") is None and study.parse_term(row["generic term"])["estimate"] == -0.0151
+
+
+def test_a_constant_term_does_not_match_a_speed_dependent_truth():
+    """shape_match of a constant nose-down dM against the fuselage download (a nose-up moment bump at hover): a
+    constant has no speed dependence, so it is "no" whatever the rounding of its estimate (the table's three
+    digits or the loop's full value); the hover bump dM_bump00 with the truth's sign is "yes", with the other "no"."""
+    study = _study()
+    for c in (-0.000642, -0.0006418):
+        assert study.shape_match("fuselage_download", {"name": "dM_one", "estimate": c}) == \
+            "no (the term is constant over speed)"
+    assert study.shape_match("fuselage_download", {"name": "dM_bump00", "estimate": 0.009}) == "yes"
+    assert study.shape_match("fuselage_download", {"name": "dM_bump00", "estimate": -0.009}).startswith("no (corr")

@@ -20,6 +20,11 @@
    if a likelihood-ratio test against their defaults is significant, and held
    fixed along the whole front.
 
+From iteration 1 on, the validation rule (``[loop] validation_rule``) compares each re-identified model with the
+model kept so far on the validation records (paired test, :func:`validation_check`); a significant rise on any
+output rejects the step. With ``[loop] after_rejection = "next"`` (default) the loop then goes back to the kept
+model and runs its step again with the rejected terms left out for the rest of the loop; ``"stop"`` stops there.
+
 ``out/loop.json`` is rewritten as each iteration finishes, so nothing
 finished is lost. Settings come from the config's ``[loop]`` table:
 ``max_iterations`` (identifications after the first, default 3),

@@ -214,6 +214,13 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
             return _close_loop(cfg, run, settings, progress, ft, id_data, val_mans)
 
 
+def _stop_message(doc: dict, reason: str) -> str:
+    """Why the loop stops, and, when nothing was kept after a discovered term the validation rule rejected, what the
+    missing effect looks like (that term's shape)."""
+    unexplained = rejected_discovery(doc)
+    return reason + ("; " + unexplained_statement(*unexplained) if unexplained else "")
+
+
 def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) -> dict:
     out, restart = run.root, run.restart
     run.mark()
@@ -273,11 +280,8 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                     rejected.append(added)
                 what = f"adding {added}" if added else "the step"
                 if settings.after_rejection == "stop":
-                    doc["stopped"] = (f"step rejected: {what} {check['message']}; the model of iteration "
-                                      f"{krec['iteration']} is kept")
-                    unexplained = rejected_discovery(doc)
-                    if unexplained:
-                        doc["stopped"] += "; " + unexplained_statement(*unexplained)
+                    doc["stopped"] = _stop_message(doc, f"step rejected: {what} {check['message']}; the model of "
+                                                        f"iteration {krec['iteration']} is kept")
                     write_json(out / LOOP_FILE, doc)
                     progress(f"stopped: {doc['stopped']}")
                     return doc
@@ -339,15 +343,13 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         if att is not None and add is None:
             record["residual_diagnosis"] = residual_verdict(cfg, chosen, progress)
         if att is None:
-            doc["stopped"] = "every candidate of the library is in the model" + (
-                f" or was rejected ({', '.join(rejected)})" if rejected else "")
+            doc["stopped"] = _stop_message(doc, "every candidate of the library is in the model" + (
+                f" or was rejected ({', '.join(rejected)})" if rejected else ""))
         elif add is None:
-            doc["stopped"] = f"nothing accepted ({decision}): {message}"
+            doc["stopped"] = _stop_message(doc, f"nothing accepted ({decision}): {message}")
         elif i >= settings.max_iterations:
-            doc["stopped"] = f"iteration limit {settings.max_iterations} reached; {add} would be added next"
-        unexplained = rejected_discovery(doc) if doc["stopped"] else None
-        if unexplained:  # nothing kept after a rejected discovered term: what the missing effect looks like
-            doc["stopped"] += "; " + unexplained_statement(*unexplained)
+            doc["stopped"] = _stop_message(doc, f"iteration limit {settings.max_iterations} reached; {add} would be "
+                                                "added next")
         write_json(out / LOOP_FILE, doc)
         progress(f"iteration {i} finished" + bar.tick(from_disk=reused))
         if doc["stopped"]:

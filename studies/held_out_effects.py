@@ -30,7 +30,10 @@ model (M0 + the held-out effect at the truth parameters: only the trim noise and
 "trim change possible %" is the cut from iteration 0 to that floor, and "share of possible trim cut %" the part
 of it the loop achieved (shown where at least 5 % is possible). On the validation maneuvers (as CONFIG prepares
 them), each output's RMS over the truth model's, before and after (1: as good as the truth), and in the md table
-the output worst before. Evaluation only: this script reads truth.json and the held-out module; the loop does not.
+the output worst before. Could the data name the missing effect at all (:func:`truth_form_check`)? The truth's
+own form, its strength free, tested at iteration 0 as the loop tests a library term: its estimate and LR ("truth
+form at M0"), the loop's p ("truth form p") and whether that is below the loop's level ("truth form significant").
+Evaluation only: this script reads truth.json and the held-out module; the loop does not.
 """
 from __future__ import annotations
 
@@ -277,6 +280,72 @@ def truth_floor(dataset: Path, config: Path) -> dict:
     return truth_model_errors(dataset, validation_maneuvers(cfg, ft), ft.trims.reset_index(drop=True))
 
 
+#: the truth form's strength is estimated within this multiple of its nominal value (0 to it for a time constant)
+TRUTH_FORM_RANGE = 10.0
+
+
+def truth_form(effect: str):
+    """The held-out effect itself as a term to score and estimate: its strength bounded (+-TRUTH_FORM_RANGE x
+    nominal; a time constant from 0, one-sided, with the secant step of the library's time shifts) and its other
+    parameters at their truth values."""
+    cls = HELD_OUT_EFFECTS[effect]
+    nominal = abs(HELD_OUT_STRENGTHS[effect][cls.strength])
+
+    class TruthForm(cls):
+        lag = any(s.name == cls.strength and s.unit == "s" for s in cls().parameters())
+        one_sided = lag
+        score_step = 0.02 if lag else None
+        shape_parameters = ()
+
+        def parameters(self):
+            lo = 0.0 if self.lag else -TRUTH_FORM_RANGE * nominal
+            return [dataclasses.replace(s, bounds=(lo, TRUTH_FORM_RANGE * nominal), scale=nominal)
+                    if s.name == self.strength else s for s in super().parameters()]
+
+    return TruthForm()
+
+
+def truth_form_check(effect: str, loop: Path, config: Path = CONFIG) -> dict:
+    """Could the data name the missing effect at all? The truth's own form (:func:`truth_form`) tested at the loop's
+    iteration 0 (M0 at its estimate) as the loop tests a library term: score test (its colour correction and df),
+    NLP estimate and likelihood ratio, the loop's criterion (the corrected LR with input errors, else the score
+    test's p) against the loop's level (alpha / library size). Evaluation only (the loop never sees this term);
+    cached in ``<case>/truth_form.json``."""
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.dataset import load_flight_test
+    from pyomo_heli.diagnosis.attribution import attribute
+    from pyomo_heli.diagnosis.discovery import nlp_screen, robust_p
+    from pyomo_heli.nlp.identification import identification_data
+    from pyomo_heli.workflows.close_loop import loop_settings, score_test_inputs
+
+    cache = loop.parent / "truth_form.json"
+    strength = HELD_OUT_STRENGTHS[effect]
+    if cache.is_file():
+        old = json.loads(cache.read_text())
+        if old.get("truth strength") == strength:
+            return old
+    doc = json.loads((loop / "loop.json").read_text())
+    it0 = doc["iterations"][0]
+    cfg = load_identification_config(config, overrides={"data": {"dataset": doc["dataset"]}})
+    settings = loop_settings(cfg)
+    term = truth_form(effect)
+    att = attribute(cfg.model.with_parameters(**it0["parameters"]), [f.name for f in cfg.free],
+                    identification_data(cfg, load_flight_test(cfg.dataset)), cfg.nlp.time_outputs,
+                    cfg.nlp.trim_outputs, candidates=[term], alpha=settings.alpha, ratio=settings.ratio,
+                    confound_corr=settings.confound_corr, robust=settings.robust, **score_test_inputs(cfg, settings))
+    score = att.scores.iloc[0]
+    fit = nlp_screen(cfg, it0["parameters"], [term], progress=lambda s: None)["fits"][term.name]
+    p_lr, lr_corrected, df = robust_p(fit["LR"], score, term.one_sided)
+    p = p_lr if cfg.nlp.input_errors else float(score["p_value"])
+    level = (it0.get("discovery") or {}).get("level", settings.alpha)
+    out = {"truth strength": strength, "estimate": fit["estimate"], "LR": fit["LR"], "LR time": fit["LR_time"],
+           "LR trim": fit["LR_trim"], "LR corrected": lr_corrected, "df": df, "score LM": float(score["LM"]),
+           "score p": float(score["p_value"]), "p": p, "level": level, "significant": bool(p < level),
+           "status": fit["status"]}
+    cache.write_text(json.dumps(out, indent=1))
+    return out
+
+
 def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.diagnosis.discovery import best_fit
@@ -356,6 +425,12 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     row["unexplained shape"] = (f"{left['name']}: c = {left['estimate']:.3g} +- {left['se']:.2g}" if left else "-")
     row["unexplained shape matches truth"] = match(effect, left) if left else "-"
     row["criterion met"] = criterion_met(row)
+    if effect != "none":
+        tf = truth_form_check(effect, loop, config)
+        row["truth form at M0"] = (f"{HELD_OUT_EFFECTS[effect].strength} = {tf['estimate']:.3g} (truth "
+                                   f"{tf['truth strength'][HELD_OUT_EFFECTS[effect].strength]:g}), LR {tf['LR']:.3g}")
+        row["truth form p"] = tf["p"]
+        row["truth form significant"] = tf["significant"]
     return row
 
 
@@ -579,6 +654,7 @@ def markdown(tab: pd.DataFrame) -> str:
                         "val RMS / truth model's, worst output",
                         "significant val rise (kept steps)", "unexplained verdict", "unexplained shape",
                         "unexplained shape matches truth", "wrong acceptance", "criterion met",
+                        "truth form at M0", "truth form p", "truth form significant",
                         "theta_twist err0 %", "theta_twist err1 %", "CL_alpha_HT err0 %", "CL_alpha_HT err1 %",
                         "Iyy err0 %", "Iyy err1 %") if c in tab]
 
@@ -590,11 +666,17 @@ def markdown(tab: pd.DataFrame) -> str:
     L.append("")
     held, none = tab[tab["truth"] != "none"], tab[tab["truth"] == "none"]
     if len(held):
+        # the truth's own form significant (evaluated rows; a csv read back holds the booleans as text)
+        named = (held["truth form significant"].astype(str).eq("True") if "truth form significant" in held
+                 else None)
         L.append(f"wrong acceptances: {int(held['wrong acceptance'].astype(bool).sum())} of {len(held)}; "
                  f"criterion met: {int(held['criterion met'].astype(bool).sum())} of {len(held)}"
                  + (f"; a trim cut of 50 % possible at all (truth model's trim RMS <= half of M0's): "
                     f"{int((pd.to_numeric(held['trim change possible %']) <= -50.0).sum())} of {len(held)}"
-                    if "trim change possible %" in held else ""))
+                    if "trim change possible %" in held else "")
+                 + (f"; the truth's own form significant over the library at M0: {int(named.sum())} of {len(held)} "
+                    f"(criterion met in {int((named & held['criterion met'].astype(str).eq('True')).sum())} of them)"
+                    if named is not None else ""))
     if len(none):
         L.append(f"M0 + noise only: wrong acceptances: {int(none['wrong acceptance'].astype(bool).sum())} of "
                  f"{len(none)}" + (f"; nothing added: {int((none['added (kept)'] == '-').sum())} of {len(none)}"

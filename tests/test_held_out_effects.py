@@ -176,6 +176,9 @@ def study(monkeypatch):
     half = {"col": 0.002, "lon": 0.0015, "theta": 0.001}
     monkeypatch.setattr(study, "truth_floor", lambda dataset, config: {"trim_rms": {"all": half},
                                                                         "maneuver_rms": {"all": {"q": 0.005}}})
+    # the truth form's check needs a real flight test (its own test below): a stand-in record here
+    monkeypatch.setattr(study, "truth_form_check", lambda effect, loop, config=None: {
+        "estimate": 1.0, "truth strength": HELD_OUT_STRENGTHS[effect], "LR": 50.0, "p": 1e-6, "significant": True})
     return study
 
 
@@ -331,3 +334,31 @@ def test_a_constant_term_does_not_match_a_speed_dependent_truth():
             "no (the term is constant over speed)"
     assert study.shape_match("fuselage_download", {"name": "dM_bump00", "estimate": 0.009}) == "yes"
     assert study.shape_match("fuselage_download", {"name": "dM_bump00", "estimate": -0.009}).startswith("no (corr")
+
+
+@pytest.mark.parametrize("with_effect", [True, False])
+def test_the_truth_forms_check_finds_the_held_out_effect_at_its_strength(tmp_path, with_effect):
+    """studies/held_out_effects.truth_form_check: the drag rise's own form, tested as the loop tests a library term
+    at M0 (here at the truth's M0 parameters) on a small flight test that holds it, is significant at the level
+    the loop gives it (here 0.01: a library of one; at this size the batch-means test has about 3 degrees of
+    freedom, docs/discovery.md) and its NLP estimate is the truth's strength within 3 standard errors; on the same
+    flight test without it (same seed and noise) it is not significant."""
+    from pyomo_heli.studies.small_instances import WAKE_MANEUVERS, make_case
+
+    study = _study()
+    effect = "[truth.effects.drag_rise]\nk_dr = 0.15\n" if with_effect else ""
+    cfg = make_case(tmp_path, effect, seed=5, points=2, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9,
+                    loop='\n[objectives]\ninput_errors = ["col", "lon"]\n')
+    truth = json.loads((tmp_path / "data" / "truth.json").read_text())["parameters"]
+    loop = tmp_path / "loop"
+    loop.mkdir()
+    (loop / "loop.json").write_text(json.dumps({"dataset": str(tmp_path / "data"), "iterations": [
+        {"parameters": {f.name: truth[f.name] for f in cfg.free}, "discovery": {"level": 0.01}}]}))
+    got = study.truth_form_check("drag_rise", loop, cfg.path)
+    assert got["level"] == 0.01 and got["status"] == "Solve_Succeeded"
+    assert got["significant"] is with_effect, got
+    if with_effect:
+        se = abs(got["estimate"]) / np.sqrt(got["LR corrected"])
+        assert abs(got["estimate"] - 0.15) < 3 * se, (got, se)
+    assert json.loads((tmp_path / "truth_form.json").read_text()) == got  # cached beside the loop
+

@@ -62,7 +62,7 @@ from ..simulation.compiled import simulate_outputs
 from ..simulation.sensitivity import sensitivities
 from ..simulation.trim import trim_float
 from ..settings.identification import ALPHA, CONFOUND_CORR, RATIO  # noqa: F401 - the [loop] defaults, declared there
-from .candidates import CANDIDATES, make_candidate
+from .candidates import CANDIDATES, as_candidate
 from .innovations import input_noise_factor
 
 
@@ -325,7 +325,8 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
               alpha: float = ALPHA, ratio: float = RATIO, confound_corr: float = CONFOUND_CORR,
               substeps: int = 2, robust: bool = True, segment_s: float = SEGMENT_S, input_errors=(),
               noise_sigma: dict | None = None, variance: str = "batch") -> Attribution:
-    """Score every candidate (default: the whole library minus those already in ``model``).
+    """Score every candidate (default: the whole library minus those already in ``model``): library names or
+    extension objects (:func:`~.candidates.as_candidate`).
 
     ``model`` carries the identified values; ``identified`` are the free
     parameter names; ``data`` an :class:`~pyomo_heli.nlp.identification.IdentificationData`.
@@ -342,21 +343,20 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
     if variance not in ("batch", "white"):
         raise ValueError(f"variance = {variance!r}: choose 'batch' or 'white'")
     have = {e.name for e in model.extensions}
-    names = [n for n in (candidates or list(CANDIDATES)) if n not in have]
-    if not names:
+    cands = [c for c in map(as_candidate, candidates or list(CANDIDATES)) if c.name not in have]
+    if not cands:
         raise ValueError("no candidate left to score: every candidate is already in the model")
-    cands = [make_candidate(n) for n in names]
     full = HelicopterModel(parameters=model.parameters, extensions=tuple(model.extensions) + tuple(cands))
     time_outputs, trim_outputs = list(time_outputs), list(trim_outputs)
     speeds = list(data.trims["V"]) if trim_outputs else []
     common = dict(maneuvers=data.maneuvers, time_outputs=time_outputs, trim_speeds=speeds, trim_out=trim_outputs,
                   substeps=substeps)
-    default = [c for c in cands if c.score_step is None]
+    default = [c for c in cands if getattr(c, "score_step", None) is None]
     base = sensitivities(full, list(identified) + [c.strength for c in default], **common)
     S = _stack(base, time_outputs, trim_outputs)[:, : len(identified)]
     cols = {c.strength: _stack(base, time_outputs, trim_outputs, len(identified) + i) for i, c in enumerate(default)}
     for c in cands:
-        if c.score_step is not None:
+        if getattr(c, "score_step", None) is not None:
             scale = full.parameters.spec(c.strength).scale or 1.0
             s = sensitivities(full, [c.strength], rel_step=c.score_step / scale, **common)
             cols[c.strength] = _stack(s, time_outputs, trim_outputs, 0)
@@ -384,10 +384,11 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
     n_cands = len(cands)
     for c in cands:
         b = whiten(cols[c.strength])
-        sc = score_column(A, ew, b, seg, c.one_sided, variance if robust else "white")
+        one_sided = getattr(c, "one_sided", False)
+        sc = score_column(A, ew, b, seg, one_sided, variance if robust else "white")
         bt, F, df = sc["projected"], sc["F"], sc["df"]
         ref = stats.f(1, df) if np.isfinite(df) else stats.chi2(1)
-        half = 0.5 if c.one_sided else 1.0
+        half = 0.5 if one_sided else 1.0
         # the LM this candidate needs to be significant (its own df; one-sided: the two-sided quantile of 2 x level)
         lm_needed = float(ref.isf(alpha / n_cands / half))
         corr_id = [abs(float(b @ A[:, k]) / np.sqrt(max(sc["F_raw"] * float(A[:, k] @ A[:, k]), 1e-300)))

@@ -295,6 +295,14 @@ def make_candidate(name: str) -> Candidate:
         raise KeyError(f"unknown candidate extension {name!r}{hint}; choose from {', '.join(CANDIDATES)}") from None
 
 
+def as_candidate(term) -> Extension:
+    """``term`` as an extension to score or estimate: a library name (:func:`make_candidate`), or an extension
+    object passed as it is (a study's own effect, e.g. the truth's form for a detectability check). An object
+    needs a ``strength`` parameter with bounds; ``one_sided``, ``score_step`` and ``shape_parameters`` default to
+    a two-sided strength, analytic sensitivities and no shape."""
+    return term if isinstance(term, Extension) else make_candidate(term)
+
+
 def model_with_candidates(model: HelicopterModel, names, shape: dict | None = None) -> HelicopterModel:
     """``model`` plus the candidate extensions ``names`` (in order), their shape parameters at ``shape`` (the
     values a loop iteration held; defaults for those not given). The one place a loop iteration's model is

@@ -56,7 +56,7 @@ from scipy import stats
 from ..physics.discrepancy import BUMP_CENTRES, FORCE_CHANNELS, generic_names, is_generic
 from ..units import KT
 from . import attribution as attr
-from .candidates import CANDIDATES, make_candidate
+from .candidates import CANDIDATES, as_candidate, make_candidate
 
 #: generic terms (best by LM) estimated in the NLP at every step
 SCREEN_GENERIC = 3
@@ -94,13 +94,14 @@ def _joint_objective(m, data, trim_outputs):
     return m.discovery_objective
 
 
-def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = True, progress=print,
+def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True, progress=print,
                warm_start: str = "continuation") -> dict:
     """Estimate each of ``terms`` alone, and each pair of ``pairs`` together, in one identification NLP, freed by
     their bounds (module docstring, step 2).
 
     ``cfg``: the current identification config (its model and free parameters); ``start``: values of its free
-    parameters to start from (the diagnosed point). Returns ``{"J0", "base", "fits": {name: {...}}, "pairs":
+    parameters to start from (the diagnosed point); ``terms``: library names or extension objects
+    (:func:`~.candidates.as_candidate`), ``pairs`` by name. Returns ``{"J0", "base", "fits": {name: {...}}, "pairs":
     {"P+G": {...}}}`` with each fit's estimate, standard error, J, LR against the base, p (chi-square(1)), solve
     status, Ipopt iterations, solve wall seconds and parameters.
     """
@@ -113,12 +114,12 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
     from ..solvers import SolverError, make_solver
 
     t0 = time.perf_counter()
-    exts = [make_candidate(n) for n in terms]
+    exts = [as_candidate(t) for t in terms]
     model = HelicopterModel(parameters=cfg.model.parameters, extensions=tuple(cfg.model.extensions) + tuple(exts))
     free = [dataclasses.replace(f, initial=min(max(start.get(f.name, f.initial), f.lower), f.upper)) for f in cfg.free]
     own = {}  # term -> its parameters in the NLP (strength first, then shape parameters)
     for e in exts:
-        names = [e.strength] + (list(e.shape_parameters) if shape_free else [])
+        names = [e.strength] + (list(getattr(e, "shape_parameters", ())) if shape_free else [])
         own[e.name] = names
         for n in names:
             spec = model.parameters.spec(n)
@@ -207,7 +208,7 @@ def nlp_screen(cfg, start: dict, terms: list[str], pairs=(), shape_free: bool = 
         return res
 
     fits = {}
-    for name in terms:
+    for name in own:
         r = fit([name])
         one = r.pop("terms")[name]
         # standard error from the profile likelihood's curvature: LR = (c / se)^2

@@ -188,7 +188,7 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
     return {"status": status, "verdict": d.verdict, "findings": d.findings}
 
 
-def _score_inputs(cfg: IdentificationConfig, settings: LoopSettings) -> dict:
+def score_test_inputs(cfg: IdentificationConfig, settings: LoopSettings) -> dict:
     """The score test's errors-in-variables arguments: the NLP's input errors and sigmas, unless the loop
     takes the measured inputs as exact (``[loop] score_inputs = "measured"``) or there are none."""
     if settings.score_inputs == "measured" or not cfg.nlp.input_errors:
@@ -320,7 +320,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             generic = [n for n in (settings.generic or generic_names()) if n not in rejected]
             step = discovery_step(cfg, model, chosen, id_data, physical=left, generic=generic,
                                   alpha=settings.alpha, ratio=settings.ratio, confound_corr=settings.confound_corr,
-                                  robust=settings.robust, score_kw=_score_inputs(cfg, settings), progress=progress)
+                                  robust=settings.robust, score_kw=score_test_inputs(cfg, settings), progress=progress)
             att = attr.Attribution.from_dict(step["attribution"])
             record["attribution"] = step.pop("attribution")
             record["discovery"] = step
@@ -331,7 +331,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             att = attr.attribute(model, [f.name for f in cfg.free], id_data, cfg.nlp.time_outputs,
                                  cfg.nlp.trim_outputs, candidates=left, alpha=settings.alpha, ratio=settings.ratio,
                                  confound_corr=settings.confound_corr, robust=settings.robust,
-                                 **_score_inputs(cfg, settings))
+                                 **score_test_inputs(cfg, settings))
             progress(str(att))
             record["attribution"] = att.to_dict()
             decision, message = att.decision, att.message

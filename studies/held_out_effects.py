@@ -307,16 +307,11 @@ def truth_form(effect: str):
 
 def truth_form_check(effect: str, loop: Path, config: Path = CONFIG) -> dict:
     """Could the data name the missing effect at all? The truth's own form (:func:`truth_form`) tested at the loop's
-    iteration 0 (M0 at its estimate) as the loop tests a library term: score test (its colour correction and df),
-    NLP estimate and likelihood ratio, the loop's criterion (the corrected LR with input errors, else the score
-    test's p) against the loop's level (alpha / library size). Evaluation only (the loop never sees this term);
-    cached in ``<case>/truth_form.json``."""
-    from pyomo_heli.config import load_identification_config
-    from pyomo_heli.dataset import load_flight_test
-    from pyomo_heli.diagnosis.attribution import attribute
-    from pyomo_heli.diagnosis.discovery import nlp_screen, robust_p
-    from pyomo_heli.nlp.identification import identification_data
-    from pyomo_heli.workflows.close_loop import loop_settings, score_test_inputs
+    iteration 0 (M0 at its estimate) as the loop tests a library term
+    (:func:`pyomo_heli.workflows.check_effect.check_effect`): its NLP estimate and LR, the loop's deciding p
+    against the loop's level (alpha / library size). Evaluation only (the loop never sees this term); cached in
+    ``<case>/truth_form.json``."""
+    from pyomo_heli.workflows.check_effect import check_effect
 
     cache = loop.parent / "truth_form.json"
     strength = HELD_OUT_STRENGTHS[effect]
@@ -324,23 +319,11 @@ def truth_form_check(effect: str, loop: Path, config: Path = CONFIG) -> dict:
         old = json.loads(cache.read_text())
         if old.get("truth strength") == strength:
             return old
-    doc = json.loads((loop / "loop.json").read_text())
-    it0 = doc["iterations"][0]
-    cfg = load_identification_config(config, overrides={"data": {"dataset": doc["dataset"]}})
-    settings = loop_settings(cfg)
-    term = truth_form(effect)
-    att = attribute(cfg.model.with_parameters(**it0["parameters"]), [f.name for f in cfg.free],
-                    identification_data(cfg, load_flight_test(cfg.dataset)), cfg.nlp.time_outputs,
-                    cfg.nlp.trim_outputs, candidates=[term], alpha=settings.alpha, ratio=settings.ratio,
-                    confound_corr=settings.confound_corr, robust=settings.robust, **score_test_inputs(cfg, settings))
-    score = att.scores.iloc[0]
-    fit = nlp_screen(cfg, it0["parameters"], [term], progress=lambda s: None)["fits"][term.name]
-    p_lr, lr_corrected, df = robust_p(fit["LR"], score, term.one_sided)
-    p = p_lr if cfg.nlp.input_errors else float(score["p_value"])
-    level = (it0.get("discovery") or {}).get("level", settings.alpha)
+    r = check_effect(loop, truth_form(effect), iteration=0, config=config, against=None, progress=lambda s: None)
+    fit = r["term"]
     out = {"truth strength": strength, "estimate": fit["estimate"], "LR": fit["LR"], "LR time": fit["LR_time"],
-           "LR trim": fit["LR_trim"], "LR corrected": lr_corrected, "df": df, "score LM": float(score["LM"]),
-           "score p": float(score["p_value"]), "p": p, "level": level, "significant": bool(p < level),
+           "LR trim": fit["LR_trim"], "LR corrected": fit["LR_robust"], "df": fit["df"], "score LM": r["score"]["LM"],
+           "score p": r["score"]["p"], "p": fit["p"], "level": r["level"], "significant": r["significant"],
            "status": fit["status"]}
     cache.write_text(json.dumps(out, indent=1))
     return out

@@ -338,27 +338,20 @@ def test_a_constant_term_does_not_match_a_speed_dependent_truth():
 
 @pytest.mark.parametrize("with_effect", [True, False])
 def test_the_truth_forms_check_finds_the_held_out_effect_at_its_strength(tmp_path, with_effect):
-    """studies/held_out_effects.truth_form_check: the drag rise's own form, tested as the loop tests a library term
-    at M0 (here at the truth's M0 parameters) on a small flight test that holds it, is significant at the level
-    the loop gives it (here 0.01: a library of one; at this size the batch-means test has about 3 degrees of
-    freedom, docs/discovery.md) and its NLP estimate is the truth's strength within 3 standard errors; on the same
-    flight test without it (same seed and noise) it is not significant."""
-    from pyomo_heli.studies.small_instances import WAKE_MANEUVERS, make_case
+    """studies/held_out_effects.truth_form_check on a finished small loop (iteration 0 only): the drag rise's own
+    form, tested as the loop tests a library term, has p < 0.01 on a small flight test that holds it (at this size
+    the batch-means test has about 3 degrees of freedom: not below the loop's level 0.01/19, docs/discovery.md)
+    and its NLP estimate is the truth's strength within 3 standard errors; on the same flight test without it (same
+    seed and noise) p > 0.01 and it is not significant."""
+    from test_discovery import _loop
 
     study = _study()
-    effect = "[truth.effects.drag_rise]\nk_dr = 0.15\n" if with_effect else ""
-    cfg = make_case(tmp_path, effect, seed=5, points=2, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9,
-                    loop='\n[objectives]\ninput_errors = ["col", "lon"]\n')
-    truth = json.loads((tmp_path / "data" / "truth.json").read_text())["parameters"]
-    loop = tmp_path / "loop"
-    loop.mkdir()
-    (loop / "loop.json").write_text(json.dumps({"dataset": str(tmp_path / "data"), "iterations": [
-        {"parameters": {f.name: truth[f.name] for f in cfg.free}, "discovery": {"level": 0.01}}]}))
-    got = study.truth_form_check("drag_rise", loop, cfg.path)
-    assert got["level"] == 0.01 and got["status"] == "Solve_Succeeded"
-    assert got["significant"] is with_effect, got
+    _, doc = _loop(tmp_path, "[truth.effects.drag_rise]\nk_dr = 0.15\n" if with_effect else "", seed=5)
+    got = study.truth_form_check("drag_rise", tmp_path / "loop", tmp_path / "ident.toml")
+    assert got["level"] == doc["iterations"][0]["discovery"]["level"] and got["status"] == "Solve_Succeeded"
     if with_effect:
         se = abs(got["estimate"]) / np.sqrt(got["LR corrected"])
-        assert abs(got["estimate"] - 0.15) < 3 * se, (got, se)
+        assert got["p"] < 0.01 and abs(got["estimate"] - 0.15) < 3 * se, (got, se)
+    else:
+        assert got["p"] > 0.01 and not got["significant"], got
     assert json.loads((tmp_path / "truth_form.json").read_text()) == got  # cached beside the loop
-

@@ -17,7 +17,7 @@ from .folders import (_check_copy_out, _check_diagnosis_out, _check_out_dir, _ch
                       _check_out_not_foreign, _point_parameters, _solver_status_line)
 from .identify_commands import (cmd_demo, cmd_identify, cmd_inspect, cmd_multistart, cmd_report_linear,
                                 cmd_uncertainty)
-from .loop_commands import cmd_close_loop, cmd_diagnose, cmd_trim_loop
+from .loop_commands import cmd_check_effect, cmd_close_loop, cmd_diagnose, cmd_trim_loop
 from .model_commands import cmd_linearize, cmd_simulate, cmd_trim
 from .options import (MAX_INPUT_DEG, MAX_SIM_SAMPLES, MAX_SPEED_KT, UserError, _epsilon, _Parser,  # noqa: F401
                       _starts, finite_float, nonneg_float, nonneg_int, positive_float, positive_int)
@@ -132,6 +132,20 @@ def build_parser() -> argparse.ArgumentParser:
                          "discarded) instead of resuming")
     _figure_flag(cl)
     cl.set_defaults(func=cmd_close_loop)
+
+    ce = sub.add_parser("check-effect", help="test an effect of your own (or a library term) against a finished "
+                                             "close-loop: significant? does it explain what the discovered term does?")
+    ce.add_argument("loop_dir", help="results folder of pyomo-heli close-loop")
+    ce.add_argument("--effect", required=True,
+                    help="FILE.py:CLASS or MODULE:CLASS (an extension whose strength has bounds), or a library name")
+    ce.add_argument("--iteration", type=nonneg_int,
+                    help="test at this iteration's model (default: the model the loop kept)")
+    ce.add_argument("--config", help="the loop's config (default: the one loop.json names)")
+    ce.add_argument("--against", default="auto",
+                    help="generic term for the encompassing test: 'auto' (default: the one the step at that "
+                         "iteration discovered or described), a term's name, or 'none'")
+    ce.add_argument("--json", help="also write the whole result to this JSON file")
+    ce.set_defaults(func=cmd_check_effect)
 
     tl = _config_command(sub, "trim-loop", "identify a trim-only flight test (J_trim), test the candidate effects "
                                            "on the trim residuals, add the accepted one, repeat (docs/real_data.md)",

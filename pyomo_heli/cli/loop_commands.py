@@ -1,11 +1,11 @@
-"""The loops and their diagnosis: ``close-loop``, ``trim-loop`` and ``diagnose``."""
+"""The loops and their diagnosis: ``close-loop``, ``trim-loop``, ``diagnose`` and ``check-effect``."""
 from __future__ import annotations
 
 import math
 import sys
 from pathlib import Path
 
-from .folders import (_check_diagnosis_out, _check_out_dir, _check_out_not_foreign, _point_parameters,
+from .folders import (_check_diagnosis_out, _check_out_dir, _check_out_file, _check_out_not_foreign, _point_parameters,
                       _results_folder, _solver_status_line, _warning)
 from .options import UserError
 
@@ -120,3 +120,78 @@ def cmd_diagnose(args) -> int:
     print(f"wrote {out / 'diagnosis.json'}, {out / 'diagnosis.md'} and figures")
     return 0
 
+
+
+def load_effect(spec: str):
+    """``--effect``: a library name (``lon_rigging``, ``dM_col``) or ``FILE.py:CLASS`` / ``MODULE:CLASS``, an
+    extension class of one's own, built with no arguments; its strength needs bounds (the NLP frees it within
+    them). UserError naming the option otherwise."""
+    import importlib
+    import importlib.util
+
+    from ..diagnosis.candidates import make_candidate
+    from ..physics.extensions import Extension
+
+    if ":" not in spec:
+        try:
+            return make_candidate(spec)
+        except KeyError as exc:
+            raise UserError(f"option --effect: {exc.args[0]}; or FILE.py:CLASS for an effect of your own") from None
+    where, _, name = spec.rpartition(":")
+    if where.endswith(".py"):
+        if not Path(where).is_file():
+            raise UserError(f"option --effect: file {where} not found")
+        mod_spec = importlib.util.spec_from_file_location(Path(where).stem, where)
+        module = importlib.util.module_from_spec(mod_spec)
+        mod_spec.loader.exec_module(module)
+    else:
+        try:
+            module = importlib.import_module(where)
+        except ImportError as exc:
+            raise UserError(f"option --effect: cannot import module {where!r} ({exc})") from None
+    cls = getattr(module, name, None)
+    if not (isinstance(cls, type) and issubclass(cls, Extension)):
+        raise UserError(f"option --effect: {where} has no extension class {name!r} (a subclass of "
+                        f"pyomo_heli.physics.extensions.Extension)")
+    effect = cls()
+    strength = getattr(effect, "strength", None)
+    specs = {s.name: s for s in effect.parameters()}
+    if strength not in specs:
+        raise UserError(f"option --effect: {name} declares no parameter named by its 'strength' ({strength!r})")
+    if specs[strength].bounds is None:
+        raise UserError(f"option --effect: {name}'s strength {strength!r} has no bounds; declare "
+                        f"ParameterSpec(..., bounds=(lower, upper)) so that the NLP can free it within them")
+    return effect
+
+
+def cmd_check_effect(args) -> int:
+    import json
+
+    from ..workflows.check_effect import check_effect
+
+    effect = load_effect(args.effect)
+    against = None if args.against == "none" else args.against
+    if args.json is not None:
+        _check_out_file(args.json, "--json")
+    r = check_effect(args.loop_dir, effect, iteration=args.iteration, config=args.config, against=against)
+    t = r["term"]
+    print(f"{effect.name} at iteration {r['iteration']} of {args.loop_dir}: {t['strength']} = {t['estimate']:.4g} "
+          f"+- {t['se']:.2g}; LR {t['LR']:.3g} (time {t['LR_time']:.3g}, trim {t['LR_trim']:.3g}), corrected "
+          f"{t['LR_robust']:.3g} on df {t['df']:.3g}; solve {t['status']}")
+    print(f"p = {t['p']:.2g} ({r['criterion']}) {'<' if r['significant'] else '>='} level {r['level']:.2g}: "
+          + ("significant" if r["significant"] else "not significant"))
+    e = r.get("encompassing")
+    if e and "LR_G_given_P" in e:
+        g = r["against"]["name"]
+        verdict = ("encompasses it: explains the data as well as the generic term" if e["encompasses"]
+                   else "equivalent to it on these data" if e["equivalent"]
+                   else f"does not explain what {g} explains")
+        print(f"against {g}: with {effect.name} fitted {g} adds LR {e['LR_G_given_P']:.3g} (p = "
+              f"{e['p_G_given_P']:.2g}); {effect.name} adds LR {e['LR_P_given_G']:.3g} (p = {e['p_P_given_G']:.2g}) "
+              f"to {g}: {verdict}")
+    elif e:
+        print(f"against {r['against']['name']}: the joint solve failed; no encompassing test")
+    if args.json is not None:
+        Path(args.json).write_text(json.dumps(r, indent=1, default=float))
+        print(f"wrote {args.json}")
+    return 0

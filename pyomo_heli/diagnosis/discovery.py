@@ -279,12 +279,7 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
     criterion = "likelihood ratio" if cfg.nlp.input_errors else "score test"
     out["criterion"] = criterion
     for n, f in fits.items():
-        one_sided = getattr(make_candidate(n), "one_sided", False)
-        f["p"], f["LR_robust"], f["df"] = robust_p(f["LR"], rows_by.loc[n], one_sided)
-        if criterion == "score test":
-            f["p_robust_LR"], f["p"] = f["p"], float(rows_by.loc[n, "p_value"])
-        # standard error from the corrected profile likelihood's curvature: LR_robust = (c / se)^2
-        f["se"] = abs(f["estimate"]) / math.sqrt(f["LR_robust"]) if f["LR_robust"] > 0 else float("nan")
+        judge(f, rows_by.loc[n], getattr(make_candidate(n), "one_sided", False), criterion)
     G = best_fit(fits, True)
     g_sig = G is not None and G["p"] < level
     p_sig = [f for f in fits.values() if not f["generic"] and f["success"] and f["p"] < level]
@@ -301,23 +296,7 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
                            + (f"; shape per channel (score test): {shapes_sentence(out['shape_by_channel'])}"
                               if out["shape_by_channel"] else ""))
         return out
-    rows = []
-    for pf in p_sig:
-        pair = screen["pairs"].get(f"{pf['name']}+{G['name']}")
-        row = {"candidate": pf["name"], "J_P": pf["J"], "J_G": G["J"], "LR_P": pf["LR"], "estimate": pf["estimate"],
-               "shape": pf["shape"]}
-        if pair and pair["success"]:
-            lr = max(2.0 * (pf["J"] - pair["J"]), 0.0)
-            p = float(stats.chi2.sf(lr, 1))
-            # and the other way: does P add anything once G is in? If not, the two are equivalent on these data
-            # and the physics cannot be named from them
-            lr_pg = max(2.0 * (G["J"] - pair["J"]), 0.0)
-            p_pg = float(stats.chi2.sf(lr_pg, 1))
-            row.update(J_PG=pair["J"], LR_G_given_P=lr, p_G_given_P=p, LR_P_given_G=lr_pg, p_P_given_G=p_pg,
-                       equivalent=bool(p >= alpha and p_pg >= alpha), encompasses=bool(p >= alpha and p_pg < alpha))
-        else:
-            row.update(encompasses=False, note="joint solve failed")
-        rows.append(row)
+    rows = [encompassing(pf, G, screen["pairs"].get(f"{pf['name']}+{G['name']}"), alpha) for pf in p_sig]
     out["encompassing"] = rows
     named = [r for r in rows if r["encompasses"]]
     if not g_sig:
@@ -426,6 +405,65 @@ def robust_p(lr: float, row, one_sided: bool = False) -> tuple[float, float, flo
     ref = stats.f(1, df) if np.isfinite(df) else stats.chi2(1)
     p = float(ref.sf(adj))
     return (p / 2 if one_sided else p), adj, df
+
+
+def judge(fit: dict, score_row, one_sided: bool, criterion: str) -> dict:
+    """Set a screened term's deciding ``p`` (the corrected LR's, :func:`robust_p`, or with ``criterion`` "score
+    test" the score test's own, the LR's kept as ``p_robust_LR``), ``LR_robust``, ``df`` and the standard error from
+    the corrected profile likelihood's curvature (``LR_robust = (c / se)^2``). Returns ``fit``."""
+    fit["p"], fit["LR_robust"], fit["df"] = robust_p(fit["LR"], score_row, one_sided)
+    if criterion == "score test":
+        fit["p_robust_LR"], fit["p"] = fit["p"], float(score_row["p_value"])
+    fit["se"] = abs(fit["estimate"]) / math.sqrt(fit["LR_robust"]) if fit["LR_robust"] > 0 else float("nan")
+    return fit
+
+
+def encompassing(P: dict, G: dict, pair: dict | None, alpha: float) -> dict:
+    """Step 3's test of a term P against a generic term G from their NLP fits alone and together (``pair``):
+    ``LR(G | P) = 2 (J_P - J_PG)`` and ``LR(P | G) = 2 (J_G - J_PG)``, each against chi-square(1) at ``alpha``.
+    P encompasses G when G adds nothing once P is in and P adds something G does not; the two are equivalent on
+    these data when neither adds to the other."""
+    row = {"candidate": P["name"], "J_P": P["J"], "J_G": G["J"], "LR_P": P["LR"], "estimate": P["estimate"],
+           "shape": P["shape"]}
+    if not (pair and pair["success"]):
+        return {**row, "encompasses": False, "note": "joint solve failed"}
+    lr = max(2.0 * (P["J"] - pair["J"]), 0.0)
+    p = float(stats.chi2.sf(lr, 1))
+    # and the other way: does P add anything once G is in? If not, the two are equivalent on these data and the
+    # physics cannot be named from them
+    lr_pg = max(2.0 * (G["J"] - pair["J"]), 0.0)
+    p_pg = float(stats.chi2.sf(lr_pg, 1))
+    return {**row, "J_PG": pair["J"], "LR_G_given_P": lr, "p_G_given_P": p, "LR_P_given_G": lr_pg, "p_P_given_G": p_pg,
+            "equivalent": bool(p >= alpha and p_pg >= alpha), "encompasses": bool(p >= alpha and p_pg < alpha)}
+
+
+def check_term(cfg, model, start: dict, data, term, *, level: float, against: str | None = None,
+               alpha=attr.ALPHA, robust=True, score_kw=None, progress=print) -> dict:
+    """Test one term, a library name or an extension object of one's own (a hypothesis: "is the missing effect
+    this?"), at the current model as a structure-determination step tests a library term: the score test (its
+    colour correction and df), the NLP estimate and LR (:func:`nlp_screen`), the deciding p (the corrected LR's
+    with the measured inputs' noise modelled, else the score test's) against ``level``. With ``against`` (a
+    generic term's name, e.g. the one a step discovered) also step 3's encompassing test both ways
+    (:func:`encompassing`): does the term explain the data as well as that generic term does?
+
+    ``cfg``, ``model``, ``start``, ``data`` as for :func:`discovery_step`. Returns a plain dict: ``term`` (the
+    fit: estimate, se, LR, LR_time, LR_trim, LR_robust, df, p, status), ``score`` (LM, p), ``level``,
+    ``significant``, ``criterion`` and, with ``against``, ``against`` (its fit) and ``encompassing``."""
+    t = as_candidate(term)
+    terms = [t] + ([against] if against else [])
+    att = attr.attribute(model, [f.name for f in cfg.free], data, cfg.nlp.time_outputs, cfg.nlp.trim_outputs,
+                         candidates=terms, alpha=alpha, robust=robust, **dict(score_kw or {}))
+    rows = att.scores.set_index("name")
+    screen = nlp_screen(cfg, start, terms, pairs=[(t.name, against)] if against else (), progress=progress)
+    criterion = "likelihood ratio" if cfg.nlp.input_errors else "score test"
+    fit = judge(screen["fits"][t.name], rows.loc[t.name], getattr(t, "one_sided", False), criterion)
+    out = {"term": fit, "score": {"LM": float(rows.loc[t.name, "LM"]), "p": float(rows.loc[t.name, "p_value"])},
+           "level": level, "significant": bool(fit["p"] < level), "criterion": criterion}
+    if against:
+        g = judge(screen["fits"][against], rows.loc[against], getattr(make_candidate(against), "one_sided", False),
+                  criterion)
+        out.update(against=g, encompassing=encompassing(fit, g, screen["pairs"].get(f"{t.name}+{against}"), alpha))
+    return out
 
 
 def best_fit(fits: dict, generic: bool):

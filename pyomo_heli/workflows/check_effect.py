@@ -1,0 +1,73 @@
+"""Test an effect of one's own against a finished closed loop: "is the missing effect this?"
+
+The loop (:mod:`.close_loop`) names physics only from its library. When it reports a residual "not explained by
+any library effect; discovered dM = c ...", the engineer writes the effect they suspect as an extension
+(:mod:`pyomo_heli.physics.extensions`, its strength with bounds) and asks whether the data name it:
+
+    from pyomo_heli.workflows.check_effect import check_effect
+    r = check_effect("results/loop", MyMixing(), iteration=0)     # at iteration 0's model
+    print(r["significant"], r["term"]["estimate"], r["encompassing"]["encompasses"])
+
+or ``pyomo-heli check-effect results/loop --effect my_effects.py:MyMixing``. The term is tested at that
+iteration's model and estimate exactly as a step tests a library term
+(:func:`pyomo_heli.diagnosis.discovery.check_term`): significant at the step's level (alpha over the library),
+and, against the generic term the step discovered or described, the encompassing test both ways: it explains
+the data as well as that term does when the term adds nothing once it is in.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..config import config_of_result, load_identification_config
+from ..dataset import load_flight_test
+from ..diagnosis.candidates import CANDIDATES
+from ..diagnosis.discovery import check_term, library
+from ..log import info
+from ..nlp.identification import identification_data
+from ..pareto.result import IdentificationResult
+from ..physics.discrepancy import generic_names
+from ..provenance import check_results_match
+from ..report.loop import final_index, load_loop
+from .close_loop import loop_settings, score_test_inputs
+
+
+def check_effect(loop_dir, term, iteration: int | None = None, config=None, against: str | None = "auto",
+                 progress=info) -> dict:
+    """Test ``term`` (an extension object, or a library name) at iteration ``iteration`` of the finished loop in
+    ``loop_dir`` (default: the model the loop kept).
+
+    ``config``: the loop's config (default: the one ``loop.json`` names), with the dataset ``loop.json`` names;
+    the iteration's effects are added and the whole checked against its results folder. ``against``: a generic
+    term's name for the encompassing test, "auto" for the one the step at that iteration discovered or described
+    (none if it ran no discovery), None for no encompassing test. The level is the one the step used (alpha over
+    the library it scored), else alpha over the library at that model. Returns
+    :func:`~pyomo_heli.diagnosis.discovery.check_term`'s dict plus ``iteration``."""
+    loop_dir = Path(loop_dir)
+    doc = load_loop(loop_dir)
+    its = doc["iterations"]
+    if iteration is None:
+        it = its[final_index(doc)]
+    else:
+        it = next((r for r in its if r["iteration"] == iteration), None)
+        if it is None:
+            ran = ", ".join(str(r["iteration"]) for r in its)
+            raise ValueError(f"{loop_dir}: no iteration {iteration} (the loop ran iterations {ran})")
+    folder = loop_dir / it["results_dir"]
+    res = IdentificationResult.load(folder)
+    cfg = load_identification_config(config or doc["config"], overrides={"data": {"dataset": doc["dataset"]}})
+    if res.info.get("extensions"):
+        cfg = config_of_result(cfg, res)
+    check_results_match(cfg, res, folder)
+    settings = loop_settings(cfg)
+    model = cfg.model.with_parameters(**it["parameters"])
+    step = it.get("discovery") or {}
+    if against == "auto":
+        against = (step.get("discovered") or step.get("best_generic") or {}).get("name")
+    if against is not None and against in {e.name for e in model.extensions}:
+        raise ValueError(f"against = {against!r}: that term is in the model of iteration {it['iteration']} already")
+    level = step.get("level") or settings.alpha / len(library(model, settings.candidates or list(CANDIDATES),
+                                                               settings.generic or generic_names()))
+    out = check_term(cfg, model, it["parameters"], identification_data(cfg, load_flight_test(cfg.dataset)), term,
+                     level=level, against=against, alpha=settings.alpha, robust=settings.robust,
+                     score_kw=score_test_inputs(cfg, settings), progress=progress)
+    return {"iteration": it["iteration"], **out}

@@ -277,6 +277,7 @@ def test_a_rejected_discovered_term_is_reported_unexplained_with_its_shape(tmp_p
     text = "\n".join(L)
     assert "## Discovered, not kept (validation rule): the residual stays unexplained" in text
     assert "rise significantly on beta_0" in text
+    assert f"pyomo-heli check-effect {tmp_path} --effect FILE.py:CLASS" in text  # how to test a suspected effect
     assert (tmp_path / "loop_discovered_dX_mu4.png").is_file()
     tab = discovered_curve(iteration_model(HelicopterModel(), rejected), rejected["parameters"], "dX_mu4",
                            [0, 40, 80, 120])

@@ -436,6 +436,9 @@ def discovery_summary(doc: dict, cfg, out) -> list[str]:
             c, se = term_estimate(it, fit)
             L += [f"- {unexplained_statement(it, fit)}; rejected because adding it {it['rejected']}", ""]
             L += _discovered_figure(iteration_model(cfg.model, it), it["parameters"], fit, c, se, out)
+    if found or rejected:
+        L += ["To test an effect you suspect behind it (an extension whose strength has bounds): "
+              f"`pyomo-heli check-effect {out} --effect FILE.py:CLASS --iteration K` (docs/discovery.md).", ""]
     return L
 
 

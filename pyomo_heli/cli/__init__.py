@@ -140,7 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="FILE.py:CLASS or MODULE:CLASS (an extension whose strength has bounds), or a library name")
     ce.add_argument("--iteration", type=nonneg_int,
                     help="test at this iteration's model (default: the model the loop kept)")
-    ce.add_argument("--config", help="the loop's config (default: the one loop.json names)")
+    ce.add_argument("--config", help="the loop's config (default: the one named in the iteration's chosen.json)")
     ce.add_argument("--against", default="auto",
                     help="generic term for the encompassing test: 'auto' (default: the one the step at that "
                          "iteration discovered or described), a term's name, or 'none'")

@@ -22,6 +22,7 @@ from ..config import config_of_result, load_identification_config
 from ..dataset import load_flight_test
 from ..diagnosis.candidates import CANDIDATES
 from ..diagnosis.discovery import check_term, library
+from ..diagnosis.residuals import find_config
 from ..log import info
 from ..nlp.identification import identification_data
 from ..pareto.result import IdentificationResult
@@ -36,7 +37,8 @@ def check_effect(loop_dir, term, iteration: int | None = None, config=None, agai
     """Test ``term`` (an extension object, or a library name) at iteration ``iteration`` of the finished loop in
     ``loop_dir`` (default: the model the loop kept).
 
-    ``config``: the loop's config (default: the one ``loop.json`` names), with the dataset ``loop.json`` names;
+    ``config``: the loop's config (default: the one the iteration's ``chosen.json`` names, found as ``diagnose``
+    finds it), with the dataset ``loop.json`` names;
     the iteration's effects are added and the whole checked against its results folder. ``against``: a generic
     term's name for the encompassing test, "auto" for the one the step at that iteration discovered or described
     (none if it ran no discovery), None for no encompassing test. The level is the one the step used (alpha over
@@ -54,7 +56,8 @@ def check_effect(loop_dir, term, iteration: int | None = None, config=None, agai
             raise ValueError(f"{loop_dir}: no iteration {iteration} (the loop ran iterations {ran})")
     folder = loop_dir / it["results_dir"]
     res = IdentificationResult.load(folder)
-    cfg = load_identification_config(config or doc["config"], overrides={"data": {"dataset": doc["dataset"]}})
+    cfg = load_identification_config(config or find_config(folder, res),
+                                     overrides={"data": {"dataset": doc["dataset"]}})
     if res.info.get("extensions"):
         cfg = config_of_result(cfg, res)
     check_results_match(cfg, res, folder)

@@ -63,6 +63,10 @@ def check_effect(loop_dir, term, iteration: int | None = None, config=None, agai
     check_results_match(cfg, res, folder)
     settings = loop_settings(cfg)
     model = cfg.model.with_parameters(**it["parameters"])
+    name = term if isinstance(term, str) else term.name
+    if name in {e.name for e in model.extensions}:
+        raise ValueError(f"{name!r} is in the model of iteration {it['iteration']} already; test it at an earlier "
+                         f"iteration (--iteration)")
     step = it.get("discovery") or {}
     if against == "auto":
         against = (step.get("discovered") or step.get("best_generic") or {}).get("name")

@@ -121,7 +121,6 @@ def cmd_diagnose(args) -> int:
     return 0
 
 
-
 def load_effect(spec: str):
     """``--effect``: a library name (``lon_rigging``, ``dM_col``) or ``FILE.py:CLASS`` / ``MODULE:CLASS``, an
     extension class of one's own, built with no arguments; its strength needs bounds (the NLP frees it within
@@ -129,7 +128,7 @@ def load_effect(spec: str):
     import importlib
     import importlib.util
 
-    from ..diagnosis.candidates import make_candidate
+    from ..diagnosis.candidates import as_candidate, make_candidate
     from ..physics.extensions import Extension
 
     if ":" not in spec:
@@ -153,15 +152,10 @@ def load_effect(spec: str):
     if not (isinstance(cls, type) and issubclass(cls, Extension)):
         raise UserError(f"option --effect: {where} has no extension class {name!r} (a subclass of "
                         f"pyomo_heli.physics.extensions.Extension)")
-    effect = cls()
-    strength = getattr(effect, "strength", None)
-    specs = {s.name: s for s in effect.parameters()}
-    if strength not in specs:
-        raise UserError(f"option --effect: {name} declares no parameter named by its 'strength' ({strength!r})")
-    if specs[strength].bounds is None:
-        raise UserError(f"option --effect: {name}'s strength {strength!r} has no bounds; declare "
-                        f"ParameterSpec(..., bounds=(lower, upper)) so that the NLP can free it within them")
-    return effect
+    try:
+        return as_candidate(cls())
+    except ValueError as exc:
+        raise UserError(f"option --effect: {exc}") from None
 
 
 def cmd_check_effect(args) -> int:

@@ -298,9 +298,18 @@ def make_candidate(name: str) -> Candidate:
 def as_candidate(term) -> Extension:
     """``term`` as an extension to score or estimate: a library name (:func:`make_candidate`), or an extension
     object passed as it is (a study's own effect, e.g. the truth's form for a detectability check). An object
-    needs a ``strength`` parameter with bounds; ``one_sided``, ``score_step`` and ``shape_parameters`` default to
-    a two-sided strength, analytic sensitivities and no shape."""
-    return term if isinstance(term, Extension) else make_candidate(term)
+    needs a ``strength`` parameter with bounds (ValueError naming its class otherwise); ``one_sided``,
+    ``score_step`` and ``shape_parameters`` default to a two-sided strength, analytic sensitivities and no shape."""
+    if not isinstance(term, Extension):
+        return make_candidate(term)
+    name, strength = type(term).__name__, getattr(term, "strength", None)
+    specs = {s.name: s for s in term.parameters()}
+    if strength not in specs:
+        raise ValueError(f"{name} declares no parameter named by its 'strength' ({strength!r})")
+    if specs[strength].bounds is None:
+        raise ValueError(f"{name}'s strength {strength!r} has no bounds; declare ParameterSpec(..., bounds=(lower, "
+                         f"upper)) so that the NLP can free it within them")
+    return term
 
 
 def model_with_candidates(model: HelicopterModel, names, shape: dict | None = None) -> HelicopterModel:

@@ -20,13 +20,11 @@ from pathlib import Path
 
 from ..config import config_of_result, load_identification_config
 from ..dataset import load_flight_test
-from ..diagnosis.candidates import CANDIDATES
 from ..diagnosis.discovery import check_term, library
 from ..diagnosis.residuals import find_config
 from ..log import info
 from ..nlp.identification import identification_data
 from ..pareto.result import IdentificationResult
-from ..physics.discrepancy import generic_names
 from ..provenance import check_results_match
 from ..report.loop import final_index, load_loop
 from .close_loop import loop_settings, score_test_inputs
@@ -72,8 +70,8 @@ def check_effect(loop_dir, term, iteration: int | None = None, config=None, agai
         against = (step.get("discovered") or step.get("best_generic") or {}).get("name")
     if against is not None and against in {e.name for e in model.extensions}:
         raise ValueError(f"against = {against!r}: that term is in the model of iteration {it['iteration']} already")
-    level = step.get("level") or settings.alpha / len(library(model, settings.candidates or list(CANDIDATES),
-                                                               settings.generic or generic_names()))
+    level = step.get("level") or settings.alpha / len(library(model, settings.candidates or None,
+                                                               settings.generic or None))
     out = check_term(cfg, model, it["parameters"], identification_data(cfg, load_flight_test(cfg.dataset)), term,
                      level=level, against=against, alpha=settings.alpha, robust=settings.robust,
                      score_kw=score_test_inputs(cfg, settings), progress=progress)

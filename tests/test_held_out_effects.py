@@ -17,17 +17,19 @@ KT = 0.514444
 
 
 def test_diagnosis_and_close_loop_never_import_the_held_out_effects():
-    """Import every diagnosis module, the close loop (its candidate menu) and the discrepancy family in a fresh
-    interpreter: the held-out module must not be loaded, and no source file there names it."""
+    """Import every diagnosis module, the close loop (its candidate menu), check-effect and the discrepancy family in
+    a fresh interpreter: the held-out module must not be loaded, and no source file there names it."""
     mods = [p.stem for p in (ROOT / "pyomo_heli" / "diagnosis").glob("*.py") if p.stem != "__init__"]
     code = ("import sys\n" + "".join(f"import pyomo_heli.diagnosis.{m}\n" for m in mods)
-            + "import pyomo_heli.workflows.close_loop, pyomo_heli.physics.discrepancy\n"
+            + "import pyomo_heli.workflows.close_loop, pyomo_heli.workflows.check_effect\n"
+            + "import pyomo_heli.physics.discrepancy\n"
             + "from pyomo_heli.workflows.close_loop import loop_settings\n"
             + "print('held_out' in ' '.join(sys.modules))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip() == "False", out.stdout + out.stderr
     package = ROOT / "pyomo_heli"
     for p in list((package / "diagnosis").glob("*.py")) + [package / "workflows" / "close_loop.py",
+                                                          package / "workflows" / "check_effect.py",
                                                           package / "physics" / "discrepancy.py"]:
         assert "held_out" not in p.read_text(), p
 

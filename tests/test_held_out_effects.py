@@ -357,3 +357,48 @@ def test_the_truth_forms_check_finds_the_held_out_effect_at_its_strength(tmp_pat
     else:
         assert got["p"] > 0.01 and not got["significant"], got
     assert json.loads((tmp_path / "truth_form.json").read_text()) == got  # cached beside the loop
+
+
+def test_the_fresh_blind_set_moves_what_its_equations_say():
+    """H8-H10 at their nominal strengths, against the equations of their docstrings evaluated here by hand:
+    the pitot reads k_pd v_i high in hover and nothing at 120 kt, and moves no trim; the fuselage's pitch damping
+    is -k 0.25 rho V 12 m^2 (4 m)^2 q and moves no trim; the tail's cubic lift loss is
+    -k (alpha_t/0.2)^2 of M0's tail lift (dM = l_t dZ), a few thousandths of a degree in level trims."""
+    m0 = HelicopterModel()
+    p = m0.parameters
+
+    def model(name):
+        return HelicopterModel(extensions=(HELD_OUT_EFFECTS[name](),)).with_parameters(**HELD_OUT_STRENGTHS[name])
+
+    def state(tp, q=0.0):
+        return {"u": tp.u, "w": tp.w, "q": q, "theta": tp.theta, "lambda_i": tp.lambda_i}
+
+    pitot = model("pitot_downwash")
+    for V in (0.0, 120 * KT):
+        a, b = trim_float(m0, V), trim_float(pitot, V)
+        assert (b.col, b.lon, b.theta) == pytest.approx((a.col, a.lon, a.theta), abs=1e-12)
+        x, u = state(a), {"col": a.col, "lon": a.lon}
+        d_tas = pitot.evaluate(x, u).outputs["TAS"] - m0.evaluate(x, u).outputs["TAS"]
+        v_i = a.lambda_i * p["Omega"] * p["R"]
+        assert d_tas == pytest.approx(0.2 * v_i if V == 0 else 0.0, rel=1e-9, abs=1e-5)
+    assert 0.2 * trim_float(m0, 0.0).lambda_i * p["Omega"] * p["R"] > 1.0  # > 1 m/s in hover
+
+    damp = model("fuselage_pitch_damping")
+    a = trim_float(m0, 80 * KT)
+    assert trim_float(damp, 80 * KT).theta == pytest.approx(a.theta, abs=1e-12)
+    x, u = state(a, q=0.1), {"col": a.col, "lon": a.lon}
+    V = np.sqrt(a.u**2 + a.w**2 + p["eps_v"] ** 2)
+    dM = damp.evaluate(x, u).forces.M - m0.evaluate(x, u).forces.M
+    assert dM == pytest.approx(-1.0 * 0.25 * p["rho"] * V * 12.0 * 16.0 * 0.1, rel=1e-9)
+
+    stall = model("tail_stall")
+    x = {"u": 40.0, "w": 6.0, "q": 0.2, "theta": 0.1, "lambda_i": 0.02}
+    u = {"col": 0.2, "lon": 0.0}
+    w_t = 6.0 + 0.2 * p["l_t"]
+    Z_T = -0.5 * p["rho"] * p["eta_t"] * p["S_t"] * p["CL_alpha_HT"] * (40.0**2 * p["alpha_t0"] + 40.0 * w_t)
+    alpha_t = (40.0 * p["alpha_t0"] + w_t) / np.sqrt(40.0**2 + w_t**2 + 1.0)
+    f0, f1 = m0.evaluate(x, u).forces, stall.evaluate(x, u).forces
+    dZ = -0.2 * (alpha_t / 0.2) ** 2 * Z_T
+    assert (f1.Z - f0.Z, f1.M - f0.M) == pytest.approx((dZ, p["l_t"] * dZ), rel=1e-9)
+    for V in (40, 80):
+        assert abs(trim_float(stall, V * KT).theta - trim_float(m0, V * KT).theta) < np.radians(0.02)

@@ -119,7 +119,8 @@ ENTRIES: tuple[Entry, ...] = (
                                    "--epsilon 0.2008495658274336 --out {out}/multistart_case1_eps --restart",),
           ("multistart.json", "starts.csv"), minutes=20),
     Entry("held_out_small", ("python studies/held_out_effects.py --seeds 1 --effects fuselage_download drag_rise "
-                             "canted_tail_rotor vertical_drag control_mixing actuator_lag accelerometer_filter none "
+                             "canted_tail_rotor vertical_drag control_mixing actuator_lag accelerometer_filter "
+                             "pitot_downwash tail_stall fuselage_pitch_damping none "
                              "--config studies/held_out_small.toml --data-config studies/held_out_small_gen.toml "
                              "--out {out}/held_out_small",),
           ("held_out.csv", "held_out.md"), minutes=30),
@@ -127,7 +128,7 @@ ENTRIES: tuple[Entry, ...] = (
           ("held_out.csv", "held_out.md"), minutes=140),
     Entry("held_out", ("python studies/held_out_effects.py --seeds 3 --out {out}/held_out",
                        "python studies/held_out_effects.py --bundled --out {out}/held_out"),
-          ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=500),
+          ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=650),
     Entry("bo105_flight_trims", ("pyomo-heli trim-loop studies/bo105_flight_trims.toml "
                                  "--out {out}/bo105_flight_trims",),
           ("report.md", "trim_curves.png", "trim_loop.json", "trim_residuals.png"), minutes=2),

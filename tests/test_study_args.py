@@ -28,6 +28,9 @@ ROOT = Path(__file__).resolve().parent.parent
      "--config nope.toml: file not found"),
     (["validation_test_level.py", "--seeds", "1", "--data-config", "studies/held_out_small.toml", "--out", "OUT"],
      "held_out_small.toml: unknown key 'loop'"),
+    (["record_bias_level.py", "--seeds", "x", "--out", "OUT"], "--seeds: cannot read 'x'"),
+    (["record_bias_level.py", "--seeds", "1", "--config", "nope.toml", "--out", "OUT"],
+     "--config nope.toml: file not found"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path):

@@ -10,7 +10,10 @@ of a parameter set and runs every test:
   correlation with physical regressors (:mod:`.timeseries`); when the
   identification estimated the input errors, whiteness is tested on the
   residuals' innovations instead, which take out the colour the measured
-  inputs' noise gives them (:mod:`.innovations`).
+  inputs' noise gives them (:mod:`.innovations`);
+- with the innovations, the records' agreement on each output's bias: whiteness
+  cannot see an error that is constant within a record and changes from record
+  to record (:mod:`.record_bias`).
 
 The result, :class:`Diagnosis`, is plain data: it saves to and loads from
 JSON, prints as readable tables and carries short findings in words. Figures
@@ -31,6 +34,7 @@ from ..units import DEG, KT
 from .residuals import DISPLAY, Residuals
 from .timeseries import (DYN_BAND, HIGH_BAND, TEST_RATE_HZ, clean_time_residuals, coherence_table,
                          correlation_table, spectra, whiteness_table, with_bound)
+from .record_bias import record_bias_tests
 from .trim_shape import ShapeTest, trim_shape_test
 
 #: band ratio above which a residual spectrum counts as dominated by the dynamics band
@@ -69,6 +73,7 @@ class Diagnosis:
     coherence: list = field(default_factory=list)  # per maneuver, output and input
     coherence_curves: dict = field(default_factory=dict)  # maneuver -> {"f": [...], "<in>:<out>": [...]}
     correlations: list = field(default_factory=list)
+    record_biases: dict = field(default_factory=dict)  # output -> RecordBiasTest as dict
     verdict: dict = field(default_factory=dict)
     findings: list = field(default_factory=list)
     problems: list = field(default_factory=list)
@@ -76,7 +81,7 @@ class Diagnosis:
 
     # ------------------------------------------------------------ tables
     def table(self, name: str) -> pd.DataFrame:
-        """One of rms, nuisance, whiteness, coherence, correlations, trim_shapes as a DataFrame."""
+        """One of rms, nuisance, whiteness, coherence, correlations, trim_shapes, record_biases as a DataFrame."""
         if name == "trim_shapes":
             rows = []
             for c, t in self.trim_shapes.items():
@@ -85,6 +90,8 @@ class Diagnosis:
                              **{f"p {s}": p[s] for s in p}, "rms": t["rms"], "rms after": t["rms_after"],
                              "runs z": t["runs"].get("z")})
             return pd.DataFrame(rows)
+        if name == "record_biases":
+            return pd.DataFrame([{k: v for k, v in t.items() if k != "by_speed"} for t in self.record_biases.values()])
         return pd.DataFrame(getattr(self, name))
 
     def shape(self, channel: str) -> ShapeTest:
@@ -120,6 +127,10 @@ class Diagnosis:
             how = f"; innovations of {', '.join(inn['outputs'])} (input noise taken out)" if inn else ""
             L += [f"Whiteness: Ljung-Box p-values at {self.settings['test_rate_hz']:g} Hz after removing the nuisance "
                   f"(white if p > alpha / tests{how}):", piv.to_string(float_format=lambda x: f"{x:.2g}"), ""]
+        rb = self.table("record_biases")
+        if len(rb):
+            L += ["Record biases: do the records agree on each output's bias (chi-square across records, SI)?",
+                  rb.to_string(index=False, float_format=lambda x: f"{x:.3g}"), ""]
         for role, sp in self.spectra.items():
             br = ", ".join(f"{o} {v:.3g}" for o, v in sp.get("band_ratio", {}).items())
             L.append(f"Spectral band ratio ({role}; PSD {DYN_BAND[0]:g}-{DYN_BAND[1]:g} Hz / "
@@ -267,17 +278,24 @@ def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RAT
                   trim_shapes={c: t.to_dict() for c, t in shapes.items()}, nuisance=_records(nuisance),
                   whiteness=_records(white), spectra={r: s for r, s in spec.items() if s}, coherence=_records(coh),
                   coherence_curves=curves, correlations=_records(corr), problems=problems, info=dict(res.info))
+    biases = record_bias_tests(res.info["innovations"]["record_biases"], alpha) \
+        if res.info.get("innovations", {}).get("record_biases") else {}
+    d.record_biases = {o: t.to_dict() for o, t in biases.items()}
     verdict = {"trim_shape": {c: t.shape for c, t in shapes.items()}}
     for role in ("identification", "validation"):
         w = white[white["role"] == role] if len(white) else white
         if len(w):
             verdict[f"white_{role}"] = bool(w["white"].astype(bool).all())
+    if biases:
+        verdict["record_biases_agree"] = all(t.consistent for t in biases.values())
     verdict["noise_only"] = bool(all(t.shape == "noise" for t in shapes.values())
-                                 and verdict.get("white_identification", True))
+                                 and verdict.get("white_identification", True)
+                                 and verdict.get("record_biases_agree", True))
     d.verdict = verdict
-    d.findings = _findings(d, shapes, white, coh, corr)
+    d.findings = _findings(d, shapes, white, coh, corr) + [t.describe() for t in biases.values() if not t.consistent]
     d.findings.insert(0, "verdict: " + ("the residuals look like noise only (no trim shape, identification residuals "
-                                        "white)" if verdict["noise_only"] else
+                                        "white" + (", record biases agree" if biases else "") + ")"
+                                        if verdict["noise_only"] else
                                         "structure left in the residuals: something is missing from the model"))
     return d
 

@@ -67,8 +67,11 @@ def input_noise_factor(model: HelicopterModel, mv, outputs, input_errors, sigma:
 
 
 def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigma: dict, test_rate_hz: float,
-                         substeps: int = 2) -> pd.DataFrame:
-    """Innovations of one prepared maneuver at its test-rate samples (columns ``t`` and ``inn_<o>``).
+                         substeps: int = 2) -> tuple[pd.DataFrame, dict]:
+    """Innovations of one prepared maneuver at its test-rate samples (columns ``t`` and ``inn_<o>``), and the
+    maneuver's output biases: ``{"bias_<o>": SI, "se_bias_<o>": SI}``, the generalised least-squares estimates
+    of the nuisance with their standard errors under the same covariance, scaled by each output's innovation RMS in
+    the record (the record's own noise level: the sigmas come from the lead-ins and need not fit every record).
 
     ``sigma``: the noise sigma [SI] of every output and input channel. The sign follows
     :class:`~pyomo_heli.diagnosis.residuals.Residuals` (model - data); whiteness does not care.
@@ -90,8 +93,15 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
         N[:, n_out + c] = Su[:, c * n:(c + 1) * n].sum(axis=1)
     ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)
     coef, *_ = np.linalg.lstsq(Nw, ew, rcond=None)
+    cov = np.linalg.pinv(Nw.T @ Nw)  # the estimates' covariance if the whitened rows have unit variance
     ew = (ew - Nw @ coef).reshape(m, n_out)
-    return pd.DataFrame({"t": t[keep], **{f"inn_{o}": ew[:, j] for j, o in enumerate(outputs)}})
+    # each output's noise scale in this record: the RMS of its innovations (1 when the sigmas are right; a record
+    # noisier than the lead-in's sigma says, e.g. at hover, widens its bias's standard error)
+    dof = max(m - N.shape[1] / n_out, 1.0)
+    scale = np.sqrt(np.sum(ew**2, axis=0) / dof)
+    biases = {**{f"bias_{o}": float(coef[j]) for j, o in enumerate(outputs)},
+              **{f"se_bias_{o}": float(np.sqrt(cov[j, j]) * scale[j]) for j, o in enumerate(outputs)}}
+    return pd.DataFrame({"t": t[keep], **{f"inn_{o}": ew[:, j] for j, o in enumerate(outputs)}}), biases
 
 
 def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_errors, noise_sigma: dict | None,
@@ -102,7 +112,8 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     identification maneuvers, as in the NLP). An output without a known sigma (not in the
     ``noise_sigma`` table, or no noise in the lead-in) is left out and named in ``problems``; a maneuver
     whose computation fails likewise. Returns ``(table, settings)``: columns ``maneuver, role, t,
-    inn_<o>``, and the channels and sigmas used.
+    inn_<o>``, and the channels and sigmas used, with ``record_biases``: per maneuver its role, trim speed and
+    output biases with their standard errors (:func:`maneuver_innovations`).
     """
     problems = problems if problems is not None else []
     input_errors = list(input_errors)
@@ -116,10 +127,10 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
             outs.append(o)
         except ValueError as exc:
             problems.append(f"innovations: output {o} left out ({exc})")
-    frames = []
+    frames, biases = [], []
     for role, mv in maneuvers:
         try:
-            df = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps)
+            df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps)
         except Exception as exc:  # noqa: BLE001 - the raw residual tests stay available
             why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             problems.append(f"maneuver {mv.name}: innovations failed ({why})")
@@ -127,7 +138,8 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
         df.insert(0, "role", role)
         df.insert(0, "maneuver", mv.name)
         frames.append(df)
+        biases.append({"maneuver": mv.name, "role": role, "trim_speed": float(mv.trim_speed), **b})
     table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["maneuver", "role", "t"])
     settings = {"outputs": outs, "input_errors": input_errors, "test_rate_hz": float(test_rate_hz),
-                "sigma": {c: float(v) for c, v in sigma.items()}}
+                "sigma": {c: float(v) for c, v in sigma.items()}, "record_biases": biases}
     return table, settings

@@ -234,6 +234,17 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
               f"white when p > alpha / number of tests of the role, bound {_fmt(w['bound'].min(), 2)} for "
               "identification):", "", markdown_table(piv, digits=2), "",
               f"![time residuals](diagnosis_time.{figure_format})", ""]
+    if diag.record_biases:
+        L += ["### Record biases", "", "Do the records agree on each output's bias (generalised least-squares bias per "
+              "record under the innovations' covariance; chi-square of their spread, Bonferroni over the outputs; "
+              "docs/diagnosis.md)?", "", markdown_table(diag.table("record_biases"), digits=3), ""]
+        for o, t in diag.record_biases.items():
+            if not t["consistent"]:
+                unit, fac = _unit(o)
+                by = pd.DataFrame([{"trim speed [kt]": r["V"] / KT, f"bias - mean [{unit}]": r["shift"] * fac,
+                                    f"SE [{unit}]": r["se"] * fac, "records": r["records"]} for r in t["by_speed"]])
+                L += [f"{o}: residual bias (model - data) of the records at each trim speed against their mean:", "",
+                      markdown_table(by, digits=3), ""]
     if diag.spectra:
         L += ["### Spectra", "", f"![spectra](diagnosis_spectra.{figure_format})", "",
               "Band ratio = mean PSD in 0.1-2 Hz / mean PSD in 2-5 Hz (about 1 for white noise):", ""]

@@ -110,6 +110,9 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("validation_test_level", ("python studies/validation_test_level.py --seeds 20261122-20261147 "
                                     "--out {out}/validation_test_level",),
           ("summary.csv", "summary.md"), minutes=30),
+    Entry("record_bias_level", ("python studies/record_bias_level.py --seeds 20261122-20261161 "
+                                "--out {out}/record_bias_level",),
+          ("summary.csv", "summary.md"), minutes=30),
     Entry("monte_carlo", ("python studies/monte_carlo.py --realizations 20 --out {out}/monte_carlo",),
           ("monte_carlo.json", "monte_carlo.png", "realizations.csv", "summary.csv", "summary.md"), minutes=45),
     Entry("multistart_case1", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "

@@ -20,8 +20,6 @@ seed are not independent draws (p and 1 - p).
 """
 from __future__ import annotations
 
-import argparse
-import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -29,18 +27,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pyomo_heli.config import ConfigError, load_identification_config
+from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.validation_change import mean_square_change
-from pyomo_heli.flighttest.config import load_config
-from pyomo_heli.flighttest.generate import generate
 from pyomo_heli.nlp.identification import validation_maneuvers
-from pyomo_heli.report.identification import VALIDATION_OUTPUTS, markdown_table, predict, truth_prediction
+from pyomo_heli.report.identification import VALIDATION_OUTPUTS, predict, truth_prediction
 
-from .args import in_file, out_folder
-from .score_test_level import seeds_of
+from .seeded import cached_seed, m0_noise_data, seeded_study_main
 
-ROOT = Path(__file__).resolve().parents[2]
 #: batch choices: name -> batch length [s] (None: whole records, the rule's)
 BATCHES = {"whole records": None, "1 s": 1.0}
 LEVELS = (0.05, 0.01)
@@ -48,16 +42,11 @@ LEVELS = (0.05, 0.01)
 
 def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
     """The p-values of one seed (read back from ``OUT/seed_<seed>.json`` when it is there)."""
+    done = cached_seed(out, seed)
+    if done is not None:
+        return done
     f = out / f"seed_{seed}.json"
-    if f.is_file():
-        try:
-            return json.loads(f.read_text())
-        except ValueError:  # cut short by a kill: compute it again
-            pass
-    data = out / "data" / str(seed)
-    if not (data / "truth.json").is_file():
-        gen = dataclasses.replace(load_config(data_config), seed=seed, effects={})
-        generate(gen, data, force=True)
+    data = m0_noise_data(seed, data_config, out)
     cfg = load_identification_config(config, overrides={"data": {"dataset": str(data)}})
     val = validation_maneuvers(cfg, load_flight_test(data))
     if not val:
@@ -89,37 +78,14 @@ def summary(docs: list[dict]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", required=True, help="e.g. 20261122-20261147")
-    ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
-    ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
-    ap.add_argument("--out", required=True)
-    a = ap.parse_args(argv)
-    try:
-        seeds = seeds_of(a.seeds)
-    except ValueError as exc:
-        ap.error(f"--seeds: {exc}")
-    config, data_config = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
-    try:  # both configs checked before any work
-        load_config(data_config)
-        load_identification_config(config)
-    except ConfigError as exc:
-        ap.error(str(exc))
-    out = out_folder(ap, a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    docs = []
-    for s in seeds:
-        docs.append(one_seed(s, config.resolve(), data_config.resolve(), out))
-        print(f"seed {s} done", flush=True)
-    tab = summary(docs)
-    tab.to_csv(out / "summary.csv", index=False)
-    (out / "summary.md").write_text(
+def summarise(docs: list) -> tuple[pd.DataFrame, str]:
+    return summary(docs), (
         f"Paired validation test under equal error energy, {len(docs)} seeds of M0 + noise "
-        f"({docs[0]['records']} validation records each); expected: p < alpha in alpha of the tests.\n\n"
-        + markdown_table(tab, digits=3) + "\n")
-    print(tab.to_string(index=False))
-    return 0
+        f"({docs[0]['records']} validation records each); expected: p < alpha in alpha of the tests.")
+
+
+def main(argv=None) -> int:
+    return seeded_study_main(__doc__.splitlines()[0], argv, one_seed, summarise, "20261122-20261147")
 
 
 if __name__ == "__main__":

@@ -173,7 +173,8 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
     """When nothing is accepted: is the residual noise only, or an unexplained residual with a signature?
 
     Uses the residual analysis of :mod:`pyomo_heli.diagnosis.analysis` (trim shapes, whiteness,
-    coherence) on the chosen parameters. A failure is reported, not raised (the loop's results stand).
+    coherence, the records' agreement on each output's bias) on the chosen parameters. A failure is reported,
+    not raised (the loop's results stand).
     """
     try:
         from ..diagnosis.analysis import diagnose
@@ -185,7 +186,7 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
         return {"status": f"failed: {exc}"}
     status = "noise only" if d.verdict.get("noise_only") else "unexplained residual"
     progress(f"residual diagnosis: {status}")
-    return {"status": status, "verdict": d.verdict, "findings": d.findings}
+    return {"status": status, "verdict": d.verdict, "findings": d.findings, "record_biases": d.record_biases}
 
 
 def score_test_inputs(cfg: IdentificationConfig, settings: LoopSettings) -> dict:

@@ -1,0 +1,78 @@
+"""The command line shared by the Monte Carlo level studies on the bundled records (validation_test_level,
+record_bias_level): seeds, the loop config and the generator config, one JSON per seed in OUT, a summary."""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+from typing import Callable
+
+from pyomo_heli.config import ConfigError, load_identification_config
+from pyomo_heli.flighttest.config import load_config
+from pyomo_heli.flighttest.generate import generate
+from pyomo_heli.report.identification import markdown_table
+
+from .args import in_file, out_folder
+from .score_test_level import seeds_of
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def seeded_study_main(description: str, argv, one_seed: Callable[[int, Path, Path, Path], dict],
+                      summarise: Callable[[list], tuple], seeds_example: str = "20261122-20261147") -> int:
+    """Parse ``--seeds --config --data-config --out`` (both configs checked before any work), run ``one_seed(seed,
+    config, data_config, out)`` for every seed (printing each as it ends); ``summarise(docs)`` gives the summary
+    table and the sentence above it: ``OUT/summary.csv``, ``OUT/summary.md``, printed. ``OUT/data`` is removed when
+    the seeds left it empty (another run into the same OUT may still be using it)."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--seeds", required=True, help=f"e.g. {seeds_example}")
+    ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
+    ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
+    ap.add_argument("--out", required=True)
+    a = ap.parse_args(argv)
+    try:
+        seeds = seeds_of(a.seeds)
+    except ValueError as exc:
+        ap.error(f"--seeds: {exc}")
+    config, data_config = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
+    try:
+        load_config(data_config)
+        load_identification_config(config)
+    except ConfigError as exc:
+        ap.error(str(exc))
+    out = out_folder(ap, a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    docs = []
+    for s in seeds:
+        docs.append(one_seed(s, config.resolve(), data_config.resolve(), out))
+        print(f"seed {s} done", flush=True)
+    try:
+        (out / "data").rmdir()
+    except OSError:
+        pass
+    tab, header = summarise(docs)
+    tab.to_csv(out / "summary.csv", index=False)
+    (out / "summary.md").write_text(header + "\n\n" + markdown_table(tab, digits=3) + "\n")
+    print(tab.to_string(index=False))
+    return 0
+
+
+def cached_seed(out: Path, seed: int) -> dict | None:
+    """A finished seed's ``OUT/seed_<seed>.json``; None when it is missing or was cut short by a kill."""
+    f = out / f"seed_{seed}.json"
+    if f.is_file():
+        try:
+            return json.loads(f.read_text())
+        except ValueError:
+            pass
+    return None
+
+
+def m0_noise_data(seed: int, data_config: Path, out: Path) -> Path:
+    """``OUT/data/<seed>``: the flight test of ``data_config`` generated from M0 with sensor noise only (its truth
+    effects removed, its seed replaced); kept if it is already there."""
+    data = out / "data" / str(seed)
+    if not (data / "truth.json").is_file():
+        generate(dataclasses.replace(load_config(data_config), seed=seed, effects={}), data, force=True)
+    return data

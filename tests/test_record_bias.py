@@ -122,3 +122,17 @@ def test_level_study_writes_each_seed_and_resumes(tmp_path):
     assert list(summary["output"])[-1] == "all" and int(summary["tests"].iloc[-1]) == 6
     (tmp_path / "seed_7.json").write_text(json.dumps({**doc, "records": 99}))
     assert main(argv) == 0 and "(99 records each" in (tmp_path / "summary.md").read_text()
+
+
+def test_the_shape_table_lists_each_speed_in_display_units():
+    """report.diagnosis.record_bias_shapes (the diagnosis report and the loop report's residual analysis): only the
+    outputs whose records disagree, each speed in kt with its bias in the output's display unit."""
+    from pyomo_heli.report.diagnosis import record_bias_shapes
+
+    rows = [{"trim_speed": v * KT, "bias_theta": b, "se_bias_theta": 1e-4, "bias_q": 0.0, "se_bias_q": 1e-3}
+            for v, b in ((20, 0.0), (80, 0.01))]
+    tests = {o: t.to_dict() for o, t in record_bias_tests(rows).items()}
+    text = "\n".join(record_bias_shapes(tests))
+    assert "theta: residual bias" in text and "q: residual bias" not in text
+    # equal standard errors: each speed is 0.01 rad / 2 = 0.286 deg off the mean; SE 1e-4 rad = 0.00573 deg
+    assert "| 20 | -0.286 | 0.00573 | 1 |" in text and "| 80 | 0.286 | 0.00573 | 1 |" in text

@@ -178,6 +178,20 @@ def _fmt(x, d=3):
     return f"{x:.{d}g}" if isinstance(x, (float, np.floating)) else str(x)
 
 
+def record_bias_shapes(record_biases: dict) -> list[str]:
+    """Markdown lines: for each output whose records disagree on its bias (``Diagnosis.record_biases``), the
+    residual bias of the records at each trim speed against their mean, in display units."""
+    L = []
+    for o, t in record_biases.items():
+        if not t["consistent"]:
+            unit, fac = _unit(o)
+            by = pd.DataFrame([{"trim speed [kt]": r["V"] / KT, f"bias - mean [{unit}]": r["shift"] * fac,
+                                f"SE [{unit}]": r["se"] * fac, "records": r["records"]} for r in t["by_speed"]])
+            L += [f"{o}: residual bias (model - data) of the records at each trim speed against their mean:", "",
+                  markdown_table(by, digits=3), ""]
+    return L
+
+
 def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir=None, command: str | None = None,
                            figure_format: str = "png") -> Path:
     """Write the figures and ``diagnosis.md`` into ``out_dir``; return the path of ``diagnosis.md``."""
@@ -238,13 +252,7 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
         L += ["### Record biases", "", "Do the records agree on each output's bias (generalised least-squares bias per "
               "record under the innovations' covariance; chi-square of their spread, Bonferroni over the outputs; "
               "docs/diagnosis.md)?", "", markdown_table(diag.table("record_biases"), digits=3), ""]
-        for o, t in diag.record_biases.items():
-            if not t["consistent"]:
-                unit, fac = _unit(o)
-                by = pd.DataFrame([{"trim speed [kt]": r["V"] / KT, f"bias - mean [{unit}]": r["shift"] * fac,
-                                    f"SE [{unit}]": r["se"] * fac, "records": r["records"]} for r in t["by_speed"]])
-                L += [f"{o}: residual bias (model - data) of the records at each trim speed against their mean:", "",
-                      markdown_table(by, digits=3), ""]
+        L += record_bias_shapes(diag.record_biases)
     if diag.spectra:
         L += ["### Spectra", "", f"![spectra](diagnosis_spectra.{figure_format})", "",
               "Band ratio = mean PSD in 0.1-2 Hz / mean PSD in 2-5 Hz (about 1 for white noise):", ""]

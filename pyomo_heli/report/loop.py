@@ -26,6 +26,7 @@ from ..nlp.identification import validation_maneuvers
 from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
+from .diagnosis import record_bias_shapes
 from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
                              read_truth, truth_model_errors, truth_prediction, validation_rms)
 
@@ -287,7 +288,7 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
         rd = it.get("residual_diagnosis")
         if rd:
             L += [f"Residual analysis of what is left (pyomo_heli.diagnosis): **{rd['status']}**", ""]
-            L += [f"- {f}" for f in rd.get("findings", [])] + [""]
+            L += [f"- {f}" for f in rd.get("findings", [])] + [""] + record_bias_shapes(rd.get("record_biases") or {})
         if a.get("signature"):
             rows = [{"block": k, **v} for k, v in a["signature"].items()]
             L += ["Residual signature (SI):", "", markdown_table(pd.DataFrame(rows), digits=4), ""]

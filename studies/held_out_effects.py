@@ -257,14 +257,16 @@ def criterion_met(row: dict) -> bool | str:
     """Issue 27's criterion for a row: no wrong acceptance, no significant validation rise of a kept step, and either
     a discovered term kept that cuts the pooled trim RMS by >= 50 %, or an "unexplained" verdict whose reported shape
     matches the truth's. A kept discovered term is such a verdict (the loop reports it "not explained by any library
-    effect; discovered ..."), as is the shape the loop reports when it stops unexplained."""
+    effect; discovered ..."), as is the shape the loop reports when it stops unexplained, and the shape of an
+    output's record biases that the residual analysis of the kept model reports (:func:`record_bias_match`)."""
     if row["truth"] == "none":
         return "n/a"
     kept = row.get("kept discovered term", "-") != "-"
     return bool(not row["wrong acceptance"] and row["significant val rise (kept steps)"] == "none"
                 and ((kept and float(row["trim change %"]) <= -50.0)
                      or (kept and row["shape matches truth"] == "yes")
-                     or row["unexplained shape matches truth"] == "yes"))
+                     or row["unexplained shape matches truth"] == "yes"
+                     or str(row.get("record bias shape matches truth", "-")).startswith("yes")))
 
 
 def truth_floor(dataset: Path, config: Path) -> dict:
@@ -329,6 +331,88 @@ def truth_form_check(effect: str, loop: Path, config: Path = CONFIG) -> dict:
     return out
 
 
+#: the residual analysis a cached final verdict was made with (a new test in diagnosis/ invalidates the cache)
+RESIDUAL_ANALYSIS = "trim shape, whiteness, record biases (scaled by each record's innovation RMS)"
+
+
+def final_residual(loop: Path) -> dict:
+    """The residual analysis of the model the loop kept (``residual_verdict`` of the loop, the same call), made
+    with the current analysis: a loop run before a test was added to it reports its older verdict in
+    ``loop.json``. Cached in ``<case>/final_residual.json``. A loop without its iteration's results folder keeps
+    the verdict of its ``loop.json``."""
+    from pyomo_heli.config import config_of_result, load_identification_config
+    from pyomo_heli.pareto.result import IdentificationResult
+    from pyomo_heli.report.loop import final_index
+    from pyomo_heli.workflows.close_loop import residual_verdict
+
+    doc = json.loads((loop / "loop.json").read_text())
+    said = doc["iterations"][-1].get("residual_diagnosis") or {}
+    if "record_biases" in said:  # the loop ran with the current analysis
+        return {"analysis": RESIDUAL_ANALYSIS, **said}
+    cache = loop.parent / "final_residual.json"
+    if cache.is_file():
+        old = json.loads(cache.read_text())
+        if old.get("analysis") == RESIDUAL_ANALYSIS:
+            return old
+    rec = doc["iterations"][final_index(doc)]
+    folder = loop / f"iter_{rec['iteration']}"
+    if not (folder / "chosen.json").is_file():  # no results to analyse again: the loop's own verdict
+        return {"analysis": "the loop's", "status": said.get("status", "-"), "record_biases": {}}
+    res = IdentificationResult.load(folder)
+    cfg = load_identification_config(doc["config"], overrides={"data": {"dataset": doc["dataset"]}})
+    if res.info.get("extensions"):
+        cfg = config_of_result(cfg, res)
+    v = residual_verdict(cfg, rec["parameters"], progress=lambda s: None)
+    out = {"analysis": RESIDUAL_ANALYSIS, "status": v["status"], "findings": v.get("findings", []),
+           "record_biases": {o: t for o, t in (v.get("record_biases") or {}).items()}}
+    cache.write_text(json.dumps(out, indent=1))
+    return out
+
+
+def truth_record_change(effect: str, output: str, setup: SignatureSetup | None = None) -> dict:
+    """What the truth effect adds to ``output``'s mean over each validation record, averaged per trim speed
+    {V [m/s]: SI} (truth model against M0, both at the M0 truth parameters)."""
+    setup = setup or signature_setup()
+    pred, base = setup.predict(HELD_OUT_EFFECTS[effect](), HELD_OUT_STRENGTHS[effect]), setup.base
+    per = {}
+    for mv in setup.maneuvers:
+        d = pred.maneuvers[mv.name][output].to_numpy() - base.maneuvers[mv.name][output].to_numpy()
+        per.setdefault(round(float(mv.trim_speed), 6), []).append(float(np.mean(d)))
+    return {v: float(np.mean(x)) for v, x in per.items()}
+
+
+def record_bias_match(effect: str, tests: dict) -> str:
+    """Does a record-bias shape the residual analysis reports (an output whose records disagree on its bias, with
+    each speed's shift against the records' mean, residual = model - data) match the truth's change of that output's
+    record means in sign and speed dependence? The data hold the truth's change and the model lacks it, so the
+    shift should follow minus the change: 'yes' when, both centred over the speeds they share, their correlation
+    is > 0.7 and they agree in sign at the speed of the truth's largest centred change; 'no (...)' otherwise;
+    '-' when no output's records disagree."""
+    flagged = {o: t for o, t in tests.items() if not t["consistent"]}
+    if effect == "none" or not flagged:
+        return "n/a" if effect == "none" else "-"
+    verdicts = []
+    for o, t in flagged.items():
+        change = truth_record_change(effect, o)
+        shift = {round(r["V"], 6): -r["shift"] for r in t["by_speed"]}
+        vs = sorted(set(change) & set(shift))
+        if len(vs) < 3:
+            verdicts.append(f"{o}: n/a")
+            continue
+        a = np.array([change[v] for v in vs])
+        b = np.array([shift[v] for v in vs])
+        a, b = a - a.mean(), b - b.mean()
+        if not np.any(np.abs(a) > 1e-12):
+            verdicts.append(f"{o}: no (the truth does not change its record means)")
+            continue
+        corr = float(np.corrcoef(a, b)[0, 1])
+        k = int(np.argmax(np.abs(a)))
+        if corr > 0.7 and np.sign(a[k]) == np.sign(b[k]):
+            return f"yes ({o}, corr {corr:+.2f})"
+        verdicts.append(f"{o}: no (corr {corr:+.2f})")
+    return "no (" + "; ".join(verdicts) + ")"
+
+
 def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.diagnosis.discovery import best_fit
@@ -349,9 +433,13 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
                  + (f" {it['discovery']['added']}" if (it.get("discovery") or {}).get("added") else "")
                  + (" (rejected)" if j + 1 < len(its) and its[j + 1].get("rejected") else "")
                  for j, it in enumerate(its)]
+    fr = final_residual(loop)
     row = {"truth": effect, "seed": seed, "verdict": "; ".join(decisions),
-           "added (kept)": "+".join(ik["extensions"]) or "-",
-           "final residual": (its[-1].get("residual_diagnosis") or {}).get("status", "-")}
+           "added (kept)": "+".join(ik["extensions"]) or "-", "final residual": fr["status"]}
+    flagged = {o: t for o, t in fr["record_biases"].items() if not t["consistent"]}
+    row["record biases differ"] = (", ".join(f"{o} (chi2 {t['chi2']:.3g} on {t['df']})" for o, t in flagged.items())
+                                   or "none")
+    row["record bias shape matches truth"] = record_bias_match(effect, fr["record_biases"])
     def pooled(d, keys):
         return float(np.sqrt(np.mean([d[c] ** 2 for c in keys if c in d])))
 
@@ -631,12 +719,14 @@ def write_table(out: Path) -> pd.DataFrame:
 
 
 def markdown(tab: pd.DataFrame) -> str:
-    cols = [c for c in ("truth", "seed", "verdict", "added (kept)", "generic term", "shape matches truth",
+    cols = [c for c in ("truth", "seed", "verdict", "added (kept)", "final residual", "generic term",
+                        "shape matches truth",
                         "trim RMS before [deg]", "trim RMS after [deg]", "trim change %",
                         "trim RMS truth model [deg]", "trim change possible %", "share of possible trim cut %",
                         "val RMS / truth model's, worst output",
                         "significant val rise (kept steps)", "unexplained verdict", "unexplained shape",
-                        "unexplained shape matches truth", "wrong acceptance", "criterion met",
+                        "unexplained shape matches truth", "record biases differ", "record bias shape matches truth",
+                        "wrong acceptance", "criterion met",
                         "truth form at M0", "truth form p", "truth form significant",
                         "theta_twist err0 %", "theta_twist err1 %", "CL_alpha_HT err0 %", "CL_alpha_HT err1 %",
                         "Iyy err0 %", "Iyy err1 %") if c in tab]

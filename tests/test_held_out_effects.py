@@ -402,3 +402,29 @@ def test_the_fresh_blind_set_moves_what_its_equations_say():
     assert (f1.Z - f0.Z, f1.M - f0.M) == pytest.approx((dZ, p["l_t"] * dZ), rel=1e-9)
     for V in (40, 80):
         assert abs(trim_float(stall, V * KT).theta - trim_float(m0, V * KT).theta) < np.radians(0.02)
+
+
+def test_the_study_scores_the_record_bias_shape_the_residual_analysis_reports(tmp_path, study):
+    """A final residual analysis whose TAS record biases disagree (as the residual analysis of the pitot-downwash
+    rows reports them): matched against the truth's change of each speed's record means (the data hold it, the model
+    lacks it, so the residual follows minus it). The shape itself matches and meets the criterion; its mirror image
+    does not; fewer than three speeds cannot show a speed dependence."""
+    change = study.truth_record_change("pitot_downwash", "TAS")
+    assert max(change, key=change.get) < 11.0  # the probe reads high at hover and 20 kt (speeds in m/s)
+    mean = float(np.mean(list(change.values())))
+    by = [{"V": v, "shift": -(c - mean), "se": 0.05, "records": 2} for v, c in change.items()]
+    tas = {"output": "TAS", "chi2": 900.0, "df": 11, "p": 1e-100, "bound": 0.0017, "common": 0.0, "consistent": False,
+           "by_speed": by}
+    assert study.record_bias_match("pitot_downwash", {"TAS": tas}).startswith("yes (TAS, corr +1.00")
+    mirror = {"TAS": {**tas, "by_speed": [{**r, "shift": -r["shift"]} for r in by]}}
+    assert study.record_bias_match("pitot_downwash", mirror).startswith("no (TAS: no (corr -1.00")
+    assert study.record_bias_match("pitot_downwash", {"TAS": {**tas, "by_speed": by[:2]}}) == "no (TAS: n/a)"
+    assert study.record_bias_match("pitot_downwash", {"TAS": {**tas, "consistent": True}}) == "-"
+    # the loop's own residual analysis carries the test: the study reads it from loop.json
+    loop = _loop_doc(tmp_path, [{"iteration": 0, "extensions": [], "discovery": {"decision": "none"},
+                                 "residual_diagnosis": {"status": "unexplained residual",
+                                                        "record_biases": {"TAS": tas}}}], 0)
+    row = study.evaluate("pitot_downwash", 20261122, loop)
+    assert row["final residual"] == "unexplained residual" and row["record biases differ"] == "TAS (chi2 900 on 11)"
+    assert row["record bias shape matches truth"].startswith("yes") and row["unexplained verdict"]
+    assert row["criterion met"] is True

@@ -342,9 +342,8 @@ def final_residual(loop: Path) -> dict:
     with the current analysis: a loop run before a test was added to it reports its older verdict in
     ``loop.json``. Cached in ``<case>/final_residual.json``. A loop without its iteration's results folder keeps
     the verdict of its ``loop.json``."""
-    from pyomo_heli.config import config_of_result, load_identification_config
-    from pyomo_heli.pareto.result import IdentificationResult
     from pyomo_heli.report.loop import final_index
+    from pyomo_heli.workflows.check_effect import loop_iteration
     from pyomo_heli.workflows.close_loop import residual_verdict
 
     doc = json.loads((loop / "loop.json").read_text())
@@ -357,13 +356,9 @@ def final_residual(loop: Path) -> dict:
         if old.get("analysis") == RESIDUAL_ANALYSIS:
             return old
     rec = doc["iterations"][final_index(doc)]
-    folder = loop / f"iter_{rec['iteration']}"
-    if not (folder / "chosen.json").is_file():  # no results to analyse again: the loop's own verdict
+    if not (loop / rec.get("results_dir", "-") / "chosen.json").is_file():  # nothing to analyse again
         return {"analysis": "the loop's", "status": said.get("status", "-"), "record_biases": {}}
-    res = IdentificationResult.load(folder)
-    cfg = load_identification_config(doc["config"], overrides={"data": {"dataset": doc["dataset"]}})
-    if res.info.get("extensions"):
-        cfg = config_of_result(cfg, res)
+    _, rec, cfg = loop_iteration(loop, rec["iteration"], doc["config"])
     v = residual_verdict(cfg, rec["parameters"], progress=lambda s: None)
     out = {"analysis": RESIDUAL_ANALYSIS, "status": v["status"], "findings": v.get("findings", []),
            "record_biases": {o: t for o, t in (v.get("record_biases") or {}).items()}}

@@ -31,6 +31,8 @@ ROOT = Path(__file__).resolve().parent.parent
     (["record_bias_level.py", "--seeds", "x", "--out", "OUT"], "--seeds: cannot read 'x'"),
     (["record_bias_level.py", "--seeds", "1", "--config", "nope.toml", "--out", "OUT"],
      "--config nope.toml: file not found"),
+    (["record_bias_level.py", "--seeds", "1", "--config", "studies/multistart_case1.toml", "--out", "OUT"],
+     "the record-bias test needs the residuals' innovations"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path):

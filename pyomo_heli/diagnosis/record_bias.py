@@ -67,12 +67,14 @@ def record_bias_tests(records: list[dict], alpha: float = 0.01) -> dict[str, Rec
     ``se_bias_<o>``; the innovations' ``record_biases``). An output with fewer than two records is left out."""
     tab = pd.DataFrame(records)
     outs = [c[len("bias_"):] for c in tab.columns if c.startswith("bias_") and f"se_{c}" in tab]
-    tests = {}
+    groups = {}
     for o in outs:
         g = tab[["trim_speed", f"bias_{o}", f"se_bias_{o}"]].dropna()
         g = g[g[f"se_bias_{o}"] > 0]
-        if len(g) < 2:
-            continue
+        if len(g) >= 2:
+            groups[o] = g
+    tests = {}
+    for o, g in groups.items():
         b, s = g[f"bias_{o}"].to_numpy(float), g[f"se_bias_{o}"].to_numpy(float)
         w = 1.0 / s**2
         common = float(np.sum(w * b) / np.sum(w))
@@ -83,7 +85,6 @@ def record_bias_tests(records: list[dict], alpha: float = 0.01) -> dict[str, Rec
             mv = float(np.sum(wv * gv[f"bias_{o}"].to_numpy(float)) / np.sum(wv))
             by_speed.append({"V": float(v), "shift": mv - common, "se": float(np.sqrt(1.0 / np.sum(wv))),
                              "records": int(len(gv))})
-        tests[o] = RecordBiasTest(o, chi2, len(g) - 1, float(stats.chi2.sf(chi2, len(g) - 1)), 0.0, common, by_speed)
-    for t in tests.values():
-        t.bound = alpha / len(tests)
+        tests[o] = RecordBiasTest(o, chi2, len(g) - 1, float(stats.chi2.sf(chi2, len(g) - 1)), alpha / len(groups),
+                                  common, by_speed)
     return tests

@@ -1,6 +1,6 @@
 """How often do the records disagree on a bias when nothing is missing? Monte Carlo on the bundled records.
 
-    python studies/record_bias_level.py --seeds 20261122-20261151 --out results/record_bias_level \
+    python studies/record_bias_level.py --seeds 20261122-20261161 --out results/record_bias_level \
         [--config studies/held_out_discovery.toml] [--data-config data/bo105_synthetic.toml]
 
 Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
@@ -48,10 +48,7 @@ def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
     model = truth_model_of(data)
     res = compute_residuals(dataclasses.replace(cfg, model=model), model.parameters.to_dict(), label="truth",
                             input_offsets=False, trim_sensitivities=False)
-    inn = (res.info.get("innovations") or {}).get("record_biases")
-    if not inn:
-        raise ValueError(f"{config}: the residuals have no innovations (set [objectives] input_errors or "
-                         f"[diagnosis] input_noise); the record-bias test needs them")
+    inn = res.info["innovations"]["record_biases"]
     tests = record_bias_tests(inn, ALPHA)
     doc = {"seed": seed, "records": len(inn), "problems": res.problems,
            "tests": {o: {"chi2": t.chi2, "df": t.df, "p": t.p, "consistent": t.consistent} for o, t in tests.items()}}
@@ -83,8 +80,15 @@ def summarise(docs: list) -> tuple[pd.DataFrame, str]:
         f"flagged (some output below {ALPHA:g} / outputs) in about {100 * ALPHA:g} %.")
 
 
+def needs_innovations(cfg) -> None:
+    if not cfg.diagnosis_settings.input_noise:
+        raise ValueError(f"--config {cfg.path}: the record-bias test needs the residuals' innovations; set "
+                         f"[objectives] input_errors or [diagnosis] input_noise")
+
+
 def main(argv=None) -> int:
-    return seeded_study_main(__doc__.splitlines()[0], argv, one_seed, summarise, "20261122-20261161")
+    return seeded_study_main(__doc__.splitlines()[0], argv, one_seed, summarise, "20261122-20261161",
+                             needs_innovations)
 
 
 if __name__ == "__main__":

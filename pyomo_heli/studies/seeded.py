@@ -20,11 +20,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def seeded_study_main(description: str, argv, one_seed: Callable[[int, Path, Path, Path], dict],
-                      summarise: Callable[[list], tuple], seeds_example: str = "20261122-20261147") -> int:
+                      summarise: Callable[[list], tuple], seeds_example: str = "20261122-20261147",
+                      check_config: Callable | None = None) -> int:
     """Parse ``--seeds --config --data-config --out`` (both configs checked before any work), run ``one_seed(seed,
     config, data_config, out)`` for every seed (printing each as it ends); ``summarise(docs)`` gives the summary
     table and the sentence above it: ``OUT/summary.csv``, ``OUT/summary.md``, printed. ``OUT/data`` is removed when
-    the seeds left it empty (another run into the same OUT may still be using it)."""
+    the seeds left it empty (another run into the same OUT may still be using it). ``check_config(cfg)``: what the
+    study needs of the loop config, a ValueError naming ``--config`` otherwise."""
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--seeds", required=True, help=f"e.g. {seeds_example}")
     ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
@@ -38,8 +40,10 @@ def seeded_study_main(description: str, argv, one_seed: Callable[[int, Path, Pat
     config, data_config = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
     try:
         load_config(data_config)
-        load_identification_config(config)
-    except ConfigError as exc:
+        cfg = load_identification_config(config)
+        if check_config:
+            check_config(cfg)
+    except (ConfigError, ValueError) as exc:
         ap.error(str(exc))
     out = out_folder(ap, a.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..config import config_of_result, load_identification_config
+from ..config import IdentificationConfig, config_of_result, load_identification_config
 from ..dataset import load_flight_test
 from ..diagnosis.discovery import check_term, library
 from ..diagnosis.residuals import find_config
@@ -30,18 +30,11 @@ from ..report.loop import final_index, load_loop
 from .close_loop import loop_settings, score_test_inputs
 
 
-def check_effect(loop_dir, term, iteration: int | None = None, config=None, against: str | None = "auto",
-                 progress=info) -> dict:
-    """Test ``term`` (an extension object, or a library name) at iteration ``iteration`` of the finished loop in
-    ``loop_dir`` (default: the model the loop kept).
-
-    ``config``: the loop's config (default: the one the iteration's ``chosen.json`` names, found as ``diagnose``
-    finds it), with the dataset ``loop.json`` names;
-    the iteration's effects are added and the whole checked against its results folder. ``against``: a generic
-    term's name for the encompassing test, "auto" for the one the step at that iteration discovered or described
-    (none if it ran no discovery), None for no encompassing test. The level is the one the step used (alpha over
-    the library it scored), else alpha over the library at that model. Returns
-    :func:`~pyomo_heli.diagnosis.discovery.check_term`'s dict plus ``iteration``."""
+def loop_iteration(loop_dir, iteration: int | None = None, config=None) -> tuple[dict, dict, IdentificationConfig]:
+    """A finished loop's ``loop.json``, the record of iteration ``iteration`` (default: the model the loop kept) and
+    that iteration's config: ``config`` (else the one its ``chosen.json`` names) on the loop's dataset, plus the
+    effects the loop had added, checked against the iteration's results folder. ValueError for an iteration the
+    loop did not run."""
     loop_dir = Path(loop_dir)
     doc = load_loop(loop_dir)
     its = doc["iterations"]
@@ -59,6 +52,22 @@ def check_effect(loop_dir, term, iteration: int | None = None, config=None, agai
     if res.info.get("extensions"):
         cfg = config_of_result(cfg, res)
     check_results_match(cfg, res, folder)
+    return doc, it, cfg
+
+
+def check_effect(loop_dir, term, iteration: int | None = None, config=None, against: str | None = "auto",
+                 progress=info) -> dict:
+    """Test ``term`` (an extension object, or a library name) at iteration ``iteration`` of the finished loop in
+    ``loop_dir`` (default: the model the loop kept).
+
+    ``config``: the loop's config (default: the one the iteration's ``chosen.json`` names, found as ``diagnose``
+    finds it), with the dataset ``loop.json`` names;
+    the iteration's effects are added and the whole checked against its results folder. ``against``: a generic
+    term's name for the encompassing test, "auto" for the one the step at that iteration discovered or described
+    (none if it ran no discovery), None for no encompassing test. The level is the one the step used (alpha over
+    the library it scored), else alpha over the library at that model. Returns
+    :func:`~pyomo_heli.diagnosis.discovery.check_term`'s dict plus ``iteration``."""
+    doc, it, cfg = loop_iteration(loop_dir, iteration, config)
     settings = loop_settings(cfg)
     model = cfg.model.with_parameters(**it["parameters"])
     name = term if isinstance(term, str) else term.name

@@ -13,7 +13,8 @@ A force dZ acting x_p forward of the CG adds the moment dM = -x_p dZ.
 
 Nominal strengths (:data:`HELD_OUT_STRENGTHS`) are chosen so that each effect moves the
 bundled flight test's trims or maneuvers by a few sensor sigmas, as real model errors do. H8-H10 were
-added later as a fresh blind set: their strengths were fixed from physics before any loop ran on them.
+added later as a fresh blind set, and H11-H13 after the record-bias test: the strengths of each set were fixed
+from physics (float trims against the trim sigmas) before any loop ran on them.
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ import math
 
 from ..physics.extensions import Extension
 from ..physics.parameters import ParameterSpec
+from ..physics import rotor
 from ..physics.tail import tail_forces
 
 
@@ -253,9 +255,86 @@ class FuselagePitchDamping(Extension):
         return 0.0, 0.0, -p["k_fq"] * 0.25 * p["rho"] * V * 12.0 * 4.0**2 * x["q"]
 
 
+class CyclicGearing(Extension):
+    """H11: a gearing (scale) error in the longitudinal cyclic's control path.
+
+        theta_1s = (1 + k_cg) lon     [rad]
+
+    The rigging check found the zero but not the gain: the swashplate tilts k_cg more than the
+    recorded stick says, in trim (lon's own curve over speed) and in every cyclic input.
+    Strength k_cg [-] (relative gearing error).
+    """
+
+    name = "cyclic_gearing"
+    strength = "k_cg"
+
+    def parameters(self):
+        return [ParameterSpec("k_cg", 0.0, "-", "held-out truth: relative error of the longitudinal cyclic gearing",
+                              "held out")]
+
+    def adjust_controls(self, ctx):
+        ctx.lon = (1.0 + ctx.p["k_cg"]) * ctx.lon
+
+
+class StaticPortError(Extension):
+    """H12: a static-source position error that follows the angle of attack.
+
+        TAS_meas = TAS + k_sp V sin(alpha) = TAS + k_sp w     [m/s]
+
+    The static pressure the air-data system reads changes with the flow angle at the port,
+    dp_s = -c_p,alpha alpha q_dyn, so the airspeed it computes is off by about (c_p,alpha / 2) V alpha.
+    Nothing in the forces; it grows with the heave velocity of level flight at high speed (nose down)
+    and follows w in every manoeuvre. Strength k_sp = c_p,alpha / 2 [-].
+    """
+
+    name = "static_port_error"
+    strength = "k_sp"
+
+    def parameters(self):
+        return [ParameterSpec("k_sp", 0.0, "-", "held-out truth: airspeed error per unit heave velocity",
+                              "held out")]
+
+    def adjust_outputs(self, ctx):
+        ctx.outputs["TAS"] = ctx.outputs["TAS"] + ctx.p["k_sp"] * ctx.x["w"]
+
+
+class RotorSpeedDroop(Extension):
+    """H13: a proportional engine governor: the rotor speed droops as collective (power demand) rises.
+
+        tau_g d(delta)/dt = -k_rd (col - col_ref) - delta,    delta = dOmega / Omega [-]
+        dX, dZ, dM = (2 delta + delta^2) (X_R, Z_R, M_R)      [N, N, N m]
+
+    The rotor's forces and hub moment scale with Omega^2 at fixed coefficients (the change of the
+    advance ratio and inflow ratio with Omega is left out). In trim delta = -k_rd (col - col_ref): less
+    thrust where the collective is above col_rd = 0.12 rad (near the power bucket's): at hover and high speed; after a collective input the speed
+    settles with tau_g = 0.8 s (rotor inertia and governor). Strength k_rd [-/rad].
+    """
+
+    name = "rotor_speed_droop"
+    strength = "k_rd"
+    states = ("rpm_droop",)
+
+    def parameters(self):
+        return [ParameterSpec("k_rd", 0.0, "1/rad", "held-out truth: governor droop per radian of collective",
+                              "held out"),
+                ParameterSpec("tau_g", 0.8, "s", "held-out truth: rotor-speed time constant", "held out"),
+                ParameterSpec("col_rd", 0.12, "rad", "held-out truth: collective of nominal rotor speed",
+                              "held out")]
+
+    def extra_forces(self, ctx):
+        X_R, Z_R, M_R = rotor.rotor_forces(ctx.thrust, ctx.beta_1c_tpp, ctx.p, ctx.ops, x_h=ctx.x_h)
+        d = ctx.x["rpm_droop"]
+        f = 2.0 * d + d**2
+        return f * X_R, f * Z_R, f * M_R
+
+    def state_equations(self, ctx):
+        p = ctx.p
+        return {"rpm_droop": (p["tau_g"], -p["k_rd"] * (ctx.col - p["col_rd"]) - ctx.x["rpm_droop"])}
+
+
 HELD_OUT_EFFECTS = {c.name: c for c in (FuselageDownload, DragRise, CantedTailRotor, ControlMixing, ActuatorLag,
                                         AccelerometerFilter, VerticalDrag, PitotDownwash, TailStall,
-                                        FuselagePitchDamping)}
+                                        FuselagePitchDamping, CyclicGearing, StaticPortError, RotorSpeedDroop)}
 
 #: nominal strengths of the held-out studies (studies/held_out_effects.py)
 HELD_OUT_STRENGTHS = {
@@ -269,4 +348,7 @@ HELD_OUT_STRENGTHS = {
     "pitot_downwash": {"k_pd": 0.2},
     "tail_stall": {"k_ts": 0.2},
     "fuselage_pitch_damping": {"k_fq": 1.0},
+    "cyclic_gearing": {"k_cg": 0.05},
+    "static_port_error": {"k_sp": 0.2},
+    "rotor_speed_droop": {"k_rd": 0.3},
 }

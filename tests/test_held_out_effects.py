@@ -428,3 +428,43 @@ def test_the_study_scores_the_record_bias_shape_the_residual_analysis_reports(tm
     assert row["final residual"] == "unexplained residual" and row["record biases differ"] == "TAS (chi2 900 on 11)"
     assert row["record bias shape matches truth"].startswith("yes") and row["unexplained verdict"]
     assert row["criterion met"] is True
+
+
+def test_the_second_blind_set_moves_what_its_equations_say():
+    """H11-H13 at their nominal strengths, against the equations of their docstrings evaluated here by hand: the
+    cyclic gearing error leaves theta_1s = 1.05 lon (so a trim records lon / 1.05, the same theta_1s); the static
+    port reads k_sp w more airspeed and moves no trim; the governor's droop is -k_rd (col - 0.12 rad) in trim and
+    scales M0's rotor forces by (1 + delta)^2, so at a fixed state and droop the force changes by (2 delta +
+    delta^2) times M0's rotor force."""
+    m0 = HelicopterModel()
+
+    def model(name):
+        return HelicopterModel(extensions=(HELD_OUT_EFFECTS[name](),)).with_parameters(**HELD_OUT_STRENGTHS[name])
+
+    gear = model("cyclic_gearing")
+    for V in (0.0, 60 * KT, 120 * KT):
+        a, b = trim_float(m0, V), trim_float(gear, V)
+        assert b.lon == pytest.approx(a.lon / 1.05, rel=1e-7, abs=1e-12)
+        assert (b.col, b.theta) == pytest.approx((a.col, a.theta), abs=1e-10)
+    assert abs(np.degrees(trim_float(gear, 120 * KT).lon - trim_float(m0, 120 * KT).lon)) > 0.1  # 2 trim sigmas
+
+    port = model("static_port_error")
+    a = trim_float(m0, 120 * KT)
+    b = trim_float(port, 120 * KT)
+    assert (b.col, b.lon, b.theta) == pytest.approx((a.col, a.lon, a.theta), abs=1e-12)
+    x, u = {"u": 50.0, "w": -4.0, "q": 0.1, "theta": 0.0, "lambda_i": 0.02}, {"col": 0.15, "lon": -0.03}
+    assert port.evaluate(x, u).outputs["TAS"] - m0.evaluate(x, u).outputs["TAS"] == pytest.approx(0.2 * -4.0)
+
+    droop = model("rotor_speed_droop")
+    for V in (0.0, 120 * KT):
+        t = trim_float(droop, V)
+        assert t.extra_states["rpm_droop"] == pytest.approx(-0.3 * (t.col - 0.12), rel=1e-6)
+        assert t.extra_states["rpm_droop"] < -0.005  # half a per cent of rotor speed lost in hover and at 120 kt
+    d = -0.01
+    x = {"u": 40.0, "w": 2.0, "q": 0.05, "theta": 0.0, "lambda_i": 0.03}
+    f0, f1 = m0.evaluate(x, u).forces, droop.evaluate({**x, "rpm_droop": d}, u).forces
+    for k in ("X", "Z", "M"):
+        assert getattr(f1, k) - getattr(f0, k) == pytest.approx((2 * d + d * d) * getattr(f0, k + "_R"), rel=1e-9)
+    ctx = droop.evaluate({**x, "rpm_droop": d}, u)
+    coef, rhs = ctx.state_eqs["rpm_droop"]
+    assert (coef, rhs) == pytest.approx((0.8, -0.3 * (0.15 - 0.12) - d))

@@ -301,13 +301,14 @@ class StaticPortError(Extension):
 class RotorSpeedDroop(Extension):
     """H13: a proportional engine governor: the rotor speed droops as collective (power demand) rises.
 
-        tau_g d(delta)/dt = -k_rd (col - col_ref) - delta,    delta = dOmega / Omega [-]
-        dX, dZ, dM = (2 delta + delta^2) (X_R, Z_R, M_R)      [N, N, N m]
+        tau_g d(delta)/dt = -k_rd (col - col_rd) - delta,    delta = dOmega / Omega [-]
+        dX, dZ, dM = (2 delta + delta^2) (X_R, Z_R, M_R)     [N, N, N m]
 
     The rotor's forces and hub moment scale with Omega^2 at fixed coefficients (the change of the
-    advance ratio and inflow ratio with Omega is left out). In trim delta = -k_rd (col - col_ref): less
-    thrust where the collective is above col_rd = 0.12 rad (near the power bucket's): at hover and high speed; after a collective input the speed
-    settles with tau_g = 0.8 s (rotor inertia and governor). Strength k_rd [-/rad].
+    advance ratio and inflow ratio with Omega is left out). In trim delta = -k_rd (col - col_rd): less
+    thrust where the collective is above col_rd = 0.12 rad (near the power bucket's), i.e. at hover and
+    high speed; after a collective input the speed settles with tau_g = 0.8 s (rotor inertia and
+    governor). Strength k_rd [-/rad].
     """
 
     name = "rotor_speed_droop"

@@ -123,10 +123,11 @@ ENTRIES: tuple[Entry, ...] = (
           ("multistart.json", "starts.csv"), minutes=20),
     Entry("held_out_small", ("python studies/held_out_effects.py --seeds 1 --effects fuselage_download drag_rise "
                              "canted_tail_rotor vertical_drag control_mixing actuator_lag accelerometer_filter "
-                             "pitot_downwash tail_stall fuselage_pitch_damping none "
+                             "pitot_downwash tail_stall fuselage_pitch_damping cyclic_gearing static_port_error "
+                             "rotor_speed_droop none "
                              "--config studies/held_out_small.toml --data-config studies/held_out_small_gen.toml "
                              "--out {out}/held_out_small",),
-          ("held_out.csv", "held_out.md"), minutes=30),
+          ("held_out.csv", "held_out.md"), minutes=40),
     Entry("noise_only", ("python studies/held_out_effects.py --effects none --seeds 5 --out {out}/noise_only",),
           ("held_out.csv", "held_out.md"), minutes=140),
     Entry("held_out", ("python studies/held_out_effects.py --seeds 3 --out {out}/held_out",

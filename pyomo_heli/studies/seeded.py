@@ -41,10 +41,13 @@ def seeded_study_main(description: str, argv, one_seed: Callable[[int, Path, Pat
     try:
         load_config(data_config)
         cfg = load_identification_config(config)
-        if check_config:
-            check_config(cfg)
-    except (ConfigError, ValueError) as exc:
+    except ConfigError as exc:
         ap.error(str(exc))
+    if check_config:
+        try:
+            check_config(cfg)
+        except ValueError as exc:  # only the study's own check: a ValueError from loading is no usage error
+            ap.error(str(exc))
     out = out_folder(ap, a.out)
     out.mkdir(parents=True, exist_ok=True)
     docs = []

@@ -366,11 +366,17 @@ def final_residual(loop: Path) -> dict:
     return out
 
 
+@functools.lru_cache(maxsize=4)
+def truth_prediction(effect: str, setup: SignatureSetup):
+    """The truth model's prediction of the validation records (M0 truth parameters plus the effect at its strength)."""
+    return setup.predict(HELD_OUT_EFFECTS[effect](), HELD_OUT_STRENGTHS[effect])
+
+
 def truth_record_change(effect: str, output: str, setup: SignatureSetup | None = None) -> dict:
     """What the truth effect adds to ``output``'s mean over each validation record, averaged per trim speed
     {V [m/s]: SI} (truth model against M0, both at the M0 truth parameters)."""
     setup = setup or signature_setup()
-    pred, base = setup.predict(HELD_OUT_EFFECTS[effect](), HELD_OUT_STRENGTHS[effect]), setup.base
+    pred, base = truth_prediction(effect, setup), setup.base
     per = {}
     for mv in setup.maneuvers:
         d = pred.maneuvers[mv.name][output].to_numpy() - base.maneuvers[mv.name][output].to_numpy()

@@ -26,12 +26,18 @@ def maneuver():
 
 
 def test_checked_replay_in_pieces_is_the_one_piece_integration(maneuver):
-    """The divergence check integrates in 1 s pieces; that is the same RK4 arithmetic as one piece, to the bit,
-    and the same as calling the integrator directly."""
+    """The Python RK4's divergence check integrates in 1 s pieces; that is the same RK4 arithmetic as one piece, to
+    the bit, and the same as calling the integrator directly. The compiled replay (the default) is the same record
+    to rounding, column for column."""
     model = HelicopterModel()
     tp = trim_float(model, maneuver.trim_speed)
-    checked = rp.replay(model, maneuver, tp)
-    whole = rp.replay(model, maneuver, tp, check=False)
+    checked = rp.replay(model, maneuver, tp, compiled=False)
+    whole = rp.replay(model, maneuver, tp, check=False, compiled=False)
+    fast = rp.replay(model, maneuver, tp)
+    assert list(fast.columns) == list(checked.columns)
+    for c in fast.columns:
+        np.testing.assert_allclose(fast[c].to_numpy(), checked[c].to_numpy(), rtol=1e-10,
+                                   atol=1e-12 * max(1.0, float(np.max(np.abs(checked[c])))), err_msg=c)
     t = maneuver.data["t"].to_numpy()
     direct = simulate(model, tp, t, {k: sampled(t, v) for k, v in maneuver.increments().items()}, method="rk4",
                       substeps=4)
@@ -39,6 +45,25 @@ def test_checked_replay_in_pieces_is_the_one_piece_integration(maneuver):
     for c in direct.columns:
         np.testing.assert_array_equal(checked[c].to_numpy(), whole[c].to_numpy(), err_msg=c)
         np.testing.assert_array_equal(whole[c].to_numpy(), direct[c].to_numpy(), err_msg=c)
+
+
+def test_a_diverging_replay_stops_at_the_same_sample_compiled_or_not(maneuver):
+    """A pitch-unstable model (a generic pitch-damping term of the wrong sign, five times its NLP bound): both RK4s
+    raise Diverged at the same first implausible sample and carry the same record up to it."""
+    from pyomo_heli.physics.discrepancy import generic_term
+
+    term = generic_term("dM_q")
+    model = HelicopterModel(extensions=(term,)).with_parameters(**{term.strength: 0.1})
+    tp = trim_float(model, maneuver.trim_speed)
+    got = []
+    for compiled in (True, False):
+        with pytest.raises(rp.Diverged) as exc:
+            rp.replay(model, maneuver, tp, compiled=compiled)
+        got.append((str(exc.value), exc.value.partial))
+    (msg_c, part_c), (msg_p, part_p) = got
+    assert msg_c == msg_p and "left its plausible range" in msg_c and 2 < len(part_c) < len(maneuver.data)
+    assert len(part_c) == len(part_p) and list(part_c.columns) == list(part_p.columns)
+    np.testing.assert_allclose(part_c["q"].to_numpy(), part_p["q"].to_numpy(), rtol=1e-8)
 
 
 def test_a_constant_input_offset_moves_the_replay_like_an_increment(maneuver):

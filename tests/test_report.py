@@ -196,7 +196,7 @@ def test_failed_simulation_is_reported_not_raised(tmp_path, monkeypatch):
     out = tmp_path / "out"
     res = _fake_result(out)
     cfg = load_identification_config(_config(tmp_path, ds))
-    real = replay.simulate
+    real = replay.simulate_states
     bad = res.chosen["parameters"]["CL_alpha_HT"]
 
     def flaky(model, *args, **kw):  # the multi-objective model "diverges"
@@ -204,7 +204,7 @@ def test_failed_simulation_is_reported_not_raised(tmp_path, monkeypatch):
             raise RuntimeError("simulation failed: Required step size is less than spacing between numbers.")
         return real(model, *args, **kw)
 
-    monkeypatch.setattr(replay, "simulate", flaky)
+    monkeypatch.setattr(replay, "simulate_states", flaky)
     path = rep.write_report(out, cfg)
     text = path.read_text()
     assert f"multi-objective (C): maneuver {VAL}: simulation failed" in text

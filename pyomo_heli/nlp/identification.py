@@ -204,9 +204,12 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
 def _float_start(sim_model: HelicopterModel, data: IdentificationData) -> tuple[list, dict]:
     """The start of the NLP at ``sim_model``'s parameters: float trims at every trim speed of ``data``
     and the RK4 replay (2 sub-steps per sample, no divergence rule) of every maneuver from its speed's
-    trim. Raises TrimError when the model cannot be trimmed."""
+    trim. Raises TrimError when the model cannot be trimmed. The Python RK4 (``compiled=False``): the start is then
+    the same to the bit as before the replays ran compiled, and some small NLPs land elsewhere from a start that
+    differs in the 13th digit (tests/test_placement_nd.py's direct Eq. 11 solve did); it is run once per build."""
     float_trims = trim_sweep(sim_model, data.speeds)
-    sims = {mv.name: replay(sim_model, mv, float_trims[data.speed_index(mv.trim_speed)], substeps=2, check=False)
+    sims = {mv.name: replay(sim_model, mv, float_trims[data.speed_index(mv.trim_speed)], substeps=2, check=False,
+                            compiled=False)
             for mv in data.maneuvers}
     return float_trims, sims
 

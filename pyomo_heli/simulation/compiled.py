@@ -112,10 +112,28 @@ def simulate_outputs(model: HelicopterModel, trim: TrimPoint, t_eval, increments
     if unknown:
         raise ValueError(f"unknown input channel(s) {sorted(unknown)}; choose from {', '.join(INPUTS)}")
     substeps = _substeps(model, trim, t_eval, substeps)
-    step, out_fun, out_names = _functions(model, substeps)
+    _, out_fun, out_names = _functions(model, substeps)
     missing = [o for o in outputs if o not in out_names]
     if missing:
         raise ValueError(f"unknown output(s) {missing}; the model gives {', '.join(out_names)}")
+    xs, u = simulate_states(model, trim, t_eval, increments, substeps)
+    bad = ~np.all(np.isfinite(xs), axis=0)
+    if bad.any():
+        raise RuntimeError(f"simulation diverged at t = {t_eval[np.argmax(bad)]:.3f} s")
+    n = len(t_eval)
+    p = np.array([model.parameters[name] for name in model.parameters], dtype=float)
+    ys = np.asarray(out_fun.map(n)(xs, u, np.tile(p[:, None], (1, n))))
+    return {o: ys[out_names.index(o)].copy() for o in outputs}
+
+
+def simulate_states(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mapping[str, np.ndarray],
+                    substeps: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """The states (rows: ``model.state_names``; columns: the times of ``t_eval``) and the inputs (rows: col, lon)
+    of ``simulate(model, trim, t_eval, sampled increments, method="rk4")``, by the compiled RK4. Not checked:
+    a diverging record holds non-finite values from where it diverged."""
+    t_eval = np.asarray(t_eval, dtype=float)
+    substeps = _substeps(model, trim, t_eval, substeps)
+    step, _, _ = _functions(model, substeps)
     n = len(t_eval)
     base = trim.inputs()
     u = np.vstack([base[k] + np.asarray(increments.get(k, np.zeros(n)), dtype=float) for k in INPUTS])
@@ -126,15 +144,12 @@ def simulate_outputs(model: HelicopterModel, trim: TrimPoint, t_eval, increments
         if key not in _ACCUMULATED:
             _ACCUMULATED[key] = step.mapaccum("rk4_record", n - 1)
         intervals = np.vstack([u[:, :-1], u[:, 1:], np.diff(t_eval)[None, :]])
-        xs = np.asarray(_ACCUMULATED[key](x0, intervals, np.tile(p[:, None], (1, n - 1))))
+        with np.errstate(all="ignore"):
+            xs = np.asarray(_ACCUMULATED[key](x0, intervals, np.tile(p[:, None], (1, n - 1))))
         xs = np.hstack([x0[:, None], xs])
     else:
         xs = x0[:, None]
-    bad = ~np.all(np.isfinite(xs), axis=0)
-    if bad.any():
-        raise RuntimeError(f"simulation diverged at t = {t_eval[np.argmax(bad)]:.3f} s")
-    ys = np.asarray(out_fun.map(n)(xs, u, np.tile(p[:, None], (1, n))))
-    return {o: ys[out_names.index(o)].copy() for o in outputs}
+    return xs, u
 
 
 #: (structure, substeps) -> (step Jacobian function, output Jacobian function)

@@ -110,6 +110,14 @@ def simulate(model: HelicopterModel, trim: TrimPoint, t_eval, increments: Mappin
         if not sol.success:
             raise RuntimeError(f"simulation failed: {sol.message}")
         ys = sol.y
+    return frame(model, t_eval, ys, inputs_at)
+
+
+def frame(model: HelicopterModel, t_eval, ys: np.ndarray, inputs_at: Callable[[float, np.ndarray], Mapping]
+          ) -> pd.DataFrame:
+    """The frame :func:`simulate` returns, from the states ``ys`` (one column per time of ``t_eval``, in
+    ``model.state_names`` order) and ``inputs_at(t, y)`` (the inputs by channel [rad])."""
+    names = model.state_names
     rows = []
     for i, t in enumerate(t_eval):
         x = dict(zip(names, ys[:, i]))

@@ -10,10 +10,11 @@ validation, the residual diagnosis, the sensitivities, the NLP's initialisation,
   by classic RK4 with ``substeps`` steps per sample interval (or an adaptive scipy method);
 - one divergence rule: a replay has diverged when a recorded output is not finite or its magnitude
   exceeds the plausibility limit the dataset reader applies to measurements
-  (:data:`DIVERGENCE_LIMITS`, SI). The record is integrated in pieces of about :data:`CHUNK_S`
-  seconds, each starting from the state at the end of the previous one (the same arithmetic as
-  one piece), so that a diverging model is stopped early; :class:`Diverged` then carries the record
-  up to there.
+  (:data:`DIVERGENCE_LIMITS`, SI). The compiled RK4 (casadi, the default) integrates the whole record
+  at once; the Python one integrates it in pieces of about :data:`CHUNK_S` seconds, each starting
+  from the state at the end of the previous one (the same arithmetic as one piece), so that a
+  diverging model is stopped early. Either way :class:`Diverged` carries the record up to the
+  first implausible sample.
 - :func:`predict`: trims and replays of one parameter set as a plain :class:`Prediction`, every
   failure recorded in its ``problems`` (what the report formats and the closed loop scores);
 - :func:`maneuver_outputs`: the outputs of a list of maneuvers concatenated per output, by the
@@ -29,10 +30,10 @@ import pandas as pd
 
 from ..channels import OUTPUTS, TRIM_CHANNELS
 from ..dataset.schema import MANEUVER_QUANTITIES
-from ..physics.model import HelicopterModel
+from ..physics.model import INPUTS, HelicopterModel
 from ..units import KT
-from .compiled import simulate_outputs
-from .integrate import sampled, simulate, stable_substeps
+from .compiled import simulate_outputs, simulate_states
+from .integrate import frame, sampled, simulate, stable_substeps
 from .trim import TrimPoint, trim_float, trim_sweep
 
 #: |value| beyond which a replayed output counts as diverged: the dataset's plausibility limits (SI)
@@ -91,12 +92,14 @@ def maneuver_increments(maneuver, offsets: dict | None = None) -> dict:
 
 
 def replay(model: HelicopterModel, maneuver, trim: TrimPoint, substeps: int = 4, offsets: dict | None = None,
-           check: bool = True, method: str = "rk4", **integrator) -> pd.DataFrame:
+           check: bool = True, method: str = "rk4", compiled: bool = True, **integrator) -> pd.DataFrame:
     """Replay a measured maneuver: start at ``trim``, inputs = trim inputs + measured increments.
 
     ``substeps`` RK4 steps per sample interval (``method="rk4"``; more where a lag state is faster,
     :func:`stable_substeps`), or ``method`` / ``integrator``
-    options of :func:`~.integrate.simulate` for scipy's adaptive integrators. ``offsets``: constant
+    options of :func:`~.integrate.simulate` for scipy's adaptive integrators. RK4 runs compiled (casadi,
+    :func:`~.compiled.simulate_states`) unless ``compiled=False`` (the Python RK4: the same arithmetic, the
+    same record to rounding). ``offsets``: constant
     input offsets [rad] added to the increments. ``check``: apply the divergence rule (see the module
     docstring) and raise :class:`Diverged` with the record up to the first implausible sample;
     without it the record is integrated in one piece and returned as it is. Raises RuntimeError if
@@ -107,6 +110,8 @@ def replay(model: HelicopterModel, maneuver, trim: TrimPoint, substeps: int = 4,
     if method == "rk4" and len(t) > 1:
         substeps = stable_substeps(model, trim, float(np.max(np.diff(t))), substeps)
     kw = dict(method=method, substeps=substeps, **integrator)
+    if method == "rk4" and compiled and len(t) > 1:
+        return _replay_compiled(model, maneuver, trim, t, inc, substeps, offsets, check)
     if not check:
         return simulate(model, trim, t, inc, **kw)
     names = model.state_names
@@ -120,14 +125,10 @@ def replay(model: HelicopterModel, maneuver, trim: TrimPoint, substeps: int = 4,
         if len(sim) != i1 + 1 - i0:
             raise RuntimeError(f"simulation stopped after {i0 + len(sim)} of {len(t)} samples")
         pieces.append(sim if not pieces else sim.iloc[1:])
-        vals = sim[[c for c in OUTPUTS if c in sim]]
-        bad = ~np.isfinite(vals.to_numpy(dtype=float))
-        for c, lim in DIVERGENCE_LIMITS.items():
-            if c in vals:
-                bad[:, list(vals.columns).index(c)] |= np.abs(vals[c].to_numpy(dtype=float)) > lim
+        bad = _implausible(sim)
         if bad.any():
             k = int(np.argmax(bad.any(axis=1)))
-            col = vals.columns[int(np.argmax(bad[k]))]
+            col = [c for c in OUTPUTS if c in sim][int(np.argmax(bad[k]))]
             partial = pd.concat(pieces, ignore_index=True)
             partial = partial[partial["t"] <= sim["t"].iloc[k]].reset_index(drop=True)
             raise Diverged(f"diverged: {col} left its plausible range at t = {sim['t'].iloc[k]:.2f} s", partial)
@@ -136,6 +137,42 @@ def replay(model: HelicopterModel, maneuver, trim: TrimPoint, substeps: int = 4,
         x0 = {n: float(sim[n].iloc[-1]) for n in names}
         i0 = i1
     return pd.concat(pieces, ignore_index=True)
+
+
+def _implausible(sim: pd.DataFrame) -> np.ndarray:
+    """Per sample of ``sim``: is a recorded output not finite or beyond :data:`DIVERGENCE_LIMITS`?"""
+    vals = sim[[c for c in OUTPUTS if c in sim]]
+    bad = ~np.isfinite(vals.to_numpy(dtype=float))
+    for c, lim in DIVERGENCE_LIMITS.items():
+        if c in vals:
+            bad[:, list(vals.columns).index(c)] |= np.abs(vals[c].to_numpy(dtype=float)) > lim
+    return bad
+
+
+def _replay_compiled(model, maneuver, trim, t, inc, substeps, offsets, check) -> pd.DataFrame:
+    """:func:`replay` by the compiled RK4: the whole record at once, then the same divergence rule."""
+    arrays = {k: np.asarray(f(t), dtype=float) for k, f in inc.items()}
+    xs, _ = simulate_states(model, trim, t, arrays, substeps)
+    finite = np.all(np.isfinite(xs), axis=0)
+    n_ok = len(t) if finite.all() else int(np.argmin(finite))
+    base = trim.inputs()
+
+    def inputs_at(tt, _y):
+        return {k: base[k] + (float(inc[k](tt)) if k in inc else 0.0) for k in INPUTS}
+
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = frame(model, t[:n_ok], xs[:, :n_ok], inputs_at)
+    if check and n_ok:
+        bad = _implausible(sim)
+        if bad.any():
+            k = int(np.argmax(bad.any(axis=1)))
+            col = [c for c in OUTPUTS if c in sim][int(np.argmax(bad[k]))]
+            raise Diverged(f"diverged: {col} left its plausible range at t = {sim['t'].iloc[k]:.2f} s",
+                           sim.iloc[:k + 1].reset_index(drop=True))
+    if n_ok < len(t):
+        raise RuntimeError(f"simulation diverged at t = {t[n_ok]:.3f} s")
+    return sim
 
 
 def maneuver_outputs(model: HelicopterModel, maneuvers, outputs, substeps: int = 4,

@@ -6,6 +6,7 @@
     python studies/benchmark.py --size 1,2,4,8 --no-front --no-shooting --max-duration 1.5 --repeat 3   # cropped, 1 min
     python studies/benchmark.py --size 1,2,4,8 --repeat 3 --shooting rk4 --shooting-max-sims 0 --compare-nl-route
                                                               # every target in one run (~30 min, 7 GB)
+    python studies/benchmark.py --replay                      # compiled against Python replay (1 min of CPU)
     python studies/benchmark.py --quick                       # seconds; what the test suite runs
     python studies/benchmark.py --no-shooting --compare-nl-route   # + set-up and point A with every row in the NL file
     python studies/benchmark.py --no-front --no-shooting --compare-scaling   # A + 5-point front unscaled vs scaled
@@ -80,10 +81,16 @@ def main(argv=None) -> int:
                     help="the tri-objective config of --tri-vs-bi")
     ap.add_argument("--tri-out", type=Path, help="--tri-vs-bi: the tri-objective run's results folder (default: "
                                                  "OUT/tri; the bi-objective run goes to OUT/bi)")
+    ap.add_argument("--replay", action="store_true",
+                    help="time the replay of the bundled flight test's maneuvers (M0 at its truth parameters) by the "
+                         "compiled RK4 and by the Python RK4 in this process; print both, the ratio and the largest "
+                         "difference (no --out)")
     ap.add_argument("--out", type=Path, default=Path("results") / "benchmark.json", help="JSON output")
     args = ap.parse_args(argv)
     if args.tri_vs_bi:
         return _tri_vs_bi(ap, args)
+    if args.replay:
+        return _replay_speed()
     from .args import out_file
     out_file(ap, args.out)  # before the benchmark runs, not after
     overrides: dict = {}
@@ -116,6 +123,36 @@ def main(argv=None) -> int:
                                  compare_scaling=args.compare_scaling, scaling_points=args.scaling_points)
     return _run_and_print(lambda progress: run_benchmark(settings, args.out, progress=progress), format_tables,
                           args.out)
+
+
+def _replay_speed() -> int:
+    """``--replay``: the replays the validation, the residual diagnosis and the record-bias test run, both ways."""
+    import time
+
+    import numpy as np
+
+    from pyomo_heli.dataset import load_flight_test
+    from pyomo_heli.physics.model import HelicopterModel
+    from pyomo_heli.simulation.replay import replay
+    from pyomo_heli.simulation.trim import trim_float
+
+    ft = load_flight_test(ROOT / "data" / "bo105_synthetic")
+    model = HelicopterModel()
+    mans = list(ft.maneuvers.values())
+    trims = {mv.name: trim_float(model, mv.trim_speed) for mv in mans}
+    replay(model, mans[0], trims[mans[0].name])  # the compiled functions are built once per model structure
+    runs, times = {}, {}
+    for compiled in (True, False):
+        t0 = time.process_time()
+        runs[compiled] = {mv.name: replay(model, mv, trims[mv.name], compiled=compiled) for mv in mans}
+        times[compiled] = time.process_time() - t0
+    diff = max(float(np.max(np.abs(runs[True][n][o].to_numpy() - runs[False][n][o].to_numpy())))
+               for n in runs[True] for o in ("q", "theta", "n_x", "n_z", "TAS", "beta_0"))
+    samples = sum(len(mv.data) for mv in mans)
+    print(f"replay of {len(mans)} maneuvers ({samples} samples), CPU time: compiled {times[True]:.2f} s, "
+          f"Python {times[False]:.2f} s, ratio {times[False] / times[True]:.1f}x; largest output difference "
+          f"{diff:.2e} (SI)")
+    return 0
 
 
 def _run_and_print(run, format_result, written) -> int:

@@ -111,7 +111,7 @@ def replay(model: HelicopterModel, maneuver, trim: TrimPoint, substeps: int = 4,
         substeps = stable_substeps(model, trim, float(np.max(np.diff(t))), substeps)
     kw = dict(method=method, substeps=substeps, **integrator)
     if method == "rk4" and compiled and len(t) > 1:
-        return _replay_compiled(model, maneuver, trim, t, inc, substeps, offsets, check)
+        return _replay_compiled(model, trim, t, inc, substeps, check)
     if not check:
         return simulate(model, trim, t, inc, **kw)
     names = model.state_names
@@ -149,7 +149,7 @@ def _implausible(sim: pd.DataFrame) -> np.ndarray:
     return bad
 
 
-def _replay_compiled(model, maneuver, trim, t, inc, substeps, offsets, check) -> pd.DataFrame:
+def _replay_compiled(model, trim, t, inc, substeps, check) -> pd.DataFrame:
     """:func:`replay` by the compiled RK4: the whole record at once, then the same divergence rule."""
     arrays = {k: np.asarray(f(t), dtype=float) for k, f in inc.items()}
     xs, _ = simulate_states(model, trim, t, arrays, substeps)

@@ -43,6 +43,7 @@ import argparse
 import dataclasses
 import functools
 import json
+import math
 import re
 import sys
 import time
@@ -734,8 +735,8 @@ def markdown(tab: pd.DataFrame) -> str:
                         "theta_twist err0 %", "theta_twist err1 %", "CL_alpha_HT err0 %", "CL_alpha_HT err1 %",
                         "Iyy err0 %", "Iyy err1 %") if c in tab]
 
-    def fmt(v):
-        return f"{v:+.3g}" if isinstance(v, float) else str(v)
+    def fmt(v):  # a value the row does not have (a noise-only row's truth form) is an empty cell
+        return "" if isinstance(v, float) and math.isnan(v) else f"{v:+.3g}" if isinstance(v, float) else str(v)
 
     L = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     L += ["| " + " | ".join(fmt(v) for v in r) + " |" for r in tab[cols].itertuples(index=False)]

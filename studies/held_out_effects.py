@@ -206,9 +206,14 @@ def signature(extension, strengths: dict, setup: SignatureSetup) -> np.ndarray |
     """What ``extension`` at ``strengths`` changes against M0 (both at the setup's M0 parameters), in noise standard
     deviations: the level trims (col, lon, theta at SPEEDS_KT) and the records' outputs, stacked; None if a trim or
     a replay fails."""
+    return signature_of(setup.predict(extension, strengths), setup)
+
+
+def signature_of(pred, setup: SignatureSetup) -> np.ndarray | None:
+    """:func:`signature` of a prediction ``pred`` made at the setup (:meth:`SignatureSetup.predict`)."""
     from pyomo_heli.units import KT
 
-    pred, base = setup.predict(extension, strengths), setup.base
+    base = setup.base
     if pred.problems or base.problems:
         return None
     speeds = [v * KT for v in SPEEDS_KT]
@@ -219,9 +224,15 @@ def signature(extension, strengths: dict, setup: SignatureSetup) -> np.ndarray |
     return np.concatenate(parts)
 
 
+@functools.lru_cache(maxsize=4)
+def truth_prediction(effect: str, setup: SignatureSetup):
+    """The truth model's prediction of the validation records (M0 truth parameters plus the effect at its strength)."""
+    return setup.predict(HELD_OUT_EFFECTS[effect](), HELD_OUT_STRENGTHS[effect])
+
+
 @functools.lru_cache(maxsize=16)
 def truth_signature(effect: str, setup: SignatureSetup) -> np.ndarray | None:
-    return signature(HELD_OUT_EFFECTS[effect](), HELD_OUT_STRENGTHS[effect], setup)
+    return signature_of(truth_prediction(effect, setup), setup)
 
 
 def signature_match(effect: str, fit: dict | None, setup: SignatureSetup | None = None) -> str:
@@ -365,12 +376,6 @@ def final_residual(loop: Path) -> dict:
            "record_biases": {o: t for o, t in (v.get("record_biases") or {}).items()}}
     cache.write_text(json.dumps(out, indent=1))
     return out
-
-
-@functools.lru_cache(maxsize=4)
-def truth_prediction(effect: str, setup: SignatureSetup):
-    """The truth model's prediction of the validation records (M0 truth parameters plus the effect at its strength)."""
-    return setup.predict(HELD_OUT_EFFECTS[effect](), HELD_OUT_STRENGTHS[effect])
 
 
 def truth_record_change(effect: str, output: str, setup: SignatureSetup | None = None) -> dict:

@@ -125,13 +125,11 @@ def replay(model: HelicopterModel, maneuver, trim: TrimPoint, substeps: int = 4,
         if len(sim) != i1 + 1 - i0:
             raise RuntimeError(f"simulation stopped after {i0 + len(sim)} of {len(t)} samples")
         pieces.append(sim if not pieces else sim.iloc[1:])
-        bad = _implausible(sim)
-        if bad.any():
-            k = int(np.argmax(bad.any(axis=1)))
-            col = [c for c in OUTPUTS if c in sim][int(np.argmax(bad[k]))]
+        first = _first_implausible(sim)
+        if first:
             partial = pd.concat(pieces, ignore_index=True)
-            partial = partial[partial["t"] <= sim["t"].iloc[k]].reset_index(drop=True)
-            raise Diverged(f"diverged: {col} left its plausible range at t = {sim['t'].iloc[k]:.2f} s", partial)
+            partial = partial[partial["t"] <= sim["t"].iloc[first[0]]].reset_index(drop=True)
+            raise Diverged(first[1], partial)
         if i1 >= len(t) - 1:
             break
         x0 = {n: float(sim[n].iloc[-1]) for n in names}
@@ -139,14 +137,19 @@ def replay(model: HelicopterModel, maneuver, trim: TrimPoint, substeps: int = 4,
     return pd.concat(pieces, ignore_index=True)
 
 
-def _implausible(sim: pd.DataFrame) -> np.ndarray:
-    """Per sample of ``sim``: is a recorded output not finite or beyond :data:`DIVERGENCE_LIMITS`?"""
+def _first_implausible(sim: pd.DataFrame) -> tuple[int, str] | None:
+    """The first sample of ``sim`` where a recorded output is not finite or beyond :data:`DIVERGENCE_LIMITS`, and
+    the divergence message; None when there is none."""
     vals = sim[[c for c in OUTPUTS if c in sim]]
     bad = ~np.isfinite(vals.to_numpy(dtype=float))
     for c, lim in DIVERGENCE_LIMITS.items():
         if c in vals:
             bad[:, list(vals.columns).index(c)] |= np.abs(vals[c].to_numpy(dtype=float)) > lim
-    return bad
+    if not bad.any():
+        return None
+    k = int(np.argmax(bad.any(axis=1)))
+    col = vals.columns[int(np.argmax(bad[k]))]
+    return k, f"diverged: {col} left its plausible range at t = {sim['t'].iloc[k]:.2f} s"
 
 
 def _replay_compiled(model, trim, t, inc, substeps, check) -> pd.DataFrame:
@@ -163,13 +166,9 @@ def _replay_compiled(model, trim, t, inc, substeps, check) -> pd.DataFrame:
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sim = frame(model, t[:n_ok], xs[:, :n_ok], inputs_at)
-    if check and n_ok:
-        bad = _implausible(sim)
-        if bad.any():
-            k = int(np.argmax(bad.any(axis=1)))
-            col = [c for c in OUTPUTS if c in sim][int(np.argmax(bad[k]))]
-            raise Diverged(f"diverged: {col} left its plausible range at t = {sim['t'].iloc[k]:.2f} s",
-                           sim.iloc[:k + 1].reset_index(drop=True))
+    first = _first_implausible(sim) if check and n_ok else None
+    if first:
+        raise Diverged(first[1], sim.iloc[:first[0] + 1].reset_index(drop=True))
     if n_ok < len(t):
         raise RuntimeError(f"simulation diverged at t = {t[n_ok]:.3f} s")
     return sim

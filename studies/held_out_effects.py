@@ -2,7 +2,7 @@
 
     python studies/held_out_effects.py --seeds 3 --out results/held_out \
         [--effects fuselage_download drag_rise ...] [--config studies/held_out_discovery.toml] \
-        [--data-config data/bo105_synthetic.toml]
+        [--data-config data/bo105_synthetic.toml] [--generic-family extended]
 
 For every held-out effect (pyomo_heli/flighttest/held_out_effects.py, at its nominal strength) and every seed
 (20261122 + k, k = FIRST..FIRST+SEEDS-1): the bundled flight test's generator config with its truth effect
@@ -627,6 +627,9 @@ def main(argv=None) -> int:
     ap.add_argument("--effects", nargs="+", default=list(HELD_OUT_EFFECTS),
                     help=f"held-out effects (or none): {', '.join(HELD_OUT_EFFECTS)}")
     ap.add_argument("--config", default=str(CONFIG))
+    ap.add_argument("--generic-family", choices=["standard", "extended"],
+                    help="set the config's [loop] generic_family (the config is copied, with it, to "
+                         "OUT/loop_<family>.toml); extended: + speed products and input scale factors")
     ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
     ap.add_argument("--out", required=True)
     ap.add_argument("--bundled", action="store_true",
@@ -649,6 +652,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     out = out_folder(ap, a.out)
     config = in_file(ap, a.config, "--config")
+    if a.generic_family:
+        config = with_generic_family(config, a.generic_family, out)
     if a.rescore:
         if not (out / "held_out.csv").is_file():
             ap.error(f"--rescore: {out / 'held_out.csv'} not found")
@@ -691,6 +696,18 @@ def main(argv=None) -> int:
         print("failed (see their messages above): " + ", ".join(f"{e} {s}" for e, s, _ in failed), file=sys.stderr)
         return failed[0][2]
     return 0
+
+
+def with_generic_family(config: Path, family: str, out: Path) -> Path:
+    """``OUT/loop_<family>.toml``: CONFIG with ``[loop] generic_family = family`` and its dataset path made absolute."""
+    text = re.sub(r"(?m)^generic_family\s*=.*\n", "", config.read_text())
+    text = text.replace("\n[loop]\n", f'\n[loop]\ngeneric_family = "{family}"\n', 1)
+    text = re.sub(r'(?m)^dataset\s*=\s*"([^"]*)"',
+                  lambda m: f'dataset = "{(config.parent / m.group(1)).resolve().as_posix()}"', text, count=1)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"loop_{family}.toml"
+    path.write_text(text)
+    return path
 
 
 def case_task(task: tuple) -> tuple[dict | None, int]:

@@ -171,3 +171,70 @@ def test_the_default_library_offers_the_whole_family_and_a_config_can_narrow_it(
     lib = library(HelicopterModel())
     assert set(generic_names()) <= set(lib) and {"nz_delay", "nx_delay", "TAS_delay", "beta0_delay"} <= set(lib)
     assert library(HelicopterModel(), physical=[], generic=["nz_delay", "dM_one"]) == ["nz_delay", "dM_one"]
+
+
+def test_the_extended_family_adds_speed_products_and_input_scale_factors_to_the_standard_one():
+    """generic_names() is the standard library (unchanged); "extended" adds the regressors x mu/0.3 of every channel
+    and the two input scale factors; a config chooses it with [loop] generic_family."""
+    from pyomo_heli.physics.discrepancy import SPEED_PRODUCTS
+
+    std, ext = generic_names(), generic_names("extended")
+    assert len(std) == 51 and set(std) < set(ext)
+    assert sorted(set(ext) - set(std)) == sorted([f"d{c}_{r}mu" for c in "XZM" for r in SPEED_PRODUCTS]
+                                                 + ["lon_scale", "col_scale"])
+    with pytest.raises(ValueError, match="unknown discrepancy family 'big'"):
+        generic_names("big")
+
+
+def test_a_speed_product_is_the_product_of_its_two_regressors():
+    """dM_qmu = c m g R (q/0.2)(mu/0.3): at a state with pitch rate, the float model adds exactly that."""
+    m = HelicopterModel(extensions=[generic_term("dM_qmu")]).with_parameters(c_dM_qmu=-0.003)
+    f = trim_float(HelicopterModel(), 60 * KT)
+    x = {"u": f.u, "w": f.w, "q": 0.1, "theta": f.theta, "lambda_i": f.lambda_i}
+    ctx = m.evaluate(x, {"col": f.col, "lon": f.lon})
+    p = m.parameters
+    expected = -0.003 * p["m"] * p["g"] * p["R"] * (0.1 / 0.2) * (ctx.flow.mu / 0.3)
+    ctx0 = HelicopterModel().evaluate(x, {"col": f.col, "lon": f.lon})
+    assert ctx.forces.M - ctx0.forces.M == pytest.approx(expected, rel=1e-9)
+    assert float(ctx.flow.mu) > 0.05  # it acts at speed
+
+
+@pytest.mark.parametrize("name, ch", [("lon_scale", "lon"), ("col_scale", "col")])
+def test_an_input_scale_factor_is_a_trim_that_needs_less_measured_control(name, ch):
+    """The rotor sees (1 + c) u: the measured trim control is M0's divided by 1 + c (float trim and Pyomo trim block
+    agree); attitude and the other control are M0's."""
+    m = HelicopterModel(extensions=[generic_term(name)]).with_parameters(**{f"c_{name}": 0.05})
+    V = 50 * KT
+    a, b = trim_float(HelicopterModel(), V), trim_float(m, V)
+    assert getattr(b, ch) == pytest.approx(getattr(a, ch) / 1.05, rel=1e-9)
+    other = "col" if ch == "lon" else "lon"
+    assert (getattr(b, other), b.theta) == pytest.approx((getattr(a, other), a.theta), abs=1e-10)
+    py = trim_table(m, [V]).iloc[0]
+    for k in ("col", "lon", "theta"):
+        assert py[k] == pytest.approx(getattr(b, k), abs=1e-8), k
+
+
+def test_a_maneuver_flown_with_an_input_scale_factor_is_m0_flown_with_the_scaled_control():
+    from pyomo_heli.simulation.inputs import InputSignal
+    from pyomo_heli.simulation.integrate import simulate
+
+    t_ = np.linspace(0.0, 2.0, 101)
+    m = HelicopterModel(extensions=[generic_term("lon_scale")]).with_parameters(c_lon_scale=0.05)
+    b = trim_float(m, 40 * KT)
+    a = trim_float(HelicopterModel(), 40 * KT)
+    sig_b = {"lon": InputSignal("lon", "doublet", 0.5 * DEG, 1.0, t_start=0.3, ramp=0.05)}
+    sig_a = {"lon": InputSignal("lon", "doublet", 1.05 * 0.5 * DEG, 1.0, t_start=0.3, ramp=0.05)}
+    sb = simulate(m, b, t_, sig_b, max_step=0.01)
+    sa = simulate(HelicopterModel(), a, t_, sig_a, max_step=0.01)
+    for k in ("q", "theta", "u", "w"):
+        np.testing.assert_allclose(sb[k].to_numpy(), sa[k].to_numpy(), atol=1e-9, err_msg=k)
+    assert sb["lon"].to_numpy()[0] == pytest.approx(a.lon / 1.05, rel=1e-9)  # the record holds the measured control
+
+
+def test_a_config_chooses_the_extended_family_and_a_bad_family_is_a_one_line_error(tmp_path):
+    from pyomo_heli.settings.identification import LoopTable
+
+    assert LoopTable().generic_family == "standard"
+    assert LoopTable(generic_family="extended", generic=["dM_qmu"]).generic == ["dM_qmu"]
+    with pytest.raises(Exception, match="generic_family"):
+        LoopTable(generic_family="big")

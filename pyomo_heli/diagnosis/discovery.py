@@ -53,7 +53,7 @@ import time
 import numpy as np
 from scipy import stats
 
-from ..physics.discrepancy import BUMP_CENTRES, FORCE_CHANNELS, generic_names, is_generic
+from ..physics.discrepancy import BUMP_CENTRES, FORCE_CHANNELS, REGRESSORS, generic_names, is_generic
 from ..units import KT
 from . import attribution as attr
 from .candidates import CANDIDATES, as_candidate, make_candidate
@@ -346,6 +346,7 @@ SPEED_SHAPES = {"one": "constant over speed", "mu": "growing linearly with speed
 #: the state or control a state regressor follows
 STATE_WORDS = {"alpha": "angle of attack", "w": "heave velocity w", "q": "pitch rate q", "lam": "induced inflow",
                "col": "collective", "lon": "longitudinal cyclic"}
+STATE_WORDS.update({f"{r}mu": f"{w} x speed" for r, w in STATE_WORDS.items() if f"{r}mu" in REGRESSORS})
 #: the sign of a positive force or moment, in words (body axes: x forward, z down, M nose up)
 SIGN_WORDS = {"X": ("forward", "aft"), "Z": ("down", "up"), "M": ("nose-up", "nose-down")}
 

@@ -18,10 +18,17 @@ with ``phi`` a dimensionless regressor of order one over the envelope (:data:`RE
     lam              lambda_i / 0.05                        induced inflow (the wake's strength)
     col, lon         col / 0.2 rad, lon / 0.05 rad          the measured controls
 
+Extended family only (``generic_names("extended")``), the speed products of the state and control
+regressors (the classic dimensional form of a derivative, e.g. a pitch damping that grows with V):
+
+    alphamu, wmu, qmu, colmu, lonmu    the regressor above x mu/0.3
+
 Sensor side (data compatibility of flight-path reconstruction), per channel:
 
     TAS_scale        TAS_meas = (1 + c) TAS                 airspeed calibration (position error)
     nx_scale         n_x,meas = (1 + c) n_x
+    lon_scale,       the rotor sees (1 + c) u: a scale factor of the control channel's
+      col_scale      calibration (extended family only)
     beta0_bias       beta_0,meas = beta_0 + c [rad]
     lon_delay,       c d(u_d)/dt = u - u_d, the rotor sees u_d: a time shift c [s] of the measured
       col_delay      control (first order), a lag state added only when c is not zero
@@ -34,9 +41,11 @@ of q or theta: they are states as well as outputs, and the float simulator's fra
 for each, the state; :func:`pyomo_heli.simulation.integrate.simulate` refuses a sensor effect on them.)
 
 A term's name is ``d<channel>_<regressor>`` (e.g. ``dM_bump05``), its coefficient
-``c_<channel>_<regressor>``; :func:`generic_term` builds one, :func:`generic_names` lists the
-family. In an identification every coefficient is an ordinary parameter: fixed at zero until
-the structure determination frees it (:mod:`pyomo_heli.diagnosis.discovery`).
+``c_<channel>_<regressor>``; :func:`generic_term` builds one, :func:`generic_names` lists a
+family: ``"standard"`` (the default library of the discovery loop) or ``"extended"`` (standard +
+the speed products + the input scale factors, ``[loop] generic_family``). In an identification
+every coefficient is an ordinary parameter: fixed at zero until the structure determination frees
+it (:mod:`pyomo_heli.diagnosis.discovery`).
 """
 from __future__ import annotations
 
@@ -69,6 +78,13 @@ REGRESSORS = {
     "col": ("col/(0.2 rad)", lambda ctx: ctx.col / 0.2),
     "lon": ("lon/(0.05 rad)", lambda ctx: ctx.lon / 0.05),
 }
+#: state and control regressors whose product with mu/0.3 the extended family adds (``qmu``...)
+SPEED_PRODUCTS = ("alpha", "w", "q", "col", "lon")
+EXTENDED_REGRESSORS = {
+    f"{r}mu": (f"{REGRESSORS[r][0]} (mu/0.3)",
+               (lambda f: lambda ctx: f(ctx) * ctx.flow.mu / MU_REF)(REGRESSORS[r][1]))
+    for r in SPEED_PRODUCTS}
+REGRESSORS = {**REGRESSORS, **EXTENDED_REGRESSORS}
 FORCE_CHANNELS = ("X", "Z", "M")
 #: sensor terms: name -> (output or input, kind, formula)
 SENSOR_TERMS = {
@@ -77,10 +93,15 @@ SENSOR_TERMS = {
     "beta0_bias": ("beta_0", "bias", "beta_0,meas = beta_0 + c [rad]"),
     "lon_delay": ("lon", "delay", "c d(lon_d)/dt = lon - lon_d, the rotor sees lon_d (input time shift c [s])"),
     "col_delay": ("col", "delay", "c d(col_d)/dt = col - col_d, the rotor sees col_d (input time shift c [s])"),
+    "lon_scale": ("lon", "scale", "the rotor sees (1 + c) lon (input scale factor)"),
+    "col_scale": ("col", "scale", "the rotor sees (1 + c) col (input scale factor)"),
     **{f"{k}_delay": (out, "delay", f"c d({out}_d)/dt = {out} - {out}_d, the record holds {out}_d "
                                     "(output time shift c [s])")
        for k, out in (("nx", "n_x"), ("nz", "n_z"), ("TAS", "TAS"), ("beta0", "beta_0"))},
 }
+#: terms only in the extended family
+EXTENDED_ONLY = (*(f"d{ch}_{r}" for ch in FORCE_CHANNELS for r in EXTENDED_REGRESSORS), "lon_scale", "col_scale")
+FAMILIES = ("standard", "extended")
 #: coefficient bounds and scale: force (X, Z: fraction of W), moment (fraction of W R), sensor
 BOUNDS = {"X": (-0.2, 0.2, 0.005), "Z": (-0.2, 0.2, 0.005), "M": (-0.02, 0.02, 0.001),
           "scale": (-0.2, 0.2, 0.01), "bias": (-0.05, 0.05, 0.005), "delay": (0.0, 0.3, 0.05)}
@@ -147,13 +168,21 @@ class GenericTerm(Extension):
         return (d, 0.0, 0.0) if self.channel == "X" else (0.0, d, 0.0) if self.channel == "Z" else (0.0, 0.0, d)
 
     @property
+    def on_input(self) -> bool:
+        """A data-compatibility term of a control channel (the rotor sees a changed control)."""
+        return self.channel == "sensor" and SENSOR_TERMS[self.regressor][0] in INPUTS
+
+    @property
     def delays_input(self) -> bool:
-        return self.kind == "delay" and SENSOR_TERMS[self.regressor][0] in INPUTS
+        return self.kind == "delay" and self.on_input
 
     def adjust_controls(self, ctx):
-        if not self.delays_input:
+        if not self.on_input:
             return
         inp = SENSOR_TERMS[self.regressor][0]
+        if self.kind == "scale":
+            setattr(ctx, inp, (1 + ctx.p[self.strength]) * getattr(ctx, inp))
+            return
         setattr(ctx, f"{inp}_commanded", getattr(ctx, inp))
         setattr(ctx, inp, ctx.x[self.states[0]])
 
@@ -165,7 +194,7 @@ class GenericTerm(Extension):
                                  (getattr(ctx, f"{ch}_commanded") if self.delays_input else ctx.true_outputs[ch]) - d)}
 
     def adjust_outputs(self, ctx):
-        if self.channel != "sensor" or self.delays_input:
+        if self.channel != "sensor" or self.on_input:
             return
         out, kind, _ = SENSOR_TERMS[self.regressor]
         if kind == "delay":  # the record holds the lagged output; other sensor effects act on it as on the output
@@ -175,13 +204,17 @@ class GenericTerm(Extension):
         ctx.outputs[out] = ctx.outputs[out] * (1 + c) if kind == "scale" else ctx.outputs[out] + c
 
 
-def generic_names() -> list[str]:
-    """Every term of the family: the force and moment terms, then the sensor terms."""
-    return [f"d{ch}_{r}" for ch in FORCE_CHANNELS for r in REGRESSORS] + list(SENSOR_TERMS)
+def generic_names(family: str = "standard") -> list[str]:
+    """Every term of a family: the force and moment terms, then the sensor terms. ``"standard"`` leaves out the
+    terms of :data:`EXTENDED_ONLY`; ``"extended"`` has them all."""
+    if family not in FAMILIES:
+        raise ValueError(f"unknown discrepancy family {family!r}; choose from {', '.join(FAMILIES)}")
+    names = [f"d{ch}_{r}" for ch in FORCE_CHANNELS for r in REGRESSORS] + list(SENSOR_TERMS)
+    return names if family == "extended" else [n for n in names if n not in EXTENDED_ONLY]
 
 
 def is_generic(name: str) -> bool:
-    return name in set(generic_names())
+    return name in set(generic_names("extended"))
 
 
 def generic_term(name: str) -> GenericTerm:
@@ -190,4 +223,4 @@ def generic_term(name: str) -> GenericTerm:
         return GenericTerm("sensor", name)
     if len(name) > 3 and name[0] == "d" and name[1] in FORCE_CHANNELS and name[2] == "_" and name[3:] in REGRESSORS:
         return GenericTerm(name[1], name[3:])
-    raise KeyError(f"unknown discrepancy term {name!r}; the family is {', '.join(generic_names())}")
+    raise KeyError(f"unknown discrepancy term {name!r}; the family is {', '.join(generic_names('extended'))}")

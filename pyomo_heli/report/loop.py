@@ -23,6 +23,7 @@ import pandas as pd
 from ..dataset import load_flight_test
 from ..diagnosis.candidates import model_with_candidates
 from ..nlp.identification import validation_maneuvers
+from ..physics.discrepancy import REGRESSORS
 from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
@@ -414,6 +415,7 @@ def unexplained_statement(rejected: dict, fit: dict) -> str:
 
 
 STATE_OF = {"alpha": "alpha [deg]", "w": "w [m/s]", "lam": "lambda_i", "col": "col [deg]", "lon": "lon [deg]"}
+STATE_OF.update({f"{r}mu": c for r, c in STATE_OF.items() if f"{r}mu" in REGRESSORS})  # speed products
 
 
 def discovery_summary(doc: dict, cfg, out) -> list[str]:

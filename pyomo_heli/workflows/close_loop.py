@@ -85,6 +85,8 @@ class LoopSettings:
     #: structure determination over the physical candidates and the generic discrepancy family, physics named by
     #: encompassing (pyomo_heli.diagnosis.discovery; docs/discovery.md)
     discovery: bool = False
+    #: the generic family offered with ``discovery`` when ``generic`` is not given: "standard" or "extended"
+    generic_family: str = "standard"
     #: the generic terms offered with ``discovery`` (names of pyomo_heli.physics.discrepancy; default the whole family)
     generic: list | None = None
     #: reject a step whose model makes the validation error rise significantly on any output (paired test)
@@ -318,7 +320,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         if settings.discovery:
             from ..diagnosis.discovery import discovery_step
 
-            generic = [n for n in (settings.generic or generic_names()) if n not in rejected]
+            generic = [n for n in (settings.generic or generic_names(settings.generic_family)) if n not in rejected]
             step = discovery_step(cfg, model, chosen, id_data, physical=left, generic=generic,
                                   alpha=settings.alpha, ratio=settings.ratio, confound_corr=settings.confound_corr,
                                   robust=settings.robust, score_kw=score_test_inputs(cfg, settings), progress=progress)

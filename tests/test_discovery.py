@@ -90,6 +90,32 @@ def test_held_out_accelerometer_filter_is_discovered_as_an_output_time_shift(tmp
     assert abs(d["discovered"]["estimate"] - 0.08) < 3 * d["discovered"]["se"], d["discovered"]
 
 
+@pytest.mark.parametrize("effect, truth, term, sign", [
+    ("cyclic_gearing", "k_cg = 0.05", "lon_scale", +1),
+    ("fuselage_pitch_damping", "k_fq = 1.0", "dM_qmu", -1),
+])
+def test_the_extended_family_describes_two_held_out_effects_the_standard_one_cannot(tmp_path, effect, truth, term,
+                                                                                     sign):
+    """Truths the standard family has no term for: a cyclic gearing error (theta_1s = 1.05 lon) and a fuselage pitch
+    damping that grows with speed (dM ~ -q V). Offered the short library plus their neighbours of the extended family
+    (input scale factors, q and q x speed), the step's discovered or described term is the one of the truth's form,
+    with the truth's sign and size within three standard errors. The damping's equivalent coefficient, taking
+    V = mu Omega R: dM = -0.25 rho V (12 m^2)(4 m)^2 q = c m g R (q/0.2)(mu/0.3)."""
+    _cfg, doc = _loop(tmp_path, f"[truth.effects.{effect}]\n{truth}\n", seed=5,
+                      generic=[*GENERIC, "lon_scale", "col_scale", "dM_q", "dM_qmu", "dM_lon"])
+    d = doc["iterations"][0]["discovery"]
+    print(d["message"])
+    kept = doc["iterations"][doc["final_iteration"]]
+    assert not [n for n in kept["extensions"] if n in CANDIDATES], kept["extensions"]  # no wrong acceptance
+    fit = d.get("discovered") or d.get("best_generic")
+    assert fit is not None and fit["name"] == term, d["message"]
+    assert np.sign(fit["estimate"]) == sign
+    p = HelicopterModel().parameters
+    c_true = 0.05 if term == "lon_scale" else (-0.25 * p["rho"] * 12.0 * 16.0 * p["Omega"] * p["R"] * 0.2 * 0.3
+                                               / (p["m"] * p["g"] * p["R"]))
+    assert abs(fit["estimate"] - c_true) < 3 * fit["se"], (fit, c_true)
+
+
 def test_wake_on_tail_is_still_named_through_encompassing(tmp_path):
     """The small wake instance of tests/test_close_loop.py with discovery: the wake candidate is named, because with
     it fitted the best generic term adds nothing (encompassing)."""
@@ -172,6 +198,7 @@ def test_validation_rule_flags_a_worse_model_and_passes_a_better_one():
     ('discovery = "yes"', "[loop]: field 'discovery' must be true or false"),
     ('generic = ["dM_bump99"]', "[loop]: field 'generic': unknown discrepancy term 'dM_bump99'"),
     ("generic = []", "[loop]: field 'generic' must be a non-empty list of names"),
+    ('generic_family = "big"', "[loop]: field 'generic_family' must be \"standard\" or \"extended\", got 'big'"),
     ("validation_rule = 1", "[loop]: field 'validation_rule' must be true or false"),
     ('after_rejection = "retry"', "[loop]: field 'after_rejection' must be \"next\" or \"stop\", got 'retry'"),
 ])

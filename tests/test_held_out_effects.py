@@ -468,3 +468,22 @@ def test_the_second_blind_set_moves_what_its_equations_say():
     ctx = droop.evaluate({**x, "rpm_droop": d}, u)
     coef, rhs = ctx.state_eqs["rpm_droop"]
     assert (coef, rhs) == pytest.approx((0.8, -0.3 * (0.15 - 0.12) - d))
+
+
+def test_the_study_runs_the_extended_family_through_a_copy_of_the_config(tmp_path):
+    """--generic-family writes OUT/loop_<family>.toml: the same config with [loop] generic_family set and its
+    dataset path absolute, so the loop it runs offers the extended family."""
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.physics.discrepancy import generic_names
+    from pyomo_heli.workflows.close_loop import loop_settings
+
+    study = _study()
+    path = study.with_generic_family(study.CONFIG, "extended", tmp_path / "out")
+    assert path == tmp_path / "out" / "loop_extended.toml"
+    cfg = load_identification_config(path)
+    s = loop_settings(cfg)
+    assert s.generic_family == "extended" and s.discovery and s.generic is None
+    assert len(generic_names(s.generic_family)) == 68
+    assert Path(cfg.dataset).resolve() == (ROOT / "data" / "bo105_synthetic").resolve()
+    base = loop_settings(load_identification_config(study.CONFIG))
+    assert base.generic_family == "standard"

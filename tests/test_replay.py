@@ -127,3 +127,19 @@ def test_a_fast_lag_gets_enough_rk4_steps_and_matches_a_stiff_integrator(maneuve
         np.testing.assert_allclose(got[c].to_numpy(), ref[c].to_numpy(), rtol=0,
                                    atol=1e-4 * max(1.0, float(np.max(np.abs(ref[c])))), err_msg=c)
         np.testing.assert_allclose(fast[c], got[c].to_numpy(), rtol=1e-9, atol=1e-9, err_msg=c)  # casadi's RK4
+
+
+@pytest.mark.parametrize("name, c", [("lon_scale", 0.05), ("dM_qmu", -0.003)])
+def test_the_extended_family_replays_the_same_compiled_or_not(maneuver, name, c):
+    """An input scale factor (applied to the control the rotor sees) and a speed product: the compiled replay and
+    the Python RK4 give the same record, and the term moves it."""
+    from pyomo_heli.physics.discrepancy import generic_term
+
+    term = generic_term(name)
+    model = HelicopterModel(extensions=(term,)).with_parameters(**{term.strength: c})
+    tp = trim_float(model, maneuver.trim_speed)
+    fast, slow = rp.replay(model, maneuver, tp), rp.replay(model, maneuver, tp, compiled=False)
+    for col in ("q", "theta", "n_z", "TAS"):
+        np.testing.assert_allclose(fast[col].to_numpy(), slow[col].to_numpy(), rtol=1e-9, atol=1e-12, err_msg=col)
+    m0 = rp.replay(HelicopterModel(), maneuver, trim_float(HelicopterModel(), maneuver.trim_speed))
+    assert np.max(np.abs(fast["q"].to_numpy() - m0["q"].to_numpy())) > 1e-4

@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pyomo_heli.diagnosis.candidates import CANDIDATES
 from pyomo_heli.dataset import load_flight_test, validate_flight_test, write_flight_test
 from pyomo_heli.dataset.schema import KT, TrimConventions
 from pyomo_heli.nlp.parameters import FreeParameter
@@ -25,6 +26,7 @@ from pyomo_heli.workflows.trim_loop import (
     predict,
     run_trim_loop,
     trim_points,
+    write_trim_report,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -199,6 +201,17 @@ def test_trim_loop_config_errors(tmp_path):
     out = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "trim-loop", str(cfg), "--out", str(tmp_path / "o")],
                          capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 2 and "field 'holdout_every'" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    for loop, message in (('generic_family = "big"', "[loop]: field 'generic_family' must be \"standard\" or "
+                                                     "\"extended\", got 'big'"),
+                          ('generic = ["dM_bump99"]', "[loop]: field 'generic': unknown discrepancy term 'dM_bump99'")):
+        cfg.write_text(f'[data]\ndataset = "{BUNDLED}"\n[parameters.f_e]\n[loop]\ndiscovery = true\n{loop}\n')
+        with pytest.raises(TrimLoopError) as err:
+            load_trim_loop_config(cfg)
+        assert message in str(err.value) and len(str(err.value).splitlines()) == 1, str(err.value)
+    cfg.write_text(f'[data]\ndataset = "{BUNDLED}"\n[parameters.f_e]\n[loop]\ndiscovery = true\n'
+                   'generic_family = "extended"\n')
+    c = load_trim_loop_config(cfg)
+    assert c.discovery and c.generic_family == "extended" and c.generic is None
 
 
 def test_maneuver_identification_refuses_trim_only_data(tmp_path):
@@ -213,16 +226,12 @@ def test_maneuver_identification_refuses_trim_only_data(tmp_path):
         identification_data(cfg)
 
 
-def test_trim_loop_names_an_independent_wake_effect(tmp_path):
-    """Trims from M0 + the truth simulator's wake-on-tail effect E1 (flighttest.truth_effects, written
-    independently of the candidate library), 0.1 deg seeded noise, root collective and unknown datum: the
-    score test on the trim residuals accepts rotor_wake_on_tail, the second identification fits to the noise
-    level and accepts nothing more, and the datum is recovered within its standard errors."""
-    from pyomo_heli.flighttest.truth_effects import make_effect
-
+def _noisy_trims(folder: Path, effect, **strengths) -> Path:
+    """Trims from M0 + ``effect`` (a truth effect the candidate library does not import), f_e 1.4, x_h 0.02, every
+    channel every 10 kt at its own speeds, 0.1 deg seeded noise, root collective and a datum of 0.8 deg."""
     conv = TrimConventions(collective_station=0.0, theta_datum=None)
-    truth = HelicopterModel(extensions=(TrimOutputDatum(), make_effect("wake_on_tail"))).with_parameters(
-        K_lamT=1.5, f_e=1.4, x_h=0.02, theta_datum=0.8 * DEG)
+    truth = HelicopterModel(extensions=(TrimOutputDatum(), effect)).with_parameters(
+        f_e=1.4, x_h=0.02, theta_datum=0.8 * DEG, **strengths)
     speeds = {"col": range(0, 106, 10), "lon": range(3, 106, 10), "theta": range(6, 106, 10)}
     rng = np.random.default_rng(1)
     rows = []
@@ -231,9 +240,20 @@ def test_trim_loop_names_an_independent_wake_effect(tmp_path):
         for v, val in zip(kts, y):
             rows.append({"V": v * KT, "gamma_fp": 0.0, "col": np.nan, "lon": np.nan, "theta": np.nan,
                          ch: val + rng.normal(0.0, 0.1 * DEG)})
-    manifest = {"aircraft": "Bo-105 (synthetic trims, E1)", "atmosphere": {"rho_kg_m3": 1.225, "g_m_s2": 9.81},
+    manifest = {"aircraft": f"Bo-105 (synthetic trims, {effect.name})",
+                "atmosphere": {"rho_kg_m3": 1.225, "g_m_s2": 9.81},
                 "mass_kg": 2200.0, "maneuvers": [], "conventions": conv.to_manifest()}
-    folder = write_flight_test(tmp_path / "ds", manifest, {}, pd.DataFrame(rows))
+    return write_flight_test(folder, manifest, {}, pd.DataFrame(rows))
+
+
+def test_trim_loop_names_an_independent_wake_effect(tmp_path):
+    """Trims from M0 + the truth simulator's wake-on-tail effect E1 (flighttest.truth_effects, written
+    independently of the candidate library), 0.1 deg seeded noise, root collective and unknown datum: the
+    score test on the trim residuals accepts rotor_wake_on_tail, the second identification fits to the noise
+    level and accepts nothing more, and the datum is recovered within its standard errors."""
+    from pyomo_heli.flighttest.truth_effects import make_effect
+
+    folder = _noisy_trims(tmp_path / "ds", make_effect("wake_on_tail"), K_lamT=1.5)
     doc = run_trim_loop(_config(tmp_path, folder, max_iterations=2), tmp_path / "out", progress=lambda *_: None)
     first, second = doc["iterations"][0], doc["iterations"][-1]
     assert first["score_test"]["decision"] == "accepted"
@@ -242,6 +262,35 @@ def test_trim_loop_names_an_independent_wake_effect(tmp_path):
     assert second["residual_sigma_deg"] < 0.15 < first["residual_sigma_deg"]  # noise 0.1 deg
     datum = second["parameters"][THETA_DATUM]
     assert abs(datum["value"] - 0.8 * DEG) < 3 * datum["se"]
+
+
+def test_trim_loop_discovery_names_the_wake_by_encompassing_and_describes_a_held_out_download(tmp_path):
+    """[loop] discovery on trims: the candidates and the generic family scored together (Bonferroni over all).
+    The wake's trims: rotor_wake_on_tail is named because, with it fitted, the best generic term adds nothing; then
+    nothing is left. A held-out fuselage download (not in the library): no physical candidate is added, and the
+    best generic description of what is left is a download or nose-up moment (the truth's signs)."""
+    from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS
+    from pyomo_heli.flighttest.truth_effects import make_effect
+
+    folder = _noisy_trims(tmp_path / "wake", make_effect("wake_on_tail"), K_lamT=1.5)
+    doc = run_trim_loop(_config(tmp_path, folder, max_iterations=2, discovery=True), tmp_path / "o1",
+                        progress=lambda *_: None)
+    d0 = doc["iterations"][0]["score_test"]["discovery"]
+    assert d0["decision"] == "named" and d0["added"] == "rotor_wake_on_tail", d0["message"]
+    assert d0["encompassing"]["encompasses"] and d0["encompassing"]["p_generic_given_candidate"] >= 0.01
+    assert len(doc["iterations"]) == 2 and doc["stopped"] == "discovery: none"
+    assert doc["iterations"][0]["score_test"]["n_testable"] > 40  # the generic family was offered
+    write_trim_report(_config(tmp_path, folder, discovery=True), doc, tmp_path / "o1")
+    assert "structure determination over the candidates and the generic discrepancy family: **named**" in \
+        (tmp_path / "o1" / "report.md").read_text()
+
+    folder = _noisy_trims(tmp_path / "fd", HELD_OUT_EFFECTS["fuselage_download"](), k_fd=0.03)
+    doc = run_trim_loop(_config(tmp_path, folder, max_iterations=1, discovery=True), tmp_path / "o2",
+                        progress=lambda *_: None)
+    d = doc["iterations"][-1]["score_test"]["discovery"]
+    assert not [e for e in doc["iterations"][-1]["extensions"] if e in CANDIDATES]  # no wrong acceptance
+    g = d["best_generic"]
+    assert g["name"][:2] in ("dZ", "dM") and g["kappa_hat"] > 0, d["message"]  # down / nose-up
 
 
 def test_maneuver_identification_refuses_trim_rows_with_empty_channels(tmp_path):

@@ -121,6 +121,63 @@ def score_trims(model: HelicopterModel, conventions, pts: pd.DataFrame, identifi
             "points": {"speed_kt": (pts["V"] / KT).tolist(), "channel": pts["channel"].tolist()}}
 
 
+def discovery_decision(score: dict, generic_p_given, alpha: float = ALPHA) -> dict:
+    """Structure determination on trims (``[loop] discovery``): the decision over a library of physical candidates
+    and generic discrepancy terms scored together by :func:`score_trims` (Bonferroni level alpha / L).
+
+    - nothing significant: nothing is added; the best generic term (largest LM) is reported as what is left;
+    - a significant generic term G and no physical one: G is added, "not explained by any library effect";
+    - a significant physical candidate P: P is fitted and G (the best significant generic term, else the best
+      generic term) scored again at that fit, ``generic_p_given(P, G)``; P is named when G then adds nothing
+      (p >= alpha); otherwise G is added if it is significant, else nothing ("ambiguous").
+
+    Returns the decision (``named``, ``discovered``, ``ambiguous``, ``none``), the term to add (``added``), the
+    best generic row and the encompassing test, and a message; the decision rule of :func:`score_trims` (ratio,
+    confounding) is not used, as generic terms are correlated by construction."""
+    from ..physics.discrepancy import generic_term, is_generic
+
+    rows = [r for r in score["scores"] if r["testable"]]
+    gen = sorted((r for r in rows if is_generic(r["name"])), key=lambda r: -r["LM"])
+    sig_g = [r for r in gen if r["significant"]]
+    sig_p = sorted((r for r in rows if r["significant"] and not is_generic(r["name"])), key=lambda r: -r["LM"])
+    G = (sig_g or gen or [None])[0]
+    L = score["n_testable"]
+
+    def about(r):
+        return (f"{generic_term(r['name']).formula()}, c ~ {r['kappa_hat']:.3g} (one-step), LM {r['LM']:.3g}, "
+                f"p = {r['p_value']:.2g}")
+
+    out = {"best_generic": G and {k: G[k] for k in ("name", "LM", "p_value", "kappa_hat", "df")},
+           "encompassing": None, "added": None}
+    if not sig_p and not sig_g:
+        out.update(decision="none", message=f"nothing significant over the library of {L} terms (p < {alpha:g}/{L})"
+                   + (f"; best generic description of what is left: {about(G)}" if G else ""))
+        return out
+    if not sig_p:
+        out.update(decision="discovered", added=G["name"],
+                   message=f"not explained by any library effect; discovered {about(G)}")
+        return out
+    P = sig_p[0]
+    if G is None:
+        out.update(decision="named", added=P["name"], message=f"{P['name']} (no generic term to test it against)")
+        return out
+    p_g = float(generic_p_given(P["name"], G["name"]))
+    out["encompassing"] = {"candidate": P["name"], "generic": G["name"], "p_generic_given_candidate": p_g,
+                           "encompasses": p_g >= alpha}
+    if p_g >= alpha:
+        out.update(decision="named", added=P["name"],
+                   message=f"{P['name']} named (LM {P['LM']:.3g}, p = {P['p_value']:.2g}): with it fitted, "
+                           f"{G['name']} adds nothing (p = {p_g:.2g} >= {alpha:g})")
+    elif G["significant"]:
+        out.update(decision="discovered", added=G["name"],
+                   message=f"not explained by any library effect ({P['name']} tested: {G['name']} adds to it, "
+                           f"p = {p_g:.2g}); discovered {about(G)}")
+    else:
+        out.update(decision="ambiguous", message=f"{P['name']} significant, but {G['name']} still adds to it "
+                                                 f"(p = {p_g:.2g}); nothing added; what is left: {about(G)}")
+    return out
+
+
 def residual_shape(pts: pd.DataFrame, e_deg: np.ndarray) -> dict:
     """Per channel: the residual (data - model) against speed, its largest step between neighbouring speeds,
     the means below and above that step, and its least-squares linear trend [deg per 10 kt]."""

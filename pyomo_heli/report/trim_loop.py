@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ..dataset.schema import TRIM_CHANNELS
 from ..physics.conventions import THETA_DATUM
+from ..physics.discrepancy import is_generic
 
 REPORT_FILE = "report.md"
 
@@ -79,6 +80,10 @@ def plot_residuals(doc: dict, path) -> Path:
 
 
 
+#: rows of the score table in the report with discovery (the library has tens of terms)
+TOP_ROWS = 12
+
+
 def write_trim_loop_report(doc: dict, config_path, out) -> Path:
     """``report.md``, ``trim_curves.png`` and ``trim_residuals.png`` in ``out`` from ``doc`` (with its curves)."""
     out = Path(out)
@@ -122,16 +127,25 @@ def write_trim_loop_report(doc: dict, config_path, out) -> Path:
                   "sandwich (HC1) estimate. Both take the residuals as independent, which a structured residual "
                   "(below) is not: read them as lower bounds."]
         st = it["score_test"]
-        L += ["", f"Score test ({st['n_testable']} candidates with a trim signature, level {st['level']:.2g}, "
-                  f"leverage-corrected sandwich variance): "
-                  f"**{st['decision']}**: {st['message']}", "",
-              "| candidate | LM | df | p | estimate | kept | note |", "|---|---|---|---|---|---|---|"]
-        for r in st["scores"]:
+        d = st.get("discovery")  # structure determination: its decision, the library's best rows in the table
+        head = (f"Score test ({st['n_testable']} {'terms' if d else 'candidates'} with a trim signature, level "
+                f"{st['level']:.2g}, leverage-corrected sandwich variance)")
+        L += ["", f"{head}: **{st['decision']}**: {st['message']}" if not d else
+              f"{head}, structure determination over the candidates and the generic discrepancy family: "
+              f"**{d['decision']}**: {d['message']}", ""]
+        L += ["| candidate | LM | df | p | estimate | kept | note |", "|---|---|---|---|---|---|---|"]
+        top = {r["name"] for r in [r for r in st["scores"] if r["testable"]][:TOP_ROWS]}
+        shown = [r for r in st["scores"] if not d or r["name"] in top or not is_generic(r["name"])]
+        for r in shown:
             if r["testable"]:
                 L.append(f"| {r['name']} | {r['LM']:.3g} | {r['df']:.3g} | {r['p_value']:.2g} | {r['kappa_hat']:.3g} | "
                          f"{r['kept']:.2f} | |")
             else:
                 L.append(f"| {r['name']} | - | - | - | - | - | {r['note']} |")
+        if d:
+            L.append("")
+            L.append(f"(the {len(top)} testable terms of largest LM and every physical candidate; every row in "
+                     "`trim_loop.json`)")
         L.append("")
     L += ["## RMS error, data minus model [deg]", "", "| points | channel | before | after |", "|---|---|---|---|"]
     for role in ("identification", "validation"):
@@ -151,11 +165,16 @@ def write_trim_loop_report(doc: dict, config_path, out) -> Path:
                  f"{s.get('step_between_kt', ['-', '-'])[0]:.1f}-{s.get('step_between_kt', ['-', '-'])[1]:.1f} | "
                  f"{s.get('mean_below_step_deg', 0):+.2f} / {s.get('mean_above_step_deg', 0):+.2f} | "
                  f"{s.get('trend_deg_per_10kt', 0):+.3f} |")
-    if last["score_test"]["decision"] != "accepted":
+    d = last["score_test"].get("discovery")
+    if d and not d["added"]:
+        L += ["", "Nothing in the library, generic terms included, is significant on the remaining residual "
+                  f"(structure determination above: {d['decision']}). Its shape per channel is in the table and in "
+                  "`trim_residuals.png`; docs/real_data.md discusses the missing physics it points to."]
+    elif not d and last["score_test"]["decision"] != "accepted":
         L += ["", "No candidate of the library explains the remaining residual (score test above). Its shape per "
                   "channel is in the table and in `trim_residuals.png`; a generic speed-dependent correction "
-                  "(structure determination) is not part of this loop. docs/real_data.md discusses the missing "
-                  "physics the shape points to."]
+                  "(structure determination, `[loop] discovery = true`) was not offered. docs/real_data.md "
+                  "discusses the missing physics the shape points to."]
     L += ["", "Not represented by the 3-DoF longitudinal model (not fitted, whatever the data hold): lateral cyclic "
               "and roll attitude (no lateral degrees of freedom), tail-rotor collective (no tail rotor), main-rotor "
               "power (no torque equation)."]

@@ -20,7 +20,10 @@ identifies that point directly and closes the loop on the trim residuals alone:
    residuals, with the decision rules of :mod:`pyomo_heli.diagnosis.attribution` (Bonferroni level
    alpha / n, ratio and confounding rules) and a leverage-corrected sandwich variance
    (:func:`pyomo_heli.diagnosis.trim_attribution.score_trims`);
-   a candidate with no trim signature is reported as not testable on trims;
+   a candidate with no trim signature is reported as not testable on trims; with ``[loop] discovery`` the
+   generic discrepancy family is scored with them and the structure determination decides
+   (:func:`pyomo_heli.diagnosis.trim_attribution.discovery_decision`: a physical candidate named by
+   encompassing, else a significant generic term added "not explained by any library effect");
 5. an accepted candidate is added with its strength free (initial value its one-step estimate) and the
    fit repeated, up to ``max_iterations`` times; otherwise the loop stops and the remaining residual's
    shape per channel is reported (largest step between neighbouring speeds, linear trend).
@@ -45,7 +48,9 @@ from ..settings import ConfigError
 from ..physics.conventions import THETA_DATUM, TrimOutputDatum
 from ..physics.model import HelicopterModel
 from ..physics.parameters import DEG
-from ..diagnosis.trim_attribution import residual_shape, rms_by, score_trims
+from ..diagnosis.candidates import CANDIDATES, make_candidate
+from ..diagnosis.trim_attribution import discovery_decision, residual_shape, rms_by, score_trims
+from ..physics.discrepancy import generic_names
 from ..nlp.trim_identification import TrimIdentificationFailed, identify_trims, standard_errors  # noqa: F401 (cli)
 from ..simulation.recorded_trims import predict
 
@@ -72,6 +77,10 @@ class TrimLoopConfig:
     alpha: float = 0.01
     ratio: float = 2.0
     confound_corr: float = 0.7
+    #: structure determination: the generic discrepancy family scored with the candidates (docs/real_data.md)
+    discovery: bool = False
+    generic_family: str = "standard"
+    generic: list | None = None
     solver: str = "casadi-ipopt"
     solver_options: dict = field(default_factory=dict)
 
@@ -142,7 +151,8 @@ def load_trim_loop_config(path) -> TrimLoopConfig:
     return TrimLoopConfig(path=path, dataset=ds, holdout_every=every, fixed=fixed, free=free,
                           max_iterations=loop.max_iterations, candidates=cands, solver=s.solver.name,
                           solver_options=dict(s.solver.options), alpha=loop.alpha, ratio=loop.ratio,
-                          confound_corr=loop.confound_corr)
+                          confound_corr=loop.confound_corr, discovery=loop.discovery,
+                          generic_family=loop.generic_family, generic=loop.generic)
 
 
 # ---------------------------------------------------------------- data
@@ -189,7 +199,6 @@ def _model_of(cfg: TrimLoopConfig, ft, extensions=(), values: dict | None = None
 def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
     """Identify, test the candidates, add the accepted one, repeat; write ``out/trim_loop.json``."""
     from ..dataset.reader import check_model_matches_manifest
-    from ..diagnosis.candidates import make_candidate
 
     ft = _load(cfg)
     out = Path(out)
@@ -256,8 +265,21 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
         e = (data - y) / DEG
         se = standard_errors(est, conv, ident, [f.name for f in free])
         J_float = float(np.sum(e[(pts.role == "identification").to_numpy()] ** 2)) / ident["row"].nunique()
-        score = score_trims(est, conv, ident, [f.name for f in free], cfg.candidates, cfg.alpha, cfg.ratio,
+        names = list(cfg.candidates or CANDIDATES)
+        if cfg.discovery:
+            names += list(cfg.generic or generic_names(cfg.generic_family))
+        score = score_trims(est, conv, ident, [f.name for f in free], names, cfg.alpha, cfg.ratio,
                             cfg.confound_corr)
+        if cfg.discovery:
+            def generic_p_given(cand_name, generic_name, free=free, values=values, score=score):
+                fr, ext = _with_term(free, values, cand_name, score)
+                m = _model_of(cfg, ft, [*extensions, ext])
+                v, _ = identify_trims(m, fr, ident, conv, cfg.solver, cfg.solver_options)
+                return score_trims(m.with_parameters(**v), conv, ident, [f.name for f in fr],
+                                   [generic_name])["scores"][0]["p_value"]
+
+            score["discovery"] = discovery_decision(score, generic_p_given, cfg.alpha)
+        accepted = score["discovery"]["added"] if cfg.discovery else score["accepted"]
         rec = {"iteration": it, "extensions": [x.name for x in extensions], "free": [f.name for f in free],
                "solve": info, "J_trim_float": J_float,
                "parameters": {n: {"value": v, "se": se["se"][n], "se_robust": se["se_robust"][n],
@@ -272,21 +294,29 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
         progress(f"  J_trim {info['J_trim']:.4g} deg^2 ({info['status']}); held-out RMS "
                  + ", ".join(f"{c} {v:.3f}" for c, v in rec["rms_deg"]["validation"].items()) + " deg")
         progress(f"  score test: {score['decision']}: {score['message']}")
+        if cfg.discovery:
+            progress(f"  discovery: {score['discovery']['decision']}: {score['discovery']['message']}")
         doc["stopped"] = "max_iterations"
-        if score["decision"] != "accepted":
-            doc["stopped"] = f"score test: {score['decision']}"
+        if accepted is None:
+            doc["stopped"] = (f"discovery: {score['discovery']['decision']}" if cfg.discovery
+                              else f"score test: {score['decision']}")
             break
         if it == cfg.max_iterations:
             break
-        cand = make_candidate(score["accepted"])
-        spec = HelicopterModel(extensions=(cand,)).parameters.spec(cand.strength)
-        k0 = float(np.clip(next(r["kappa_hat"] for r in score["scores"] if r["name"] == cand.name),
-                           *spec.bounds))
-        free = [dataclasses.replace(f, initial=float(np.clip(values[f.name], f.lower, f.upper))) for f in free]
-        free.append(FreeParameter(cand.strength, k0, spec.bounds[0], spec.bounds[1], spec.scale))
+        free, cand = _with_term(free, values, accepted, score)
         extensions.append(cand)
     (out / RESULT_FILE).write_text(json.dumps(doc, indent=1, default=_plain) + "\n")
     return doc
+
+
+def _with_term(free: list, values: dict, name: str, score: dict):
+    """The free parameters started at ``values`` plus the strength of candidate or generic term ``name`` (started at
+    its one-step estimate within its bounds), and the term."""
+    cand = make_candidate(name)
+    spec = HelicopterModel(extensions=(cand,)).parameters.spec(cand.strength)
+    k0 = float(np.clip(next(r["kappa_hat"] for r in score["scores"] if r["name"] == name), *spec.bounds))
+    free = [dataclasses.replace(f, initial=float(np.clip(values[f.name], f.lower, f.upper))) for f in free]
+    return [*free, FreeParameter(cand.strength, k0, spec.bounds[0], spec.bounds[1], spec.scale)], cand
 
 
 def _shown(model, name, value):

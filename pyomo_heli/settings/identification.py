@@ -289,6 +289,12 @@ class DiagnosisTable(Table):
 
 
 NON_EMPTY = "field '{field}' must be a non-empty list of names"
+#: the generic discrepancy family and terms offered with discovery: one declaration for every [loop] table
+GenericFamily = Literal["standard", "extended"]
+GenericTerms = Optional[Names(generic_names("extended"), empty=NON_EMPTY,
+                              unknown="field 'generic': unknown discrepancy term {one!r}; choose from {choices}")]
+GENERIC_MESSAGES = {"generic": ("field 'generic' must be a non-empty list of names", None),
+                    "generic_family": "field 'generic_family' must be \"standard\" or \"extended\", got {v!r}"}
 
 
 class LoopTable(Table):
@@ -306,8 +312,7 @@ class LoopTable(Table):
         "shape": "field 'shape' must be \"time_domain\" or \"default\", got {v!r}",
         "uncertainty": "field 'uncertainty' must be \"chosen\" or \"none\", got {v!r}",
         "score_inputs": "field 'score_inputs' must be \"eliminated\" or \"measured\", got {v!r}",
-        "generic": ("field 'generic' must be a non-empty list of names", None),
-        "generic_family": "field 'generic_family' must be \"standard\" or \"extended\", got {v!r}",
+        **GENERIC_MESSAGES,
         "after_rejection": "field 'after_rejection' must be \"next\" or \"stop\", got {v!r}",
     }
 
@@ -328,12 +333,10 @@ class LoopTable(Table):
                                   "measured inputs as exact")
     discovery: bool = Field(False, description="structure determination over the candidates and the generic "
                                                "discrepancy family (docs/discovery.md)")
-    generic_family: Literal["standard", "extended"] = Field(
+    generic_family: GenericFamily = Field(
         "standard", description="the generic family offered with discovery when no 'generic' list is given: "
                                 "standard, or extended (+ speed products and input scale factors; docs/discovery.md)")
-    generic: Optional[Names(generic_names("extended"), empty=NON_EMPTY,
-                            unknown="field 'generic': unknown discrepancy term {one!r}; choose from {choices}")] = \
-        Field(
+    generic: GenericTerms = Field(
         None, description="the generic terms offered with discovery (default the whole family named by "
                           "'generic_family', pyomo_heli.physics.discrepancy.generic_names(generic_family))")
     validation_rule: bool = Field(True, description="reject a step whose model makes the validation error rise "

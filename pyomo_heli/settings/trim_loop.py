@@ -5,14 +5,13 @@ dataset folder are the loader's (:func:`pyomo_heli.workflows.trim_loop.load_trim
 """
 from __future__ import annotations
 
-from typing import Literal, Optional
+from typing import Optional
 
 from pydantic import Field
 
 from .base import Table
-from .common import Finite, Names, ParameterTable, ParameterValues, SolverTable
-from ..physics.discrepancy import generic_names
-from .identification import ALPHA, CONFOUND_CORR, NON_EMPTY, RATIO
+from .common import Finite, ParameterTable, ParameterValues, SolverTable
+from .identification import ALPHA, CONFOUND_CORR, GENERIC_MESSAGES, RATIO, GenericFamily, GenericTerms
 
 
 class TrimDataTable(Table):
@@ -40,8 +39,7 @@ class TrimLoopTable(Table):
                 "alpha": (None, "field 'alpha' = {v!r} is out of range"),
                 "ratio": (None, "field 'ratio' = {v!r} is out of range"),
                 "confound_corr": (None, "field 'confound_corr' = {v!r} is out of range"),
-                "generic_family": "field 'generic_family' must be \"standard\" or \"extended\", got {v!r}",
-                "generic": ("field 'generic' must be a non-empty list of names", None)}
+                **GENERIC_MESSAGES}
 
     max_iterations: int = Field(2, ge=0, description="most loop iterations after the first fit")
     candidates: Optional[list[str]] = Field(None, description="the candidate effects offered (names of "
@@ -53,11 +51,10 @@ class TrimLoopTable(Table):
     discovery: bool = Field(False, description="structure determination: the generic discrepancy family scored "
                                                "with the candidates, physics named by encompassing "
                                                "(docs/real_data.md)")
-    generic_family: Literal["standard", "extended"] = Field(
+    generic_family: GenericFamily = Field(
         "standard", description="the generic family offered with discovery when no 'generic' list is given")
-    generic: Optional[Names(generic_names("extended"), empty=NON_EMPTY,
-                            unknown="field 'generic': unknown discrepancy term {one!r}; choose from {choices}")] = \
-        Field(None, description="the generic terms offered with discovery (default the whole family)")
+    generic: GenericTerms = Field(None, description="the generic terms offered with discovery (default the whole "
+                                                    "family)")
 
 
 class TrimLoopFile(Table):

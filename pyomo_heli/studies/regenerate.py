@@ -138,8 +138,7 @@ ENTRIES: tuple[Entry, ...] = (
         "control_mixing --generic-family extended --out {out}/held_out_extended --workers 2",
         "python studies/held_out_effects.py --effects none --seeds 5 --generic-family extended "
         "--out {out}/held_out_extended --workers 2",
-        "python studies/held_out_effects.py --bundled --modes on --generic-family extended "
-        "--out {out}/held_out_extended"),
+        "python studies/held_out_effects.py --bundled --generic-family extended --out {out}/held_out_extended"),
         ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=200),
     Entry("bo105_flight_trims", ("pyomo-heli trim-loop studies/bo105_flight_trims.toml "
                                  "--out {out}/bo105_flight_trims",),

@@ -12,6 +12,7 @@ import pandas as pd
 from scipy import stats
 
 from ..dataset.schema import KT, TRIM_CHANNELS
+from ..physics.discrepancy import generic_term, is_generic
 from ..physics.model import HelicopterModel
 from ..physics.parameters import DEG
 from ..simulation.recorded_trims import jacobian, predict
@@ -134,8 +135,6 @@ def discovery_decision(score: dict, generic_p_given, alpha: float = ALPHA) -> di
     Returns the decision (``named``, ``discovered``, ``ambiguous``, ``none``), the term to add (``added``), the
     best generic row and the encompassing test, and a message; the decision rule of :func:`score_trims` (ratio,
     confounding) is not used, as generic terms are correlated by construction."""
-    from ..physics.discrepancy import generic_term, is_generic
-
     rows = [r for r in score["scores"] if r["testable"]]
     gen = sorted((r for r in rows if is_generic(r["name"])), key=lambda r: -r["LM"])
     sig_g = [r for r in gen if r["significant"]]

@@ -80,10 +80,14 @@ REGRESSORS = {
 }
 #: state and control regressors whose product with mu/0.3 the extended family adds (``qmu``...)
 SPEED_PRODUCTS = ("alpha", "w", "q", "col", "lon")
-EXTENDED_REGRESSORS = {
-    f"{r}mu": (f"{REGRESSORS[r][0]} (mu/0.3)",
-               (lambda f: lambda ctx: f(ctx) * ctx.flow.mu / MU_REF)(REGRESSORS[r][1]))
-    for r in SPEED_PRODUCTS}
+
+
+def _times_mu(regressor):
+    """regressor(ctx) x mu/0.3 as a function of ctx."""
+    return lambda ctx: regressor(ctx) * ctx.flow.mu / MU_REF
+
+
+EXTENDED_REGRESSORS = {f"{r}mu": (f"{REGRESSORS[r][0]} (mu/0.3)", _times_mu(REGRESSORS[r][1])) for r in SPEED_PRODUCTS}
 REGRESSORS = {**REGRESSORS, **EXTENDED_REGRESSORS}
 FORCE_CHANNELS = ("X", "Z", "M")
 #: sensor terms: name -> (output or input, kind, formula)

@@ -22,8 +22,8 @@ import numpy as np
 import pyomo.environ as pyo
 import pytest
 
-from pyomo_heli.pareto.epsilon import (INFEASIBLE, EpsilonConstraintSolver, GridStart, nondominated, nondominated_nadir,
-                                       snake, utopia_distance_n)
+from pyomo_heli.pareto.epsilon import (DIRECT_STARTS, INFEASIBLE, EpsilonConstraintSolver, GridStart, nondominated,
+                                       nondominated_nadir, snake, utopia_distance_n)
 from pyomo_heli.pareto.front import ParetoSettings
 
 NAMES = ("f1", "f2", "f3")
@@ -109,6 +109,39 @@ def test_eq11_choice_under_both_nadir_rules(box_front):
     choices = ps.choices()
     assert set(choices) == {"payoff", "nondominated"}
     assert choices["nondominated"]["nadir"] == pytest.approx([n1, 1, 1], abs=1e-6)
+
+
+def test_direct_eq11_solve_that_fails_goes_on_from_the_next_start_and_reaches_the_closed_form(box_front):
+    """A direct Eq. 11 solve stopped by Ipopt (Error_In_Step_Computation on a flat front, here simulated for
+    the first three attempts) is solved again from the next converged points nearest to utopia, then
+    midway between the first two; the answer is the closed form's, and the record names every attempt."""
+    ps = box_front
+    chosen, d, _, _ = ps.eq11("payoff")
+    pts = ps.front_candidates()
+    nearest = [pts[i] for i in np.argsort(d, kind="stable")]
+    assert nearest[0] is chosen
+    real, seen = ps._direct_once, []
+
+    def failing_thrice(utopia, nadir):
+        seen.append((pyo.value(ps.m.theta_s["a"]), pyo.value(ps.m.theta_s["b"])))
+        p = real(utopia, nadir)
+        if len(seen) <= DIRECT_STARTS:
+            p.success, p.status = False, "Error_In_Step_Computation"
+        return p
+
+    ps._direct_once = failing_thrice
+    try:
+        direct = ps.direct_choice(chosen, rule="payoff")
+    finally:
+        del ps._direct_once
+    starts = [(p.parameters["a"], p.parameters["b"]) for p in nearest[:DIRECT_STARTS]]
+    np.testing.assert_allclose(seen, starts + [tuple(np.mean(starts[:2], axis=0))], atol=1e-9)  # last: midway
+    assert direct.success
+    np.testing.assert_allclose([direct.parameters["a"], direct.parameters["b"]], [_t(1.0)] * 2, atol=1e-5)
+    label = [f"point {p.index} (eps)" for p in nearest[:DIRECT_STARTS]]
+    assert direct.warm_start == ("primal from " + "".join(f"{x} (Error_In_Step_Computation), then " for x in label)
+                                 + f"midway between {label[0]} and {label[1]}")
+    assert direct.iterations > 0
 
 
 def test_solve_at_warm_starts_from_the_nearest_point_and_matches_the_closed_form(box_front):

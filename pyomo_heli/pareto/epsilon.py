@@ -54,7 +54,7 @@ from .eq11 import (NADIR_RULES, nondominated, nondominated_nadir, payoff_nadir, 
 from .snapshot import Snapshot
 from .steps import (ANCHOR_NAMES, FRONT_STEP_OPTIONS, INFEASIBLE, IPOPT_INFEASIBLE,  # noqa: F401 - re-exported
                     LEAVE_ANCHOR_OPTIONS, TIGHT_MARGIN, EpsilonPoint, Outcome, _value, epsilon_grid,
-                    pin_objective_settings, retried, snake, solve_with_fallback)
+                    pin_objective_settings, retried, snake, solve_from_starts, solve_with_fallback)
 
 
 #: a start whose objective vector exceeds the new bounds by at most this (in anchor ranges) counts as feasible, a
@@ -598,12 +598,41 @@ class EpsilonConstraintSolver:
 
     choose = eq11
 
-    def direct_choice(self, start, rule: str | None = None):
-        """Eq. 11 as one NLP (squared distance: same minimiser, smooth), warm from the post-hoc choice ``start``."""
+    def direct_choice(self, start=None, rule: str | None = None):
+        """Eq. 11 as one NLP (squared distance: same minimiser, smooth), warm from the post-hoc choice ``start``
+        (default: :meth:`eq11`'s), and from the next starts of :meth:`direct_starts` while it fails. Stored
+        under ``"direct"`` once final, so a resumed run repeats no attempt."""
         utopia, nadir = self.utopia_nadir(rule=rule)
-        self.snapshots[start.kind if start.kind in self.anchor_points else start.index].restore()
+        starts = self.direct_starts(start or self.eq11(rule)[0], rule)
+        return self.solve_point("direct", lambda: solve_from_starts(lambda: self._direct_once(utopia, nadir), starts))
+
+    def _direct_once(self, utopia, nadir):
+        """One solve of Eq. 11 squared from the model's current values."""
         out = self.solve_once("utopia", {}, "primal", utopia=utopia, nadir=nadir)
         return self._point(-len(self.names), "direct", {}, out, "primal", ())
+
+    def _snapshot_of(self, p):
+        """The stored solution of the converged point ``p`` (None if there is none)."""
+        return self.snapshots.get(p.kind if p.kind in self.anchor_points else p.index)
+
+    def direct_starts(self, start, rule: str | None = None) -> list:
+        """Where the direct Eq. 11 solve starts, in turn while it fails: ``start`` (the post-hoc choice),
+        the other converged points by their distance to utopia (:data:`DIRECT_STARTS` points in all),
+        then midway between the first two. ``(label, snapshot)`` pairs."""
+        pts = self.front_candidates()
+        _, d, _, _ = self.eq11(rule, pts)
+        order = [start] + [pts[i] for i in np.argsort(d, kind="stable") if pts[i] is not start]
+        starts = [(f"point {p.index} ({p.kind})", self._snapshot_of(p)) for p in order]
+        starts = [s for s in starts if s[1] is not None][:DIRECT_STARTS]
+        if len(starts) >= 2:
+            (l0, s0), (l1, s1) = starts[:2]
+            starts.append((f"midway between {l0} and {l1}", s0.extrapolated(s1, -0.5)))
+        return starts
+
+
+#: converged points the direct Eq. 11 solve starts from before its last start, midway between the first two
+#: (:meth:`EpsilonConstraintSolver.direct_starts`)
+DIRECT_STARTS = 3
 
 
 def _get(p, k: str) -> float:

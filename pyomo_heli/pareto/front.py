@@ -404,13 +404,11 @@ class ParetoSolver(EpsilonConstraintSolver):
         p, d, _, _ = self.eq11(rule)
         return p, d
 
-    def direct_choice(self, start: FrontPoint | None = None, rule: str | None = None) -> FrontPoint:
-        """Eq. 11 as one NLP (squared distance: same minimiser, smooth), warm from the post-hoc choice."""
-        utopia, nadir = self.utopia_nadir(rule=rule)
-        start = start or self.choose(rule)[0]
-        self.snapshots[start.index].restore()
-        return self.solve_point("direct", lambda: self._solve("utopia", -1, "direct", math.inf, "primal",
-                                                             utopia=utopia, nadir=nadir))
+    def _direct_once(self, utopia, nadir) -> FrontPoint:
+        return self._solve("utopia", -1, "direct", math.inf, "primal", utopia=utopia, nadir=nadir)
+
+    def _snapshot_of(self, p: FrontPoint):
+        return self.snapshots.get(p.index)
 
 
 def _retried(first: FrontPoint, retry: FrontPoint, how: str) -> FrontPoint:

@@ -72,6 +72,28 @@ def solve_with_fallback(solve, mode: str, start: Snapshot):
     return retried(p, solve("primal"), f"{mode} ({p.status}), then primal")
 
 
+def solve_from_starts(solve, starts):
+    """``solve()`` from each ``(label, snapshot)`` of ``starts`` in turn until one converges.
+
+    The one retry of a solve whose start alone may be at fault (the direct Eq. 11 solve: its
+    objective, a squared distance of objectives normalised by their ranges, is badly conditioned
+    where a front is flat, and Ipopt can stop in a step-computation or restoration failure from one
+    start and converge from another). The returned point carries every attempt's iterations and
+    times, and its ``warm_start`` names the starts and their statuses.
+    """
+    p, tried = None, []
+    for label, snapshot in starts:
+        snapshot.restore()
+        q = solve()
+        mode = q.warm_start
+        tried.append(f"{label} ({q.status})" if not q.success else label)
+        p = retried(p, q, "") if p is not None else q
+        p.warm_start = f"{mode} from " + ", then ".join(tried)
+        if q.success:
+            break
+    return p
+
+
 def retried(first, retry, warm_start: str):
     """``retry`` (a point or outcome) carrying the failed ``first`` attempt's iterations and times, its
     ``warm_start`` saying what happened: the one bookkeeping of every retry of a front or anchor solve."""

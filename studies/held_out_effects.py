@@ -449,6 +449,9 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     row["record biases differ"] = (", ".join(f"{o} (chi2 {t['chi2']:.3g} on {t['df']})" for o, t in flagged.items())
                                    or "none")
     row["record bias shape matches truth"] = record_bias_match(effect, fr["record_biases"])
+    # iterations that diagnosed the closest front point because the direct Eq. 11 solve failed from every start
+    row["direct solve failed"] = ", ".join(str(j) for j, it in enumerate(its)
+                                           if "direct solve failed" in str(it.get("point", ""))) or "none"
     def pooled(d, keys):
         return float(np.sqrt(np.mean([d[c] ** 2 for c in keys if c in d])))
 
@@ -752,7 +755,7 @@ def markdown(tab: pd.DataFrame) -> str:
                         "val RMS / truth model's, worst output",
                         "significant val rise (kept steps)", "unexplained verdict", "unexplained shape",
                         "unexplained shape matches truth", "record biases differ", "record bias shape matches truth",
-                        "wrong acceptance", "criterion met",
+                        "direct solve failed", "wrong acceptance", "criterion met",
                         "truth form at M0", "truth form p", "truth form significant",
                         "theta_twist err0 %", "theta_twist err1 %", "CL_alpha_HT err0 %", "CL_alpha_HT err1 %",
                         "Iyy err0 %", "Iyy err1 %") if c in tab]

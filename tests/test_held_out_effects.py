@@ -222,7 +222,8 @@ def test_the_study_reads_a_loop_that_went_on_after_a_rejected_step(tmp_path, stu
     """A loop that discovered dX_mu4 at iteration 0, had that step rejected, went back to iteration 0's model,
     discovered dX_mu2 there and kept it: the kept discovered term is dX_mu2 (not the rejected one), the verdict
     marks the rejected step, the rejected step's significant rise is not one of a kept step, and with a term kept
-    after the rejection nothing is reported unexplained from it."""
+    after the rejection nothing is reported unexplained from it. The row names the iteration whose direct
+    Eq. 11 solve failed (the closest front point was diagnosed)."""
     mu4 = {"name": "dX_mu4", "formula": "dX = c m g (mu/0.3)^4", "strength": "c_dX_mu4", "estimate": -0.0148,
            "se": 0.001, "p": 1e-17}
     mu2 = {**mu4, "name": "dX_mu2", "formula": "dX = c m g (mu/0.3)^2", "strength": "c_dX_mu2", "estimate": -0.0055}
@@ -231,7 +232,8 @@ def test_the_study_reads_a_loop_that_went_on_after_a_rejected_step(tmp_path, stu
         {"iteration": 0, "extensions": [], "discovery": {"decision": "discovered", "added": "dX_mu4",
                                                          "discovered": mu4}},
         {"iteration": 1, "extensions": ["dX_mu4"], "rejected": "made the validation error rise on beta_0",
-         "validation_check": rise, "step_from": {"iteration": 0, "without": ["dX_mu4"]},
+         "point": "closest front point (direct solve failed)", "validation_check": rise,
+         "step_from": {"iteration": 0, "without": ["dX_mu4"]},
          "discovery": {"decision": "discovered", "added": "dX_mu2", "discovered": mu2}},
         {"iteration": 2, "extensions": ["dX_mu2"], "discovery": {"decision": "none"},
          "validation_check": [{"output": "beta_0", "significant rise": False}]}], 2)
@@ -241,6 +243,7 @@ def test_the_study_reads_a_loop_that_went_on_after_a_rejected_step(tmp_path, stu
     assert row["generic term"].startswith("dX_mu2") and row["shape matches truth"] == "yes"
     assert row["significant val rise (kept steps)"] == "none" and not row["unexplained verdict"]
     assert row["criterion met"] and not row["wrong acceptance"]
+    assert row["direct solve failed"] == "1"  # iteration 1 diagnosed the closest front point
 
 
 def _tiny_flight_test(out, noise: bool):

@@ -142,6 +142,11 @@ def test_direct_eq11_solve_that_fails_goes_on_from_the_next_start_and_reaches_th
     assert direct.warm_start == ("primal from " + "".join(f"{x} (Error_In_Step_Computation), then " for x in label)
                                  + f"midway between {label[0]} and {label[1]}")
     assert direct.iterations > 0
+    kept, ps.snapshots = ps.snapshots, {}
+    try:  # no solution kept: the one start is the model's current values
+        assert [label for label, _ in ps.direct_starts(chosen)] == ["the current values"]
+    finally:
+        ps.snapshots = kept
 
 
 def test_solve_at_warm_starts_from_the_nearest_point_and_matches_the_closed_form(box_front):

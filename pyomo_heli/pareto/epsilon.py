@@ -618,7 +618,8 @@ class EpsilonConstraintSolver:
     def direct_starts(self, start, rule: str | None = None) -> list:
         """Where the direct Eq. 11 solve starts, in turn while it fails: ``start`` (the post-hoc choice),
         the other converged points by their distance to utopia (:data:`DIRECT_STARTS` points in all),
-        then midway between the first two. ``(label, snapshot)`` pairs."""
+        then midway between the first two; the model's current values when no point has its solution kept.
+        ``(label, snapshot)`` pairs."""
         pts = self.front_candidates()
         _, d, _, _ = self.eq11(rule, pts)
         order = [start] + [pts[i] for i in np.argsort(d, kind="stable") if pts[i] is not start]
@@ -627,7 +628,7 @@ class EpsilonConstraintSolver:
         if len(starts) >= 2:
             (l0, s0), (l1, s1) = starts[:2]
             starts.append((f"midway between {l0} and {l1}", s0.extrapolated(s1, -0.5)))
-        return starts
+        return starts or [("the current values", Snapshot(self.m))]
 
 
 #: converged points the direct Eq. 11 solve starts from before its last start, midway between the first two

@@ -490,3 +490,101 @@ def test_the_study_runs_the_extended_family_through_a_copy_of_the_config(tmp_pat
     assert Path(cfg.dataset).resolve() == (ROOT / "data" / "bo105_synthetic").resolve()
     base = loop_settings(load_identification_config(study.CONFIG))
     assert base.generic_family == "standard"
+
+
+def test_the_third_blind_set_moves_what_its_equations_say():
+    """H14-H16 at their nominal strengths, against the equations of their docstrings evaluated here by hand: the
+    skewed wake's inflow gradient adds -gamma kappa_x lambda_i / 8 to the cosine row of M0's flap equation (the
+    tip-path plane the rotor forces use tilts aft; coning and thrust stay), and moves lon forward in level trims
+    (0.14 deg at 30 kt, 0.06 deg at 120 kt) with theta unchanged; the free play's smooth dead band makes the rotor
+    see lon - b lon / sqrt(lon^2 + s^2), so a trim records the lon whose image is M0's (0.1 deg forward from 20
+    kt up, nearly nothing in hover); the pylon mode passes the hub-spring moment through its second-order states,
+    changes no trim, and rings the q of a lon doublet by about 1.5 deg/s. The Pyomo trim block gives the float
+    trims of all three."""
+    from pyomo_heli.nlp.trim_table import trim_table
+    from pyomo_heli.physics import rotor
+    from pyomo_heli.simulation.inputs import InputSignal
+    from pyomo_heli.simulation.integrate import simulate
+
+    m0 = HelicopterModel()
+    p = m0.parameters
+    deg = np.pi / 180
+
+    def model(name):
+        return HelicopterModel(extensions=(HELD_OUT_EFFECTS[name](),)).with_parameters(**HELD_OUT_STRENGTHS[name])
+
+    x = {"u": 40.0, "w": 2.0, "q": 0.05, "theta": 0.0, "lambda_i": 0.03}
+    u = {"col": 0.15, "lon": -0.02}
+
+    # H14: the flap equation by hand, its cosine row forced by the gradient
+    skew = model("skewed_inflow_gradient")
+    assert HELD_OUT_STRENGTHS["skewed_inflow_gradient"] == {"k_ig": 0.3}
+    c0, c1 = m0.evaluate(x, u), skew.evaluate(x, u)
+    lock = p["rho"] * p["a"] * p["c"] * p["R"] ** 4 / p["I_beta"]
+    lb2 = 1 + p["K_beta"] / (p["I_beta"] * p["Omega"] ** 2)
+    mu, lam = c0.flow.mu, c0.lam
+    kappa = 0.3 * mu / (np.sqrt(mu**2 + lam**2) + lam)
+    A, b = rotor.flapping_system(c0.flow, c0.pitch, lam, p)
+    b[1] = b[1] - lock * kappa * 0.03 / 8
+    beta = np.linalg.solve(np.array(A, dtype=float), np.array(b, dtype=float))
+    d_hand = -(lock / 8) * kappa * 0.03 * (lb2 - 1) / ((lb2 - 1) ** 2 + lock**2 * (1 / 64 - mu**4 / 256))
+    assert beta[1] - c0.beta[1] == pytest.approx(d_hand, rel=1e-9) and d_hand < -1e-4  # [rad], aft
+    assert beta[0] == pytest.approx(c0.beta[0], rel=1e-12) and c1.beta[0] == c0.beta[0]  # coning unchanged
+    tilt, T = beta[1] + p["gamma_s"], c0.thrust
+    assert c1.thrust == c0.thrust
+    X_R, Z_R = T * np.sin(tilt), -T * np.cos(tilt)
+    M_R = -p["h"] * X_R - p["x_h"] * Z_R - (p["Nb"] / 2) * p["K_beta"] * beta[1]
+    f0, f1 = c0.forces, c1.forces
+    assert (f1.X_R, f1.Z_R, f1.M_R) == pytest.approx((X_R, Z_R, M_R), rel=1e-9)
+    assert (f1.X - f1.X_R, f1.Z - f1.Z_R, f1.M - f1.M_R) == pytest.approx(
+        (f0.X - f0.X_R, f0.Z - f0.Z_R, f0.M - f0.M_R), rel=1e-12, abs=1e-9)  # fuselage and tail as in M0
+    d_lon = {}
+    for V in (0, 10, 30, 120):
+        a, t = trim_float(m0, V * KT), trim_float(skew, V * KT)
+        d_lon[V] = np.degrees(t.lon - a.lon)
+        assert abs(np.degrees(t.theta - a.theta)) < 1e-3  # [deg]: the disc moves, not the attitude
+    assert d_lon[0] == pytest.approx(0.0, abs=1e-9)  # no skew in hover
+    assert d_lon[30] < -0.13 and d_lon[120] < -0.05  # forward, nearly 3 and 1 trim sigmas
+    assert abs(d_lon[30]) > max(abs(d_lon[10]), abs(d_lon[120]))  # the transition peak
+
+    # H15: the rotor sees the dead band's image of the recorded lon
+    play = model("cyclic_free_play")
+    b_fp, s_fp = 0.1 * deg, 0.3 * deg
+    assert HELD_OUT_STRENGTHS["cyclic_free_play"]["b_fp"] == pytest.approx(b_fp)
+    for lon in (0.5 * deg, -2 * deg, 0.0):
+        seen = lon - b_fp * lon / np.sqrt(lon**2 + s_fp**2)
+        g1, g0 = play.evaluate(x, {**u, "lon": lon}).forces, m0.evaluate(x, {**u, "lon": seen}).forces
+        assert (g1.X, g1.Z, g1.M) == pytest.approx((g0.X, g0.Z, g0.M), rel=1e-12)
+    for V in (0, 20, 60, 120):
+        a, t = trim_float(m0, V * KT), trim_float(play, V * KT)
+        assert t.lon - b_fp * t.lon / np.sqrt(t.lon**2 + s_fp**2) == pytest.approx(a.lon, rel=1e-7, abs=1e-12)
+        assert (t.col, t.theta) == pytest.approx((a.col, a.theta), abs=1e-10)
+        shift = np.degrees(t.lon - a.lon)
+        assert (abs(shift) < 0.01) if V == 0 else (-0.1 <= shift < -0.09)  # 2 trim sigmas forward from 20 kt
+
+    # H16: the hub-spring moment through the mode's states
+    pylon = model("rotor_pylon_mode")
+    assert HELD_OUT_STRENGTHS["rotor_pylon_mode"] == {"tau_p": 0.05}
+    b1c = float(c0.beta[1])
+    y, v = b1c - 0.01, 0.002
+    c2 = pylon.evaluate({**x, "pylon_tilt": y, "pylon_rate": v}, u)
+    assert c2.forces.M - f0.M == pytest.approx((p["Nb"] / 2) * p["K_beta"] * 0.01, rel=1e-9)
+    assert (c2.forces.X, c2.forces.Z) == (f0.X, f0.Z)
+    assert c2.state_eqs["pylon_tilt"] == pytest.approx((0.05, v))
+    assert c2.state_eqs["pylon_rate"] == pytest.approx((0.05, b1c - y - 2 * 0.25 * v))
+    for V in (0.0, 80 * KT):
+        a, t = trim_float(m0, V), trim_float(pylon, V)
+        assert (t.col, t.lon, t.theta) == pytest.approx((a.col, a.lon, a.theta), abs=1e-10)
+        assert t.extra_states["pylon_tilt"] == pytest.approx(a.beta_1c, abs=1e-10)
+        assert t.extra_states["pylon_rate"] == pytest.approx(0.0, abs=1e-10)
+        sig = {"lon": InputSignal("lon", "doublet", 0.5 * deg, 1.0, t_start=0.5, ramp=0.1)}
+        times = np.arange(0.0, 2.0 + 1e-9, 0.01)
+        dq = np.degrees(simulate(pylon, t, times, sig, max_step=0.05)["q"] - simulate(m0, a, times, sig,
+                                                                                       max_step=0.05)["q"])
+        assert 1.2 < np.max(np.abs(dq)) < 2.0  # [deg/s]: about 7 sigmas of q at the doublet's reversal
+
+    # the same trims from the Pyomo trim block
+    for name in ("skewed_inflow_gradient", "cyclic_free_play", "rotor_pylon_mode"):
+        m = model(name)
+        row, t = trim_table(m, [30 * KT]).iloc[0], trim_float(m, 30 * KT)
+        assert (row["col"], row["lon"], row["theta"]) == pytest.approx((t.col, t.lon, t.theta), abs=1e-9), name

@@ -25,6 +25,7 @@ import pytest
 from pyomo_heli.pareto.epsilon import (DIRECT_STARTS, INFEASIBLE, EpsilonConstraintSolver, GridStart, nondominated,
                                        nondominated_nadir, snake, utopia_distance_n)
 from pyomo_heli.pareto.front import ParetoSettings
+from pyomo_heli.pareto.steps import starts_note
 
 NAMES = ("f1", "f2", "f3")
 SETTINGS = ParetoSettings(points=[4, 4], solver_options={"tol": 1e-10, "constr_viol_tol": 1e-13}, max_iter=100)
@@ -142,6 +143,7 @@ def test_direct_eq11_solve_that_fails_goes_on_from_the_next_start_and_reaches_th
     assert direct.warm_start == ("primal from " + "".join(f"{x} (Error_In_Step_Computation), then " for x in label)
                                  + f"midway between {label[0]} and {label[1]}")
     assert direct.iterations > 0
+    assert starts_note(direct) == f" ({direct.warm_start})" and starts_note(ps.eq11("payoff")[0]) == ""
     kept, ps.snapshots = ps.snapshots, {}
     try:  # no solution kept: the one start is the model's current values
         assert [label for label, _ in ps.direct_starts(chosen)] == ["the current values"]

@@ -94,6 +94,11 @@ def solve_from_starts(solve, starts):
     return p
 
 
+def starts_note(p) -> str:
+    """`` (started from ...)`` when a solve of :func:`solve_from_starts` needed more than one start, else ''."""
+    return f" ({p.warm_start})" if ", then " in str(getattr(p, "warm_start", "")) else ""
+
+
 def retried(first, retry, warm_start: str):
     """``retry`` (a point or outcome) carrying the failed ``first`` attempt's iterations and times, its
     ``warm_start`` saying what happened: the one bookkeeping of every retry of a front or anchor solve."""

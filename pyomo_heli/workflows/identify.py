@@ -19,6 +19,7 @@ from ..physics.extensions import extension_forms  # noqa: F401 - re-exported
 from ..pareto.front import ParetoSolver, utopia_distance
 from ..pareto.placement import AdaptiveFront
 from ..pareto.result import IdentificationResult
+from ..pareto.steps import starts_note
 from ..pareto.store import fingerprint
 from ..provenance import provenance_info
 from .run_folder import RunFolder
@@ -148,7 +149,8 @@ def _run_identification(cfg, run: RunFolder, progress, uncertainty) -> Identific
         direct = ps.direct_choice(chosen)
         if placement is not None:
             placement.compare_direct(chosen, direct)
-        progress(f"  chosen: front point {chosen.index} (Eq. 11); direct Eq. 11 solve: {direct.status}")
+        progress(f"  chosen: front point {chosen.index} (Eq. 11); direct Eq. 11 solve: {direct.status}"
+                 + starts_note(direct))
     else:
         direct = None
         progress("  no front point converged: nothing to choose (statuses in front.csv)")

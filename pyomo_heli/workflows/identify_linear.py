@@ -27,6 +27,7 @@ from ..dataset.frequency_response import (frequency_responses, save_responses, s
 from ..nlp.identification import build_identification_nlp, identification_data
 from ..pareto.result import IdentificationResult
 from ..pareto.epsilon import INFEASIBLE
+from ..pareto.steps import starts_note
 from ..pareto.tri_front import TriParetoSolver, utopia_distance_n
 from ..provenance import provenance_info
 from .identify import built_message
@@ -112,7 +113,7 @@ def run_tri_identification(cfg, run: RunFolder, progress=info) -> Identification
     if placement is not None:
         placement.compare_direct(chosen, direct)
     progress(f"  chosen (3 objectives): point {chosen.index} {chosen.kind}; bi-objective choice: point {bi.index}; "
-             f"direct Eq. 11 solve: {direct.status}")
+             f"direct Eq. 11 solve: {direct.status}" + starts_note(direct))
     front = pd.DataFrame(table.rows).sort_values("index").reset_index(drop=True)
     ok = front["success"].astype(bool) & front["kind"].isin(["A", "B", "C", "eps"])
     front["utopia_distance"] = float("nan")

@@ -427,6 +427,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     from pyomo_heli.diagnosis.discovery import best_fit
     from pyomo_heli.report.identification import read_truth
     from pyomo_heli.report.loop import discovered_terms, final_index, rejected_discovery
+    from pyomo_heli.workflows.close_loop import DIRECT_FAILED
 
     doc = json.loads((loop / "loop.json").read_text())
     its = doc["iterations"]
@@ -451,7 +452,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     row["record bias shape matches truth"] = record_bias_match(effect, fr["record_biases"])
     # iterations that diagnosed the closest front point because the direct Eq. 11 solve failed from every start
     row["direct solve failed"] = ", ".join(str(j) for j, it in enumerate(its)
-                                           if "direct solve failed" in str(it.get("point", ""))) or "none"
+                                           if it.get("point") == DIRECT_FAILED) or "none"
     def pooled(d, keys):
         return float(np.sqrt(np.mean([d[c] ** 2 for c in keys if c in d])))
 

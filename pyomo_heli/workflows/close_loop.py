@@ -118,6 +118,10 @@ class IdentificationFailed(RuntimeError):
     """An iteration's identification converged at no front point: the loop cannot go on (the input was fine)."""
 
 
+#: the ``point`` of an iteration in loop.json when the direct Eq. 11 solve failed from every start
+DIRECT_FAILED = "closest front point (direct solve failed)"
+
+
 def _diagnosed_point(result, which: str) -> tuple[dict, str]:
     """The point of the front the loop diagnoses and reports.
 
@@ -129,7 +133,7 @@ def _diagnosed_point(result, which: str) -> tuple[dict, str]:
     d = result.direct
     if which == "direct" and d and d.get("success"):
         return d, "Eq. 11 direct"
-    return result.chosen, "closest front point" + (" (direct solve failed)" if which == "direct" else "")
+    return result.chosen, DIRECT_FAILED if which == "direct" else "closest front point"
 
 
 def _finished(cfg: IdentificationConfig, folder: Path):

@@ -166,6 +166,41 @@ def test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model(tm
     assert "Step rejected: back to the model of iteration 0; its structure determination again without " \
            "rotor_wake_on_tail" in report
 
+
+def test_a_named_candidate_that_leaves_a_generic_term_significant_is_withdrawn(tmp_path, monkeypatch):
+    """The name check. The wake instance: the wake is named at iteration 0; at iteration 1 (M0 + wake) the real
+    step finds no generic term significant, so on these data the name would stand. The test's stand-in then marks
+    the best generic term of that step significant (the step itself runs): the loop withdraws the wake, goes back
+    to iteration 0's model and runs its structure determination again without the wake, on the same base."""
+    import pyomo_heli.diagnosis.discovery as disc
+
+    real, seen = disc.discovery_step, []
+
+    def step(cfg, model, *a, **kw):
+        out = real(cfg, model, *a, **kw)
+        if "rotor_wake_on_tail" in [e.name for e in model.extensions]:
+            seen.append(out["generic_significant"])
+            out = {**out, "generic_significant": True}  # the stand-in
+        return out
+
+    monkeypatch.setattr(disc, "discovery_step", step)
+    _cfg, doc = _loop(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
+                      max_iterations=1)
+    its = doc["iterations"]
+    print([(it["extensions"], (it.get("discovery") or {}).get("message")) for it in its])
+    assert its[0]["discovery"]["decision"] == "named" and its[0]["discovery"]["added"] == "rotor_wake_on_tail"
+    assert seen == [False]  # the real step at M0 + wake: nothing generic left, the name would stand
+    assert its[1]["extensions"] == ["rotor_wake_on_tail"] and "(name check)" in its[1]["rejected"]
+    assert its[1]["name_check"]["best_generic_fit"]["name"] in GENERIC
+    assert its[1]["step_from"] == {"iteration": 0, "without": ["rotor_wake_on_tail"]}
+    assert doc["final_iteration"] == 0
+    retry = its[1]["discovery"]
+    assert retry["library_size"] == its[0]["discovery"]["library_size"] - 1
+    assert retry["screen"]["J0"] == pytest.approx(its[0]["discovery"]["screen"]["J0"], rel=1e-6)
+    report = (tmp_path / "loop" / "loop_report.md").read_text()
+    assert "Name check (a physical candidate the loop added must leave the generic family nothing significant" \
+           in report
+
 @pytest.mark.slow
 def test_held_out_drag_rise_gives_no_wrong_acceptance(tmp_path):
     """Truth: M0 + a drag rise above 80 kt (held out): whatever the loop decides, no library effect is kept."""

@@ -40,9 +40,11 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
 4. **Nothing significant**: nothing is added; the best generic term's NLP estimate is still reported
    as the shape of what is left.
 
-The backward check (a term added earlier that is no longer significant once the new one is in) and the
-validation rule (a step that makes validation significantly worse on any output is rejected) are run by
-the loop (:mod:`pyomo_heli.workflows.close_loop`).
+The backward check (a term added earlier that is no longer significant once the new one is in), the
+validation rule (a step that makes validation significantly worse on any output is rejected) and the name check
+(a physical candidate the loop added must leave the generic family nothing significant at the next step:
+``generic_significant`` and ``best_generic_fit`` of that step) are run by the loop
+(:mod:`pyomo_heli.workflows.close_loop`).
 """
 from __future__ import annotations
 
@@ -283,6 +285,9 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
     G = best_fit(fits, True)
     g_sig = G is not None and G["p"] < level
     p_sig = [f for f in fits.values() if not f["generic"] and f["success"] and f["p"] < level]
+    # the family's best term at this model and whether it is significant, whatever is decided (the loop's check of
+    # a physical candidate it added: it must leave the generic family nothing significant)
+    out.update(generic_significant=bool(g_sig), best_generic_fit=G)
     if not g_sig and not p_sig:
         # "unexplained": the best generic term is significant on its own (p < alpha) but not over the library
         unexplained = G is not None and G["p"] < alpha

@@ -27,6 +27,7 @@ from ..physics.discrepancy import REGRESSORS
 from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
+from ..diagnosis.discovery import describe_fit
 from .diagnosis import record_bias_shapes
 from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
                              read_truth, truth_model_errors, truth_prediction, validation_rms)
@@ -304,10 +305,16 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
 def iteration_checks(it: dict) -> list[str]:
     """The validation rule's paired test against the previous iteration, the rejection and the backward check."""
     L = []
+    named = it.get("name_check")
     if it.get("validation_check"):
         L += [f"Validation rule (paired test against the model kept so far; a significant rise rejects the "
-              f"step): **{'rejected: ' + it['rejected'] if it.get('rejected') else 'passed'}**", "",
+              f"step): **{'rejected: ' + it['rejected'] if it.get('rejected') and not named else 'passed'}**", "",
               markdown_table(pd.DataFrame(it["validation_check"]), digits=4), ""]
+    if named:
+        G = named["best_generic_fit"]
+        L += [f"Name check (a physical candidate the loop added must leave the generic family nothing significant "
+              f"at the next step): **rejected: {it['rejected']}**; with it fitted the step found "
+              f"{describe_fit(G)} (its decision: {named['decision']})", ""]
     if it.get("backward_check"):
         L += ["Backward check (Wald test of the strengths added before the last one, Cramer-Rao SE):", "",
               markdown_table(pd.DataFrame(it["backward_check"]), digits=4), ""]

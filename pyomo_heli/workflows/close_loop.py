@@ -24,6 +24,10 @@ From iteration 1 on, the validation rule (``[loop] validation_rule``) compares e
 model kept so far on the validation records (paired test, :func:`validation_check`); a significant rise on any
 output rejects the step. With ``[loop] after_rejection = "next"`` (default) the loop then goes back to the kept
 model and runs its step again with the rejected terms left out for the rest of the loop; ``"stop"`` stops there.
+With ``[loop] discovery``, the name check: a physical candidate added at the last step (named by encompassing, or
+taken by the library) must leave the generic family nothing significant at the next step; when the best generic
+term is significant there, the candidate described the missing effect only in part, and its step is rejected in
+the same way (``name_check`` in the record: that step; the loop goes back and tries the next term).
 
 ``out/loop.json`` is rewritten as each iteration finishes, so nothing
 finished is lost. Settings come from the config's ``[loop]`` table:
@@ -239,6 +243,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
     bar = run.progress_bar(settings.max_iterations + 1, "loop iterations", at_most=True)
     added = None  # the term the current iteration added (None: the first, or a backward-check drop)
     kept = None  # (config, record) of the model kept so far: the validation rule's reference
+    kept_models = []  # every model kept so far, in order (the name check goes back past the last)
     rejected = []  # terms whose step the validation rule rejected: not offered again in this loop
     base_names = [e.name for e in cfg.model.extensions]  # declared by the config: never dropped by the loop
     while True:
@@ -299,6 +304,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                 cfg, chosen = kcfg, krec["parameters"]
         if not record.get("rejected"):
             kept = (cfg, record)
+            kept_models.append(kept)
             doc["final_iteration"] = i
         names = [e.name for e in cfg.model.extensions]
         model = cfg.model.with_parameters(**chosen)
@@ -324,10 +330,41 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         if settings.discovery:
             from ..diagnosis.discovery import discovery_step
 
-            generic = [n for n in (settings.generic or generic_names(settings.generic_family)) if n not in rejected]
-            step = discovery_step(cfg, model, chosen, id_data, physical=left, generic=generic,
-                                  alpha=settings.alpha, ratio=settings.ratio, confound_corr=settings.confound_corr,
-                                  robust=settings.robust, score_kw=score_test_inputs(cfg, settings), progress=progress)
+            def structure_step(cfg, model, chosen, left):
+                generic = [n for n in (settings.generic or generic_names(settings.generic_family))
+                           if n not in rejected]
+                return discovery_step(cfg, model, chosen, id_data, physical=left, generic=generic,
+                                      alpha=settings.alpha, ratio=settings.ratio,
+                                      confound_corr=settings.confound_corr, robust=settings.robust,
+                                      score_kw=score_test_inputs(cfg, settings), progress=progress)
+
+            step = structure_step(cfg, model, chosen, left)
+            if added in CANDIDATES and not record.get("rejected") and step.get("generic_significant"):
+                # the name check: a physical candidate must leave the generic family nothing significant; one that
+                # does not describes the missing effect only in part (docs/discovery.md): the step is rejected
+                G = step["best_generic_fit"]
+                record["rejected"] = (f"left the generic term {G['name']} significant (p = {G['p']:.2g} < "
+                                      f"{step['level']:.2g}): a physical candidate must account for the whole "
+                                      f"missing effect (name check)")
+                record["name_check"] = {k: v for k, v in step.items() if k != "attribution"}
+                rejected.append(added)
+                kept_models.pop()
+                kcfg, krec = kept = kept_models[-1]
+                doc["final_iteration"] = krec["iteration"]
+                if settings.after_rejection == "stop":
+                    doc["stopped"] = _stop_message(doc, f"step rejected: adding {added} {record['rejected']}; the "
+                                                        f"model of iteration {krec['iteration']} is kept")
+                    write_json(out / LOOP_FILE, doc)
+                    progress(f"stopped: {doc['stopped']}")
+                    return doc
+                progress(f"name check: {added} {record['rejected']}; back to the model of iteration "
+                         f"{krec['iteration']}, without {', '.join(rejected)}")
+                record["step_from"] = {"iteration": krec["iteration"], "without": list(rejected)}
+                cfg, chosen = kcfg, krec["parameters"]
+                names = [e.name for e in cfg.model.extensions]
+                model = cfg.model.with_parameters(**chosen)
+                left = [n for n in pool if n not in names and n not in rejected]
+                step = structure_step(cfg, model, chosen, left)
             att = attr.Attribution.from_dict(step["attribution"])
             record["attribution"] = step.pop("attribution")
             record["discovery"] = step

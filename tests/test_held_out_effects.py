@@ -588,3 +588,108 @@ def test_the_third_blind_set_moves_what_its_equations_say():
         m = model(name)
         row, t = trim_table(m, [30 * KT]).iloc[0], trim_float(m, 30 * KT)
         assert (row["col"], row["lon"], row["theta"]) == pytest.approx((t.col, t.lon, t.theta), abs=1e-9), name
+
+
+def test_the_fourth_blind_set_moves_what_its_equations_say():
+    """H17-H19 at their nominal strengths, against the equations of their docstrings evaluated here by hand: the
+    advancing blade's higher lift-curve slope adds k mu F_0 (M0's mean aerodynamic flap moment) to the sine row of
+    M0's flap equation, which tilts the tip-path plane the rotor forces use aft (coning and thrust stay), and moves
+    lon forward in level trims with speed (nothing in hover, 0.24 deg at 120 kt) with theta unchanged; the fuselage
+    in the rotor's downwash gets M0's fuselage forces at w - k lambda_i Omega R (its Munk moment -rho K_f Vol_f u
+    v_d), lon 0.15-0.18 deg aft and theta 0.13-0.17 deg down from 30 kt up, nothing in hover; the hidden rate damper
+    makes the rotor see lon - K_q (q - q_w), changes no trim, and moves the q of a hover lon doublet by about
+    1.3 deg/s. The Pyomo trim block gives the float trims of all three."""
+    from pyomo_heli.nlp.trim_table import trim_table
+    from pyomo_heli.physics import rotor
+    from pyomo_heli.simulation.inputs import InputSignal
+    from pyomo_heli.simulation.integrate import simulate
+
+    m0 = HelicopterModel()
+    p = m0.parameters
+    deg = np.pi / 180
+
+    def model(name):
+        return HelicopterModel(extensions=(HELD_OUT_EFFECTS[name](),)).with_parameters(**HELD_OUT_STRENGTHS[name])
+
+    x = {"u": 50.0, "w": -2.0, "q": 0.05, "theta": -0.03, "lambda_i": 0.02}
+    u = {"col": 0.12, "lon": -0.04}
+    c0 = m0.evaluate(x, u)
+    f0 = c0.forces
+
+    # H17: the flap equation by hand, its sine row forced by the advancing side's extra lift
+    comp = model("advancing_blade_compressibility")
+    assert HELD_OUT_STRENGTHS["advancing_blade_compressibility"] == {"k_ma": 0.2}
+    c1 = comp.evaluate(x, u)
+    lock = p["rho"] * p["a"] * p["c"] * p["R"] ** 4 / p["I_beta"]
+    lb2 = 1 + p["K_beta"] / (p["I_beta"] * p["Omega"] ** 2)
+    mu, lam = c0.flow.mu, c0.lam
+    th_tw = p["theta_twist"] * p["R"]
+    th0 = 0.12 - p["r_ref"] * th_tw
+    F0 = lock * (th0 * (1 + mu**2) / 8 + th_tw * (1 / 10 + mu**2 / 12) + mu * -0.04 / 6 - lam / 6)
+    A, b = rotor.flapping_system(c0.flow, c0.pitch, lam, p)
+    assert F0 == pytest.approx(b[0] - (lb2 - 1) * p["beta_p"], rel=1e-12)  # M0's coning row without the spring
+    b[2] = b[2] + 0.2 * mu * F0
+    beta = np.linalg.solve(np.array(A, dtype=float), np.array(b, dtype=float))
+    d_hand = -lock * (1 / 8 + mu**2 / 16) * 0.2 * mu * F0 / ((lb2 - 1) ** 2 + lock**2 * (1 / 64 - mu**4 / 256))
+    assert beta[1] - c0.beta[1] == pytest.approx(d_hand, rel=1e-9) and d_hand < -1e-3  # [rad], aft
+    assert beta[0] == pytest.approx(c0.beta[0], rel=1e-12) and c1.beta == c0.beta  # coning (and the record) stay
+    assert c1.thrust == c0.thrust
+    tilt, T = beta[1] + p["gamma_s"], c0.thrust
+    X_R, Z_R = T * np.sin(tilt), -T * np.cos(tilt)
+    M_R = -p["h"] * X_R - p["x_h"] * Z_R - (p["Nb"] / 2) * p["K_beta"] * beta[1]
+    g1 = c1.forces
+    assert (g1.X_R, g1.Z_R, g1.M_R) == pytest.approx((X_R, Z_R, M_R), rel=1e-9)
+    assert (g1.X - g1.X_R, g1.Z - g1.Z_R, g1.M - g1.M_R) == pytest.approx(
+        (f0.X - f0.X_R, f0.Z - f0.Z_R, f0.M - f0.M_R), rel=1e-12, abs=1e-9)  # fuselage and tail as in M0
+    d_lon = {}
+    for V in (0, 20, 80, 120):
+        a, t = trim_float(m0, V * KT), trim_float(comp, V * KT)
+        d_lon[V] = np.degrees(t.lon - a.lon)
+        assert abs(np.degrees(t.theta - a.theta)) < 1e-3  # [deg]: the disc moves, not the attitude
+    assert d_lon[0] == pytest.approx(0.0, abs=1e-9)  # no advancing side in hover
+    assert 0 > d_lon[20] > d_lon[80] > d_lon[120]  # forward, growing with speed
+    assert -0.16 < d_lon[80] < -0.13 and -0.26 < d_lon[120] < -0.22  # 3 and 5 trim sigmas of 0.05 deg
+
+    # H18: M0's fuselage forces at the downwash-deflected flow, by hand
+    wake = model("fuselage_wake_incidence")
+    assert HELD_OUT_STRENGTHS["fuselage_wake_incidence"] == {"k_fw": 1.0}
+    v_d = 1.0 * 0.02 * p["Omega"] * p["R"]
+    V0, V1 = np.sqrt(50.0**2 + 2.0**2 + p["eps_v"] ** 2), np.sqrt(50.0**2 + (2.0 + v_d) ** 2 + p["eps_v"] ** 2)
+    dX = -0.5 * p["rho"] * p["f_e"] * 50.0 * (V1 - V0)
+    dZ = -0.5 * p["rho"] * p["f_e"] * (V1 * (-2.0 - v_d) - V0 * -2.0)
+    dM = -p["rho"] * p["KfVf"] * 50.0 * v_d  # the Munk moment's change: nose-down
+    g2 = wake.evaluate(x, u).forces
+    assert (g2.X - f0.X, g2.Z - f0.Z, g2.M - f0.M) == pytest.approx((dX, dZ, dM), rel=1e-9)
+    assert dM < -500.0  # [N m]
+    for V in (0, 30, 80, 120):
+        a, t = trim_float(m0, V * KT), trim_float(wake, V * KT)
+        dlon, dth = np.degrees(t.lon - a.lon), np.degrees(t.theta - a.theta)
+        assert abs(np.degrees(t.col - a.col)) < 0.03
+        if V == 0:
+            assert abs(dlon) < 1e-3 and abs(dth) < 0.02  # only a small download in hover
+        else:
+            assert 0.14 < dlon < 0.18 and -0.17 < dth < -0.13  # about 3 lon and 1.5 theta trim sigmas
+
+    # H19: the rotor sees the stick minus the washed-out rate feedback
+    sas = model("pitch_rate_damper")
+    assert HELD_OUT_STRENGTHS["pitch_rate_damper"] == {"K_q": 0.02}
+    c3 = sas.evaluate({**x, "sas_washout": 0.01}, u)
+    g0 = m0.evaluate(x, {**u, "lon": -0.04 - 0.02 * (0.05 - 0.01)}).forces
+    assert (c3.forces.X, c3.forces.Z, c3.forces.M) == pytest.approx((g0.X, g0.Z, g0.M), rel=1e-12)
+    assert c3.state_eqs["sas_washout"] == pytest.approx((2.0, 0.05 - 0.01))
+    for V in (0.0, 80 * KT):
+        a, t = trim_float(m0, V), trim_float(sas, V)
+        assert (t.col, t.lon, t.theta) == pytest.approx((a.col, a.lon, a.theta), abs=1e-10)
+        assert t.extra_states["sas_washout"] == pytest.approx(0.0, abs=1e-10)
+    a, t = trim_float(m0, 0.0), trim_float(sas, 0.0)
+    sig = {"lon": InputSignal("lon", "doublet", 0.5 * deg, 1.0, t_start=0.5, ramp=0.1)}
+    times = np.arange(0.0, 3.0 + 1e-9, 0.01)
+    dq = np.degrees(simulate(sas, t, times, sig, max_step=0.05)["q"] - simulate(m0, a, times, sig,
+                                                                                 max_step=0.05)["q"])
+    assert 1.0 < np.max(np.abs(dq)) < 1.6  # [deg/s]: about 6 sigmas of q in the hover lon doublet
+
+    # the same trims from the Pyomo trim block
+    for name in ("advancing_blade_compressibility", "fuselage_wake_incidence", "pitch_rate_damper"):
+        m = model(name)
+        row, t = trim_table(m, [30 * KT]).iloc[0], trim_float(m, 30 * KT)
+        assert (row["col"], row["lon"], row["theta"]) == pytest.approx((t.col, t.lon, t.theta), abs=1e-9), name

@@ -16,7 +16,9 @@ bundled flight test's trims or maneuvers by a few sensor sigmas, as real model e
 added later as a fresh blind set, and H11-H13 after the record-bias test: the strengths of each set were fixed
 from physics (float trims against the trim sigmas) before any loop ran on them. H14-H16 were added later still as
 a third blind set, with their strengths fixed the same way (float trims and noise-free maneuver records against
-the trim and sensor sigmas) before any loop ran on them.
+the trim and sensor sigmas) before any loop ran on them. H17-H19 were added later still as a fourth blind set, their
+strengths fixed the same way (float trims and noise-free doublets of the bundled maneuvers against the trim and
+sensor sigmas) before any loop ran on them.
 """
 from __future__ import annotations
 
@@ -24,7 +26,7 @@ import math
 
 from ..physics.extensions import Extension
 from ..physics.parameters import ParameterSpec
-from ..physics import rotor
+from ..physics import fuselage, rotor
 from ..physics.tail import tail_forces
 
 
@@ -433,10 +435,131 @@ class RotorPylonMode(Extension):
                 "pylon_rate": (p["tau_p"], ctx.beta_1c_tpp - x["pylon_tilt"] - 2 * p["zeta_p"] * x["pylon_rate"])}
 
 
+class AdvancingBladeCompressibility(Extension):
+    """H17: the blade's lift-curve slope rises with the section Mach number: more on the advancing side.
+
+        a(psi) = a (1 + k_ma mu sin psi)     (a: M0's lift-curve slope, its hover value)
+    (psi from the tail, 90 deg on the advancing side). Multiplying M0's blade-element flap moment by it, the
+    mean aerodynamic flap moment
+        F_0 = gamma (theta_0 (1 + mu^2)/8 + theta_tw (1/10 + mu^2/12) + mu theta_1s/6 - lam/6)     [-]
+    (M0's coning row without its spring term) reappears in the sine row of M0's flap equation
+    (rotor.flapping_system): d(b_1s) = k_ma mu F_0, the advancing side's extra lift, which tilts the tip-path
+    plane aft:
+        d(beta_1c) = -gamma (1/8 + mu^2/16) k_ma mu F_0 / D     [rad]
+        D = (lambda_b^2 - 1)^2 + gamma^2 (1/64 - mu^4/256)
+    (gamma the Lock number, lambda_b^2 the flap frequency^2 of rotor.rotor_constants; products with the 1/rev
+    moments go to coning and 2/rev and are left out, as is the lateral flapping; coning and thrust do not
+    change). Rotor forces, hub moment and the disc-frame inflow use the tilted plane. Nothing in hover; it grows
+    with speed and with the blade loading, so a collective input at speed also tilts the disc aft.
+    Strength k_ma [-] (relative rise of the lift-curve slope per unit of mu sin psi). Prandtl-Glauert,
+    a ~ 1 / sqrt(1 - M^2), at 0.75 R of the Bo-105 (tip Mach number 0.64) gives
+    d(ln a)/d(mu sin psi) = 0.75 M_tip^2 / (1 - (0.75 M_tip)^2) = 0.40 (Leishman, Principles of Helicopter
+    Aerodynamics, 2nd ed. 2006, rotor airfoil aerodynamics; Johnson, Rotorcraft Aeromechanics, 2013, section
+    aerodynamics): the section's lift-curve slope in the rotating, three-dimensional flow rises less, about half
+    of it.
+    At k_ma = 0.2 the level trims record lon further forward by 0.04 deg at 20 kt, 0.15 deg at 80 kt and
+    0.24 deg at 120 kt (nearly 5 trim sigmas of 0.05 deg), col at most 0.09 deg higher, theta unchanged (the disc
+    moves, not the attitude), nothing in hover; in the noise-free 80 and 100 kt records (lon and col 3211s and
+    doublets) q moves by up to 0.7 deg/s at the steps (3.5 sigmas of 0.2 deg/s), n_z by up to 0.05 g (5 sigmas)
+    and theta by up to 1.2 deg over the 15 s records (the speed stability changes); the hover and 20 kt records
+    by little (theta up to 0.25 deg).
+    """
+
+    name = "advancing_blade_compressibility"
+    strength = "k_ma"
+
+    def parameters(self):
+        return [ParameterSpec("k_ma", 0.0, "-", "held-out truth: rise of the lift-curve slope per unit mu sin psi",
+                              "held out")]
+
+    def tip_path_plane(self, ctx):
+        p, pitch, mu, lam = ctx.p, ctx.pitch, ctx.flow.mu, ctx.lam
+        lock, _, lb2 = rotor.rotor_constants(p)
+        F0 = lock * (pitch.theta_0 * (1 + mu**2) / 8 + pitch.theta_tw * (1 / 10 + mu**2 / 12)
+                     + mu * pitch.theta_1s / 6 - lam / 6)
+        det = (lb2 - 1) ** 2 + lock**2 * (1 / 64 - mu**4 / 256)
+        ctx.beta_1c_tpp = ctx.beta_1c_tpp - lock * (1 / 8 + mu**2 / 16) * p["k_ma"] * mu * F0 / det
+
+
+class FuselageWakeIncidence(Extension):
+    """H18: the fuselage sits in the main rotor's downwash: its drag and Munk moment see a deflected flow.
+
+        v_d = k_fw lambda_i Omega R                    [m/s]  (downwash at the fuselage, down)
+        (dX, dZ, dM) = F(u, w - v_d) - F(u, w)          [N, N, N m]
+    with F M0's fuselage forces (fuselage.fuselage_forces: X_F = -0.5 rho f_e V u, Z_F = -0.5 rho f_e V w,
+    M_F = rho K_f Vol_f u w, V = sqrt(u^2 + w^2 + eps_v^2)): the air reaching the fuselage moves down by v_d,
+    so its incidence drops, and mostly the destabilising Munk moment changes, by -rho K_f Vol_f u v_d
+    (nose-down). Nothing in hover but a small download (u = 0), it builds up through transition and keeps
+    about -K_f Vol_f k_fw T / (2 pi R^2) at high speed (u v_i tends to T / (2 rho pi R^2)); in manoeuvres it
+    follows the inflow, so a collective input pitches the nose down in proportion to the speed.
+    (Padfield, Helicopter Flight Dynamics, 2nd ed. 2007, ch. 3: the fuselage's incidence in the rotor wake;
+    Prouty, Helicopter Performance, Stability, and Control, 1986: fuselage aerodynamics in the downwash.)
+    Strength k_fw [-] (share of the rotor's induced velocity at the fuselage; about 1 under the disc, 2 in the
+    fully developed wake).
+    At k_fw = 1 the level trims record lon 0.08 deg further aft at 10 kt, 0.14 deg at 20 kt and 0.15-0.17 deg
+    from 30 kt up (over 3 trim sigmas of 0.05 deg), theta 0.11-0.16 deg lower from 10 kt up (1.5 trim sigmas of
+    0.1 deg), col at most 0.02 deg higher; the hover trim moves by less than 0.02 deg. In the noise-free records
+    the speed gained in the hover lon doublets meets the Munk moment's new speed dependence: their theta moves by
+    up to 1 deg (10 sigmas of 0.1 deg), q by up to 0.4 deg/s (2 sigmas), n_x by up to 0.8 sigma from 20 kt up.
+    """
+
+    name = "fuselage_wake_incidence"
+    strength = "k_fw"
+
+    def parameters(self):
+        return [ParameterSpec("k_fw", 0.0, "-", "held-out truth: share of the induced velocity at the fuselage",
+                              "held out")]
+
+    def extra_forces(self, ctx):
+        p, ops, x = ctx.p, ctx.ops, ctx.x
+        v_d = p["k_fw"] * x["lambda_i"] * ctx.flow.v_tip
+        X1, Z1, M1 = fuselage.fuselage_forces(x["u"], x["w"] - v_d, p, ops)
+        X0, Z0, M0 = fuselage.fuselage_forces(x["u"], x["w"], p, ops)
+        return X1 - X0, Z1 - Z0, M1 - M0
+
+
+class PitchRateDamper(Extension):
+    """H19: a limited-authority pitch-rate damper (SAS) with washout whose series actuator is not recorded.
+
+        tau_w d(q_w)/dt = q - q_w                        [rad/s],  tau_w = 2 s
+        theta_1s = lon - K_q (q - q_w)                   [rad]
+    The recorded lon is the pilot's stick; the SAS adds its own cyclic through a series actuator downstream,
+    from the washed-out pitch rate (nose-up rate, forward cyclic). Nothing in trim (q = q_w = 0); every
+    manoeuvre is damped through the rotor, at every speed, hover included, and the washout lets a held rate
+    through after a few seconds. A common flight-test pitfall: identifying from the stick when the SAS acts
+    downstream of it (Tischler and Remple, Aircraft and Rotorcraft System Identification, 2nd ed. 2012: the
+    bare airframe is identified from the mixer or swashplate inputs, not the stick, when a SAS is engaged).
+    Strength K_q [s] (rad of swashplate cyclic per rad/s of pitch rate).
+    At K_q = 0.02 s (0.02 deg of cyclic per deg/s, 1.15 deg per rad/s) no trim moves; the noise-free q of every
+    lon doublet and 3211 (0.5 deg, hover to 100 kt) moves by 1.1-1.3 deg/s at the steps (5.5-6.6 sigmas of
+    0.2 deg/s; 1.3 deg/s in the first 3 s of the hover doublet), of the col inputs at speed by up to 1.2 deg/s, and
+    theta by up to 1 deg over the records; nothing in the hover col doublets (no pitch rate).
+    """
+
+    name = "pitch_rate_damper"
+    strength = "K_q"
+    states = ("sas_washout",)
+
+    def parameters(self):
+        return [ParameterSpec("K_q", 0.0, "s", "held-out truth: pitch-rate damper gain (cyclic per pitch rate)",
+                              "held out"),
+                ParameterSpec("tau_w", 2.0, "s", "held-out truth: washout time constant of the rate damper",
+                              "held out")]
+
+    def adjust_controls(self, ctx):
+        x = ctx.x
+        ctx.lon = ctx.lon - ctx.p["K_q"] * (x["q"] - x["sas_washout"])
+
+    def state_equations(self, ctx):
+        x = ctx.x
+        return {"sas_washout": (ctx.p["tau_w"], x["q"] - x["sas_washout"])}
+
+
 HELD_OUT_EFFECTS = {c.name: c for c in (FuselageDownload, DragRise, CantedTailRotor, ControlMixing, ActuatorLag,
                                         AccelerometerFilter, VerticalDrag, PitotDownwash, TailStall,
                                         FuselagePitchDamping, CyclicGearing, StaticPortError, RotorSpeedDroop,
-                                        SkewedInflowGradient, CyclicFreePlay, RotorPylonMode)}
+                                        SkewedInflowGradient, CyclicFreePlay, RotorPylonMode,
+                                        AdvancingBladeCompressibility, FuselageWakeIncidence, PitchRateDamper)}
 
 #: nominal strengths of the held-out studies (studies/held_out_effects.py)
 HELD_OUT_STRENGTHS = {
@@ -456,4 +579,7 @@ HELD_OUT_STRENGTHS = {
     "skewed_inflow_gradient": {"k_ig": 0.3},
     "cyclic_free_play": {"b_fp": 0.1 * math.pi / 180},
     "rotor_pylon_mode": {"tau_p": 0.05},
+    "advancing_blade_compressibility": {"k_ma": 0.2},
+    "fuselage_wake_incidence": {"k_fw": 1.0},
+    "pitch_rate_damper": {"K_q": 0.02},
 }

@@ -38,11 +38,13 @@ TRI_FILES = ("band_errors.csv", "bode.png", "chosen.json", "front.csv", "front_p
 LOOP_FILES = ("loop.json", "loop_report.md", "shape_*.json", "iter_*/chosen.json", "iter_*/front.csv",
               "iter_*/time_domain.json")
 SEEDS = "20261123 20261124 20261125 20261126 20261127"
-#: held-out effects H1-H13 (the full-size table ``held_out``) and H14-H16 (the third blind set, ``held_out_blind3``)
+#: held-out effects H1-H13 (the full-size table ``held_out``), H14-H16 (the third blind set, ``held_out_blind3``) and
+#: H17-H19 (the fourth, ``held_out_blind4``)
 H1_H13 = ("fuselage_download drag_rise canted_tail_rotor vertical_drag control_mixing actuator_lag "
           "accelerometer_filter pitot_downwash tail_stall fuselage_pitch_damping cyclic_gearing static_port_error "
           "rotor_speed_droop")
 H14_H16 = "skewed_inflow_gradient cyclic_free_play rotor_pylon_mode"
+H17_H19 = "advancing_blade_compressibility fuselage_wake_incidence pitch_rate_damper"
 BENCH = "python studies/benchmark.py"
 
 
@@ -130,6 +132,11 @@ ENTRIES: tuple[Entry, ...] = (
                              "--config studies/held_out_small.toml --data-config studies/held_out_small_gen.toml "
                              "--workers 2 --out {out}/held_out_small",),
           ("held_out.csv", "held_out.md"), minutes=40),
+    Entry("held_out_small_blind4", (f"python studies/held_out_effects.py --seeds 1 --effects {H17_H19} "
+                                    "--config studies/held_out_small.toml "
+                                    "--data-config studies/held_out_small_gen.toml "
+                                    "--out {out}/held_out_small_blind4",),
+          ("held_out.csv", "held_out.md"), minutes=8),
     Entry("noise_only", ("python studies/held_out_effects.py --effects none --seeds 5 --out {out}/noise_only",),
           ("held_out.csv", "held_out.md"), minutes=140),
     Entry("held_out", (f"python studies/held_out_effects.py --seeds 3 --effects {H1_H13} --out {{out}}/held_out",
@@ -144,6 +151,9 @@ ENTRIES: tuple[Entry, ...] = (
         ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=200),
     Entry("held_out_blind3", (f"python studies/held_out_effects.py --seeds 3 --effects {H14_H16} --workers 2 "
                               "--out {out}/held_out_blind3",),
+          ("held_out.csv", "held_out.md"), minutes=200),
+    Entry("held_out_blind4", (f"python studies/held_out_effects.py --seeds 3 --effects {H17_H19} --workers 2 "
+                              "--out {out}/held_out_blind4",),
           ("held_out.csv", "held_out.md"), minutes=200),
     Entry("bo105_flight_trims", ("pyomo-heli trim-loop studies/bo105_flight_trims.toml "
                                  "--out {out}/bo105_flight_trims",),

@@ -293,6 +293,39 @@ def test_trim_loop_discovery_names_the_wake_by_encompassing_and_describes_a_held
     assert g["name"][:2] in ("dZ", "dM") and g["kappa_hat"] > 0, d["message"]  # down / nose-up
 
 
+
+def test_trim_loop_name_check_withdraws_a_named_candidate_that_leaves_a_generic_term(tmp_path, monkeypatch):
+    """The name check on trims. The wake's trims: the wake is named at iteration 0, and at iteration 1 (M0 + wake)
+    the real decision finds no generic term significant, so the name would stand. The test's stand-in then marks a
+    generic term significant there: iteration 1 is rejected, and iteration 2 starts again from M0 without the wake
+    on offer; the report's "after" is the model kept."""
+    import pyomo_heli.workflows.trim_loop as tl
+    from pyomo_heli.flighttest.truth_effects import make_effect
+
+    real, seen = tl.discovery_decision, []
+
+    def decide(score, generic_p_given, alpha):
+        out = real(score, generic_p_given, alpha)
+        if any(r["name"] == "rotor_wake_on_tail" for r in score["scores"]):
+            return out
+        seen.append(out["generic_significant"])
+        return {**out, "generic_significant": True}  # the stand-in, at the model holding the wake
+
+    monkeypatch.setattr(tl, "discovery_decision", decide)
+    folder = _noisy_trims(tmp_path / "wake", make_effect("wake_on_tail"), K_lamT=1.5)
+    cfg = _config(tmp_path, folder, max_iterations=2, discovery=True)
+    doc = run_trim_loop(cfg, tmp_path / "o", progress=lambda *_: None)
+    its = doc["iterations"]
+    assert its[0]["score_test"]["discovery"]["added"] == "rotor_wake_on_tail"
+    assert seen[0] is False  # the real decision at M0 + wake: nothing generic left
+    assert its[1]["extensions"] == ["rotor_wake_on_tail"] and "name check" in its[1]["rejected"]
+    assert its[2]["extensions"] == [] and not its[2].get("rejected")
+    assert "rotor_wake_on_tail" not in [r["name"] for r in its[2]["score_test"]["scores"]]
+    assert its[2]["J_trim_float"] == pytest.approx(its[0]["J_trim_float"], rel=1e-6)  # M0 again
+    assert doc["final_iteration"] == 2
+    write_trim_report(cfg, doc, tmp_path / "o")
+    assert "**Rejected**: name check" in (tmp_path / "o" / "report.md").read_text()
+
 def test_maneuver_identification_refuses_trim_rows_with_empty_channels(tmp_path):
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.nlp.identification import identification_data

@@ -147,7 +147,7 @@ def discovery_decision(score: dict, generic_p_given, alpha: float = ALPHA) -> di
                 f"p = {r['p_value']:.2g}")
 
     out = {"best_generic": G and {k: G[k] for k in ("name", "LM", "p_value", "kappa_hat", "df")},
-           "encompassing": None, "added": None}
+           "encompassing": None, "added": None, "generic_significant": bool(sig_g)}
     if not sig_p and not sig_g:
         out.update(decision="none", message=f"nothing significant over the library of {L} terms (p < {alpha:g}/{L})"
                    + (f"; best generic description of what is left: {about(G)}" if G else ""))

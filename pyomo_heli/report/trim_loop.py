@@ -58,7 +58,7 @@ def plot_residuals(doc: dict, path) -> Path:
 
     pts = doc["points"]
     fig, axes = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
-    first, last = doc["initial"]["model_deg"], doc["iterations"][-1]["model_deg"]
+    first, last = doc["initial"]["model_deg"], doc["iterations"][doc.get("final_iteration", -1)]["model_deg"]
     for ax, c in zip(axes, TRIM_CHANNELS):
         sel = sorted((i for i, cc in enumerate(pts["channel"]) if cc == c), key=lambda i: pts["speed_kt"][i])
         v = [pts["speed_kt"][i] for i in sel]
@@ -89,7 +89,7 @@ def write_trim_loop_report(doc: dict, config_path, out) -> Path:
     out = Path(out)
     plot_trim_curves(doc, doc["curves"]["before"], doc["curves"]["after"], out / "trim_curves.png")
     plot_residuals(doc, out / "trim_residuals.png")
-    last = doc["iterations"][-1]
+    last = doc["iterations"][doc.get("final_iteration", -1)]
     c = doc["conventions"]
     L = [f"# Trim-only closed loop: {doc['aircraft']}", "",
          f"Config `{config_path}`, dataset `{doc['dataset']}` (relative to the config).", ""]
@@ -126,6 +126,8 @@ def write_trim_loop_report(doc: dict, config_path, out) -> Path:
         L += ["", "Standard errors: s^2 (J^T J)^-1 with one residual variance s^2 for every point; robust: the "
                   "sandwich (HC1) estimate. Both take the residuals as independent, which a structured residual "
                   "(below) is not: read them as lower bounds."]
+        if it.get("rejected"):
+            L += ["", f"**Rejected**: {it['rejected']}; the next iteration starts again from the model before it."]
         st = it["score_test"]
         d = st.get("discovery")  # structure determination: its decision, the library's best rows in the table
         head = (f"Score test ({st['n_testable']} {'terms' if d else 'candidates'} with a trim signature, level "

@@ -255,6 +255,8 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
                        "rms_deg": rms_by(pts, e0), "rms_deg_without_conventions": rms_by(pts, e_raw)},
            "iterations": []}
     extensions: list = []
+    before: list = []  # (free, extensions) before each added term: the name check goes back to them
+    withdrawn: list = []  # physical candidates the name check rejected: not offered again
     for it in range(cfg.max_iterations + 1):
         progress(f"iteration {it}: free {', '.join(f.name for f in free)}"
                  + (f"; extensions {', '.join(e.name for e in extensions)}" if extensions else ""))
@@ -265,7 +267,7 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
         e = (data - y) / DEG
         se = standard_errors(est, conv, ident, [f.name for f in free])
         J_float = float(np.sum(e[(pts.role == "identification").to_numpy()] ** 2)) / ident["row"].nunique()
-        names = list(cfg.candidates or CANDIDATES)
+        names = [n for n in (cfg.candidates or CANDIDATES) if n not in withdrawn]
         if cfg.discovery:
             names += list(cfg.generic or generic_names(cfg.generic_family))
         score = score_trims(est, conv, ident, [f.name for f in free], names, cfg.alpha, cfg.ratio,
@@ -296,6 +298,18 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
         progress(f"  score test: {score['decision']}: {score['message']}")
         if cfg.discovery:
             progress(f"  discovery: {score['discovery']['decision']}: {score['discovery']['message']}")
+        last = extensions[-1].name if extensions else None
+        if cfg.discovery and last in CANDIDATES and score["discovery"]["generic_significant"]:
+            # the name check (docs/discovery.md): the physical candidate added last must leave the generic family
+            # nothing significant; it does not, so back to the model before it, without it
+            G = score["discovery"]["best_generic"]
+            rec["rejected"] = (f"name check: with {last} fitted, the generic term {G['name']} is significant "
+                               f"(p = {G['p_value']:.2g} < {cfg.alpha:g}/{score['n_testable']}); {last} withdrawn")
+            progress(f"  {rec['rejected']}")
+            withdrawn.append(last)
+            free, extensions = before.pop()
+            doc["stopped"] = "max_iterations"
+            continue
         doc["stopped"] = "max_iterations"
         if accepted is None:
             doc["stopped"] = (f"discovery: {score['discovery']['decision']}" if cfg.discovery
@@ -303,8 +317,11 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
             break
         if it == cfg.max_iterations:
             break
+        before.append((free, list(extensions)))
         free, cand = _with_term(free, values, accepted, score)
         extensions.append(cand)
+    # the model kept: the last iteration the name check did not reject
+    doc["final_iteration"] = max(i for i, r in enumerate(doc["iterations"]) if not r.get("rejected"))
     (out / RESULT_FILE).write_text(json.dumps(doc, indent=1, default=_plain) + "\n")
     return doc
 
@@ -361,6 +378,6 @@ def write_trim_report(cfg: TrimLoopConfig, doc: dict, out) -> Path:
 
     out = Path(out)
     doc["curves"] = {"before": dense_curves(cfg, doc, None),
-                     "after": dense_curves(cfg, doc, len(doc["iterations"]) - 1)}
+                     "after": dense_curves(cfg, doc, doc.get("final_iteration", len(doc["iterations"]) - 1))}
     (out / RESULT_FILE).write_text(json.dumps(doc, indent=1, default=_plain) + "\n")
     return write_trim_loop_report(doc, cfg.path, out)

@@ -394,6 +394,49 @@ def test_an_ambiguous_step_says_what_the_generic_term_left_looks_like(monkeypatc
     assert "what is left looks like c d(col_d)/dt = col - col_d, c = 0.0016 +-" in out["message"]
 
 
+
+def test_a_failed_base_solve_leaves_the_decision_to_the_score_test_and_says_so(monkeypatch):
+    """The NLP screen's base solve failed (twice): no likelihood ratio exists (LR nan). With input errors the step
+    would refer the LR; instead the score test's own p decides (lon_rigging p = 1e-6 < 0.01/2 significant,
+    col_delay p = 0.02 not), the encompassing test runs on the fits' J, and the message names the failure, so
+    "nothing significant" can never come from a failed solve."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from pyomo_heli.diagnosis import discovery
+
+    names = ["lon_rigging", "col_delay"]
+    scores = pd.DataFrame({"name": names, "p_value": [1e-6, 0.02], "LM": [49.4, 9.2], "LM_white": [49.4, 9.2],
+                           "df": [np.inf, np.inf]})
+    monkeypatch.setattr(discovery.attr, "attribute",
+                        lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
+    J = -117175.06
+
+    def fit(name, generic, dJ, estimate):
+        return {"name": name, "generic": generic, "success": True, "LR": float("nan"), "p": float("nan"),
+                "J": J - dJ, "estimate": estimate, "formula": name, "shape": {}}
+
+    fits = {"col_delay": fit("col_delay", True, 3.0, 0.0016), "lon_rigging": fit("lon_rigging", False, 12.0, -0.002)}
+
+    def screen(cfg, start, terms, pairs=(), **kw):
+        assert pairs(fits) == [("lon_rigging", "col_delay")]  # the score test's p picks the pair
+        return {"J0": float("nan"), "base_success": False, "base_status": "Maximum_Iterations_Exceeded",
+                "fits": fits, "pairs": {"lon_rigging+col_delay": {"success": True,
+                                                                  "J": fits["lon_rigging"]["J"] - 0.5}}}
+
+    monkeypatch.setattr(discovery, "nlp_screen", screen)
+    cfg = SimpleNamespace(free=[SimpleNamespace(name="Iyy")],
+                          nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=True))
+    model = SimpleNamespace(extensions=(), parameters={"Omega": 44.4, "R": 4.91})
+    out = discovery.discovery_step(cfg, model, {}, None, physical=["lon_rigging"], generic=["col_delay"],
+                                   progress=lambda s: None)
+    assert out["criterion"] == "score test" and out["base_failed"] == "Maximum_Iterations_Exceeded"
+    assert fits["lon_rigging"]["p"] == 1e-6 and fits["col_delay"]["p"] == 0.02
+    # with both fitted: col_delay adds LR 1 to lon_rigging (p = 0.32), lon_rigging adds 19 to col_delay: named
+    assert out["decision"] == "named" and out["added"] == "lon_rigging", out["message"]
+    assert "base solve failed: Maximum_Iterations_Exceeded" in out["message"]
+
 def test_the_screen_warm_start_from_the_base_multipliers_gives_the_primal_warm_starts_estimates(tmp_path):
     """nlp_screen frees each term from the base solution: warm from its multipliers with a small barrier parameter
     (the fronts' continuation) it reaches the estimate and LR that the primal-only warm start reaches, in fewer

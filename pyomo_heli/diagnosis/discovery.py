@@ -161,6 +161,10 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
         for n in names:
             pin(n, False)
     ok, status = solve("none")
+    if not ok:  # once more from where it stopped (its primal values)
+        progress(f"    NLP screen: base solve failed ({status}, {effort.get('iterations')} iterations); once more "
+                 "from where it stopped")
+        ok, status = solve("primal")
     J0 = float(pyo.value(m.discovery_objective))
     J0_tr = float(pyo.value(m.discovery_trim_nll))
     base = free_parameter_values(m)
@@ -231,14 +235,24 @@ def describe_fit(fit: dict) -> str:
     return f"{fit['formula']}, c = {fit['estimate']:.4g} +- {fit['se']:.2g} (NLP estimate; {lr})"
 
 
-def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=attr.ALPHA,
-                   ratio=attr.RATIO, confound_corr=attr.CONFOUND_CORR, robust=True, score_kw=None,
-                   progress=print) -> dict:
+def discovery_step(cfg, model, start: dict, data, **kw) -> dict:
     """One structure-determination step (module docstring). ``model``: the current model at its estimate;
-    ``start``: the free parameters' values. Returns a plain dict: ``decision`` (named | discovered | accepted |
-    none), ``added`` (name or None), ``initial`` (its strength's start value), ``attribution`` (the score table
-    over the whole library, used to rank), ``screen`` (NLP estimates and likelihood ratios), ``encompassing`` (one
-    row per physical candidate tested), ``level`` (alpha / library size), ``message``."""
+    ``start``: the free parameters' values; keywords ``physical``, ``generic``, ``alpha``, ``ratio``,
+    ``confound_corr``, ``robust``, ``score_kw``, ``progress``. Returns a plain dict: ``decision`` (named |
+    discovered | accepted | ambiguous | none), ``added`` (name or None), ``initial`` (its strength's start value),
+    ``attribution`` (the score table over the whole library, used to rank), ``screen`` (NLP estimates and
+    likelihood ratios), ``encompassing`` (one row per physical candidate tested), ``level`` (alpha / library
+    size), ``criterion``, ``message``; ``base_failed`` (the status) when the NLP screen's base solve failed twice,
+    which leaves no likelihood ratio: the score test then decides, and the message says so."""
+    out = _step(cfg, model, start, data, **kw)
+    if out.get("base_failed"):
+        out["message"] += (f" (the NLP screen's base solve failed: {out['base_failed']}; with no likelihood ratio "
+                           "the score test decided)")
+    return out
+
+
+def _step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=attr.ALPHA, ratio=attr.RATIO,
+          confound_corr=attr.CONFOUND_CORR, robust=True, score_kw=None, progress=print) -> dict:
     score_kw = dict(score_kw or {})
     identified = [f.name for f in cfg.free]
     names = library(model, physical, generic)
@@ -265,7 +279,8 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
         for n, f in fits.items():  # the deciding p-values (the pairs are asked for before they are set below)
             f.setdefault("p_LR", f["p"])
             f["p"] = (robust_p(f["LR"], sc.set_index("name").loc[n], getattr(make_candidate(n), "one_sided", False))[0]
-                      if cfg.nlp.input_errors else float(sc.set_index("name").loc[n, "p_value"]))
+                      if cfg.nlp.input_errors and not math.isnan(f["LR"])
+                      else float(sc.set_index("name").loc[n, "p_value"]))
         g = best_fit(fits, True)
         if g is None:
             return []
@@ -278,8 +293,12 @@ def discovery_step(cfg, model, start: dict, data, *, physical=None, generic=None
     rows_by = sc.set_index("name")
     # the criterion: the corrected LR when the likelihood models the measured inputs' noise (errors in variables);
     # in output error the score test's own p (docs/discovery.md, "Which test decides")
-    criterion = "likelihood ratio" if cfg.nlp.input_errors else "score test"
+    # a base solve that failed leaves no likelihood ratio: the score test decides, and the message says so
+    base_failed = screen.get("base_success", True) is False
+    criterion = "likelihood ratio" if cfg.nlp.input_errors and not base_failed else "score test"
     out["criterion"] = criterion
+    if base_failed:
+        out["base_failed"] = screen.get("base_status")
     for n, f in fits.items():
         judge(f, rows_by.loc[n], getattr(make_candidate(n), "one_sided", False), criterion)
     G = best_fit(fits, True)
@@ -473,6 +492,7 @@ def check_term(cfg, model, start: dict, data, term, *, level: float, against: st
 
 
 def best_fit(fits: dict, generic: bool):
-    """The fit of largest likelihood ratio among the solved generic (or physical) terms of an NLP screen, or None."""
-    ok = [f for f in fits.values() if f["generic"] == generic and f["success"] and not math.isnan(f["LR"])]
-    return max(ok, key=lambda f: f["LR"]) if ok else None
+    """The fit of largest likelihood ratio (lowest J: the same order, and defined when the base solve failed) among
+    the solved generic (or physical) terms of an NLP screen, or None."""
+    ok = [f for f in fits.values() if f["generic"] == generic and f["success"] and not math.isnan(f["J"])]
+    return min(ok, key=lambda f: f["J"]) if ok else None

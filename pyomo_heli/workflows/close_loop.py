@@ -244,7 +244,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
     added = None  # the term the current iteration added (None: the first, or a backward-check drop)
     kept = None  # (config, record) of the model kept so far: the validation rule's reference
     kept_models = []  # every model kept so far, in order (the name check goes back past the last)
-    rejected = []  # terms whose step the validation rule rejected: not offered again in this loop
+    rejected = []  # terms whose step the validation rule or the name check rejected: not offered again
     base_names = [e.name for e in cfg.model.extensions]  # declared by the config: never dropped by the loop
     while True:
         t0 = time.perf_counter()

@@ -437,6 +437,47 @@ def test_a_failed_base_solve_leaves_the_decision_to_the_score_test_and_says_so(m
     assert out["decision"] == "named" and out["added"] == "lon_rigging", out["message"]
     assert "base solve failed: Maximum_Iterations_Exceeded" in out["message"]
 
+
+def test_a_base_that_stopped_short_is_solved_again_from_the_best_fit_and_the_ratios_match(tmp_path, monkeypatch):
+    """The NLP screen's base solve made to fail twice without moving (the test's stand-in for a solve that stops
+    at a worse point): its J is the start's, and every LR against it would be inflated. The base is then solved
+    from the best single fit's solution with that term at zero, and the estimates and likelihood ratios equal
+    those of a screen whose base solved normally."""
+    from types import SimpleNamespace
+
+    import pyomo_heli.solvers as solvers
+    from pyomo_heli.diagnosis.discovery import nlp_screen
+
+    cfg = make_case(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, points=2,
+                    maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+    start = {f.name: f.initial for f in cfg.free}
+    terms = ["dM_bump00", "dZ_one"]
+    normal = nlp_screen(cfg, start, terms, progress=lambda s: None)
+    assert normal["base_refined"] is None and normal["base_success"]
+    real = solvers.make_solver
+
+    def make(*a, **k):
+        s, calls = real(*a, **k), []
+
+        class Failing:
+            def solve(self, warm_start="none"):
+                calls.append(warm_start)
+                if len(calls) <= 2:  # the base and its second try: stopped where they started
+                    return SimpleNamespace(success=False, status="Maximum_Iterations_Exceeded", iterations=0,
+                                           wall_time=0.0)
+                return s.solve(warm_start=warm_start)
+        return Failing()
+
+    monkeypatch.setattr(solvers, "make_solver", make)
+    got = nlp_screen(cfg, start, terms, progress=print)
+    assert got["base_refined"] and got["base_refined"]["status_before"] == "Maximum_Iterations_Exceeded"
+    assert got["base_success"] and got["J0"] == pytest.approx(normal["J0"], abs=0.05)
+    for t in terms:
+        a, b = got["fits"][t], normal["fits"][t]
+        assert a["estimate"] == pytest.approx(b["estimate"], rel=1e-3, abs=1e-3 * b["se"])
+        assert a["LR"] == pytest.approx(b["LR"], rel=1e-3, abs=0.1)
+        assert a["LR_trim"] + a["LR_time"] == pytest.approx(a["LR"], abs=1e-6)
+
 def test_the_screen_warm_start_from_the_base_multipliers_gives_the_primal_warm_starts_estimates(tmp_path):
     """nlp_screen frees each term from the base solution: warm from its multipliers with a small barrier parameter
     (the fronts' continuation) it reaches the estimate and LR that the primal-only warm start reaches, in fewer

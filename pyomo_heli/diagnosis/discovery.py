@@ -207,24 +207,55 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
                  + ", ".join(f"{r['strength']} = {r['estimate']:.4g}" for r in rows.values())
                  + f", J = {J:.6g}, LR = {lr:.4g} (time {res['LR_time']:.3g}, trim {res['LR_trim']:.3g}; {status_k}, "
                  + f"{effort.get('iterations')} iterations, {effort.get('wall_time') or 0.0:.0f} s)")
+        if len(group) == 1 and ok_k and (not best or J < best["J"]):  # the best single fit's solution
+            best.update(J=J, name=group[0], snap=Snapshot(m))
         for name in group:
             for n in own[name]:
                 pin(n, False)
         snap.restore()
         return res
 
+    def rescore(r):
+        """A fit's likelihood ratios against the base of the moment."""
+        lr = max(2.0 * (J0 - r["J"]), 0.0) if ok and r["success"] else float("nan")
+        r.update(LR=lr, p=float(stats.chi2.sf(lr, 1)) if not math.isnan(lr) else float("nan"))
+        # standard error from the profile likelihood's curvature: LR = (c / se)^2
+        r["se"] = abs(r["estimate"]) / math.sqrt(lr) if not math.isnan(lr) and lr > 0 else float("nan")
+        return r
+
+    best = {}
     fits = {}
     for name in own:
         r = fit([name])
-        one = r.pop("terms")[name]
-        # standard error from the profile likelihood's curvature: LR = (c / se)^2
-        ok_lr = not math.isnan(r["LR"]) and r["LR"] > 0
-        one["se"] = abs(one["estimate"]) / math.sqrt(r["LR"]) if ok_lr else float("nan")
-        fits[name] = {**one, **r}
+        fits[name] = rescore({**r.pop("terms")[name], **r})
+    refined = None
+    if best:
+        # the base must be the best the current model reaches: the best single fit's solution, its term pinned
+        # back at zero, is a second start for it; a base lower by more than LR 1 replaces the first (a base solve
+        # that stopped at a worse point would inflate every LR by the same amount)
+        best["snap"].restore()
+        for n in own[best["name"]]:
+            pin(n, False)
+        ok_b, status_b = solve("primal")
+        J0b = float(pyo.value(m.discovery_objective))
+        if ok_b and (not ok or 2.0 * (J0 - J0b) > 1.0):
+            refined = {"from": best["name"], "J_before": J0, "status_before": status, "J": J0b}
+            progress(f"    NLP screen: base again from {best['name']}'s solution with it at zero: J = {J0b:.6g} "
+                     f"({status_b}; before {J0:.6g}, {status}); the likelihood ratios are taken against it")
+            J0_tr_old, J0_old = J0_tr, J0
+            J0, J0_tr, ok, status = J0b, float(pyo.value(m.discovery_trim_nll)), True, status_b
+            base, snap = free_parameter_values(m), Snapshot(m)
+            for f in fits.values():  # J_trim of the fit = J0_tr_old - LR_trim / 2, unchanged
+                f["LR_trim"] += 2.0 * (J0_tr - J0_tr_old)
+                f["LR_time"] = 2.0 * (J0 - J0_old) + f["LR_time"] - 2.0 * (J0_tr - J0_tr_old)
+                rescore(f)
+        else:
+            snap.restore()
     if callable(pairs):
         pairs = pairs(fits)
     both = {f"{a}+{b}": fit([a, b]) for a, b in pairs}
-    return {"J0": J0, "base_success": bool(ok), "base_status": status, "base": base, "fits": fits, "pairs": both,
+    return {"J0": J0, "base_success": bool(ok), "base_status": status, "base": base, "base_refined": refined,
+            "fits": fits, "pairs": both,
             "wall_time": time.perf_counter() - t0}
 
 

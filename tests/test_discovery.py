@@ -349,23 +349,39 @@ def test_a_rejected_discovered_term_is_reported_unexplained_with_its_shape(tmp_p
     assert rejected_discovery({"iterations": [its[0], {**its[1], "rejected": None}], "final_iteration": 1}) is None
 
 
+def _stubbed_step(monkeypatch, p_values, LM, screen):
+    """discovery_step on lon_rigging (physical) and col_delay (generic) with the score test (``p_values``, ``LM``
+    in that order, white = robust, df infinite) and the NLP screen (``screen``) stubbed; input errors on."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from pyomo_heli.diagnosis import discovery
+
+    names = ["lon_rigging", "col_delay"]
+    scores = pd.DataFrame({"name": names, "p_value": p_values, "LM": LM, "LM_white": LM, "df": [np.inf, np.inf]})
+    monkeypatch.setattr(discovery.attr, "attribute",
+                        lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
+
+    def checked(cfg, start, terms, pairs=(), **kw):
+        assert set(terms) == set(names)
+        return screen(pairs)
+
+    monkeypatch.setattr(discovery, "nlp_screen", checked)
+    cfg = SimpleNamespace(free=[SimpleNamespace(name="Iyy")],
+                          nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=True))
+    model = SimpleNamespace(extensions=(), parameters={"Omega": 44.4, "R": 4.91})
+    return discovery.discovery_step(cfg, model, {}, None, physical=["lon_rigging"], generic=["col_delay"],
+                                    progress=lambda s: None)
+
+
 def test_an_ambiguous_step_says_what_the_generic_term_left_looks_like(monkeypatch):
     """discovery_step's decision with the score test and the NLP screen stubbed: a physical candidate significant
     (LR 24.4), the best generic term not significant over the library (LR 6) but adding to the physical one (LR 7.5
     given it, p = 0.006 < 0.01): nothing is added ("ambiguous"), and the record and message carry the generic
     term's formula and estimate, so the report says what the missing effect looks like."""
-    from types import SimpleNamespace
-
-    import pandas as pd
     from scipy.stats import chi2
 
-    from pyomo_heli.diagnosis import discovery
-
-    names = ["lon_rigging", "col_delay"]
-    scores = pd.DataFrame({"name": names, "p_value": [1e-6, 0.01], "LM": [49.4, 29.2], "LM_white": [49.4, 29.2],
-                           "df": [np.inf, np.inf]})
-    monkeypatch.setattr(discovery.attr, "attribute",
-                        lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
     J0 = -117175.06
 
     def fit(name, generic, lr, estimate, formula):
@@ -375,18 +391,12 @@ def test_an_ambiguous_step_says_what_the_generic_term_left_looks_like(monkeypatc
     fits = {"col_delay": fit("col_delay", True, 6.0, 0.0016, "c d(col_d)/dt = col - col_d"),
             "lon_rigging": fit("lon_rigging", False, 24.37, -0.0022, "lon offset")}
 
-    def screen(cfg, start, terms, pairs=(), **kw):
-        assert set(terms) == set(names)
+    def screen(pairs):
         assert pairs(fits) == [("lon_rigging", "col_delay")]
         return {"J0": J0, "fits": fits, "pairs": {"lon_rigging+col_delay": {"success": True,
                                                                              "J": fits["lon_rigging"]["J"] - 3.75}}}
 
-    monkeypatch.setattr(discovery, "nlp_screen", screen)
-    cfg = SimpleNamespace(free=[SimpleNamespace(name="Iyy")],
-                          nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=True))
-    model = SimpleNamespace(extensions=(), parameters={"Omega": 44.4, "R": 4.91})
-    out = discovery.discovery_step(cfg, model, {}, None, physical=["lon_rigging"], generic=["col_delay"],
-                                   progress=lambda s: None)
+    out = _stubbed_step(monkeypatch, [1e-6, 0.01], [49.4, 29.2], screen)
     assert out["decision"] == "ambiguous" and out["added"] is None
     row, = out["encompassing"]
     assert row["LR_G_given_P"] == pytest.approx(7.5) and row["p_G_given_P"] < 0.01 and not row["encompasses"]
@@ -400,17 +410,6 @@ def test_a_failed_base_solve_leaves_the_decision_to_the_score_test_and_says_so(m
     would refer the LR; instead the score test's own p decides (lon_rigging p = 1e-6 < 0.01/2 significant,
     col_delay p = 0.02 not), the encompassing test runs on the fits' J, and the message names the failure, so
     "nothing significant" can never come from a failed solve."""
-    from types import SimpleNamespace
-
-    import pandas as pd
-
-    from pyomo_heli.diagnosis import discovery
-
-    names = ["lon_rigging", "col_delay"]
-    scores = pd.DataFrame({"name": names, "p_value": [1e-6, 0.02], "LM": [49.4, 9.2], "LM_white": [49.4, 9.2],
-                           "df": [np.inf, np.inf]})
-    monkeypatch.setattr(discovery.attr, "attribute",
-                        lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
     J = -117175.06
 
     def fit(name, generic, dJ, estimate):
@@ -419,18 +418,13 @@ def test_a_failed_base_solve_leaves_the_decision_to_the_score_test_and_says_so(m
 
     fits = {"col_delay": fit("col_delay", True, 3.0, 0.0016), "lon_rigging": fit("lon_rigging", False, 12.0, -0.002)}
 
-    def screen(cfg, start, terms, pairs=(), **kw):
+    def screen(pairs):
         assert pairs(fits) == [("lon_rigging", "col_delay")]  # the score test's p picks the pair
         return {"J0": float("nan"), "base_success": False, "base_status": "Maximum_Iterations_Exceeded",
                 "fits": fits, "pairs": {"lon_rigging+col_delay": {"success": True,
                                                                   "J": fits["lon_rigging"]["J"] - 0.5}}}
 
-    monkeypatch.setattr(discovery, "nlp_screen", screen)
-    cfg = SimpleNamespace(free=[SimpleNamespace(name="Iyy")],
-                          nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=True))
-    model = SimpleNamespace(extensions=(), parameters={"Omega": 44.4, "R": 4.91})
-    out = discovery.discovery_step(cfg, model, {}, None, physical=["lon_rigging"], generic=["col_delay"],
-                                   progress=lambda s: None)
+    out = _stubbed_step(monkeypatch, [1e-6, 0.02], [49.4, 9.2], screen)
     assert out["criterion"] == "score test" and out["base_failed"] == "Maximum_Iterations_Exceeded"
     assert fits["lon_rigging"]["p"] == 1e-6 and fits["col_delay"]["p"] == 0.02
     # with both fitted: col_delay adds LR 1 to lon_rigging (p = 0.32), lon_rigging adds 19 to col_delay: named

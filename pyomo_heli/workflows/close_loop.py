@@ -232,6 +232,25 @@ def _stop_message(doc: dict, reason: str) -> str:
     return reason + ("; " + unexplained_statement(*unexplained) if unexplained else "")
 
 
+def _reject(doc, record, krec, added, reason: str, rejected: list, settings, out, progress) -> bool:
+    """The step of ``record`` (adding ``added``) rejected for ``reason`` (the validation rule or the name check),
+    ``krec`` the record of the model kept. With ``after_rejection = "stop"`` the loop stops there (``loop.json``
+    written; True); otherwise the record says which model the loop goes back to, and the terms left out (False)."""
+    record["rejected"] = reason
+    what = f"adding {added}" if added else "the step"
+    if settings.after_rejection == "stop":
+        doc["stopped"] = _stop_message(doc, f"step rejected: {what} {reason}; the model of iteration "
+                                            f"{krec['iteration']} is kept")
+        write_json(out / LOOP_FILE, doc)
+        progress(f"stopped: {doc['stopped']}")
+        return True
+    # back to the kept model: its structure determination again, the rejected terms left out
+    progress(f"step rejected: {what} {reason}; back to the model of iteration {krec['iteration']}, without "
+             f"{', '.join(rejected)}")
+    record["step_from"] = {"iteration": krec["iteration"], "without": list(rejected)}
+    return False
+
+
 def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) -> dict:
     out, restart = run.root, run.restart
     run.mark()
@@ -287,20 +306,10 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             check = validation_check(kcfg.model, krec["parameters"], cfg.model, chosen, val_mans)
             record["validation_check"] = check["rows"]
             if check["rise"]:
-                record["rejected"] = check["message"]
                 if added is not None:
                     rejected.append(added)
-                what = f"adding {added}" if added else "the step"
-                if settings.after_rejection == "stop":
-                    doc["stopped"] = _stop_message(doc, f"step rejected: {what} {check['message']}; the model of "
-                                                        f"iteration {krec['iteration']} is kept")
-                    write_json(out / LOOP_FILE, doc)
-                    progress(f"stopped: {doc['stopped']}")
+                if _reject(doc, record, krec, added, check["message"], rejected, settings, out, progress):
                     return doc
-                # back to the kept model: its structure determination again, the rejected terms left out
-                progress(f"step rejected: {what} {check['message']}; back to the model of iteration "
-                         f"{krec['iteration']}, without {', '.join(rejected)}")
-                record["step_from"] = {"iteration": krec["iteration"], "without": list(rejected)}
                 cfg, chosen = kcfg, krec["parameters"]
         if not record.get("rejected"):
             kept = (cfg, record)
@@ -343,23 +352,15 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                 # the name check: a physical candidate must leave the generic family nothing significant; one that
                 # does not describes the missing effect only in part (docs/discovery.md): the step is rejected
                 G = step["best_generic_fit"]
-                record["rejected"] = (f"left the generic term {G['name']} significant (p = {G['p']:.2g} < "
-                                      f"{step['level']:.2g}): a physical candidate must account for the whole "
-                                      f"missing effect (name check)")
                 record["name_check"] = {k: v for k, v in step.items() if k != "attribution"}
                 rejected.append(added)
                 kept_models.pop()
                 kcfg, krec = kept = kept_models[-1]
                 doc["final_iteration"] = krec["iteration"]
-                if settings.after_rejection == "stop":
-                    doc["stopped"] = _stop_message(doc, f"step rejected: adding {added} {record['rejected']}; the "
-                                                        f"model of iteration {krec['iteration']} is kept")
-                    write_json(out / LOOP_FILE, doc)
-                    progress(f"stopped: {doc['stopped']}")
+                if _reject(doc, record, krec, added, f"left the generic term {G['name']} significant (p = "
+                           f"{G['p']:.2g} < {step['level']:.2g}): a physical candidate must account for the whole "
+                           "missing effect (name check)", rejected, settings, out, progress):
                     return doc
-                progress(f"name check: {added} {record['rejected']}; back to the model of iteration "
-                         f"{krec['iteration']}, without {', '.join(rejected)}")
-                record["step_from"] = {"iteration": krec["iteration"], "without": list(rejected)}
                 cfg, chosen = kcfg, krec["parameters"]
                 names = [e.name for e in cfg.model.extensions]
                 model = cfg.model.with_parameters(**chosen)

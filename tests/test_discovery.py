@@ -18,6 +18,7 @@ from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.candidates import CANDIDATES
 from pyomo_heli.nlp.identification import prepare_data
 from pyomo_heli.physics.model import HelicopterModel
+from pyomo_heli.report.loop import JOINT
 
 #: a short generic library for the small instances: moment and force terms over speed, and a sensor term
 GENERIC = ["dM_one", "dM_mu2", "dM_bump00", "dM_bump05", "dM_bump10", "dX_mu4", "dZ_one", "dZ_bump00", "TAS_scale"]
@@ -138,8 +139,8 @@ def test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model(tm
 
     real, calls = cl.validation_check, []
 
-    def check(model0, params0, model1, params1, val_mans, alpha=0.01):
-        out = real(model0, params0, model1, params1, val_mans, alpha)
+    def check(model0, params0, model1, params1, val_mans, alpha=0.01, joint=False):
+        out = real(model0, params0, model1, params1, val_mans, alpha, joint)
         added = [e.name for e in model1.extensions]
         calls.append((dict(params0), [e.name for e in model0.extensions], added))
         if "rotor_wake_on_tail" in added:
@@ -227,6 +228,31 @@ def test_validation_rule_flags_a_worse_model_and_passes_a_better_one():
     assert worse["rise"] and "rise significantly" in worse["message"]
     assert not better["rise"] and better["message"] == ""
     assert {r["output"] for r in worse["rows"]} >= {"q", "theta", "n_z"}
+    # the joint row: a rise too (not significant here: one record, six batches, dominated by q's doubling)
+    joint = {r["output"]: r for r in worse["rows"]}[JOINT]
+    assert joint["change [%]"] > 0 and joint["z"] > 0
+
+
+def test_validation_rule_rejects_a_joint_rise_only_when_told(monkeypatch):
+    """A step whose error rises on every output, significantly on none alone but significantly all at once, passes
+    the per-output rule (the default) and is rejected by the joint row with ``joint=True`` (``[loop]
+    validation_joint = true``); the joint row is in the check's table either way."""
+    import pandas as pd
+
+    import pyomo_heli.report.loop as report_loop
+    import pyomo_heli.workflows.loop_steps as steps
+
+    rows = [{"output": o, "change [%]": 3.0, "p (rise)": 0.1, "significant rise": False}
+            for o in ("q", "theta", "n_z")] + [{"output": JOINT, "change [%]": 3.0, "p (rise)": 0.004,
+                                                  "significant rise": True}]
+    monkeypatch.setattr(report_loop, "validation_change_table", lambda *a, **k: pd.DataFrame(rows))
+    monkeypatch.setattr(steps, "predict", lambda *a, **k: None)
+    m0 = HelicopterModel()
+    on = validation_check(m0, {}, m0, {}, [], joint=True)
+    off = validation_check(m0, {}, m0, {}, [])
+    assert on["rise"] and on["message"] == (f"made the validation error rise significantly on {JOINT} "
+                                            "(+3.0 %, p = 0.004)")
+    assert not off["rise"] and off["message"] == "" and len(off["rows"]) == 4
 
 
 @pytest.mark.parametrize("loop, message", [
@@ -235,6 +261,7 @@ def test_validation_rule_flags_a_worse_model_and_passes_a_better_one():
     ("generic = []", "[loop]: field 'generic' must be a non-empty list of names"),
     ('generic_family = "big"', "[loop]: field 'generic_family' must be \"standard\" or \"extended\", got 'big'"),
     ("validation_rule = 1", "[loop]: field 'validation_rule' must be true or false"),
+    ('validation_joint = "no"', "[loop]: field 'validation_joint' must be true or false"),
     ('after_rejection = "retry"', "[loop]: field 'after_rejection' must be \"next\" or \"stop\", got 'retry'"),
 ])
 def test_bad_discovery_fields_are_one_line_exit_2(tmp_path, capsys, loop, message):

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from pyomo_heli.diagnosis.validation_change import mean_square_change
+from pyomo_heli.diagnosis.validation_change import joint_mean_square_change, mean_square_change
 
 
 def test_identical_models_change_nothing():
@@ -93,3 +93,105 @@ def test_bad_records_are_named():
         mean_square_change([np.zeros(3)], [np.zeros(2)], 1)
     with pytest.raises(ValueError, match="same non-empty list"):
         mean_square_change([], [], 1)
+
+
+# --- all outputs at once (joint_mean_square_change) ---------------------------------------------------------------
+def test_joint_change_is_the_sum_of_the_relative_mean_square_changes():
+    """D = sum_o (ms1_o / ms0_o - 1) exactly, whatever the outputs' units; one output alone gives its own test."""
+    rng = np.random.default_rng(6)
+    r0 = {"q": [rng.normal(0, 0.01, 400) for _ in range(6)], "theta": [rng.normal(0, 3.0, 400) for _ in range(6)]}
+    r1 = {"q": [x * 1.1 for x in r0["q"]], "theta": [x * 0.95 for x in r0["theta"]]}
+    j = joint_mean_square_change(r0, r1)
+    assert j.ms0 == 2 and j.ms1 - j.ms0 == pytest.approx((1.1**2 - 1) + (0.95**2 - 1), rel=1e-12)
+    assert j.segments == 6
+    one = joint_mean_square_change({"q": r0["q"]}, {"q": r1["q"]})
+    alone = mean_square_change(r0["q"], r1["q"])
+    assert one.z == pytest.approx(alone.z, rel=1e-12) and one.p_rise == pytest.approx(alone.p_rise, rel=1e-12)
+
+
+def test_a_broad_small_rise_is_significant_jointly_and_on_no_output_alone():
+    """Six outputs, independent white noise (sigma), each model-1 residual offset by c: each output's z has mean
+    c sqrt(N) / (2 sigma) = 1.2 (p = 0.13 with 11 df), the joint z sqrt(6) times that, 2.9 (p = 0.007). Over
+    200 seeds the joint test (alpha 0.01) fires about five times as often as any single output's, below the
+    normal power of its expected z (0.73; the t reference with 11 df is stricter)."""
+    from scipy.stats import norm
+
+    sigma, N, K = 0.2, 3600, 6
+    c = 1.2 * 2 * sigma / N**0.5
+    alpha, joint, single = 0.01, 0, 0
+    for seed in range(200):
+        rng = np.random.default_rng(seed)
+        r0 = {f"y{k}": list(rng.normal(0, sigma, (12, N // 12))) for k in range(K)}
+        r1 = {o: [x + c for x in v] for o, v in r0.items()}
+        joint += joint_mean_square_change(r0, r1, alpha=alpha).rise_significant
+        single += sum(mean_square_change(r0[o], r1[o], alpha=alpha).rise_significant for o in r0)
+    power = norm.sf(norm.isf(alpha) - 1.2 * K**0.5)
+    assert 0.45 * 200 <= joint <= power * 200  # 128 of 200
+    assert single / K < 0.2 * 200  # one output alone: 23 of 200
+
+
+def test_joint_false_alarm_rate_with_correlated_outputs_is_near_alpha():
+    """Three outputs whose noise is one AR(1) process (3 s correlation time) seen three times with different gains,
+    so the outputs are fully correlated within a record; errors of equal energy e0 = -e1 per output. The whole-record
+    batches carry the correlation: the joint test fires at about its level (Monte Carlo, 400 seeds)."""
+    from scipy.signal import lfilter
+
+    dt, n_rec, n_s, tau = 0.02, 12, 675, 3.0
+    t = np.arange(n_s) * dt
+    e0 = {"a": 0.05 * np.sin(2 * np.pi * t / 13.5), "b": 0.02 * np.cos(2 * np.pi * t / 6.75),
+          "c": 0.1 * np.sin(2 * np.pi * t / 4.5)}
+    gain = {"a": 1.0, "b": 0.3, "c": 2.0}
+    phi = np.exp(-dt / tau)
+    alpha, fired = 0.05, 0
+    for seed in range(400):
+        w = np.random.default_rng(seed).normal(0, 0.2 * (1 - phi**2) ** 0.5, (n_rec, n_s))
+        n = lfilter([1.0], [1.0, -phi], w, axis=1)
+        r0 = {o: [gain[o] * x + e0[o] for x in n] for o in e0}
+        r1 = {o: [gain[o] * x - e0[o] for x in n] for o in e0}
+        fired += joint_mean_square_change(r0, r1, alpha=alpha).rise_significant
+    assert 8 <= fired <= 32  # 20 expected, binomial sd 4.4
+
+
+def test_bad_joint_records_are_named():
+    a = [np.ones(5)]
+    with pytest.raises(ValueError, match="same non-empty set of outputs"):
+        joint_mean_square_change({"q": a}, {"theta": a})
+    with pytest.raises(ValueError, match="different records or sample counts"):
+        joint_mean_square_change({"q": a, "theta": [np.ones(4)]}, {"q": a, "theta": [np.ones(4)]})
+    with pytest.raises(ValueError, match="nothing to standardise by"):
+        joint_mean_square_change({"q": [np.zeros(5)]}, {"q": a})
+
+
+def test_by_speed_table_puts_a_rise_at_the_speed_where_it_is():
+    """Two outputs, records at 0, 50 and 100 kt (two each, white noise); model 1 adds an offset to q at 100 kt only.
+    By speed: every change is exactly zero but q's at 100 kt, whose RMS change is the analytic sqrt(1 + c^2 / ms0);
+    the all-records table sees a smaller, diluted q rise."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from pyomo_heli.report.loop import JOINT, validation_change_by_speed, validation_change_table
+    from pyomo_heli.units import KT
+
+    rng = np.random.default_rng(7)
+    t = np.arange(600) * 0.02
+    mans, m0, m1, c = [], {}, {}, 0.02
+    for kt in (0, 50, 100):
+        for axis in ("lon", "col"):
+            name = f"{axis}_{kt}"
+            data = pd.DataFrame({"q": rng.normal(0, 0.01, t.size), "theta": rng.normal(0, 0.02, t.size)})
+            mans.append(SimpleNamespace(name=name, t=t, data=data, trim_speed=kt * KT))
+            m0[name] = pd.DataFrame({"q": np.zeros(t.size), "theta": np.zeros(t.size)})
+            m1[name] = m0[name].assign(q=-c if kt == 100 else 0.0)
+    p0, p1 = SimpleNamespace(maneuvers=m0), SimpleNamespace(maneuvers=m1)
+    tab = validation_change_by_speed(p0, p1, mans).set_index("speed [kt]")
+    assert list(tab.index) == [0.0, 50.0, 100.0] and list(tab["records"]) == [2, 2, 2]
+    assert (tab.loc[[0.0, 50.0], ["q [%]", "theta [%]", "joint [%]"]].to_numpy() == 0).all()
+    assert tab.loc[100.0, "theta [%]"] == 0
+    q100 = np.concatenate([mv.data["q"].to_numpy() for mv in mans if mv.trim_speed == 100 * KT])
+    ms0 = np.mean(q100**2)
+    expected = 100 * (np.mean((q100 + c) ** 2) / ms0) ** 0.5 - 100
+    assert tab.loc[100.0, "q [%]"] == pytest.approx(expected, rel=1e-9) and expected > 50
+    assert tab.loc[100.0, "joint p (rise)"] < 0.01
+    whole = validation_change_table(p0, p1, mans).set_index("output")
+    assert 0 < whole.loc["q", "change [%]"] < expected and JOINT in whole.index

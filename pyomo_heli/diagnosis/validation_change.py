@@ -48,6 +48,39 @@ class MeanSquareChange:
 MIN_BATCHES = 6
 
 
+def _records(r0, r1, name: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    r0, r1 = [np.asarray(a, float) for a in r0], [np.asarray(a, float) for a in r1]
+    if len(r0) != len(r1) or not r0:
+        raise ValueError(f"{name}: need the same non-empty list of records for both models")
+    for k, (a, b) in enumerate(zip(r0, r1)):
+        if a.shape != b.shape:
+            raise ValueError(f"{name}: record {k} has {a.size} samples for model 0, {b.size} for 1")
+    return r0, r1
+
+
+def _batch_test(d_records: list[np.ndarray], n_segment, alpha: float, min_batches: int, name: str):
+    """The batch-means test of mean(d) > 0 over the loss differentials ``d_records`` (one array per record):
+    (mean, se, z, batches, p)."""
+    cuts = -(-min_batches // len(d_records)) if len(d_records) < min_batches else 1  # batches per record
+    segs = n_segment if isinstance(n_segment, list) else [n_segment] * len(d_records)
+    batches = []
+    for k, d in enumerate(d_records):
+        if d.size == 0:
+            raise ValueError(f"{name}: record {k} has no finite samples")
+        n = max(d.size // cuts if segs[k] is None else int(segs[k]), 1)
+        edges = list(range(0, d.size, n))
+        if len(edges) > 1 and d.size - edges[-1] < n:
+            edges.pop()  # merge the last partial segment
+        edges.append(d.size)
+        batches += [d[i:j] for i, j in zip(edges[:-1], edges[1:])]
+    d = np.concatenate(d_records)
+    mean = float(d.mean())
+    se = (sum(float((s - mean).sum()) ** 2 for s in batches) / d.size**2) ** 0.5
+    z = mean / se if se > 0 else (np.inf if mean > 0 else 0.0)
+    p = float(student_t.sf(z, df=max(len(batches) - 1, 1)))
+    return mean, se, float(z), len(batches), p
+
+
 def mean_square_change(r0, r1, n_segment: int | list[int] | None = None, alpha: float = 0.01,
                        min_batches: int = MIN_BATCHES) -> MeanSquareChange:
     """Paired test of ``r1`` against ``r0``: lists of residual arrays, one pair per record (same samples).
@@ -57,35 +90,47 @@ def mean_square_change(r0, r1, n_segment: int | list[int] | None = None, alpha: 
     partial batch merged into the one before it. Raises ValueError for records of unequal length or
     without finite samples.
     """
-    r0, r1 = [np.asarray(a, float) for a in r0], [np.asarray(a, float) for a in r1]
-    if len(r0) != len(r1) or not r0:
-        raise ValueError("mean_square_change: need the same non-empty list of records for both models")
-    cuts = -(-min_batches // len(r0)) if len(r0) < min_batches else 1  # batches per record (n_segment None)
-    segs = n_segment if isinstance(n_segment, list) else [n_segment] * len(r0)
-    d_all, batches = [], []
-    for k, (a, b) in enumerate(zip(r0, r1)):
-        if a.shape != b.shape:
-            raise ValueError(f"mean_square_change: record {k} has {a.size} samples for model 0, {b.size} for 1")
-        ok = np.isfinite(a) & np.isfinite(b)
-        d = b[ok] ** 2 - a[ok] ** 2
-        if d.size == 0:
-            raise ValueError(f"mean_square_change: record {k} has no finite samples")
-        n = max(d.size // cuts if segs[k] is None else int(segs[k]), 1)
-        edges = list(range(0, d.size, n))
-        if len(edges) > 1 and d.size - edges[-1] < n:
-            edges.pop()  # merge the last partial segment
-        edges.append(d.size)
-        batches += [d[i:j] for i, j in zip(edges[:-1], edges[1:])]
-        d_all.append(d)
-    d = np.concatenate(d_all)
-    n_tot = d.size
-    mean = float(d.mean())
-    var = sum(float((s - mean).sum()) ** 2 for s in batches) / n_tot**2
-    se = var**0.5
-    ms0 = float(np.mean(np.concatenate([a[np.isfinite(a) & np.isfinite(b)] ** 2 for a, b in zip(r0, r1)])))
+    r0, r1 = _records(r0, r1, "mean_square_change")
+    ok = [np.isfinite(a) & np.isfinite(b) for a, b in zip(r0, r1)]
+    d = [b[m] ** 2 - a[m] ** 2 for a, b, m in zip(r0, r1, ok)]
+    mean, se, z, nb, p = _batch_test(d, n_segment, alpha, min_batches, "mean_square_change")
+    ms0 = float(np.mean(np.concatenate([a[m] ** 2 for a, m in zip(r0, ok)])))
     ms1 = ms0 + mean
-    z = mean / se if se > 0 else (np.inf if mean > 0 else 0.0)
-    p = float(student_t.sf(z, df=max(len(batches) - 1, 1)))
-    return MeanSquareChange(ms0=ms0, ms1=ms1, se=se, z=float(z), segments=len(batches),
+    return MeanSquareChange(ms0=ms0, ms1=ms1, se=se, z=z, segments=nb,
                             rms_change_pct=100.0 * ((ms1 / ms0) ** 0.5 - 1.0) if ms0 > 0 else float("nan"),
                             p_rise=p, rise_significant=bool(p < alpha))
+
+
+def joint_mean_square_change(r0: dict, r1: dict, n_segment: int | list[int] | None = None, alpha: float = 0.01,
+                             min_batches: int = MIN_BATCHES) -> MeanSquareChange:
+    """The same paired test for all outputs at once: ``r0``, ``r1`` map each output to its list of residual
+    arrays (the same records and samples for every output).
+
+    The loss of a sample is the sum over the outputs of its squared residuals, each in units of model 0's mean
+    square of that output, L(t) = sum_o r_o(t)^2 / ms0_o, so that the differential d(t) = L1(t) - L0(t) has
+    mean D = sum_o (ms1_o / ms0_o - 1): a broad small rise, on every output and significant on none alone,
+    adds up. A sample enters where every output is finite. The batches are those of :func:`mean_square_change`
+    (whole records by default); the batch means carry the correlation between the outputs of one record.
+    Returned in standardised units: ms0 = the number of outputs, ms1 = ms0 + D, and ``rms_change_pct`` is the
+    change of the standardised RMS. Raises ValueError for different outputs or records in ``r0`` and ``r1``.
+    """
+    name = "joint_mean_square_change"
+    if set(r0) != set(r1) or not r0:
+        raise ValueError(f"{name}: need the same non-empty set of outputs for both models")
+    outs = sorted(r0)
+    recs = {o: _records(r0[o], r1[o], f"{name} ({o})") for o in outs}
+    n_rec = {len(recs[o][0]) for o in outs}
+    if len(n_rec) != 1 or len({tuple(a.size for a in recs[o][0]) for o in outs}) != 1:
+        raise ValueError(f"{name}: the outputs have different records or sample counts")
+    ok = [np.logical_and.reduce([np.isfinite(recs[o][0][k]) & np.isfinite(recs[o][1][k]) for o in outs])
+          for k in range(n_rec.pop())]
+    ms0 = {o: float(np.mean(np.concatenate([a[m] ** 2 for a, m in zip(recs[o][0], ok)]))) if any(
+        m.any() for m in ok) else 0.0 for o in outs}
+    if any(v <= 0 for v in ms0.values()):
+        raise ValueError(f"{name}: model 0 fits an output exactly or no sample is finite; nothing to standardise by")
+    d = [sum((recs[o][1][k][m] ** 2 - recs[o][0][k][m] ** 2) / ms0[o] for o in outs) for k, m in enumerate(ok)]
+    mean, se, z, nb, p = _batch_test(d, n_segment, alpha, min_batches, name)
+    n = float(len(outs))
+    return MeanSquareChange(ms0=n, ms1=n + mean, se=se, z=z, segments=nb,
+                            rms_change_pct=100.0 * (((n + mean) / n) ** 0.5 - 1.0), p_rise=p,
+                            rise_significant=bool(p < alpha))

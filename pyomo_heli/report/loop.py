@@ -121,16 +121,22 @@ def truth_errors(doc: dict, base: HelicopterModel, truth: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+#: the output name of the joint row of :func:`validation_change_table`
+JOINT = "all outputs (joint)"
+
+
 def validation_change_table(pred0, pred1, val_mans, segment_s: float | None = None,
                             alpha: float = 0.01) -> pd.DataFrame:
     """Per output: validation RMS of data minus model for two predictions and the paired test of the change
     (Diebold-Mariano with batch means, :mod:`pyomo_heli.diagnosis.validation_change`: whole records as batches by
-    default, or ``segment_s`` segments)."""
+    default, or ``segment_s`` segments). A last row, :data:`JOINT`, tests all these outputs at once (each output's
+    squared error in units of model 0's mean square, summed: :func:`~pyomo_heli.diagnosis.validation_change.
+    joint_mean_square_change`); its RMS columns are empty and its change is that of the standardised RMS."""
     import numpy as np
 
-    from ..diagnosis.validation_change import mean_square_change
+    from ..diagnosis.validation_change import joint_mean_square_change, mean_square_change
 
-    rows = []
+    rows, r0s, r1s, seg_all = [], {}, {}, []
     for o in VALIDATION_OUTPUTS:
         r0, r1, seg = [], [], []
         for mv in val_mans:
@@ -146,11 +152,39 @@ def validation_change_table(pred0, pred1, val_mans, segment_s: float | None = No
             if not r0:
                 continue
             c = mean_square_change(r0, r1, seg or None, alpha)
+            r0s[o], r1s[o], seg_all = r0, r1, seg
             unit = plots.UNITS[o][0]
             rows.append({"output": o, "RMS before": float(plots.shown(o, c.ms0**0.5)),
                          "RMS after": float(plots.shown(o, c.ms1**0.5)), "unit": unit,
                          "change [%]": c.rms_change_pct, "z": c.z, "p (rise)": c.p_rise, "segments": c.segments,
                          "significant rise": c.rise_significant})
+    if len(r0s) > 1:
+        c = joint_mean_square_change(r0s, r1s, seg_all or None, alpha)
+        rows.append({"output": JOINT, "RMS before": None, "RMS after": None, "unit": "",
+                     "change [%]": c.rms_change_pct, "z": c.z, "p (rise)": c.p_rise, "segments": c.segments,
+                     "significant rise": c.rise_significant})
+    return pd.DataFrame(rows)
+
+
+def speed_groups(val_mans) -> list[tuple[float, list]]:
+    """The validation records grouped by trim speed (rounded to whole knots): [(speed [kt], records), ...]."""
+    speeds = sorted({round(mv.trim_speed / KT) for mv in val_mans})
+    return [(float(kt), [mv for mv in val_mans if round(mv.trim_speed / KT) == kt]) for kt in speeds]
+
+
+def validation_change_by_speed(pred0, pred1, val_mans, alpha: float = 0.01) -> pd.DataFrame:
+    """Where a validation change sits: per trim speed, each output's RMS change [%] and the paired test of the
+    joint row on that speed's records alone (:func:`validation_change_table`). One or two records per speed: the
+    tests are weak and many (speeds x outputs), so a p here locates a change rather than proves it."""
+    rows = []
+    for kt, group in speed_groups(val_mans):
+        tab = validation_change_table(pred0, pred1, group, alpha=alpha).set_index("output")
+        row = {"speed [kt]": kt, "records": len(group)}
+        row.update({f"{o} [%]": float(tab.loc[o, "change [%]"]) for o in tab.index if o != JOINT})
+        if JOINT in tab.index:
+            row["joint [%]"] = float(tab.loc[JOINT, "change [%]"])
+            row["joint p (rise)"] = float(tab.loc[JOINT, "p (rise)"])
+        rows.append(row)
     return pd.DataFrame(rows)
 
 
@@ -227,7 +261,10 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
               "significant when its one-sided p < 0.01. At the sensor-noise floor the same noise enters both "
               "models' residuals and does not cancel, so small changes of either sign are expected without any "
               "change of the model error.", "",
-              markdown_table(validation_change_table(first, last, val_mans), digits=4), ""]
+              markdown_table(validation_change_table(first, last, val_mans), digits=4), "",
+              "Where it sits: the change of each output's validation RMS by trim speed, and the joint test on that "
+              "speed's records alone (one or two records each, so a p here locates a change rather than proves it):",
+              "", markdown_table(validation_change_by_speed(first, last, val_mans), digits=3), ""]
     L += [f"![Trim vs speed before and after](loop_trim_vs_speed.{figure_format})", ""]
     L += discovery_summary(doc, cfg, out)
     if val_mans:
@@ -307,8 +344,9 @@ def iteration_checks(it: dict) -> list[str]:
     L = []
     named = it.get("name_check")
     if it.get("validation_check"):
-        L += [f"Validation rule (paired test against the model kept so far; a significant rise rejects the "
-              f"step): **{'rejected: ' + it['rejected'] if it.get('rejected') and not named else 'passed'}**", "",
+        verdict = "rejected: " + it["rejected"] if it.get("rejected") and not named else "passed"
+        L += ["Validation rule (paired test against the model kept so far; a significant rise on any output rejects "
+              f"the step, and of all outputs at once with `[loop] validation_joint`): **{verdict}**", "",
               markdown_table(pd.DataFrame(it["validation_check"]), digits=4), ""]
     if named:
         G = named["best_generic_fit"]

@@ -341,6 +341,9 @@ class LoopTable(Table):
                           "'generic_family', pyomo_heli.physics.discrepancy.generic_names(generic_family))")
     validation_rule: bool = Field(True, description="reject a step whose model makes the validation error rise "
                                                     "significantly on any output")
+    validation_joint: bool = Field(False, description="the validation rule also rejects a significant rise of all "
+                                                      "outputs' error at once (joint paired test, reported either "
+                                                      "way)")
     after_rejection: Literal["next", "stop"] = Field(
         "next", description="after a step the validation rule rejected: back to the kept model and the next "
                             "significant term, the rejected ones left out (next), or stop there (stop)")

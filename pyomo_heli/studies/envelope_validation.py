@@ -38,8 +38,8 @@ from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.nlp.identification import prepare_data
 from pyomo_heli.report import plots
 from pyomo_heli.report.identification import VALIDATION_OUTPUTS, predict
-from pyomo_heli.report.loop import iteration_model, label, truth_replay_errors, validation_change_table
-from pyomo_heli.units import KT
+from pyomo_heli.report.loop import (iteration_model, label, speed_groups, truth_replay_errors,
+                                    validation_change_table)
 
 ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, data/
 
@@ -63,8 +63,7 @@ def evaluate(loop: Path, data: Path) -> pd.DataFrame:
     failed = [p for pr in preds for p in pr.problems]
     if failed:
         raise SystemExit(f"{loop}: replay problems on {data}: {failed}")
-    groups = [("all", mans)] + [(f"{kt:.0f} kt", [mv for mv in mans if round(mv.trim_speed / KT) == kt])
-                                for kt in sorted({round(mv.trim_speed / KT) for mv in mans})]
+    groups = [("all", mans)] + [(f"{kt:.0f} kt", group) for kt, group in speed_groups(mans)]
     doc_fl = {**doc, "iterations": [first, last]}  # model minus truth for the two models compared
     rows = []
     for name, group in groups:

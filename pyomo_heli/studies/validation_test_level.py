@@ -14,9 +14,12 @@ both directions) should fall below alpha at a rate alpha. It is computed with th
 records) and, for comparison, with 1 s batches, which ignore the colour of the noise beyond a second. Each
 seed's p-values go to ``OUT/seed_<n>.json`` as it finishes (a rerun reuses them).
 
-Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per batch choice and output (and all outputs pooled), the
-number of tests (seeds x 2 directions) and the fraction with p < 0.05 and p < 0.01. The two directions of one
-seed are not independent draws (p and 1 - p).
+The same for the validation rule's joint test of all outputs at once
+(:func:`~pyomo_heli.diagnosis.validation_change.joint_mean_square_change` on every output's r0 and r1).
+
+Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per batch choice and output (all outputs' tests pooled, and
+the joint test), the number of tests (seeds x 2 directions) and the fraction with p < 0.05 and p < 0.01. The two
+directions of one seed are not independent draws (p and 1 - p).
 """
 from __future__ import annotations
 
@@ -29,7 +32,7 @@ import pandas as pd
 
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
-from pyomo_heli.diagnosis.validation_change import mean_square_change
+from pyomo_heli.diagnosis.validation_change import joint_mean_square_change, mean_square_change
 from pyomo_heli.nlp.identification import validation_maneuvers
 from pyomo_heli.report.identification import VALIDATION_OUTPUTS, predict, truth_prediction
 
@@ -54,14 +57,19 @@ def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
     truth = truth_prediction(data, [], val)
     m0 = predict("initial", cfg.model, {f.name: f.initial for f in cfg.free}, [], val)
     dt = float(np.median(np.diff(val[0].t)))
-    doc = {"seed": seed, "records": len(val), "p": {}}
+    doc = {"seed": seed, "records": len(val), "p": {}, "joint": {}}
+    R0, R1 = {}, {}
     for o in VALIDATION_OUTPUTS:
         n = [mv.data[o].to_numpy(float) - truth.maneuvers[mv.name][o].to_numpy(float) for mv in val]
         e0 = [truth.maneuvers[mv.name][o].to_numpy(float) - m0.maneuvers[mv.name][o].to_numpy(float) for mv in val]
         r0, r1 = [a + b for a, b in zip(n, e0)], [a - b for a, b in zip(n, e0)]
+        R0[o], R1[o] = r0, r1
         for name, seg_s in BATCHES.items():
             seg = None if seg_s is None else max(int(round(seg_s / dt)), 1)
             doc["p"][f"{name}|{o}"] = [mean_square_change(r0, r1, seg).p_rise, mean_square_change(r1, r0, seg).p_rise]
+    for name, seg_s in BATCHES.items():  # all outputs at once, as the validation rule's joint row
+        seg = None if seg_s is None else max(int(round(seg_s / dt)), 1)
+        doc["joint"][name] = [joint_mean_square_change(a, b, seg).p_rise for a, b in ((R0, R1), (R1, R0))]
     f.write_text(json.dumps(doc, indent=1))
     return doc
 
@@ -75,6 +83,10 @@ def summary(docs: list[dict]) -> pd.DataFrame:
             if ps.size:
                 rows.append({"batches": name, "output": o, "tests": int(ps.size),
                              **{f"p < {a:g} [%]": 100.0 * float(np.mean(ps < a)) for a in LEVELS}})
+        ps = np.array([p for d in docs for p in d.get("joint", {}).get(name, [])])
+        if ps.size:
+            rows.append({"batches": name, "output": "joint (all outputs at once)", "tests": int(ps.size),
+                         **{f"p < {a:g} [%]": 100.0 * float(np.mean(ps < a)) for a in LEVELS}})
     return pd.DataFrame(rows)
 
 

@@ -22,8 +22,9 @@
 
 From iteration 1 on, the validation rule (``[loop] validation_rule``) compares each re-identified model with the
 model kept so far on the validation records (paired test, :func:`validation_check`); a significant rise on any
-output rejects the step. With ``[loop] after_rejection = "next"`` (default) the loop then goes back to the kept
-model and runs its step again with the rejected terms left out for the rest of the loop; ``"stop"`` stops there.
+output (with ``[loop] validation_joint``, also of all outputs at once) rejects the step. With ``[loop]
+after_rejection = "next"`` (default) the loop then goes back to the kept model and runs its step again with the
+rejected terms left out for the rest of the loop; ``"stop"`` stops there.
 With ``[loop] discovery``, the name check: a physical candidate added at the last step (named by encompassing, or
 taken by the library) must leave the generic family nothing significant at the next step; when the best generic
 term is significant there, the candidate described the missing effect only in part, and its step is rejected in
@@ -95,6 +96,9 @@ class LoopSettings:
     generic: list | None = None
     #: reject a step whose model makes the validation error rise significantly on any output (paired test)
     validation_rule: bool = True
+    #: the validation rule also rejects a significant rise of all outputs' error at once (the joint paired test;
+    #: reported in every validation check either way)
+    validation_joint: bool = False
     #: after a rejected step: back to the kept model and its next significant term, the rejected terms left out for
     #: the rest of the loop ("next"), or stop with the kept model ("stop", the loops before 2026-11-27)
     after_rejection: str = "next"
@@ -303,7 +307,8 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         # the validation rule: a step whose model validates significantly worse on any output is rejected
         if i > 0 and settings.validation_rule and val_mans:
             kcfg, krec = kept
-            check = validation_check(kcfg.model, krec["parameters"], cfg.model, chosen, val_mans)
+            check = validation_check(kcfg.model, krec["parameters"], cfg.model, chosen, val_mans,
+                                     joint=settings.validation_joint)
             record["validation_check"] = check["rows"]
             if check["rise"]:
                 if added is not None:

@@ -50,17 +50,18 @@ def _without(cfg: IdentificationConfig, chosen: dict, name: str) -> Identificati
 
 
 def validation_check(model0: HelicopterModel, params0: dict, model1: HelicopterModel, params1: dict, val_mans,
-                     alpha: float = 0.01) -> dict:
+                     alpha: float = 0.01, joint: bool = False) -> dict:
     """The validation rule: the paired test (Diebold-Mariano, :mod:`pyomo_heli.diagnosis.validation_change`) of each
-    output's validation error, model 1 against model 0 on the same records. ``rise``: True when any output's error
-    rises significantly (one-sided p < ``alpha``); ``rows``: the test table as records; ``message`` names them."""
-    from ..report.loop import validation_change_table
+    output's validation error, model 1 against model 0 on the same records, and of all outputs at once (the table's
+    joint row). ``rise``: True when any output's error rises significantly (one-sided p < ``alpha``), or, with
+    ``joint``, the joint error does; ``rows``: the test table as records; ``message`` names them."""
+    from ..report.loop import JOINT, validation_change_table
 
     p0 = predict("before", model0, params0, [], val_mans)
     p1 = predict("after", model1, params1, [], val_mans)
     tab = validation_change_table(p0, p1, val_mans, alpha=alpha)
     rows = tab.to_dict(orient="records")
-    bad = [r for r in rows if r["significant rise"]]
+    bad = [r for r in rows if r["significant rise"] and (joint or r["output"] != JOINT)]
     msg = ("made the validation error rise significantly on " + ", ".join(
         f"{r['output']} ({r['change [%]']:+.1f} %, p = {r['p (rise)']:.2g})" for r in bad)) if bad else ""
     return {"rise": bool(bad), "rows": rows, "message": msg}

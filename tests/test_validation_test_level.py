@@ -20,8 +20,11 @@ def test_level_study_writes_each_seed_and_its_two_directions_are_complementary(t
     assert doc["records"] == 1 and len(doc["p"]) == 2 * 6
     for a, b in doc["p"].values():
         assert 0.0 <= a <= 1.0 and a + b == pytest.approx(1.0, abs=1e-9)
-    summary = (tmp_path / "summary.csv").read_text().splitlines()
-    assert summary[0].startswith("batches,output,tests") and len(summary) == 1 + 2 * 7
+    # the joint test: each direction in units of its own model 0's mean squares, so not complementary
+    assert set(doc["joint"]) == {"whole records", "1 s"}
+    assert all(0.0 <= p <= 1.0 for v in doc["joint"].values() for p in v)
+    summary = (tmp_path / "summary.csv").read_text().splitlines()  # per batch choice: 6 outputs, all, joint
+    assert summary[0].startswith("batches,output,tests") and len(summary) == 1 + 2 * 8
     (tmp_path / "seed_7.json").write_text(json.dumps({**doc, "records": 99}))
     assert main(argv) == 0 and "(99 validation records each)" in (tmp_path / "summary.md").read_text()
     (tmp_path / "seed_7.json").write_text('{"seed": 7, "rec')

@@ -15,7 +15,8 @@ records) and, for comparison, with 1 s batches, which ignore the colour of the n
 seed's p-values go to ``OUT/seed_<n>.json`` as it finishes (a rerun reuses them).
 
 The same for the validation rule's joint test of all outputs at once
-(:func:`~pyomo_heli.diagnosis.validation_change.joint_mean_square_change` on every output's r0 and r1).
+(:func:`~pyomo_heli.diagnosis.validation_change.joint_mean_square_change` on every output's r0 and r1); it
+standardises each output by the first model's mean square, so its two directions are not p and 1 - p.
 
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per batch choice and output (all outputs' tests pooled, and
 the joint test), the number of tests (seeds x 2 directions) and the fraction with p < 0.05 and p < 0.01. The two

@@ -113,7 +113,8 @@ def joint_mean_square_change(r0: dict, r1: dict, n_segment: int | list[int] | No
     (whole records by default); the batch means carry the correlation between the outputs of one record.
     Returned in standardised units: ms0 = the number of outputs, ms1 = ms0 + D, and ``rms_change_pct`` is the
     change of the standardised RMS. Swapping the models changes the units, so the test is not antisymmetric
-    (sum_o (x_o - 1) against sum_o (1/x_o - 1), x_o = ms1_o / ms0_o). Raises ValueError for different outputs or records in ``r0`` and ``r1``.
+    (sum_o (x_o - 1) against sum_o (1/x_o - 1), x_o = ms1_o / ms0_o). Raises ValueError for different outputs
+    or records in ``r0`` and ``r1``.
     """
     name = "joint_mean_square_change"
     if set(r0) != set(r1) or not r0:

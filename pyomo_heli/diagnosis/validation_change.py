@@ -58,7 +58,7 @@ def _records(r0, r1, name: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
     return r0, r1
 
 
-def _batch_test(d_records: list[np.ndarray], n_segment, alpha: float, min_batches: int, name: str):
+def _batch_test(d_records: list[np.ndarray], n_segment, min_batches: int, name: str):
     """The batch-means test of mean(d) > 0 over the loss differentials ``d_records`` (one array per record):
     (mean, se, z, batches, p)."""
     cuts = -(-min_batches // len(d_records)) if len(d_records) < min_batches else 1  # batches per record
@@ -93,7 +93,7 @@ def mean_square_change(r0, r1, n_segment: int | list[int] | None = None, alpha: 
     r0, r1 = _records(r0, r1, "mean_square_change")
     ok = [np.isfinite(a) & np.isfinite(b) for a, b in zip(r0, r1)]
     d = [b[m] ** 2 - a[m] ** 2 for a, b, m in zip(r0, r1, ok)]
-    mean, se, z, nb, p = _batch_test(d, n_segment, alpha, min_batches, "mean_square_change")
+    mean, se, z, nb, p = _batch_test(d, n_segment, min_batches, "mean_square_change")
     ms0 = float(np.mean(np.concatenate([a[m] ** 2 for a, m in zip(r0, ok)])))
     ms1 = ms0 + mean
     return MeanSquareChange(ms0=ms0, ms1=ms1, se=se, z=z, segments=nb,
@@ -131,7 +131,7 @@ def joint_mean_square_change(r0: dict, r1: dict, n_segment: int | list[int] | No
     if any(v <= 0 for v in ms0.values()):
         raise ValueError(f"{name}: model 0 fits an output exactly or no sample is finite; nothing to standardise by")
     d = [sum((recs[o][1][k][m] ** 2 - recs[o][0][k][m] ** 2) / ms0[o] for o in outs) for k, m in enumerate(ok)]
-    mean, se, z, nb, p = _batch_test(d, n_segment, alpha, min_batches, name)
+    mean, se, z, nb, p = _batch_test(d, n_segment, min_batches, name)
     n = float(len(outs))
     return MeanSquareChange(ms0=n, ms1=n + mean, se=se, z=z, segments=nb,
                             rms_change_pct=100.0 * (((n + mean) / n) ** 0.5 - 1.0), p_rise=p,

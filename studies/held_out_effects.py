@@ -296,6 +296,28 @@ def truth_floor(dataset: Path, config: Path) -> dict:
     return truth_model_errors(dataset, validation_maneuvers(cfg, ft), ft.trims.reset_index(drop=True))
 
 
+def validation_joint_p(doc: dict, config: Path = CONFIG) -> float | str:
+    """One-sided p of a rise of the joint validation error (all outputs, the report's "all outputs (joint)" row) of
+    the kept model against iteration 0, from their replays; "-" when the loop kept iteration 0. (The validation rule
+    tests each step against the model before it; this compares the loop's end with its start.)"""
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.dataset import load_flight_test
+    from pyomo_heli.nlp.identification import validation_maneuvers
+    from pyomo_heli.report.identification import predict
+    from pyomo_heli.report.loop import JOINT, final_index, iteration_model, validation_change_table
+
+    its = doc["iterations"]
+    kept = its[final_index(doc)]
+    if kept is its[0]:
+        return "-"
+    cfg = load_identification_config(config, overrides={"data": {"dataset": doc["dataset"]}})
+    val = list(validation_maneuvers(cfg, load_flight_test(doc["dataset"])))
+    p0, p1 = (predict(str(it["iteration"]), iteration_model(cfg.model, it), it["parameters"], [], val)
+              for it in (its[0], kept))
+    tab = validation_change_table(p0, p1, val)
+    return float(tab.loc[tab["output"] == JOINT, "p (rise)"].iloc[0])
+
+
 #: the truth form's strength is estimated within this multiple of its nominal value (0 to it for a time constant)
 TRUTH_FORM_RANGE = 10.0
 
@@ -486,6 +508,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     sig_rise = [r["output"] for it in its[1:final_index(doc) + 1] if not it.get("rejected")
                 for r in (it.get("validation_check") or []) if r["significant rise"] and r["output"] != JOINT]
     row["significant val rise (kept steps)"] = ",".join(sig_rise) or "none"
+    row["val joint p (kept vs M0)"] = validation_joint_p(doc, config)
     for n in PARAMETERS:
         if truth and n in truth:
             row[f"{n} err0 %"] = 100 * (i0["parameters"][n] - truth[n]) / abs(truth[n])
@@ -755,7 +778,8 @@ def markdown(tab: pd.DataFrame) -> str:
                         "trim RMS before [deg]", "trim RMS after [deg]", "trim change %",
                         "trim RMS truth model [deg]", "trim change possible %", "share of possible trim cut %",
                         "val RMS / truth model's, worst output",
-                        "significant val rise (kept steps)", "unexplained verdict", "unexplained shape",
+                        "significant val rise (kept steps)", "val joint p (kept vs M0)", "unexplained verdict",
+                        "unexplained shape",
                         "unexplained shape matches truth", "record biases differ", "record bias shape matches truth",
                         "direct solve failed", "wrong acceptance", "criterion met",
                         "truth form at M0", "truth form p", "truth form significant",

@@ -64,6 +64,10 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
     change = validation_change_table(p0, p1, val)
     print(change.to_string())
     assert len(change) == 7 and change["output"].iloc[-1] == JOINT and not change["significant rise"].any()
+    # the held-out study's column of the same joint test (kept model against iteration 0)
+    from test_held_out_effects import _study
+
+    assert _study().validation_joint_p(doc, cfg.path) == pytest.approx(float(change["p (rise)"].iloc[-1]), rel=1e-12)
     # the shape rule fitted the profile order at anchor A (the wake's edge is not E1's) and held it for the front
     assert it1["shape_selection"]["decision"].startswith("fitted") and it1["shape_selection"]["p"] < 0.01
     assert it1["shape_parameters"]["n_wt"] == it1["shape_selection"]["values"]["n_wt"] != 6.0
@@ -93,6 +97,14 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
     assert out.count("reusing the finished identification") == 2 and "shape of rotor_wake_on_tail: reusing" in out
     again = json.loads((tmp_path / "loop" / "loop.json").read_text())
     assert again["iterations"][-1]["parameters"] == it1["parameters"]
+    # the report alone, rewritten from loop.json with no solve (`report-loop`): the same report, its validation
+    # tables (per output, joint, by speed) included
+    first = (tmp_path / "loop" / "loop_report.md").read_text()
+    (tmp_path / "loop" / "loop_report.md").unlink()
+    assert main(["report-loop", str(tmp_path / "loop")]) == 0
+    assert "solve" not in capsys.readouterr().out
+    assert (tmp_path / "loop" / "loop_report.md").read_text() == first
+    assert JOINT in first and "by trim speed" in first
     # another setting (the inputs resampled the other way) is not taken for the finished front: refused, named
     text = cfg.path.read_text()
     other = "sample" if cfg.resample_inputs == "project" else "project"
@@ -162,3 +174,18 @@ def test_wake_loop_with_input_errors(tmp_path):
     diag = json.loads((tmp_path / "diag" / "diagnosis.json").read_text())
     assert diag["info"]["extensions"] == ["rotor_wake_on_tail"]
     assert {w["series"] for w in diag["whiteness"]} == {"innovation"}
+
+
+def test_report_loop_bad_folders_are_one_line_exit_2(tmp_path, capsys):
+    """``report-loop`` on a folder that is not a finished close-loop: one line naming the folder or file."""
+    assert main(["report-loop", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{tmp_path}: no loop.json" in err[0], err
+    (tmp_path / "loop.json").write_text('{"config": "gone.toml", "dataset": "."}')
+    assert main(["report-loop", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "config gone.toml" in err[0] and "--config" in err[0], err
+    (tmp_path / "loop.json").write_text("[1, 2")
+    assert main(["report-loop", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a loop record" in err[0], err

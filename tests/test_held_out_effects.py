@@ -178,6 +178,8 @@ def study(monkeypatch):
     half = {"col": 0.002, "lon": 0.0015, "theta": 0.001}
     monkeypatch.setattr(study, "truth_floor", lambda dataset, config: {"trim_rms": {"all": half},
                                                                         "maneuver_rms": {"all": {"q": 0.005}}})
+    # the joint validation test replays the loop's models (its own check in test_close_loop_wake.py): a stand-in
+    monkeypatch.setattr(study, "validation_joint_p", lambda doc, config=None: 0.5)
     # the truth form's check needs a real flight test (its own test below): a stand-in record here
     monkeypatch.setattr(study, "truth_form_check", lambda effect, loop, config=None: {
         "estimate": 1.0, "truth strength": HELD_OUT_STRENGTHS[effect], "LR": 50.0, "p": 1e-6, "significant": True})

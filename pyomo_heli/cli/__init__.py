@@ -17,7 +17,7 @@ from .folders import (_check_copy_out, _check_diagnosis_out, _check_out_dir, _ch
                       _check_out_not_foreign, _point_parameters, _solver_status_line)
 from .identify_commands import (cmd_demo, cmd_identify, cmd_inspect, cmd_multistart, cmd_report_linear,
                                 cmd_uncertainty)
-from .loop_commands import cmd_check_effect, cmd_close_loop, cmd_diagnose, cmd_trim_loop
+from .loop_commands import cmd_check_effect, cmd_close_loop, cmd_diagnose, cmd_report_loop, cmd_trim_loop
 from .model_commands import cmd_linearize, cmd_simulate, cmd_trim
 from .options import (MAX_INPUT_DEG, MAX_SIM_SAMPLES, MAX_SPEED_KT, UserError, _epsilon, _Parser,  # noqa: F401
                       _starts, finite_float, nonneg_float, nonneg_int, positive_float, positive_int)
@@ -132,6 +132,13 @@ def build_parser() -> argparse.ArgumentParser:
                          "discarded) instead of resuming")
     _figure_flag(cl)
     cl.set_defaults(func=cmd_close_loop)
+
+    rp = sub.add_parser("report-loop", help="rewrite loop_report.md and the figures of a finished close-loop "
+                                            "folder from its loop.json (no solve)")
+    rp.add_argument("loop_dir", help="results folder of pyomo-heli close-loop")
+    rp.add_argument("--config", help="the loop's config (default: the one named in loop.json)")
+    _figure_flag(rp)
+    rp.set_defaults(func=cmd_report_loop)
 
     ce = sub.add_parser("check-effect", help="test an effect of your own (or a library term) against a finished "
                                              "close-loop: significant? does it explain what the discovered term does?")

@@ -47,6 +47,32 @@ def cmd_close_loop(args) -> int:
     return 0
 
 
+def cmd_report_loop(args) -> int:
+    """Rewrite ``loop_report.md`` and the figures of a finished close-loop folder from its loop.json (no solve)."""
+    import json
+
+    from ..config import load_identification_config
+    from ..report.loop import LOOP_FILE, write_loop_report
+
+    folder = Path(args.loop_dir)
+    f = folder / LOOP_FILE
+    if not f.is_file():
+        raise UserError(f"{args.loop_dir}: no {LOOP_FILE}; not a results folder of pyomo-heli close-loop")
+    try:
+        doc = json.loads(f.read_text())
+        config, dataset = args.config or doc["config"], doc["dataset"]
+    except (ValueError, KeyError) as exc:
+        raise UserError(f"{f}: not a loop record of close-loop ({exc})") from None
+    if not Path(config).is_file():
+        raise UserError(f"config {config} (named in {f}) not found; give it with --config")
+    if not Path(dataset).is_dir():
+        raise UserError(f"dataset {dataset} (named in {f}) not found")
+    cfg = load_identification_config(config, {"data": {"dataset": str(Path(dataset).resolve())}})
+    path = write_loop_report(folder, cfg, figure_format=args.figure_format)
+    print(f"{path} written")
+    return 0
+
+
 def cmd_trim_loop(args) -> int:
     """Trim-only closed loop (pyomo_heli.workflows.trim_loop): report, figures and trim_loop.json in --out."""
     from ..workflows.trim_loop import TrimIdentificationFailed, load_trim_loop_config, run_trim_loop, write_trim_report

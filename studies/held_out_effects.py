@@ -54,7 +54,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
 
-from pyomo_heli.cli import main as cli_main  # noqa: E402
+from pyomo_heli.studies.commands import exit_status, run_command  # noqa: E402
 from pyomo_heli.cli.options import nonneg_int  # noqa: E402
 from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS  # noqa: E402
 from pyomo_heli.studies.args import in_file, out_folder, positive_int  # noqa: E402
@@ -88,13 +88,10 @@ def run_case(effect: str, seed: int, out: Path, config: Path, template: str) -> 
     if not (data / "truth.json").is_file():
         case.mkdir(parents=True, exist_ok=True)
         (case / "gen.toml").write_text(data_config(template, effect, seed))
-        if cli_main(["generate-data", "--config", str(case / "gen.toml"), "--out", str(data)]) != 0:
-            raise SystemExit(2)
+        run_command(["generate-data", "--config", str(case / "gen.toml"), "--out", str(data)])
     if not (loop / "loop.json").is_file() or not json.loads((loop / "loop.json").read_text()).get("stopped"):
         t0 = time.perf_counter()
-        code = cli_main(["close-loop", str(config), "--dataset", str(data), "--out", str(loop)])
-        if code != 0:
-            raise SystemExit(code)
+        run_command(["close-loop", str(config), "--dataset", str(data), "--out", str(loop)])
         print(f"{effect} {seed}: loop done in {time.perf_counter() - t0:.0f} s", flush=True)
     return loop
 
@@ -612,9 +609,7 @@ def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> 
             flag = "true" if mode == "on" else "false"
             cfg.write_text(text.replace("\n[loop]\n", f"\n[loop]\ndiscovery = {flag}\n", 1))
             load0, t0, c0 = os.getloadavg()[0], time.perf_counter(), _cpu()
-            code = cli_main(["close-loop", str(cfg), "--dataset", str(dataset), "--out", str(loop)])
-            if code != 0:
-                raise SystemExit(code)
+            run_command(["close-loop", str(cfg), "--dataset", str(dataset), "--out", str(loop)])
             cost[mode] = {"wall_s": time.perf_counter() - t0, "cpu_s": _cpu() - c0,
                           "load_start": load0, "load_end": os.getloadavg()[0]}
             cost = merged({mode: cost[mode]})
@@ -814,4 +809,4 @@ def markdown(tab: pd.DataFrame) -> str:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(exit_status(main, "held_out_effects"))

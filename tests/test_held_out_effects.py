@@ -695,3 +695,37 @@ def test_the_fourth_blind_set_moves_what_its_equations_say():
         m = model(name)
         row, t = trim_table(m, [30 * KT]).iloc[0], trim_float(m, 30 * KT)
         assert (row["col"], row["lon"], row["theta"]) == pytest.approx((t.col, t.lon, t.theta), abs=1e-9), name
+
+
+def test_an_interrupt_ends_the_study_a_failure_ends_its_case(tmp_path, monkeypatch, capsys):
+    """SIGTERM (or Ctrl-C) inside a case's command stops the whole study with status 130 and one line; a command
+    that fails ends only its case, and the next case runs."""
+    import os
+    import signal
+
+    from pyomo_heli import interrupts
+    from pyomo_heli.studies.commands import exit_status
+
+    study, calls = _study(), []
+
+    def interrupted(argv):  # as the command line does: the signal inside its guard, status 130
+        calls.append(argv[0])
+        with interrupts.guard():
+            try:
+                os.kill(os.getpid(), signal.SIGTERM)
+                signal.sigtimedwait([], 1.0)
+            except interrupts.Interrupted:
+                return interrupts.EXIT_INTERRUPTED
+        return 0
+
+    monkeypatch.setattr("pyomo_heli.cli.main", interrupted)
+    argv = ["--effects", "drag_rise", "--seeds", "2", "--out", str(tmp_path / "a")]
+    assert exit_status(lambda: study.main(argv), "held_out_effects") == 130
+    assert calls == ["generate-data"]  # the second seed's case never started
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("held_out_effects: interrupted by SIGTERM; rerun the same command"), err
+    calls.clear()
+    monkeypatch.setattr("pyomo_heli.cli.main", lambda argv: calls.append(argv[0]) or 2)
+    argv = ["--effects", "drag_rise", "--seeds", "2", "--out", str(tmp_path / "b")]
+    assert study.main(argv) == 2
+    assert calls == ["generate-data", "generate-data"]  # each case failed on its own, the study went on

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pyomo_heli.cli import main as cli_main
+from pyomo_heli.studies.commands import run_command
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.nlp.identification import prepare_data
@@ -53,14 +53,11 @@ def run_seed(seed: int, out: Path, config: Path, data_config: Path) -> Path:
     data, loop = out / f"data_{seed}", out / f"loop_{seed}"
     if not (data / "truth.json").is_file():
         t0 = time.perf_counter()
-        if cli_main(["generate-data", "--config", str(data_config), "--seed", str(seed), "--out", str(data)]) != 0:
-            raise SystemExit(2)  # generate-data has printed why
+        run_command(["generate-data", "--config", str(data_config), "--seed", str(seed), "--out", str(data)])
         print(f"seed {seed}: data generated in {time.perf_counter() - t0:.0f} s", flush=True)
     if not (loop / "loop.json").is_file() or "stopped" not in json.loads((loop / "loop.json").read_text()):
         t0 = time.perf_counter()
-        code = cli_main(["close-loop", str(config), "--dataset", str(data), "--out", str(loop)])
-        if code != 0:
-            raise SystemExit(code)  # close-loop has printed why
+        run_command(["close-loop", str(config), "--dataset", str(data), "--out", str(loop)])
         print(f"seed {seed}: loop done in {time.perf_counter() - t0:.0f} s", flush=True)
     return loop
 

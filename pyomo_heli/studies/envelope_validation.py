@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pyomo_heli.cli import main as cli_main
+from pyomo_heli.studies.commands import run_command
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.nlp.identification import prepare_data
@@ -156,8 +156,7 @@ def main(argv=None) -> int:
         in_file(ap, a.data_config, "--data-config")
     out_folder(ap, a.out).mkdir(parents=True, exist_ok=True)
     if a.data is None and not (data / "manifest.json").is_file():
-        if cli_main(["generate-data", "--config", str(a.data_config), "--out", str(data)]) != 0:
-            raise SystemExit(2)  # generate-data has printed why
+        run_command(["generate-data", "--config", str(a.data_config), "--out", str(data)])
     if not (data / "manifest.json").is_file():
         ap.error(f"--data {data}: not a flight-test folder (no manifest.json)")
     tab = pd.concat([evaluate_saved(p, data, a.out / "loops") for p in a.loops], ignore_index=True)

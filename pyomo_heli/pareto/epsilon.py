@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import pyomo.environ as pyo
@@ -570,12 +570,34 @@ class EpsilonConstraintSolver:
         return nondominated_nadir(J) if len(J) else tuple(utopia)
 
     def utopia_nadir(self, rule: str | None = None):
-        """(utopia, nadir) of Eq. 11 with the nadir ``rule`` (:data:`NADIR_RULES`; default ``settings.nadir``)."""
+        """(utopia, nadir) of Eq. 11 with the nadir ``rule`` (:data:`NADIR_RULES`; default ``settings.nadir``).
+
+        An objective whose range on the front is below what the solver resolves (:meth:`resolved_nadir`) gets
+        its utopia value as nadir: it adds nothing to Eq. 11."""
         rule = rule or getattr(self.settings, "nadir", "payoff")
         utopia, nadir = self.payoff_utopia_nadir()
         if rule == "nondominated":
             nadir = self.nondominated_nadir(utopia)
-        return utopia, nadir
+        return utopia, self.resolved_nadir(utopia, nadir)
+
+    def resolved_nadir(self, utopia, nadir, names=None) -> tuple:
+        """``nadir`` with each objective whose range ``N_k - U_k`` is at most :data:`RANGE_RTOL` times
+        max(|U_k|, |N_k|, its scale in the NLP) set to ``U_k`` (``names``: the objectives, default all).
+
+        Such a range is solver noise (on noise-free data every front point is the truth: J_trim from 2e-10 to
+        2e-9, J_time within 1.3e-3 of -36125); dividing by it made Eq. 11 a problem of condition 1e18, whose
+        direct solve failed from three starts and took 5 min (tests/test_identification.py).
+        """
+        out = []
+        for k, u, n in zip(names or self.names, utopia, nadir):
+            floor = RANGE_RTOL * max(abs(u), abs(n), self.scale[k])
+            out.append(float(u) if math.isfinite(u) and math.isfinite(n) and n - u <= floor else n)
+        return tuple(out)
+
+    @property
+    def direct_index(self) -> int:
+        """The index of the direct Eq. 11 solve's point."""
+        return -len(self.names)
 
     def eq11(self, rule: str | None = None, points=None):
         """Eq. 11 post hoc: (the converged point closest to utopia, all distances, utopia, nadir); None if none."""
@@ -603,8 +625,20 @@ class EpsilonConstraintSolver:
         (default: :meth:`eq11`'s), and from the next starts of :meth:`direct_starts` while it fails. Stored
         under ``"direct"`` once final, so a resumed run repeats no attempt."""
         utopia, nadir = self.utopia_nadir(rule=rule)
-        starts = self.direct_starts(start or self.eq11(rule)[0], rule)
+        start = start or self.eq11(rule)[0]
+        if all(u == n for u, n in zip(utopia, nadir)):  # a one-point front: every point is the Eq. 11 minimiser
+            return self.solve_point("direct", lambda: self._one_point_direct(start))
+        starts = self.direct_starts(start, rule)
         return self.solve_point("direct", lambda: solve_from_starts(lambda: self._direct_once(utopia, nadir), starts))
+
+    def _one_point_direct(self, start):
+        """The direct choice of a front whose every objective range is solver noise (:meth:`resolved_nadir`):
+        ``start`` itself, not solved again (Eq. 11 is zero on the whole front)."""
+        snap = self._snapshot_of(start)
+        if snap is not None:
+            snap.restore()
+        return replace(start, index=self.direct_index, kind="direct", iterations=0, wall_time=0.0,
+                                   setup_time=0.0, warm_start=ONE_POINT_FRONT)
 
     def _direct_once(self, utopia, nadir):
         """One solve of Eq. 11 squared from the model's current values."""
@@ -630,6 +664,12 @@ class EpsilonConstraintSolver:
             starts.append((f"midway between {l0} and {l1}", s0.extrapolated(s1, -0.5)))
         return starts or [("the current values", Snapshot(self.m))]
 
+
+#: an objective's range on the front below this fraction of its size is solver noise (resolved_nadir)
+RANGE_RTOL = 1e-6
+#: the direct point's ``warm_start`` when the front is one point and nothing was solved
+ONE_POINT_FRONT = ("not solved: every objective's range on the front is solver noise (a one-point front), "
+                   "so the post-hoc choice is the Eq. 11 minimiser")
 
 #: converged points the direct Eq. 11 solve starts from before its last start, midway between the first two
 #: (:meth:`EpsilonConstraintSolver.direct_starts`)

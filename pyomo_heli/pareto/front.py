@@ -404,6 +404,8 @@ class ParetoSolver(EpsilonConstraintSolver):
         p, d, _, _ = self.eq11(rule)
         return p, d
 
+    direct_index = -1  # the direct Eq. 11 solve's point
+
     def _direct_once(self, utopia, nadir) -> FrontPoint:
         return self._solve("utopia", -1, "direct", math.inf, "primal", utopia=utopia, nadir=nadir)
 

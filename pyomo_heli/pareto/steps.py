@@ -95,8 +95,10 @@ def solve_from_starts(solve, starts):
 
 
 def starts_note(p) -> str:
-    """`` (started from ...)`` when a solve of :func:`solve_from_starts` needed more than one start, else ''."""
-    return f" ({p.warm_start})" if ", then " in str(getattr(p, "warm_start", "")) else ""
+    """`` (started from ...)`` when a solve of :func:`solve_from_starts` needed more than one start, `` (not
+    solved: ...)`` when none was needed, else ''."""
+    ws = str(getattr(p, "warm_start", ""))
+    return f" ({ws})" if ", then " in ws or ws.startswith("not solved") else ""
 
 
 def retried(first, retry, warm_start: str):

@@ -91,7 +91,7 @@ class TriParetoSolver(EpsilonConstraintSolver):
         utopia, nadir = self.utopia_nadir(objectives, rule)
         if objectives == ("time", "trim"):
             b = self.anchor_points["B"]
-            nadir = (b.J_time, self.anchor_points["A"].J_trim)
+            nadir = self.resolved_nadir(utopia, (b.J_time, self.anchor_points["A"].J_trim), objectives)
         pts = [p for p in self.points if p.success and p.kind in ("A", "B", "C", "eps")]
         if row_linear is not None:
             pts = [p for p in pts if p.i_linear == row_linear or p.kind in ("A", "B")]

@@ -27,13 +27,19 @@ def drag_loop(tmp_path_factory):
     return cfg, doc, root / "loop"
 
 
-def test_the_true_effect_is_estimated_and_explains_what_the_generic_term_does(drag_loop):
+@pytest.fixture(scope="module")
+def drag_check(drag_loop):
+    """check_effect of the bounded drag rise on that loop (the function's own result)."""
+    return check_effect(drag_loop[2], BoundedDragRise(), progress=lambda s: None)
+
+
+def test_the_true_effect_is_estimated_and_explains_what_the_generic_term_does(drag_loop, drag_check):
     """The drag rise's own form at the kept model: its strength within 3 standard errors of the truth's 0.15, a
     larger LR than the generic term the step described, and that term adds nothing significant once it is in
     (p >= 0.01); tested at the level the step used."""
     cfg, doc, loop = drag_loop
     step = doc["iterations"][0]["discovery"]
-    r = check_effect(loop, BoundedDragRise(), progress=lambda s: None)
+    r = drag_check
     t, e = r["term"], r["encompassing"]
     assert r["iteration"] == 0 and r["level"] == step["level"]
     assert r["against"]["name"] == (step.get("discovered") or step["best_generic"])["name"]
@@ -51,7 +57,7 @@ def test_a_wrong_hypothesis_is_not_significant(drag_loop):
     assert not r["encompassing"]["encompasses"]
 
 
-def test_the_command_prints_the_tests_and_writes_json(drag_loop, tmp_path, capsys):
+def test_the_command_prints_the_tests_and_writes_json(drag_loop, drag_check, tmp_path, capsys):
     """``pyomo-heli check-effect`` with FILE.py:CLASS: the same numbers as the function, printed and in --json."""
     _, _, loop = drag_loop
     f = tmp_path / "my_effects.py"
@@ -62,7 +68,7 @@ def test_the_command_prints_the_tests_and_writes_json(drag_loop, tmp_path, capsy
     assert main(["check-effect", str(loop), "--effect", f"{f}:Mine", "--json", str(tmp_path / "r.json")]) == 0
     out = capsys.readouterr().out
     r = json.loads((tmp_path / "r.json").read_text())
-    ref = check_effect(loop, BoundedDragRise(), progress=lambda s: None)
+    ref = drag_check
     assert r["term"]["estimate"] == pytest.approx(ref["term"]["estimate"], rel=1e-6)
     assert f"k_dr = {r['term']['estimate']:.4g}" in out and ("not significant" in out) != r["significant"]
     assert f"against {ref['against']['name']}:" in out

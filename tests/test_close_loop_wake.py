@@ -146,10 +146,14 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
     assert fresh["iterations"][0]["parameters"] != it0["parameters"]  # the other inputs, another fit
 
 
+@pytest.mark.slow
 def test_wake_loop_with_input_errors(tmp_path):
     """The same small wake instance with the measured inputs' errors estimated ([objectives] input_errors):
     the loop runs with the known-noise likelihood, picks the wake first, and the trim error, the parameter
-    errors against truth and the model's validation error against the truth replay all fall."""
+    errors against truth and the model's validation error against the truth replay all fall.
+
+    Slow (50 s; CI time): the default run has loops with input errors in tests/test_discovery.py and
+    tests/test_close_loop.py (M0 + noise), and the innovations' whiteness in tests/test_innovations.py."""
     loop = '\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\nmax_iterations = 1\n'
     cfg = make_case(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
                     loop=loop, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)

@@ -238,3 +238,36 @@ def test_a_config_chooses_the_extended_family_and_a_bad_family_is_a_one_line_err
     assert LoopTable(generic_family="extended", generic=["dM_qmu"]).generic == ["dM_qmu"]
     with pytest.raises(Exception, match="generic_family"):
         LoopTable(generic_family="big")
+
+
+@pytest.mark.parametrize("name", ["col_delay", "nz_delay"])
+def test_a_lag_state_at_zero_starts_at_what_it_follows(name):
+    """A delay term at c = 0 (as the NLP screen holds it: the float model then has no lag state) starts the NLP
+    with its lag state equal to what it follows, in every trim block and at every collocation point: its own
+    equation holds at the start, and every other variable starts as in M0's NLP (started at 0, a lagged collective
+    was 0.11-0.15 rad off what it follows everywhere)."""
+    import dataclasses
+    from pathlib import Path
+
+    import pyomo.environ as pyo
+
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.nlp.identification import build_problem
+
+    cfg = load_identification_config(Path(__file__).parent / "configs" / "small_case2.toml")
+    m0, _, _ = build_problem(cfg)
+    t = generic_term(name)
+    m1, data, _ = build_problem(dataclasses.replace(
+        cfg, model=HelicopterModel(parameters=cfg.model.parameters, extensions=[t])))
+    lag, follows = t.states[0], {"col_delay": "col", "nz_delay": "n_z"}[name]
+    for i in m1.trim:
+        assert pyo.value(getattr(m1.trim[i], lag)) == pytest.approx(
+            pyo.value(getattr(m1.trim[i], follows) if follows == "col" else m1.trim[i].outputs[follows]), abs=1e-12)
+    for mv in data.maneuvers:
+        b0, b1 = m0.man[mv.name], m1.man[mv.name]
+        for tt in list(b1.t)[1:]:
+            assert abs(pyo.value(b1.ode[lag, tt].body)) < 1e-12  # c dx = follows - lag, at rest
+        for (s, tt), v in b0.x.items():
+            assert b1.x[s, tt].value == v.value
+    if name == "col_delay":  # the collective it follows is 0.11-0.15 rad: far from the old start at 0
+        assert min(pyo.value(getattr(m1.trim[i], lag)) for i in m1.trim) > 0.1

@@ -11,6 +11,7 @@ so a solver adapter can re-solve (continuation in speed) without rebuilding.
 """
 from __future__ import annotations
 
+import math
 from types import SimpleNamespace
 
 import pyomo.environ as pyo
@@ -49,6 +50,9 @@ def build_trim_block(blk: pyo.Block, model: HelicopterModel, pmap, V: float, gam
     ctx = evaluate(x, {"col": col, "lon": lon}, pmap, ops=ops, beta=beta, extensions=model.extensions)
     rest = [k for k in ctx.state_eqs if k != "theta"]  # dtheta/dt = q = 0 holds by construction
     blk.equilibrium = pyo.Constraint(rest, rule=lambda _, k: ctx.state_eqs[k][1] == 0)
+    for s, v in extra.items():
+        if s not in g:
+            settle(v, ctx.state_eqs[s][1])
     blk.flapping = pyo.Constraint(range(3), rule=lambda _, i: ctx.flap_residuals[i] == 0)
     blk.outputs = pyo.Expression(list(ctx.outputs), rule=lambda _, k: ctx.outputs[k])
     blk.u = pyo.Expression(expr=x["u"])
@@ -61,3 +65,22 @@ def trim_block_values(blk: pyo.Block) -> dict:
     out = {k: pyo.value(getattr(blk, k)) for k in ("V", "col", "lon", "theta", "lambda_i") + FLAPPING}
     out["u"], out["w"] = pyo.value(blk.u), pyo.value(blk.w)
     return out
+
+
+def settle(var, rhs) -> None:
+    """Start ``var`` where ``rhs``, the right side of its own state equation (linear in it), is zero.
+
+    For an extension state the float start does not hold: a delay term's lag state at c = 0, which the float
+    model leaves out (it adds the state only when c is not zero). Started at 0 instead of at what it follows, a
+    lagged collective (0.11-0.15 rad) broke its own equation at every point of every maneuver.
+    ``rhs`` is evaluated at var = 0 and 1; var is left at 0 when it does not move the equation.
+    """
+    def at(x):
+        var.set_value(x, skip_validation=True)
+        r = pyo.value(rhs, exception=False)
+        return float(r) if r is not None else math.nan
+
+    r0, r1 = at(0.0), at(1.0)
+    x = -r0 / (r1 - r0) if math.isfinite(r0) and math.isfinite(r1) and r1 != r0 else 0.0
+    lo, hi = var.bounds
+    var.set_value(min(max(x, lo if lo is not None else x), hi if hi is not None else x), skip_validation=True)

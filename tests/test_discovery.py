@@ -160,6 +160,9 @@ def test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model(tm
            "rotor_wake_on_tail" in report
 
 
+# slow (90 s; CI time): the default run has the trim loop's name check (tests/test_trim_loop.py) and this
+# loop's way back to a kept model (test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model)
+@pytest.mark.slow
 def test_a_named_candidate_that_leaves_a_generic_term_significant_is_withdrawn(tmp_path, monkeypatch):
     """The name check. The wake instance: the wake is named at iteration 0; at iteration 1 (M0 + wake) the real
     step finds no generic term significant, so on these data the name would stand. The test's stand-in then marks
@@ -491,6 +494,8 @@ def test_a_base_that_stopped_short_is_solved_again_from_the_best_fit_and_the_rat
         assert a["LR"] == pytest.approx(b["LR"], rel=1e-3, abs=0.1)
         assert a["LR_trim"] + a["LR_time"] == pytest.approx(a["LR"], abs=1e-6)
 
+# slow (28 s; CI time): a check of the warm start's speed-up, not of a result
+@pytest.mark.slow
 def test_the_screen_warm_start_from_the_base_multipliers_gives_the_primal_warm_starts_estimates(tmp_path):
     """nlp_screen frees each term from the base solution: warm from its multipliers with a small barrier parameter
     (the fronts' continuation) it reaches the estimate and LR that the primal-only warm start reaches, in fewer

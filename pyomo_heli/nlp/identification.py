@@ -29,7 +29,7 @@ from ..simulation.trim import trim_sweep
 from .maneuver_block import build_maneuver_block, initialise_from
 from .objectives import add_known_noise_time_objective, add_time_objective, add_trim_objective, noise_sigmas
 from .parameters import FreeParameter, add_parameters
-from .trim_block import build_trim_block, settle
+from .trim_block import build_trim_block
 
 TIME_OUTPUTS = OUTPUTS
 TRIM_OUTPUTS = TRIM_CHANNELS
@@ -224,23 +224,9 @@ def _start_maneuvers(m: pyo.ConcreteModel, data: IdentificationData, sims: dict,
         if blk.component("u_err") is not None:
             for v in blk.u_err.values():
                 v.set_value(0.0)
-        settle_missing_states(blk, [s for s in dict.fromkeys(s for s, _ in blk.x.keys()) if s not in sim])
         for o in outputs:
             init_res[o].extend(mv.data[o].to_numpy() - sim[o].to_numpy())
     return init_res
-
-
-def settle_missing_states(blk: pyo.Block, states) -> None:
-    """Start each of ``states`` (extension states the replay does not hold) at the block's start trim value, then
-    at every collocation point where its own equation is at rest, its derivative zero (:func:`.trim_block.settle`)."""
-    times = list(blk.t)
-    for s in states:
-        x0 = blk.x[s, times[0]]
-        a, b = blk.initial[s].expr.args  # x0 == the start trim's state (Pyomo may put either side first)
-        x0.set_value(pyo.value(b if a is x0 else a), skip_validation=True)
-        for t in times[1:]:
-            blk.dx[s, t].set_value(0.0, skip_validation=True)  # at rest: the equation's body is then its rhs
-            settle(blk.x[s, t], blk.ode[s, t].body)
 
 
 def _pin(var, value: float) -> None:

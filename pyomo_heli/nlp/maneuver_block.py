@@ -21,7 +21,7 @@ from pyomo.core.base.var import VarData
 from ..physics.model import FLAPPING, INPUTS, SHARED, STATES, HelicopterModel, evaluate
 from ..physics.ops import get_ops
 from .point_rows import PointRows
-from .trim_block import STATE_BOUNDS
+from .trim_block import STATE_BOUNDS, settle
 
 
 def collocation_point(x: Mapping, dx: Mapping, beta, base: Mapping, du: Mapping, err: Mapping, p, ops,
@@ -244,7 +244,8 @@ def _input_error_terms(blk: pyo.Block, t_samples: np.ndarray, times: list, chann
 
 
 def initialise_from(blk: pyo.Block, df, states) -> None:
-    """Set variable values by interpolating a simulation DataFrame at every point of ``blk.t``."""
+    """Set variable values by interpolating a simulation DataFrame at every point of ``blk.t``; a state of the
+    block that ``df`` does not hold starts at rest (:func:`_settle_missing_states`)."""
     tt = df["t"].to_numpy()
     times = list(blk.t)
     for s in states:
@@ -267,3 +268,17 @@ def initialise_from(blk: pyo.Block, df, states) -> None:
             d = np.gradient(df[s].to_numpy(), tt)
             for t, v in zip(times[1:], np.interp(times[1:], tt, d)):
                 blk.dx[s, t].set_value(float(v), skip_validation=True)
+    _settle_missing_states(blk, [s for s in dict.fromkeys(s for s, _ in blk.x.keys()) if s not in df])
+
+
+def _settle_missing_states(blk: pyo.Block, states) -> None:
+    """Start each of ``states`` at the block's start trim value, then at every collocation point where its own
+    equation is at rest, its derivative zero (:func:`.trim_block.settle`)."""
+    times = list(blk.t)
+    for s in states:
+        x0 = blk.x[s, times[0]]
+        a, b = blk.initial[s].expr.args  # x0 == the start trim's state (Pyomo may put either side first)
+        x0.set_value(pyo.value(b if a is x0 else a), skip_validation=True)
+        for t in times[1:]:
+            blk.dx[s, t].set_value(0.0, skip_validation=True)  # at rest: the equation's body is then its rhs
+            settle(blk.x[s, t], blk.ode[s, t].body)

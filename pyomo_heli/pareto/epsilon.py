@@ -585,8 +585,8 @@ class EpsilonConstraintSolver:
         max(|U_k|, |N_k|, its scale in the NLP) set to ``U_k`` (``names``: the objectives, default all).
 
         Such a range is solver noise (on noise-free data every front point is the truth: J_trim from 2e-10 to
-        2e-9, J_time within 1.3e-3 of -36125); dividing by it made Eq. 11 a problem of condition 1e18, whose
-        direct solve failed from three starts and took 5 min (tests/test_identification.py).
+        2e-9, J_time within 1.3e-3 of -36125, tests/test_identification.py); divided by it, Eq. 11 is a problem
+        of condition up to 1e18 that Ipopt fails on.
         """
         out = []
         for k, u, n in zip(names or self.names, utopia, nadir):
@@ -637,13 +637,13 @@ class EpsilonConstraintSolver:
         snap = self._snapshot_of(start)
         if snap is not None:
             snap.restore()
-        return replace(start, index=self.direct_index, kind="direct", iterations=0, wall_time=0.0,
-                                   setup_time=0.0, warm_start=ONE_POINT_FRONT)
+        return replace(start, index=self.direct_index, kind="direct", iterations=0, wall_time=0.0, setup_time=0.0,
+                       warm_start=ONE_POINT_FRONT)
 
     def _direct_once(self, utopia, nadir):
         """One solve of Eq. 11 squared from the model's current values."""
         out = self.solve_once("utopia", {}, "primal", utopia=utopia, nadir=nadir)
-        return self._point(-len(self.names), "direct", {}, out, "primal", ())
+        return self._point(self.direct_index, "direct", {}, out, "primal", ())
 
     def _snapshot_of(self, p):
         """The stored solution of the converged point ``p`` (None if there is none)."""

@@ -407,7 +407,7 @@ class ParetoSolver(EpsilonConstraintSolver):
     direct_index = -1  # the direct Eq. 11 solve's point
 
     def _direct_once(self, utopia, nadir) -> FrontPoint:
-        return self._solve("utopia", -1, "direct", math.inf, "primal", utopia=utopia, nadir=nadir)
+        return self._solve("utopia", self.direct_index, "direct", math.inf, "primal", utopia=utopia, nadir=nadir)
 
     def _snapshot_of(self, p: FrontPoint):
         return self.snapshots.get(p.index)

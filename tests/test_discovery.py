@@ -476,16 +476,16 @@ def test_a_base_that_stopped_short_is_solved_again_from_the_best_fit_and_the_rat
         s, calls = real(*a, **k), []
 
         class Failing:
-            def solve(self, warm_start="none"):
+            def solve(self, warm_start="none", options=None):
                 calls.append(warm_start)
                 if len(calls) <= 2:  # the base and its second try: stopped where they started
                     return SimpleNamespace(success=False, status="Maximum_Iterations_Exceeded", iterations=0,
                                            wall_time=0.0)
-                return s.solve(warm_start=warm_start)
+                return s.solve(warm_start=warm_start, options=options)
         return Failing()
 
     monkeypatch.setattr(solvers, "make_solver", make)
-    got = nlp_screen(cfg, start, terms, progress=print)
+    got = nlp_screen(cfg, start, terms, progress=print, separate_on_failure=False)
     assert got["base_refined"] and got["base_refined"]["status_before"] == "Maximum_Iterations_Exceeded"
     assert got["base_success"] and got["J0"] == pytest.approx(normal["J0"], abs=0.05)
     for t in terms:
@@ -493,6 +493,53 @@ def test_a_base_that_stopped_short_is_solved_again_from_the_best_fit_and_the_rat
         assert a["estimate"] == pytest.approx(b["estimate"], rel=1e-3, abs=1e-3 * b["se"])
         assert a["LR"] == pytest.approx(b["LR"], rel=1e-3, abs=0.1)
         assert a["LR_trim"] + a["LR_time"] == pytest.approx(a["LR"], abs=1e-6)
+
+def test_a_joint_base_that_fails_twice_is_replaced_by_one_nlp_per_term_and_pair(tmp_path, monkeypatch):
+    """The joint base made to fail twice (the stand-in for a base stuck under Hessian regularization, capped at
+    SCREEN_BASE_MAX_ITER): the screen runs one NLP per term and one per pair, each with its own base. The
+    estimates and likelihood ratios equal those of the joint screen (a second method on the same data), and so do
+    the encompassing rows, whose pair carries its own NLP's single fits."""
+    from types import SimpleNamespace
+
+    import pyomo_heli.solvers as solvers
+    from pyomo_heli.diagnosis.discovery import encompassing, nlp_screen
+
+    cfg = make_case(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, points=2,
+                    maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+    start = {f.name: f.initial for f in cfg.free}
+    terms, pairs = ["dM_bump00", "cg_offset"], [("cg_offset", "dM_bump00")]
+    normal = nlp_screen(cfg, start, terms, pairs=pairs, progress=lambda s: None)
+    real, made, caps = solvers.make_solver, [], []
+
+    def make(*a, **k):
+        s = real(*a, **k)
+        made.append(s)
+        if len(made) > 1:
+            return s
+
+        class Failing:  # the joint NLP's solver: its base fails twice
+            def solve(self, warm_start="none", options=None):
+                caps.append((options or {}).get("max_iter"))
+                return SimpleNamespace(success=False, status="Maximum_Iterations_Exceeded", iterations=200,
+                                       wall_time=0.0)
+        return Failing()
+
+    monkeypatch.setattr(solvers, "make_solver", make)
+    got = nlp_screen(cfg, start, terms, pairs=pairs, progress=print)
+    assert caps == [200, 200] and len(made) == 1 + len(terms) + len(pairs)
+    assert got["separate"]["joint_base_status"] == "Maximum_Iterations_Exceeded" and got["base_success"]
+    for t in terms:
+        a, b = got["fits"][t], normal["fits"][t]
+        assert a["estimate"] == pytest.approx(b["estimate"], rel=1e-3, abs=1e-3 * b["se"])
+        assert a["LR"] == pytest.approx(b["LR"], rel=1e-3, abs=0.1)
+    pa, pb = got["pairs"]["cg_offset+dM_bump00"], normal["pairs"]["cg_offset+dM_bump00"]
+    assert pa["LR"] == pytest.approx(pb["LR"], rel=1e-3, abs=0.1)
+    ea = encompassing(got["fits"]["cg_offset"], got["fits"]["dM_bump00"], pa, 0.01)
+    eb = encompassing(normal["fits"]["cg_offset"], normal["fits"]["dM_bump00"], pb, 0.01)
+    for k in ("LR_G_given_P", "LR_P_given_G"):
+        assert ea[k] == pytest.approx(eb[k], rel=1e-3, abs=0.1), k
+    assert ea["encompasses"] == eb["encompasses"] and ea["equivalent"] == eb["equivalent"]
+
 
 # slow (28 s; CI time): a check of the warm start's speed-up, not of a result
 @pytest.mark.slow

@@ -64,6 +64,11 @@ from .candidates import CANDIDATES, as_candidate, make_candidate
 SCREEN_GENERIC = 3
 #: physical candidates (significant, best by LM) estimated in the NLP for the encompassing test
 SCREEN_PHYSICAL = 3
+#: Ipopt iteration cap of each of the screen's two base solves: a base from the diagnosed point takes 30-55
+#: iterations on the held-out flight tests; one that needs more is stuck (a flight test's base with three lag
+#: terms pinned crept for 1955 iterations under Hessian regularization), and the screen then runs one NLP per
+#: term and per pair instead (:func:`nlp_screen`)
+SCREEN_BASE_MAX_ITER = 200
 
 
 def library(model, physical=None, generic=None) -> list[str]:
@@ -97,9 +102,14 @@ def _joint_objective(m, data, trim_outputs):
 
 
 def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True, progress=print,
-               warm_start: str = "continuation") -> dict:
+               warm_start: str = "continuation", separate_on_failure: bool = True) -> dict:
     """Estimate each of ``terms`` alone, and each pair of ``pairs`` together, in one identification NLP, freed by
     their bounds (module docstring, step 2).
+
+    The base (every term pinned at zero) is solved with at most :data:`SCREEN_BASE_MAX_ITER` Ipopt iterations, and
+    once more from where it stopped. When both fail and there is more than one term, the screen is run again as
+    one NLP per term and one per pair (:func:`_separate_screens`; ``separate`` in the result), each with its own
+    base (``separate_on_failure=False``: keep the failed base and go on).
 
     ``cfg``: the current identification config (its model and free parameters); ``start``: values of its free
     parameters to start from (the diagnosed point); ``terms``: library names or extension objects
@@ -148,9 +158,9 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
 
     effort = {}  # the last solve's Ipopt iterations and wall seconds (recorded with each fit)
 
-    def solve(ws):
+    def solve(ws, options=None):
         try:
-            r = solver.solve(warm_start=ws)
+            r = solver.solve(warm_start=ws, options=options)
             effort.update(iterations=int(r.iterations), wall_time=float(r.wall_time))
             return r.success, r.status
         except SolverError as exc:
@@ -160,11 +170,16 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
     for names in own.values():
         for n in names:
             pin(n, False)
-    ok, status = solve("none")
+    cap = {"max_iter": min(SCREEN_BASE_MAX_ITER, int((cfg.pareto.solver_options or {}).get("max_iter", 3000)))}
+    ok, status = solve("none", cap)
     if not ok:  # once more from where it stopped (its primal values)
         progress(f"    NLP screen: base solve failed ({status}, {effort.get('iterations')} iterations); once more "
                  "from where it stopped")
-        ok, status = solve("primal")
+        ok, status = solve("primal", cap)
+    if not ok and separate_on_failure and len(exts) > 1:
+        progress(f"    NLP screen: base solve failed again ({status}); one NLP per term and per pair instead")
+        return _separate_screens(cfg, start, exts, pairs, status, time.perf_counter() - t0, shape_free=shape_free,
+                                 progress=progress, warm_start=warm_start)
     J0 = float(pyo.value(m.discovery_objective))
     J0_tr = float(pyo.value(m.discovery_trim_nll))
     base = free_parameter_values(m)
@@ -257,6 +272,33 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
     return {"J0": J0, "base_success": bool(ok), "base_status": status, "base": base, "base_refined": refined,
             "fits": fits, "pairs": both,
             "wall_time": time.perf_counter() - t0}
+
+
+def _separate_screens(cfg, start, exts, pairs, joint_status, spent, **kw) -> dict:
+    """:func:`nlp_screen` as one NLP per term and one per pair, after the joint base failed: each fit's LR is
+    taken against its own NLP's base, and a pair's record holds its NLP's single fits (``single_J``), so that
+    the encompassing test compares the two terms alone and together within one NLP. ``J0`` and ``base`` are
+    those of the best base; ``base_success`` is True when every NLP's base (or its refined base) converged."""
+    t0 = time.perf_counter()
+    fits, bases = {}, []
+    for e in exts:
+        s = nlp_screen(cfg, start, [e], separate_on_failure=False, **kw)
+        fits[e.name] = {**s["fits"][e.name], "J0": s["J0"], "base_status": s["base_status"]}
+        bases.append(s)
+    if callable(pairs):
+        pairs = pairs(fits)
+    by = {e.name: e for e in exts}
+    both = {}
+    for a, b in pairs:
+        s = nlp_screen(cfg, start, [by[a], by[b]], pairs=[(a, b)], separate_on_failure=False, **kw)
+        both[f"{a}+{b}"] = {**s["pairs"][f"{a}+{b}"], "J0": s["J0"],
+                            "single_J": {n: s["fits"][n]["J"] for n in (a, b)}}
+        bases.append(s)
+    best = min(bases, key=lambda s: s["J0"])
+    return {"J0": best["J0"], "base_success": all(s["base_success"] for s in bases), "base": best["base"],
+            "base_status": "; ".join(dict.fromkeys(s["base_status"] for s in bases)),
+            "base_refined": None, "fits": fits, "pairs": both, "separate": {"joint_base_status": joint_status},
+            "wall_time": spent + time.perf_counter() - t0}
 
 
 def describe_fit(fit: dict) -> str:
@@ -357,7 +399,7 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=a
     if not g_sig:
         # physical candidates significant, no generic term: named when one encompasses the best generic term too
         if named:
-            best = min(named, key=lambda r: r["J_P"])
+            best = min(named, key=lambda r: r["J_P"] - r.get("J0", 0.0))
             out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
                        message=f"{best['candidate']} significant (p < {level:.2g}) and encompasses the best generic "
                                f"term {G['name']} (not significant itself, p = {G['p']:.2g}): with {best['candidate']} "
@@ -366,7 +408,7 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=a
             return out
         equivalent = [r for r in rows if r.get("equivalent")]
         if equivalent or G is None:
-            best = min(p_sig, key=lambda f: f["J"])
+            best = min(p_sig, key=_lowest_J)
             out.update(decision="accepted", added=best["name"], initial=float(best["estimate"]),
                        message=f"{best['name']} significant (LR {best['LR']:.3g}, p = {best['p']:.2g} < {level:.2g}); "
                                "no generic term is"
@@ -479,8 +521,13 @@ def encompassing(P: dict, G: dict, pair: dict | None, alpha: float) -> dict:
     ``LR(G | P) = 2 (J_P - J_PG)`` and ``LR(P | G) = 2 (J_G - J_PG)``, each against chi-square(1) at ``alpha``.
     P encompasses G when G adds nothing once P is in and P adds something G does not; the two are equivalent on
     these data when neither adds to the other."""
-    row = {"candidate": P["name"], "J_P": P["J"], "J_G": G["J"], "LR_P": P["LR"], "estimate": P["estimate"],
-           "shape": P["shape"]}
+    row = {}
+    if pair and "single_J" in pair:  # a pair of its own NLP (_separate_screens): P and G alone in that NLP
+        P = {**P, "J": pair["single_J"][P["name"]]}
+        G = {**G, "J": pair["single_J"][G["name"]]}
+        row["J0"] = pair["J0"]
+    row.update({"candidate": P["name"], "J_P": P["J"], "J_G": G["J"], "LR_P": P["LR"], "estimate": P["estimate"],
+                "shape": P["shape"]})
     if not (pair and pair["success"]):
         return {**row, "encompasses": False, "note": "joint solve failed"}
     lr = max(2.0 * (P["J"] - pair["J"]), 0.0)
@@ -522,8 +569,14 @@ def check_term(cfg, model, start: dict, data, term, *, level: float, against: st
     return out
 
 
+def _lowest_J(fit: dict) -> float:
+    """A fit's J against its NLP's base when the screen was run as separate NLPs (``J0`` in the fit), else its J:
+    within one NLP the order of J is that of the likelihood ratio."""
+    return fit["J"] - fit.get("J0", 0.0)
+
+
 def best_fit(fits: dict, generic: bool):
     """The fit of largest likelihood ratio (lowest J: the same order, and defined when the base solve failed) among
     the solved generic (or physical) terms of an NLP screen, or None."""
     ok = [f for f in fits.values() if f["generic"] == generic and f["success"] and not math.isnan(f["J"])]
-    return min(ok, key=lambda f: f["J"]) if ok else None
+    return min(ok, key=_lowest_J) if ok else None

@@ -300,18 +300,14 @@ def validation_joint_p(doc: dict, config: Path = CONFIG) -> float | str:
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.dataset import load_flight_test
     from pyomo_heli.nlp.identification import validation_maneuvers
-    from pyomo_heli.report.identification import predict
-    from pyomo_heli.report.loop import JOINT, final_index, iteration_model, validation_change_table
+    from pyomo_heli.report.loop import JOINT, final_index, iterations_validation_change
 
     its = doc["iterations"]
     kept = its[final_index(doc)]
     if kept is its[0]:
         return "-"
     cfg = load_identification_config(config, overrides={"data": {"dataset": doc["dataset"]}})
-    val = list(validation_maneuvers(cfg, load_flight_test(doc["dataset"])))
-    p0, p1 = (predict(str(it["iteration"]), iteration_model(cfg.model, it), it["parameters"], [], val)
-              for it in (its[0], kept))
-    tab = validation_change_table(p0, p1, val)
+    tab = iterations_validation_change(cfg, its[0], kept, validation_maneuvers(cfg, load_flight_test(doc["dataset"])))
     return float(tab.loc[tab["output"] == JOINT, "p (rise)"].iloc[0])
 
 

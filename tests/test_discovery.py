@@ -454,84 +454,87 @@ def test_a_failed_base_solve_leaves_the_decision_to_the_score_test_and_says_so(m
     assert "base solve failed: Maximum_Iterations_Exceeded" in out["message"]
 
 
-def test_a_base_that_stopped_short_is_solved_again_from_the_best_fit_and_the_ratios_match(tmp_path, monkeypatch):
-    """The NLP screen's base solve made to fail twice without moving (the test's stand-in for a solve that stops
-    at a worse point): its J is the start's, and every LR against it would be inflated. The base is then solved
-    from the best single fit's solution with that term at zero, and the estimates and likelihood ratios equal
-    those of a screen whose base solved normally."""
+#: the screen instance of the base-failure tests: a physical candidate and a generic term, and the two together
+SCREEN_TERMS, SCREEN_PAIRS = ["dM_bump00", "cg_offset"], [("cg_offset", "dM_bump00")]
+
+
+@pytest.fixture(scope="module")
+def screen_case(tmp_path_factory):
+    """The held-out fuselage download instance and its NLP screen with a normal base."""
+    from pyomo_heli.diagnosis.discovery import nlp_screen
+
+    cfg = make_case(tmp_path_factory.mktemp("screen"), "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5,
+                    points=2, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+    start = {f.name: f.initial for f in cfg.free}
+    normal = nlp_screen(cfg, start, SCREEN_TERMS, pairs=SCREEN_PAIRS, progress=lambda s: None)
+    assert normal["base_refined"] is None and normal["base_success"]
+    return cfg, start, normal
+
+
+def _failing_solvers(monkeypatch, fails_of):
+    """make_solver whose k-th solver (0: the first NLP's) fails its first ``fails_of(k)`` solves, stopped where they
+    started; returns the list of (solver index, warm start, options) of the calls that failed."""
     from types import SimpleNamespace
 
     import pyomo_heli.solvers as solvers
-    from pyomo_heli.diagnosis.discovery import nlp_screen
 
-    cfg = make_case(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, points=2,
-                    maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
-    start = {f.name: f.initial for f in cfg.free}
-    terms = ["dM_bump00", "dZ_one"]
-    normal = nlp_screen(cfg, start, terms, progress=lambda s: None)
-    assert normal["base_refined"] is None and normal["base_success"]
-    real = solvers.make_solver
+    real, made, failed = solvers.make_solver, [], []
 
     def make(*a, **k):
-        s, calls = real(*a, **k), []
+        s, k_, calls = real(*a, **k), len(made), []
+        made.append(s)
 
         class Failing:
             def solve(self, warm_start="none", options=None):
                 calls.append(warm_start)
-                if len(calls) <= 2:  # the base and its second try: stopped where they started
+                if len(calls) <= fails_of(k_):
+                    failed.append((k_, warm_start, options))
                     return SimpleNamespace(success=False, status="Maximum_Iterations_Exceeded", iterations=0,
                                            wall_time=0.0)
                 return s.solve(warm_start=warm_start, options=options)
         return Failing()
 
     monkeypatch.setattr(solvers, "make_solver", make)
-    got = nlp_screen(cfg, start, terms, progress=print, separate_on_failure=False)
-    assert got["base_refined"] and got["base_refined"]["status_before"] == "Maximum_Iterations_Exceeded"
-    assert got["base_success"] and got["J0"] == pytest.approx(normal["J0"], abs=0.05)
-    for t in terms:
+    return made, failed
+
+
+def _same_fits(got, normal):
+    for t in SCREEN_TERMS:
         a, b = got["fits"][t], normal["fits"][t]
         assert a["estimate"] == pytest.approx(b["estimate"], rel=1e-3, abs=1e-3 * b["se"])
         assert a["LR"] == pytest.approx(b["LR"], rel=1e-3, abs=0.1)
         assert a["LR_trim"] + a["LR_time"] == pytest.approx(a["LR"], abs=1e-6)
 
-def test_a_joint_base_that_fails_twice_is_replaced_by_one_nlp_per_term_and_pair(tmp_path, monkeypatch):
+
+def test_a_base_that_stopped_short_is_solved_again_from_the_best_fit_and_the_ratios_match(screen_case, monkeypatch):
+    """The NLP screen's base solve made to fail twice without moving (the test's stand-in for a solve that stops
+    at a worse point): its J is the start's, and every LR against it would be inflated. The base is then solved
+    from the best single fit's solution with that term at zero, and the estimates and likelihood ratios equal
+    those of a screen whose base solved normally."""
+    from pyomo_heli.diagnosis.discovery import nlp_screen
+
+    cfg, start, normal = screen_case
+    _failing_solvers(monkeypatch, lambda k: 2)
+    got = nlp_screen(cfg, start, SCREEN_TERMS, progress=print, separate_on_failure=False)
+    assert got["base_refined"] and got["base_refined"]["status_before"] == "Maximum_Iterations_Exceeded"
+    assert got["base_success"] and got["J0"] == pytest.approx(normal["J0"], abs=0.05)
+    _same_fits(got, normal)
+
+
+def test_a_joint_base_that_fails_twice_is_replaced_by_one_nlp_per_term_and_pair(screen_case, monkeypatch):
     """The joint base made to fail twice (the stand-in for a base stuck under Hessian regularization, capped at
     SCREEN_BASE_MAX_ITER): the screen runs one NLP per term and one per pair, each with its own base. The
     estimates and likelihood ratios equal those of the joint screen (a second method on the same data), and so do
     the encompassing rows, whose pair carries its own NLP's single fits."""
-    from types import SimpleNamespace
+    from pyomo_heli.diagnosis.discovery import SCREEN_BASE_MAX_ITER, encompassing, nlp_screen
 
-    import pyomo_heli.solvers as solvers
-    from pyomo_heli.diagnosis.discovery import encompassing, nlp_screen
-
-    cfg = make_case(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, points=2,
-                    maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
-    start = {f.name: f.initial for f in cfg.free}
-    terms, pairs = ["dM_bump00", "cg_offset"], [("cg_offset", "dM_bump00")]
-    normal = nlp_screen(cfg, start, terms, pairs=pairs, progress=lambda s: None)
-    real, made, caps = solvers.make_solver, [], []
-
-    def make(*a, **k):
-        s = real(*a, **k)
-        made.append(s)
-        if len(made) > 1:
-            return s
-
-        class Failing:  # the joint NLP's solver: its base fails twice
-            def solve(self, warm_start="none", options=None):
-                caps.append((options or {}).get("max_iter"))
-                return SimpleNamespace(success=False, status="Maximum_Iterations_Exceeded", iterations=200,
-                                       wall_time=0.0)
-        return Failing()
-
-    monkeypatch.setattr(solvers, "make_solver", make)
-    got = nlp_screen(cfg, start, terms, pairs=pairs, progress=print)
-    assert caps == [200, 200] and len(made) == 1 + len(terms) + len(pairs)
+    cfg, start, normal = screen_case
+    made, failed = _failing_solvers(monkeypatch, lambda k: 2 if k == 0 else 0)
+    got = nlp_screen(cfg, start, SCREEN_TERMS, pairs=SCREEN_PAIRS, progress=print)
+    assert [(k, (o or {}).get("max_iter")) for k, _, o in failed] == [(0, SCREEN_BASE_MAX_ITER)] * 2
+    assert len(made) == 1 + len(SCREEN_TERMS) + len(SCREEN_PAIRS)
     assert got["separate"]["joint_base_status"] == "Maximum_Iterations_Exceeded" and got["base_success"]
-    for t in terms:
-        a, b = got["fits"][t], normal["fits"][t]
-        assert a["estimate"] == pytest.approx(b["estimate"], rel=1e-3, abs=1e-3 * b["se"])
-        assert a["LR"] == pytest.approx(b["LR"], rel=1e-3, abs=0.1)
+    _same_fits(got, normal)
     pa, pb = got["pairs"]["cg_offset+dM_bump00"], normal["pairs"]["cg_offset+dM_bump00"]
     assert pa["LR"] == pytest.approx(pb["LR"], rel=1e-3, abs=0.1)
     ea = encompassing(got["fits"]["cg_offset"], got["fits"]["dM_bump00"], pa, 0.01)

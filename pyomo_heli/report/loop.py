@@ -166,6 +166,14 @@ def validation_change_table(pred0, pred1, val_mans, segment_s: float | None = No
     return pd.DataFrame(rows)
 
 
+def iterations_validation_change(cfg, first: dict, second: dict, val_mans) -> pd.DataFrame:
+    """:func:`validation_change_table` of two iterations of a loop document (``loop.json`` records), each replayed
+    on the validation records ``val_mans`` with its model and parameters (``cfg``: the loop's config)."""
+    p0, p1 = (predict(label(it), iteration_model(cfg.model, it), it["parameters"], [], val_mans)
+              for it in (first, second))
+    return validation_change_table(p0, p1, val_mans)
+
+
 def speed_groups(val_mans) -> list[tuple[float, list]]:
     """The validation records grouped by trim speed (rounded to whole knots): [(speed [kt], records), ...]."""
     speeds = sorted({round(mv.trim_speed / KT) for mv in val_mans})

@@ -38,9 +38,9 @@ import pandas as pd
 from pyomo_heli.studies.commands import run_command
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
-from pyomo_heli.nlp.identification import prepare_data
-from pyomo_heli.report.identification import VALIDATION_OUTPUTS, predict, read_truth
-from pyomo_heli.report.loop import JOINT, iteration_model, label, truth_replay_errors, validation_change_table
+from pyomo_heli.nlp.identification import validation_maneuvers
+from pyomo_heli.report.identification import VALIDATION_OUTPUTS, read_truth
+from pyomo_heli.report.loop import JOINT, iterations_validation_change, truth_replay_errors
 
 ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, data/
 WAKE = "rotor_wake_on_tail"
@@ -90,10 +90,8 @@ def evaluate(name: str, loop: Path, config: Path) -> dict:
            "added": "+".join(i1["extensions"]) or "-"}
     pooled = [float(np.sqrt(np.mean([it["trim_rms"][c] ** 2 for c in TRIM]))) for it in (i0, i1)]
     row["pooled trim change %"] = 100 * (pooled[1] / pooled[0] - 1)
-    val_mans = list(prepare_data(load_flight_test(dataset), cfg.validation,
-                                 input_reference_s=cfg.input_reference_s).maneuvers)
-    preds = [predict(label(it), iteration_model(cfg.model, it), it["parameters"], [], val_mans) for it in (i0, i1)]
-    change = validation_change_table(preds[0], preds[1], val_mans).set_index("output")
+    val_mans = validation_maneuvers(cfg, load_flight_test(dataset))
+    change = iterations_validation_change(cfg, i0, i1, val_mans).set_index("output")
     for o in VALIDATION_OUTPUTS:
         row[f"val {o} change %"] = float(change.loc[o, "change [%]"])
         row[f"val {o} p(rise)"] = float(change.loc[o, "p (rise)"])

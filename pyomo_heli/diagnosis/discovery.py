@@ -64,7 +64,7 @@ from .candidates import CANDIDATES, as_candidate, make_candidate
 SCREEN_GENERIC = 3
 #: physical candidates (significant, best by LM) estimated in the NLP for the encompassing test
 SCREEN_PHYSICAL = 3
-#: Ipopt iteration cap of each of the screen's two base solves: a base from the diagnosed point takes 30-55
+#: Ipopt iteration cap of each of the screen's two base solves: a base from the diagnosed point takes 29-52
 #: iterations on the held-out flight tests; one that needs more is stuck (a flight test's base with three lag
 #: terms pinned crept for 1955 iterations under Hessian regularization), and the screen then runs one NLP per
 #: term and per pair instead (:func:`nlp_screen`)
@@ -399,7 +399,7 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=a
     if not g_sig:
         # physical candidates significant, no generic term: named when one encompasses the best generic term too
         if named:
-            best = min(named, key=lambda r: r["J_P"] - r.get("J0", 0.0))
+            best = min(named, key=lambda r: _lowest_J(r, "J_P"))
             out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
                        message=f"{best['candidate']} significant (p < {level:.2g}) and encompasses the best generic "
                                f"term {G['name']} (not significant itself, p = {G['p']:.2g}): with {best['candidate']} "
@@ -569,10 +569,11 @@ def check_term(cfg, model, start: dict, data, term, *, level: float, against: st
     return out
 
 
-def _lowest_J(fit: dict) -> float:
-    """A fit's J against its NLP's base when the screen was run as separate NLPs (``J0`` in the fit), else its J:
-    within one NLP the order of J is that of the likelihood ratio."""
-    return fit["J"] - fit.get("J0", 0.0)
+def _lowest_J(fit: dict, key: str = "J") -> float:
+    """A fit's (or an encompassing row's, ``key="J_P"``) J against its NLP's base when the screen was run as
+    separate NLPs (``J0`` in the record), else its J: within one NLP the order of J is that of the likelihood
+    ratio."""
+    return fit[key] - fit.get("J0", 0.0)
 
 
 def best_fit(fits: dict, generic: bool):

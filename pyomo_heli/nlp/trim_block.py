@@ -71,8 +71,7 @@ def settle(var, rhs) -> None:
     """Start ``var`` where ``rhs``, the right side of its own state equation (linear in it), is zero.
 
     For an extension state the float start does not hold: a delay term's lag state at c = 0, which the float
-    model leaves out (it adds the state only when c is not zero). Started at 0 instead of at what it follows, a
-    lagged collective (0.11-0.15 rad) broke its own equation at every point of every maneuver.
+    model leaves out (it adds the state only when c is not zero); it then starts at what it follows.
     ``rhs`` is evaluated at var = 0 and 1; var is left at 0 when it does not move the equation.
     """
     def at(x):

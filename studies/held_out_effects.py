@@ -13,7 +13,8 @@ command resumes row by row. ``--workers N`` runs the cases on N local processes 
 cluster whose workers see OUT); the rows are the same as one after the other.
 ``--effects none`` is M0 plus noise only; ``--first-seed K`` starts at seed 20261122 + K; ``--evaluate-only`` runs
 nothing and re-evaluates every finished loop in OUT (rows and table); ``--rescore`` runs nothing and re-scores
-``OUT/held_out.csv`` alone (shape columns and criterion, from the terms the table reports).
+``OUT/held_out.csv`` alone (shape columns and criterion, from the terms the table reports); ``--summary FOLDER...``
+runs nothing and writes the tallies of several studies' tables as one table to ``OUT/summary.md``.
 
 Written after every case: ``OUT/held_out.csv`` and ``OUT/held_out.md``, one row per effect and seed of every
 ``OUT/*/row.json`` (also rows of earlier runs into the same OUT): truth, verdict, what was added,
@@ -668,8 +669,20 @@ def main(argv=None) -> int:
     ap.add_argument("--rescore", action="store_true",
                     help="run nothing: re-score OUT/held_out.csv (shape columns and criterion) from the terms it "
                          "reports, for a table whose loops are not at hand")
+    ap.add_argument("--summary", nargs="+", metavar="FOLDER",
+                    help="run nothing: the tallies of these studies' held_out.csv (wrong acceptances, criterion met, "
+                         "truth's form significant, M0 + noise) as one table -> OUT/summary.md")
     a = ap.parse_args(argv)
     out = out_folder(ap, a.out)
+    if a.summary:
+        folders = [Path(f) for f in a.summary]
+        missing = [str(f / "held_out.csv") for f in folders if not (f / "held_out.csv").is_file()]
+        if missing:
+            ap.error(f"--summary: {missing[0]} not found")
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "summary.md").write_text(summary(folders))
+        print((out / "summary.md").read_text())
+        return 0
     config = in_file(ap, a.config, "--config")
     if a.generic_family:
         config = with_generic_family(config, a.generic_family, out)
@@ -783,26 +796,56 @@ def markdown(tab: pd.DataFrame) -> str:
     L = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     L += ["| " + " | ".join(fmt(v) for v in r) + " |" for r in tab[cols].itertuples(index=False)]
     L.append("")
-    held, none = tab[tab["truth"] != "none"], tab[tab["truth"] == "none"]
-    if len(held):
-        # the truth's own form significant (evaluated rows; a csv read back holds the booleans as text)
-        named = (held["truth form significant"].astype(str).eq("True") if "truth form significant" in held
-                 else None)
-        L.append(f"wrong acceptances: {int(held['wrong acceptance'].astype(bool).sum())} of {len(held)}; "
-                 f"criterion met: {int(held['criterion met'].astype(bool).sum())} of {len(held)}"
+    n = tallies(tab)
+    if n["rows"]:
+        L.append(f"wrong acceptances: {n['wrong']} of {n['rows']}; criterion met: {n['met']} of {n['rows']}"
                  + (f"; a trim cut of 50 % possible at all (truth model's trim RMS <= half of M0's): "
-                    f"{int((pd.to_numeric(held['trim change possible %']) <= -50.0).sum())} of {len(held)}"
-                    if "trim change possible %" in held else "")
-                 + (f"; the truth's own form significant over the library at M0: {int(named.sum())} of {len(held)} "
-                    f"(criterion met in {int((named & held['criterion met'].astype(str).eq('True')).sum())} of them)"
-                    if named is not None else ""))
-    if len(none):
-        L.append(f"M0 + noise only: wrong acceptances: {int(none['wrong acceptance'].astype(bool).sum())} of "
-                 f"{len(none)}" + (f"; nothing added: {int((none['added (kept)'] == '-').sum())} of {len(none)}"
-                                   if "added (kept)" in none else ""))
+                    f"{n['cut_possible']} of {n['rows']}" if "cut_possible" in n else "")
+                 + (f"; the truth's own form significant over the library at M0: {n['form']} of {n['rows']} "
+                    f"(criterion met in {n['met_where_form']} of them)" if "form" in n else ""))
+    if n["noise_rows"]:
+        L.append(f"M0 + noise only: wrong acceptances: {n['noise_wrong']} of {n['noise_rows']}"
+                 + (f"; nothing added: {n['noise_nothing']} of {n['noise_rows']}" if "noise_nothing" in n else ""))
     L.append("")
     return "\n".join(L)
 
+
+def _true(col: pd.Series) -> pd.Series:
+    """A column of booleans, also as a csv read back holds them (text)."""
+    return col.astype(str).eq("True")
+
+
+def tallies(tab: pd.DataFrame) -> dict:
+    """The study's counts over one table: held-out rows (``rows``), wrong acceptances, criterion met, a 50 % trim cut
+    possible, the truth's own form significant and the criterion met among those; M0 + noise rows, their wrong
+    acceptances and how many added nothing. A count whose column the table lacks is left out."""
+    held, none = tab[tab["truth"] != "none"], tab[tab["truth"] == "none"]
+    n = {"rows": len(held), "wrong": int(_true(held["wrong acceptance"]).sum()),
+         "met": int(_true(held["criterion met"]).sum()) if "criterion met" in held else 0,
+         "noise_rows": len(none), "noise_wrong": int(_true(none["wrong acceptance"]).sum())}
+    if "trim change possible %" in held:
+        n["cut_possible"] = int((pd.to_numeric(held["trim change possible %"], errors="coerce") <= -50.0).sum())
+    if "truth form significant" in held:
+        form = _true(held["truth form significant"])
+        n["form"], n["met_where_form"] = int(form.sum()), int((form & _true(held["criterion met"])).sum())
+    if "added (kept)" in none:
+        n["noise_nothing"] = int((none["added (kept)"].astype(str) == "-").sum())
+    return n
+
+
+def summary(folders: list[Path]) -> str:
+    """One markdown table of the tallies of several studies' ``held_out.csv``, one row per folder (no total: the
+    folders differ in size and library, and a table may rerun another's effects)."""
+    cols = ("table", "effects", "held-out rows", "wrong acceptances", "criterion met", "truth's form significant",
+            "met where significant", "M0 + noise rows", "wrong acceptances (noise)", "nothing added (noise)")
+    L = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for f in folders:
+        tab = pd.read_csv(f / "held_out.csv", keep_default_na=False)
+        n = tallies(tab)
+        cells = (f.name, len(set(tab["truth"]) - {"none"}), n["rows"], n["wrong"], n["met"], n.get("form", "-"),
+                 n.get("met_where_form", "-"), n["noise_rows"], n["noise_wrong"], n.get("noise_nothing", "-"))
+        L.append("| " + " | ".join(str(c) for c in cells) + " |")
+    return "\n".join(L) + "\n"
 
 if __name__ == "__main__":
     raise SystemExit(exit_status(main, "held_out_effects"))

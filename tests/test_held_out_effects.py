@@ -331,6 +331,42 @@ def test_the_table_rescores_from_the_terms_it_reports(tmp_path, study):
     assert study.parse_term("-") is None and study.parse_term(row["generic term"])["estimate"] == -0.0151
 
 
+
+def test_the_summary_tallies_each_table_as_written(tmp_path):
+    """--summary: one row per study folder with the counts its held_out.csv holds (read back as text, as
+    committed): two held-out rows, one wrong, one met with the truth's form significant; two noise rows, one
+    added something. A folder without a table is a one-line error naming the file (exit status 2)."""
+    import pandas as pd
+
+    study = _study()
+    rows = [{"truth": "drag_rise", "seed": 1, "wrong acceptance": True, "criterion met": False,
+             "truth form significant": False, "added (kept)": "cg_offset"},
+            {"truth": "drag_rise", "seed": 2, "wrong acceptance": False, "criterion met": True,
+             "truth form significant": True, "added (kept)": "dX_mu4"},
+            {"truth": "none", "seed": 1, "wrong acceptance": False, "criterion met": "", "truth form significant": "",
+             "added (kept)": "-"},
+            {"truth": "none", "seed": 2, "wrong acceptance": False, "criterion met": "", "truth form significant": "",
+             "added (kept)": "dM_q"}]
+    (tmp_path / "a").mkdir()
+    pd.DataFrame(rows).to_csv(tmp_path / "a" / "held_out.csv", index=False)
+    assert study.main(["--summary", str(tmp_path / "a"), "--out", str(tmp_path / "s")]) == 0
+    line = (tmp_path / "s" / "summary.md").read_text().splitlines()[2]
+    assert line == "| a | 1 | 2 | 1 | 1 | 1 | 1 | 2 | 0 | 1 |"
+    with pytest.raises(SystemExit) as exc:
+        study.main(["--summary", str(tmp_path / "nothing"), "--out", str(tmp_path / "s")])
+    assert exc.value.code == 2
+
+
+def test_the_committed_tallies_are_those_of_the_committed_tables():
+    """docs/results/held_out_summary/summary.md, and the table docs/discovery_results.md shows, are what --summary
+    writes from the committed study tables (the list regenerate_docs runs): neither goes stale when a row is merged."""
+    from pyomo_heli.studies.regenerate import HELD_OUT_TABLES
+
+    study = _study()
+    got = study.summary([ROOT / "docs" / "results" / f for f in HELD_OUT_TABLES])
+    assert (ROOT / "docs" / "results" / "held_out_summary" / "summary.md").read_text() == got
+    assert got in (ROOT / "docs" / "discovery_results.md").read_text()
+
 def test_a_constant_term_does_not_match_a_speed_dependent_truth():
     """shape_match of a constant nose-down dM against the fuselage download (a nose-up moment bump at hover): a
     constant has no speed dependence, so it is "no" whatever the rounding of its estimate (the table's three
@@ -347,7 +383,7 @@ def test_a_constant_term_does_not_match_a_speed_dependent_truth():
 def test_the_truth_forms_check_finds_the_held_out_effect_at_its_strength(tmp_path, with_effect):
     """studies/held_out_effects.truth_form_check on a finished small loop (iteration 0 only): the drag rise's own
     form, tested as the loop tests a library term, has p < 0.01 on a small flight test that holds it (at this size
-    the batch-means test has about 3 degrees of freedom: not below the loop's level 0.01/19, docs/discovery.md)
+    the batch-means test has about 3 degrees of freedom: not below the loop's level 0.01/19, docs/discovery_results.md)
     and its NLP estimate is the truth's strength within 3 standard errors; on the same flight test without it (same
     seed and noise) p > 0.01 and it is not significant."""
     from test_discovery import _loop

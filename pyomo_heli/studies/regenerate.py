@@ -46,6 +46,9 @@ H1_H13 = ("fuselage_download drag_rise canted_tail_rotor vertical_drag control_m
 H14_H16 = "skewed_inflow_gradient cyclic_free_play rotor_pylon_mode"
 H17_H19 = "advancing_blade_compressibility fuselage_wake_incidence pitch_rate_damper"
 BENCH = "python studies/benchmark.py"
+#: the held-out studies' tables, in the order of docs/discovery_results.md (``held_out_summary`` tallies them)
+HELD_OUT_TABLES = ("held_out_small", "held_out_small_blind4", "noise_only", "held_out", "held_out_blind3",
+                   "held_out_blind4", "held_out_extended")
 
 
 @dataclass(frozen=True)
@@ -155,6 +158,9 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("held_out_blind4", (f"python studies/held_out_effects.py --seeds 3 --effects {H17_H19} --workers 2 "
                               "--out {out}/held_out_blind4",),
           ("held_out.csv", "held_out.md"), minutes=200),
+    Entry("held_out_summary", ("python studies/held_out_effects.py --summary " + " ".join(
+        f"{{out}}/{f}" for f in HELD_OUT_TABLES) + " --out {out}/held_out_summary",),
+          ("summary.md",), needs=HELD_OUT_TABLES, minutes=0.1),
     Entry("bo105_flight_trims", ("pyomo-heli trim-loop studies/bo105_flight_trims.toml "
                                  "--out {out}/bo105_flight_trims",),
           ("report.md", "trim_curves.png", "trim_loop.json", "trim_residuals.png"), minutes=2),

@@ -33,8 +33,9 @@ def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iteration
     return cfg, json.loads((tmp_path / "loop" / "loop.json").read_text())
 
 
-def test_noise_only_nothing_is_accepted(tmp_path):
-    """M0 plus sensor noise: no term of the library (10 physical + 9 generic) is significant, nothing is added."""
+def test_noise_only_nothing_is_accepted(tmp_path, monkeypatch):
+    """M0 plus sensor noise: no term of the library (10 physical + 9 generic) is significant, nothing is added.
+    A rerun into the same folder reads the finished step back (the screen's solves are not done again)."""
     _cfg, doc = _loop(tmp_path, "", seed=21)
     its = doc["iterations"]
     print(its[0]["discovery"]["message"])
@@ -45,6 +46,47 @@ def test_noise_only_nothing_is_accepted(tmp_path):
     assert its[0]["discovery"]["library_size"] == len(CANDIDATES) + len(GENERIC)
     report = (tmp_path / "loop" / "loop_report.md").read_text()
     assert "Structure determination over a library of 19 terms" in report
+    # the step is kept on disk; a rerun reads it back instead of solving the screen again (the identification is
+    # reused as well), and records the same
+    steps = list((tmp_path / "loop" / "steps").glob("step_*.json"))
+    assert len(steps) == 1
+    stored = json.loads(steps[0].read_text())["result"]
+    assert {k: v for k, v in stored.items() if k != "attribution"} == its[0]["discovery"]
+    import pyomo_heli.diagnosis.discovery as disc
+
+    def no_step(*args, **kwargs):
+        raise AssertionError("a finished structure step was done again")
+
+    monkeypatch.setattr(disc, "discovery_step", no_step)
+    assert main(["close-loop", str(_cfg.path), "--out", str(tmp_path / "loop")]) == 0
+    rerun = json.loads((tmp_path / "loop" / "loop.json").read_text())
+    assert rerun["iterations"][0]["discovery"] == its[0]["discovery"] and rerun["stopped"] == doc["stopped"]
+
+
+def test_a_finished_structure_step_is_read_back_not_redone(tmp_path):
+    """stored_step: computed once per set of inputs, read back after; the same record either way (through JSON);
+    other inputs get their own file; restart and a damaged file compute again."""
+    from pyomo_heli.workflows.close_loop import stored_step
+
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return {"decision": "none", "J0": np.float64(-1.5), "levels": (1, 2), "p": float("inf")}
+
+    inputs = {"fingerprint": "abc", "parameters": {"Iyy": 4973.123456789012}, "physical": ["cg_offset"],
+              "generic": ["dM_one"]}
+    first = stored_step(tmp_path, inputs, compute)
+    assert first == stored_step(tmp_path, dict(inputs), compute) == {"decision": "none", "J0": -1.5,
+                                                                       "levels": [1, 2], "p": float("inf")}
+    assert len(calls) == 1
+    stored_step(tmp_path, {**inputs, "parameters": {"Iyy": 4973.0}}, compute)
+    assert len(calls) == 2 and len(list(tmp_path.glob("step_*.json"))) == 2
+    stored_step(tmp_path, inputs, compute, restart=True)
+    assert len(calls) == 3
+    for f in tmp_path.glob("step_*.json"):
+        f.write_text("{")
+    assert stored_step(tmp_path, inputs, compute) == first and len(calls) == 4
 
 
 @pytest.mark.parametrize("iterations", [0, pytest.param(1, marks=pytest.mark.slow)])

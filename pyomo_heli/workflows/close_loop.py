@@ -40,7 +40,8 @@ directly, default; ``chosen``: the closest sampled front point) (see :mod:`pyomo
 ``uncertainty`` (``chosen``: Cramer-Rao standard errors of A, the chosen point and the direct solve of every
 iteration, default; ``none``). A finished
 iteration found in ``out/iter_i`` (same config and dataset, model - including the source of its effects - free
-parameters and input reference) is reused, not redone.
+parameters and input reference) is reused, not redone, and so is a finished structure step with discovery
+(:func:`stored_step`, ``out/steps/``: the screen's NLP solves take minutes at full size).
 
 ``out`` is marked as a close-loop folder (``checkpoint.json`` with ``"what": "close-loop"``): another
 command's results folder (identify's ``front.csv``, ``chosen.json``, ``points/``; multistart's ``starts.csv``)
@@ -51,6 +52,8 @@ naming it (rerun with ``--restart``); an unreadable shape decision ``shape_i.jso
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,7 +64,7 @@ from ..diagnosis import attribution as attr
 from ..diagnosis.candidates import CANDIDATES, make_candidate
 from ..log import info
 from ..physics.discrepancy import generic_names
-from .identify import run_identification, shape_values
+from .identify import identification_fingerprint, run_identification, shape_values
 from ..nlp.identification import identification_data, validation_maneuvers
 from ..pareto.result import write_json
 from ..pareto.store import read_checkpoint
@@ -229,6 +232,35 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
             return _close_loop(cfg, run, settings, progress, ft, id_data, val_mans)
 
 
+#: where the structure steps of a discovery loop are kept (:func:`stored_step`)
+STEPS_DIR = "steps"
+
+
+def stored_step(folder: Path, inputs: dict, compute, restart: bool = False, progress=info) -> dict:
+    """A structure step's result, computed once for these ``inputs`` and kept in ``folder/step_<digest>.json``.
+
+    A loop that was stopped resumes without redoing a step it had finished (the steps after rejected iterations
+    included): the result is read back when a step with the same inputs (the identification's fingerprint, the
+    parameters it starts from, the terms offered) was finished before. The result comes back through JSON whether
+    computed now or read, so a resumed loop records the same as one that ran through. A damaged file is computed
+    again; ``restart`` recomputes.
+    """
+    key = json.loads(json.dumps(inputs, sort_keys=True, default=str))
+    path = Path(folder) / f"step_{hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]}.json"
+    if not restart and path.is_file():
+        try:
+            doc = json.loads(path.read_text())
+        except (OSError, ValueError):
+            doc = None
+        if isinstance(doc, dict) and doc.get("inputs") == key and "result" in doc:
+            progress(f"  reusing the finished structure step in {path}")
+            return doc["result"]
+    result = compute()
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    write_json(path, {"inputs": key, "result": result})
+    return json.loads(path.read_text())["result"]
+
+
 def _stop_message(doc: dict, reason: str) -> str:
     """Why the loop stops, and, when nothing was kept after a discovered term the validation rule rejected, what the
     missing effect looks like (that term's shape)."""
@@ -347,10 +379,13 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             def structure_step(cfg, model, chosen, left):
                 generic = [n for n in (settings.generic or generic_names(settings.generic_family))
                            if n not in rejected]
-                return discovery_step(cfg, model, chosen, id_data, physical=left, generic=generic,
-                                      alpha=settings.alpha, ratio=settings.ratio,
-                                      confound_corr=settings.confound_corr, robust=settings.robust,
-                                      score_kw=score_test_inputs(cfg, settings), progress=progress)
+                # the fingerprint holds the config (its [loop] settings too), the data and the model's extensions
+                inputs = {"fingerprint": identification_fingerprint(cfg), "parameters": chosen,
+                          "physical": list(left), "generic": generic}
+                return stored_step(out / STEPS_DIR, inputs, lambda: discovery_step(
+                    cfg, model, chosen, id_data, physical=left, generic=generic, alpha=settings.alpha,
+                    ratio=settings.ratio, confound_corr=settings.confound_corr, robust=settings.robust,
+                    score_kw=score_test_inputs(cfg, settings), progress=progress), restart, progress)
 
             step = structure_step(cfg, model, chosen, left)
             if added in CANDIDATES and not record.get("rejected") and step.get("generic_significant"):

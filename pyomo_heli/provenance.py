@@ -23,6 +23,7 @@ whose text differs from the recorded one while all of that agrees gets a one-lin
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import sys
@@ -37,14 +38,25 @@ def _canonical(obj) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
 
 
-def dataset_sha256(dataset: str | Path) -> str:
-    """SHA-256 over every file of a dataset folder: its path relative to the folder and its content."""
-    root = Path(dataset)
+def _tree_sha256(root: Path, pattern: str = "*") -> str:
+    """SHA-256 over the files of ``root`` matching ``pattern`` (recursively): each path relative to it and content."""
     h = hashlib.sha256()
-    for f in sorted(p for p in root.rglob("*") if p.is_file()):
+    for f in sorted(p for p in root.rglob(pattern) if p.is_file()):
         h.update(f.relative_to(root).as_posix().encode())
         h.update(hashlib.sha256(f.read_bytes()).digest())
     return h.hexdigest()
+
+
+def dataset_sha256(dataset: str | Path) -> str:
+    """SHA-256 over every file of a dataset folder: its path relative to the folder and its content."""
+    return _tree_sha256(Path(dataset))
+
+
+@functools.lru_cache(maxsize=1)
+def source_sha256() -> str:
+    """SHA-256 over this package's Python sources: a stored intermediate result that is reused only by the code
+    that made it (the closed loop's structure steps) carries it."""
+    return _tree_sha256(Path(__file__).resolve().parent, "*.py")
 
 
 def model_record(cfg) -> dict:

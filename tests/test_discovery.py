@@ -18,6 +18,7 @@ from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.diagnosis.candidates import CANDIDATES
 from pyomo_heli.nlp.identification import prepare_data
 from pyomo_heli.physics.model import HelicopterModel
+from pyomo_heli.provenance import source_sha256
 from pyomo_heli.report.loop import JOINT
 
 #: a short generic library for the small instances: moment and force terms over speed, and a sensor term
@@ -50,8 +51,9 @@ def test_noise_only_nothing_is_accepted(tmp_path, monkeypatch):
     # reused as well), and records the same
     steps = list((tmp_path / "loop" / "steps").glob("step_*.json"))
     assert len(steps) == 1
-    stored = json.loads(steps[0].read_text())["result"]
-    assert {k: v for k, v in stored.items() if k != "attribution"} == its[0]["discovery"]
+    stored = json.loads(steps[0].read_text())
+    assert {k: v for k, v in stored["result"].items() if k != "attribution"} == its[0]["discovery"]
+    assert stored["inputs"]["source"] == source_sha256()  # a step made by other code is not reused
     import pyomo_heli.diagnosis.discovery as disc
 
     def no_step(*args, **kwargs):

@@ -68,6 +68,7 @@ from .identify import identification_fingerprint, run_identification, shape_valu
 from ..nlp.identification import identification_data, validation_maneuvers
 from ..pareto.result import write_json
 from ..pareto.store import read_checkpoint
+from ..provenance import source_sha256
 from ..settings import Problems, validate
 from ..settings.identification import LoopTable
 from ..report.loop import LOOP_FILE, load_loop, rejected_discovery, unexplained_statement  # noqa: F401 - load_loop re-exported (studies)
@@ -241,9 +242,9 @@ def stored_step(folder: Path, inputs: dict, compute, restart: bool = False, prog
 
     A loop that was stopped resumes without redoing a step it had finished (the steps after rejected iterations
     included): the result is read back when a step with the same inputs (the identification's fingerprint, the
-    parameters it starts from, the terms offered) was finished before. The result comes back through JSON whether
-    computed now or read, so a resumed loop records the same as one that ran through. A damaged file is computed
-    again; ``restart`` recomputes.
+    package's source, the parameters it starts from, the terms offered) was finished before. The result comes
+    back through JSON whether computed now or read, so a resumed loop records the same as one that ran through. A
+    damaged file is computed again; ``restart`` recomputes.
     """
     key = json.loads(json.dumps(inputs, sort_keys=True, default=str))
     path = Path(folder) / f"step_{hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]}.json"
@@ -379,9 +380,10 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             def structure_step(cfg, model, chosen, left):
                 generic = [n for n in (settings.generic or generic_names(settings.generic_family))
                            if n not in rejected]
-                # the fingerprint holds the config (its [loop] settings too), the data and the model's extensions
-                inputs = {"fingerprint": identification_fingerprint(cfg), "parameters": chosen,
-                          "physical": list(left), "generic": generic}
+                # the fingerprint holds the config (its [loop] settings too), the data and the model's extensions;
+                # the source digest: a step made by other code is not reused
+                inputs = {"fingerprint": identification_fingerprint(cfg), "source": source_sha256(),
+                          "parameters": chosen, "physical": list(left), "generic": generic}
                 return stored_step(out / STEPS_DIR, inputs, lambda: discovery_step(
                     cfg, model, chosen, id_data, physical=left, generic=generic, alpha=settings.alpha,
                     ratio=settings.ratio, confound_corr=settings.confound_corr, robust=settings.robust,

@@ -415,17 +415,18 @@ def test_a_rejected_discovered_term_is_reported_unexplained_with_its_shape(tmp_p
     assert rejected_discovery({"iterations": [its[0], {**its[1], "rejected": None}], "final_iteration": 1}) is None
 
 
-def _stubbed_step(monkeypatch, p_values, LM, screen):
-    """discovery_step on lon_rigging (physical) and col_delay (generic) with the score test (``p_values``, ``LM``
-    in that order, white = robust, df infinite) and the NLP screen (``screen``) stubbed; input errors on."""
+def _stubbed_step(monkeypatch, p_values, LM, screen, rejected=()):
+    """discovery_step on lon_rigging (physical) and col_delay (generic), and the generic terms ``rejected`` by
+    earlier steps, with the score test (``p_values``, ``LM`` in that order, white = robust, df infinite) and the
+    NLP screen (``screen``) stubbed; input errors on."""
     from types import SimpleNamespace
 
     import pandas as pd
 
     from pyomo_heli.diagnosis import discovery
 
-    names = ["lon_rigging", "col_delay"]
-    scores = pd.DataFrame({"name": names, "p_value": p_values, "LM": LM, "LM_white": LM, "df": [np.inf, np.inf]})
+    names = ["lon_rigging", "col_delay", *rejected]
+    scores = pd.DataFrame({"name": names, "p_value": p_values, "LM": LM, "LM_white": LM, "df": [np.inf] * len(names)})
     monkeypatch.setattr(discovery.attr, "attribute",
                         lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
 
@@ -438,7 +439,7 @@ def _stubbed_step(monkeypatch, p_values, LM, screen):
                           nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=True))
     model = SimpleNamespace(extensions=(), parameters={"Omega": 44.4, "R": 4.91})
     return discovery.discovery_step(cfg, model, {}, None, physical=["lon_rigging"], generic=["col_delay"],
-                                    progress=lambda s: None)
+                                    rejected_generic=list(rejected), progress=lambda s: None)
 
 
 def test_an_ambiguous_step_says_what_the_generic_term_left_looks_like(monkeypatch):
@@ -469,6 +470,43 @@ def test_an_ambiguous_step_says_what_the_generic_term_left_looks_like(monkeypatc
     assert out["best_generic"] is fits["col_delay"]
     assert "what is left looks like c d(col_d)/dt = col - col_d, c = 0.0016 +-" in out["message"]
 
+
+
+def test_a_rejected_generic_term_is_not_added_again_but_a_physical_candidate_must_still_encompass_it(monkeypatch):
+    """A generic term the validation rule rejected (lon_delay) stays in the screen: it is not added again, but a
+    physical candidate is named only if it leaves that term nothing too. Here lon_rigging encompasses the best
+    term that may be added (col_delay adds LR 0.5 to it) and not the rejected one (lon_delay adds LR 40): nothing is
+    named, nothing added ("ambiguous"). Without the rejected term in the screen the same fits name lon_rigging."""
+    from scipy.stats import chi2
+
+    J0 = -117175.06
+
+    def fit(name, generic, lr, estimate, formula):
+        return {"name": name, "generic": generic, "success": True, "LR": lr, "J": J0 - lr / 2, "estimate": estimate,
+                "formula": formula, "shape": {}, "p": float(chi2.sf(lr, 1))}
+
+    fits = {"col_delay": fit("col_delay", True, 6.0, 0.0016, "c d(col_d)/dt = col - col_d"),
+            "lon_rigging": fit("lon_rigging", False, 60.0, -0.0022, "lon offset"),
+            "lon_delay": fit("lon_delay", True, 80.0, 0.03, "c d(lon_d)/dt = lon - lon_d")}
+    pair_J = {"lon_rigging+col_delay": fits["lon_rigging"]["J"] - 0.25,
+              "lon_rigging+lon_delay": fits["lon_rigging"]["J"] - 20.0}
+
+    def screen_of(terms):
+        def screen(pairs):
+            offered = {n: dict(fits[n]) for n in terms}
+            wanted = pairs(offered)
+            return {"J0": J0, "fits": offered,
+                    "pairs": {f"{a}+{b}": {"success": True, "J": pair_J[f"{a}+{b}"]} for a, b in wanted}}
+        return screen
+
+    out = _stubbed_step(monkeypatch, [1e-9, 0.01, 1e-12], [60.0, 6.0, 80.0], screen_of(fits),
+                        rejected=["lon_delay"])
+    assert out["decision"] == "ambiguous" and out["added"] is None and out["rejected_generic"] == ["lon_delay"]
+    row, = out["encompassing"]
+    assert row["candidate"] == "lon_rigging" and not row["encompasses"] and row["LR_G_given_P"] == pytest.approx(40)
+    assert out["generic_significant"]  # the name check counts the rejected term too
+    named = _stubbed_step(monkeypatch, [1e-9, 0.01], [60.0, 6.0], screen_of(["lon_rigging", "col_delay"]))
+    assert named["decision"] == "named" and named["added"] == "lon_rigging"
 
 
 def test_a_failed_base_solve_leaves_the_decision_to_the_score_test_and_says_so(monkeypatch):

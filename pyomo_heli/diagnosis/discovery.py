@@ -6,7 +6,8 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
    robust: batch-means variance): the physical candidates (:mod:`.candidates`) and the generic
    discrepancy family (:mod:`pyomo_heli.physics.discrepancy`: dX, dZ, dM as regressors in speed, state
    and controls, and sensor scale/bias terms). Cheap (float sensitivities); it only picks which terms
-   the NLP estimates: the best ``SCREEN_GENERIC`` generic terms and ``SCREEN_PHYSICAL`` physical ones.
+   the NLP estimates: the best ``SCREEN_GENERIC`` generic terms and ``SCREEN_PHYSICAL`` physical ones, and the
+   generic terms rejected earlier (never added again; a physical candidate must still encompass them).
 2. **Estimate and test in the full NLP** (:func:`nlp_screen`): one identification NLP holds the
    current model plus the screened terms, their coefficients pinned at zero by equal bounds. It is
    solved once for the joint negative log-likelihood of time series and trims
@@ -324,17 +325,23 @@ def discovery_step(cfg, model, start: dict, data, **kw) -> dict:
     return out
 
 
-def _step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=attr.ALPHA, ratio=attr.RATIO,
-          confound_corr=attr.CONFOUND_CORR, robust=True, score_kw=None, progress=print) -> dict:
+def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejected_generic=(), alpha=attr.ALPHA,
+          ratio=attr.RATIO, confound_corr=attr.CONFOUND_CORR, robust=True, score_kw=None, progress=print) -> dict:
     score_kw = dict(score_kw or {})
     identified = [f.name for f in cfg.free]
-    names = library(model, physical, generic)
+    # generic terms an earlier step added and the validation rule rejected: never added again, but still the
+    # competitors a physical candidate must encompass and the name check asks about (the data hold what they
+    # describe; their model only validated worse)
+    rejected_generic = [n for n in rejected_generic if n not in (generic or ())]
+    names = library(model, physical, None if generic is None and not rejected_generic
+                    else list(generic if generic is not None else generic_names()) + rejected_generic)
     att = attr.attribute(model, identified, data, cfg.nlp.time_outputs, cfg.nlp.trim_outputs, candidates=names,
                          alpha=alpha, ratio=ratio, confound_corr=confound_corr, robust=robust, **score_kw)
     progress(str(att))
     sc = att.scores
     ranked = [n for n in sc["name"] if not (sc.set_index("name").loc[n, "p_value"] >= 1.0)]  # wrong-sign one-sided out
-    gen_screen = [n for n in ranked if is_generic(n)][:SCREEN_GENERIC]
+    gen_screen = ([n for n in ranked if is_generic(n) and n not in rejected_generic][:SCREEN_GENERIC]
+                  + [n for n in ranked if n in rejected_generic])
     phys_screen = [n for n in ranked if not is_generic(n)][:SCREEN_PHYSICAL]
     level = alpha / max(len(names), 1)  # Bonferroni over the whole library: the family-wise level is alpha
     out = {"library_size": len(names), "level": level, "attribution": att.to_dict(), "encompassing": [],
@@ -374,12 +381,15 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=a
         out["base_failed"] = screen.get("base_status")
     for n, f in fits.items():
         judge(f, rows_by.loc[n], getattr(make_candidate(n), "one_sided", False), criterion)
-    G = best_fit(fits, True)
-    g_sig = G is not None and G["p"] < level
+    G = best_fit(fits, True)  # the competitor a physical candidate must encompass (a rejected term included)
+    A = best_fit({n: f for n, f in fits.items() if n not in rejected_generic}, True)  # the best that may be added
+    g_sig = A is not None and A["p"] < level
     p_sig = [f for f in fits.values() if not f["generic"] and f["success"] and f["p"] < level]
     # the family's best term at this model and whether it is significant, whatever is decided (the loop's check of
-    # a physical candidate it added: it must leave the generic family nothing significant)
-    out.update(generic_significant=bool(g_sig), best_generic_fit=G)
+    # a physical candidate it added: it must leave the generic family nothing significant, rejected terms included)
+    out.update(generic_significant=bool(G is not None and G["p"] < level), best_generic_fit=G)
+    if rejected_generic:
+        out["rejected_generic"] = list(rejected_generic)
     if not g_sig and not p_sig:
         # "unexplained": the best generic term is significant on its own (p < alpha) but not over the library
         unexplained = G is not None and G["p"] < alpha
@@ -400,9 +410,11 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=a
         # physical candidates significant, no generic term: named when one encompasses the best generic term too
         if named:
             best = min(named, key=lambda r: _lowest_J(r, "J_P"))
+            rej = ", rejected earlier" if G["name"] in rejected_generic else ""
             out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
                        message=f"{best['candidate']} significant (p < {level:.2g}) and encompasses the best generic "
-                               f"term {G['name']} (not significant itself, p = {G['p']:.2g}): with {best['candidate']} "
+                               f"term {G['name']} (p = {G['p']:.2g}{rej}; no generic term that may be added is "
+                               f"significant): with {best['candidate']} "
                                f"fitted, {G['name']} adds nothing (p = {best['p_G_given_P']:.2g} >= {alpha:g}), and it "
                                f"adds to {G['name']} (p = {best['p_P_given_G']:.2g}); named {best['candidate']}")
             return out
@@ -423,16 +435,18 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, alpha=a
     if named:
         best = min(named, key=lambda r: r["J_P"])
         out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
-                   message=f"{best['candidate']} encompasses the discovered {G['name']} ({G['formula']}): with "
+                   message=f"{best['candidate']} encompasses the "
+                           + ("generic term rejected earlier " if G["name"] in rejected_generic else "discovered ")
+                           + f"{G['name']} ({G['formula']}): with "
                            f"{best['candidate']} fitted, {G['name']} adds nothing (LR {best['LR_G_given_P']:.3g}, "
                            f"p = {best['p_G_given_P']:.2g} >= {alpha:g}); named {best['candidate']}")
     else:
         tested = ", ".join(f"{r['candidate']} (p of {G['name']} given it {r.get('p_G_given_P', float('nan')):.2g}, "
                            f"of it given {G['name']} {r.get('p_P_given_G', float('nan')):.2g}"
                            + ("; equivalent on these data" if r.get("equivalent") else "") + ")" for r in rows)
-        out.update(decision="discovered", added=G["name"], initial=float(G["estimate"]), discovered=G,
+        out.update(decision="discovered", added=A["name"], initial=float(A["estimate"]), discovered=A,
                    message="not explained by any library effect" + (f" (tested: {tested})" if rows else "")
-                           + f"; discovered {describe_fit(G)}, p = {G['p']:.2g} < {level:.2g}")
+                           + f"; discovered {describe_fit(A)}, p = {A['p']:.2g} < {level:.2g}")
     return out
 
 

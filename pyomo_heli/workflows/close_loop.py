@@ -378,14 +378,18 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             from ..diagnosis.discovery import discovery_step
 
             def structure_step(cfg, model, chosen, left):
-                generic = [n for n in (settings.generic or generic_names(settings.generic_family))
-                           if n not in rejected]
+                family = settings.generic or generic_names(settings.generic_family)
+                generic = [n for n in family if n not in rejected]
+                # a rejected generic term is not added again, but a physical candidate must still encompass it
+                rejected_generic = [n for n in family if n in rejected]
                 # the fingerprint holds the config (its [loop] settings too), the data and the model's extensions;
                 # the source digest: a step made by other code is not reused
                 inputs = {"fingerprint": identification_fingerprint(cfg), "source": source_sha256(),
-                          "parameters": chosen, "physical": list(left), "generic": generic}
+                          "parameters": chosen, "physical": list(left), "generic": generic,
+                          "rejected_generic": rejected_generic}
                 return stored_step(out / STEPS_DIR, inputs, lambda: discovery_step(
-                    cfg, model, chosen, id_data, physical=left, generic=generic, alpha=settings.alpha,
+                    cfg, model, chosen, id_data, physical=left, generic=generic,
+                    rejected_generic=rejected_generic, alpha=settings.alpha,
                     ratio=settings.ratio, confound_corr=settings.confound_corr, robust=settings.robust,
                     score_kw=score_test_inputs(cfg, settings), progress=progress), restart, progress)
 

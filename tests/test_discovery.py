@@ -505,6 +505,7 @@ def test_a_rejected_generic_term_is_not_added_again_but_a_physical_candidate_mus
     row, = out["encompassing"]
     assert row["candidate"] == "lon_rigging" and not row["encompasses"] and row["LR_G_given_P"] == pytest.approx(40)
     assert out["generic_significant"]  # the name check counts the rejected term too
+    assert "the best generic term lon_delay (rejected earlier) adds to each of them" in out["message"]
     named = _stubbed_step(monkeypatch, [1e-9, 0.01], [60.0, 6.0], screen_of(["lon_rigging", "col_delay"]))
     assert named["decision"] == "named" and named["added"] == "lon_rigging"
 

@@ -429,7 +429,9 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
             return out
         out.update(decision="ambiguous", best_generic=G,
                    message="physical candidates significant (" + ", ".join(f["name"] for f in p_sig)
-                   + f") but the best generic term {G['name']} adds to each of them: none added; what is left "
+                   + f") but the best generic term {G['name']}"
+                   + (" (rejected earlier)" if G["name"] in rejected_generic else "")
+                   + " adds to each of them: none added; what is left "
                    f"looks like {describe_fit(G)}, p = {G['p']:.2g}")
         return out
     if named:

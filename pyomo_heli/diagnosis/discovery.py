@@ -396,6 +396,8 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
         out.update(decision="none", best_generic=G, unexplained=bool(unexplained),
                    message=f"nothing significant over the whole library of {len(names)} terms ({criterion}, "
                            f"Bonferroni: p < {level:.2g})"
+                           + (f" but the rejected {G['name']}, which is not added again (p = {G['p']:.2g})"
+                              if G is not None and G["name"] in rejected_generic and G["p"] < level else "")
                            + ("; unexplained residual (its best generic term is significant on its own, "
                               f"p = {G['p']:.2g} < {alpha:g}, not over the library)" if unexplained else "")
                            + (f"; best generic description of what is left: {describe_fit(G)}, p = {G['p']:.2g}"

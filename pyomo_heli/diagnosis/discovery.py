@@ -332,9 +332,9 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
     # generic terms an earlier step added and the validation rule rejected: never added again, but still the
     # competitors a physical candidate must encompass and the name check asks about (the data hold what they
     # describe; their model only validated worse)
-    rejected_generic = [n for n in rejected_generic if n not in (generic or ())]
-    names = library(model, physical, None if generic is None and not rejected_generic
-                    else list(generic if generic is not None else generic_names()) + rejected_generic)
+    rejected_generic = list(rejected_generic)
+    addable = [n for n in (generic if generic is not None else generic_names()) if n not in rejected_generic]
+    names = library(model, physical, addable + rejected_generic)
     att = attr.attribute(model, identified, data, cfg.nlp.time_outputs, cfg.nlp.trim_outputs, candidates=names,
                          alpha=alpha, ratio=ratio, confound_corr=confound_corr, robust=robust, **score_kw)
     progress(str(att))

@@ -13,8 +13,9 @@ command resumes row by row. ``--workers N`` runs the cases on N local processes 
 cluster whose workers see OUT); the rows are the same as one after the other.
 ``--effects none`` is M0 plus noise only; ``--first-seed K`` starts at seed 20261122 + K; ``--evaluate-only`` runs
 nothing and re-evaluates every finished loop in OUT (rows and table); ``--rescore`` runs nothing and re-scores
-``OUT/held_out.csv`` alone (shape columns and criterion, from the terms the table reports); ``--summary FOLDER...``
-runs nothing and writes the tallies of several studies' tables as one table to ``OUT/summary.md``.
+``OUT/held_out.csv`` alone (shape columns and criterion, from the terms the table reports); ``--merge FOLDER...`` runs
+nothing and puts the rows of FOLDER/held_out.csv in place of OUT's rows of the same truth and seed;
+``--summary FOLDER...`` runs nothing and writes the tallies of several studies' tables as one table to ``OUT/summary.md``.
 
 Written after every case: ``OUT/held_out.csv`` and ``OUT/held_out.md``, one row per effect and seed of every
 ``OUT/*/row.json`` (also rows of earlier runs into the same OUT): truth, verdict, what was added,
@@ -546,14 +547,33 @@ def parse_term(text) -> dict | None:
     return {"name": m[1], "estimate": float(m[2]), "se": float(m[3])} if m else None
 
 
+def read_rows(path: Path) -> list[dict]:
+    """The rows of a written ``held_out.csv`` as the study made them: a column that mixes numbers and "-" is read as
+    text, so its numbers go back to numbers (the md formats them); an empty cell stays empty."""
+    tab = pd.read_csv(path, keep_default_na=False)
+    return [{k: (float(v) if isinstance(v, str) and NUMBER.match(v) else v) for k, v in r.items()}
+            for r in tab.to_dict("records")]
+
+
+def merge(out: Path, sources: list[Path]) -> pd.DataFrame:
+    """``OUT/held_out.csv`` with each row of the SOURCES' tables in place of OUT's row of the same truth and seed
+    (or added); every other row as it is, not re-scored. A column a row lacks is an empty cell. Rewrites csv and
+    md. For rows rerun into another folder (a case run again under a new rule) and merged into a committed table."""
+    rows = {(r["truth"], int(r["seed"])): r for r in read_rows(out / "held_out.csv")}
+    for src in sources:
+        rows.update({(r["truth"], int(r["seed"])): r for r in read_rows(src / "held_out.csv")})
+    tab = pd.DataFrame([rows[k] for k in sorted(rows)])
+    tab = tab.fillna("") if tab.isna().any().any() else tab
+    tab.to_csv(out / "held_out.csv", index=False)
+    (out / "held_out.md").write_text(markdown(tab))
+    return tab
+
+
 def rescore(out: Path) -> pd.DataFrame:
     """Re-score ``OUT/held_out.csv`` without its loops: the shape columns and the criterion from the terms the table
     reports (estimates as printed, 3 significant digits), every other column as it is; rewrites csv and md."""
-    tab = pd.read_csv(out / "held_out.csv", keep_default_na=False)
     rows = []
-    for r in tab.to_dict("records"):
-        # a column that mixes numbers and "-" is read as text: its numbers back to numbers (the md formats them)
-        r = {k: (float(v) if isinstance(v, str) and NUMBER.match(v) else v) for k, v in r.items()}
+    for r in read_rows(out / "held_out.csv"):
         described, left = parse_term(r["generic term"]), parse_term(r["unexplained shape"])
         kept = described["name"] if described and described["name"] in str(r["added (kept)"]).split("+") else "-"
         r["kept discovered term"] = kept
@@ -669,6 +689,9 @@ def main(argv=None) -> int:
     ap.add_argument("--rescore", action="store_true",
                     help="run nothing: re-score OUT/held_out.csv (shape columns and criterion) from the terms it "
                          "reports, for a table whose loops are not at hand")
+    ap.add_argument("--merge", nargs="+", metavar="FOLDER",
+                    help="run nothing: replace (or add) the rows of OUT/held_out.csv by the rows of the same truth "
+                         "and seed in these folders' held_out.csv (rows rerun elsewhere); the others stay as they are")
     ap.add_argument("--summary", nargs="+", metavar="FOLDER",
                     help="run nothing: the tallies of these studies' held_out.csv (wrong acceptances, criterion met, "
                          "truth's form significant, M0 + noise) as one table -> OUT/summary.md")
@@ -682,6 +705,13 @@ def main(argv=None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         (out / "summary.md").write_text(summary(folders))
         print((out / "summary.md").read_text())
+        return 0
+    if a.merge:
+        missing = [str(f) for f in [out, *map(Path, a.merge)] if not (f / "held_out.csv").is_file()]
+        if missing:
+            ap.error(f"--merge: {Path(missing[0]) / 'held_out.csv'} not found")
+        merge(out, [Path(f) for f in a.merge])
+        print((out / "held_out.md").read_text())
         return 0
     config = in_file(ap, a.config, "--config")
     if a.generic_family:

@@ -367,6 +367,37 @@ def test_the_committed_tallies_are_those_of_the_committed_tables():
     assert (ROOT / "docs" / "results" / "held_out_summary" / "summary.md").read_text() == got
     assert got in (ROOT / "docs" / "discovery_results.md").read_text()
 
+def test_merging_a_rerun_row_replaces_that_row_alone(tmp_path):
+    """--merge: a committed table merged with itself is byte for byte what it was (nothing re-scored, nothing
+    re-formatted); a rerun row of the same truth and seed takes its place, a new one is added in order, a column
+    only the rerun has is an empty cell in the other rows, and a folder without a table is a one-line error."""
+    import shutil
+
+    import pandas as pd
+
+    study = _study()
+    committed = ROOT / "docs" / "results" / "held_out_blind3"
+    shutil.copytree(committed, tmp_path / "t")
+    assert study.main(["--merge", str(committed), "--out", str(tmp_path / "t")]) == 0
+    for name in ("held_out.csv", "held_out.md"):
+        assert (tmp_path / "t" / name).read_bytes() == (committed / name).read_bytes()
+    old = study.read_rows(committed / "held_out.csv")
+    rerun = {**old[5], "verdict": "ambiguous", "added (kept)": "-", "wrong acceptance": False, "new column": 1.5}
+    extra = {**old[0], "seed": 20261125, "verdict": "none"}
+    (tmp_path / "r").mkdir()
+    pd.DataFrame([rerun, extra]).to_csv(tmp_path / "r" / "held_out.csv", index=False)
+    assert study.main(["--merge", str(tmp_path / "r"), "--out", str(tmp_path / "t")]) == 0
+    got = study.read_rows(tmp_path / "t" / "held_out.csv")
+    assert len(got) == len(old) + 1
+    assert got[6] == rerun and got[3] == {**extra, "new column": ""}
+    assert [r for i, r in enumerate(got) if i not in (3, 6)] == [{**r, "new column": ""} for i, r in enumerate(old)
+                                                                 if i != 5]
+    assert study.tallies(pd.DataFrame(got))["wrong"] == 0
+    with pytest.raises(SystemExit) as exc:
+        study.main(["--merge", str(tmp_path / "nothing"), "--out", str(tmp_path / "t")])
+    assert exc.value.code == 2
+
+
 def test_a_constant_term_does_not_match_a_speed_dependent_truth():
     """shape_match of a constant nose-down dM against the fuselage download (a nose-up moment bump at hover): a
     constant has no speed dependence, so it is "no" whatever the rounding of its estimate (the table's three

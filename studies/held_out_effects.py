@@ -15,7 +15,8 @@ cluster whose workers see OUT); the rows are the same as one after the other.
 nothing and re-evaluates every finished loop in OUT (rows and table); ``--rescore`` runs nothing and re-scores
 ``OUT/held_out.csv`` alone (shape columns and criterion, from the terms the table reports); ``--merge FOLDER...`` runs
 nothing and puts the rows of FOLDER/held_out.csv in place of OUT's rows of the same truth and seed;
-``--summary FOLDER...`` runs nothing and writes the tallies of several studies' tables as one table to ``OUT/summary.md``.
+``--summary FOLDER...`` runs nothing and writes the tallies of several studies' tables as one table to
+``OUT/summary.md``.
 
 Written after every case: ``OUT/held_out.csv`` and ``OUT/held_out.md``, one row per effect and seed of every
 ``OUT/*/row.json`` (also rows of earlier runs into the same OUT): truth, verdict, what was added,

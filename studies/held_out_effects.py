@@ -564,7 +564,8 @@ def merge(out: Path, sources: list[Path]) -> pd.DataFrame:
     for src in sources:
         rows.update({(r["truth"], int(r["seed"])): r for r in read_rows(src / "held_out.csv")})
     tab = pd.DataFrame([rows[k] for k in sorted(rows)])
-    tab = tab.fillna("") if tab.isna().any().any() else tab
+    for c in tab.columns[tab.isna().any()]:  # a column some rows lack: empty cells, the other values as they are
+        tab[c] = tab[c].astype(object).where(tab[c].notna(), "")
     tab.to_csv(out / "held_out.csv", index=False)
     (out / "held_out.md").write_text(markdown(tab))
     return tab

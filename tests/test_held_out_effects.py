@@ -796,3 +796,30 @@ def test_an_interrupt_ends_the_study_a_failure_ends_its_case(tmp_path, monkeypat
     argv = ["--effects", "drag_rise", "--seeds", "2", "--out", str(tmp_path / "b")]
     assert study.main(argv) == 2
     assert calls == ["generate-data", "generate-data"]  # each case failed on its own, the study went on
+
+
+# slow (about 2.5 min; CI time): the default run checks the rule's decision with the screen stubbed
+# (tests/test_discovery.py -k rejected_generic)
+@pytest.mark.slow
+def test_small_canted_tail_rotor_a_rejected_term_keeps_a_wrong_candidate_from_being_named(tmp_path):
+    """The small held-out instance (studies/held_out_small*.toml) of the canted tail rotor, whose truth holds no
+    c.g. offset. `dM_col` (the truth's nose-down moment) is discovered and rejected by the validation rule; at M0
+    again `cg_offset` is significant but the rejected `dM_col`, still screened, adds to it (p < 0.01), so it is not
+    named: `dX_col` is discovered instead and nothing of the library is kept (the study's row: no wrong
+    acceptance)."""
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, str(ROOT / "studies" / "held_out_effects.py"), "--effects",
+                        "canted_tail_rotor", "--seeds", "1", "--config", str(ROOT / "studies" / "held_out_small.toml"),
+                        "--data-config", str(ROOT / "studies" / "held_out_small_gen.toml"), "--out", str(out)],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=900)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((out / "canted_tail_rotor_20261122" / "loop" / "loop.json").read_text())
+    first, second = doc["iterations"]
+    assert first["discovery"]["added"] == "dM_col" and second["rejected"]
+    step = second["discovery"]
+    assert step["rejected_generic"] == ["dM_col"] and step["best_generic_fit"]["name"] == "dM_col"
+    assert step["decision"] == "discovered" and step["added"] == "dX_col"
+    cg = next(e for e in step["encompassing"] if e["candidate"] == "cg_offset")
+    assert not cg["encompasses"] and cg["p_G_given_P"] < 0.01
+    row = json.loads((out / "canted_tail_rotor_20261122" / "row.json").read_text())
+    assert row["added (kept)"] == "-" and not row["wrong acceptance"]

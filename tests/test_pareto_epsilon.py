@@ -151,6 +151,48 @@ def test_direct_eq11_solve_that_fails_goes_on_from_the_next_start_and_reaches_th
         ps.snapshots = kept
 
 
+def test_a_direct_eq11_solve_that_ends_farther_from_utopia_than_its_start_is_not_taken(box_front):
+    """A direct Eq. 11 solve that reports success at a point farther from utopia than the post-hoc choice it
+    started from has stopped in a worse local minimum (seen on a full-size loop: J_time 185 000 above every front
+    point, at the same J_trim). Here the first attempt's J_f1 is moved up by 10 after it converged: it counts as
+    failed, with a status that says why, and the next start gives the closed form. If every attempt does so, the
+    direct solve fails and the caller keeps the post-hoc choice."""
+    ps = box_front
+    chosen, _, utopia, nadir = ps.eq11("payoff")
+    real, seen = ps._direct_once, []
+
+    def worse(times):
+        def once(u, n):
+            seen.append(1)
+            p = real(u, n)
+            if len(seen) <= times:
+                p.J_f1 = p.J_f1 + 10.0
+            return p
+        return once
+
+    ps._direct_once = worse(1)
+    try:
+        direct = ps.direct_choice(chosen, rule="payoff")
+    finally:
+        del ps._direct_once
+    assert direct.success and len(seen) == 2
+    np.testing.assert_allclose([direct.parameters["a"], direct.parameters["b"]], [_t(1.0)] * 2, atol=1e-5)
+    assert "(Solve_Succeeded but farther from utopia than the post-hoc choice" in direct.warm_start
+    d_direct = utopia_distance_n([[direct.J_f1, direct.J_f2, direct.J_f3]], utopia, nadir)[0]
+    assert d_direct <= utopia_distance_n([[chosen.J_f1, chosen.J_f2, chosen.J_f3]], utopia, nadir)[0]
+    kept = ps.points
+    ps.points = [p for p in ps.points if p.kind != "direct"]  # the stored direct point: solve it again
+    seen.clear()
+    ps._direct_once = worse(99)
+    try:
+        direct = ps.direct_choice(chosen, rule="payoff")
+    finally:
+        del ps._direct_once
+        ps.points = kept  # the module's front as it was, for the tests after this one
+    assert not direct.success and len(seen) == DIRECT_STARTS + 1
+    assert "not the minimiser" in direct.status
+
+
 def test_solve_at_warm_starts_from_the_nearest_point_and_matches_the_closed_form(box_front):
     ps = box_front
     p = ps.solve_at({"f2": 0.3, "f3": 0.6})

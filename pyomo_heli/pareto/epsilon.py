@@ -629,7 +629,18 @@ class EpsilonConstraintSolver:
         if all(u == n for u, n in zip(utopia, nadir)):  # a one-point front: every point is the Eq. 11 minimiser
             return self.solve_point("direct", lambda: self._one_point_direct(start))
         starts = self.direct_starts(start, rule)
-        return self.solve_point("direct", lambda: solve_from_starts(lambda: self._direct_once(utopia, nadir), starts))
+        d_start = float(utopia_distance_n([[_get(start, k) for k in self.names]], utopia, nadir)[0])
+
+        def once():  # a solve that ends farther from utopia than its post-hoc start is a worse local minimum
+            q = self._direct_once(utopia, nadir)
+            if q.success:
+                d = float(utopia_distance_n([[_get(q, k) for k in self.names]], utopia, nadir)[0])
+                if d > d_start * (1 + DIRECT_RTOL) + DIRECT_RTOL:
+                    q.success, q.status = False, (f"{q.status} but farther from utopia than the post-hoc choice "
+                                                  f"(Eq. 11 distance {d:.4g} > {d_start:.4g}): not the minimiser")
+            return q
+
+        return self.solve_point("direct", lambda: solve_from_starts(once, starts))
 
     def _one_point_direct(self, start):
         """The direct choice of a front whose every objective range is solver noise (:meth:`resolved_nadir`):
@@ -671,6 +682,9 @@ RANGE_RTOL = 1e-6
 ONE_POINT_FRONT = ("not solved: every objective's range on the front is solver noise (a one-point front), "
                    "so the post-hoc choice is the Eq. 11 minimiser")
 
+#: a direct Eq. 11 solve whose distance exceeds its post-hoc start's by more than this (relative and absolute) has
+#: stopped in a worse local minimum: it counts as failed (:meth:`EpsilonConstraintSolver.direct_choice`)
+DIRECT_RTOL = 1e-6
 #: converged points the direct Eq. 11 solve starts from before its last start, midway between the first two
 #: (:meth:`EpsilonConstraintSolver.direct_starts`)
 DIRECT_STARTS = 3

@@ -22,7 +22,8 @@ import numpy as np
 import pyomo.environ as pyo
 import pytest
 
-from pyomo_heli.pareto.epsilon import (DIRECT_STARTS, INFEASIBLE, EpsilonConstraintSolver, GridStart, nondominated,
+from pyomo_heli.pareto.epsilon import (DIRECT_STARTS, INFEASIBLE, EpsilonConstraintSolver, GridStart, dominating,
+                                       nondominated,
                                        nondominated_nadir, snake, utopia_distance_n)
 from pyomo_heli.pareto.front import ParetoSettings
 from pyomo_heli.pareto.steps import starts_note
@@ -191,6 +192,44 @@ def test_a_direct_eq11_solve_that_ends_farther_from_utopia_than_its_start_is_not
         ps.points = kept  # the module's front as it was, for the tests after this one
     assert not direct.success and len(seen) == DIRECT_STARTS + 1
     assert "not the minimiser" in direct.status
+    # f1's range on the front taken as solver noise (nadir = utopia there): Eq. 11 does not weigh f1, so the
+    # post-hoc choice moved up in f1 is as close to utopia as it, but the choice dominates it: not taken either
+    U, N = ps.utopia_nadir(rule="payoff")
+    real_un = ps.utopia_nadir
+    ps.utopia_nadir = lambda rule=None: (U, (U[0],) + tuple(N[1:]))
+    ps.points = [p for p in kept if p.kind != "direct"]
+    seen.clear()
+
+    def off_the_front(u, n):
+        seen.append(1)
+        if len(seen) == 1:
+            q = real(u, n)
+            q.J_f1, q.J_f2, q.J_f3 = chosen.J_f1 + 10.0, chosen.J_f2, chosen.J_f3
+            return q
+        return real(u, n)
+
+    ps._direct_once = off_the_front
+    try:
+        direct = ps.direct_choice(chosen, rule="payoff")
+    finally:
+        del ps._direct_once, ps.utopia_nadir
+        ps.points = kept
+    assert ps.utopia_nadir == real_un
+    assert direct.success and len(seen) == 2
+    assert "(Solve_Succeeded but dominated by front point" in direct.warm_start
+
+
+def test_dominating_finds_a_front_point_better_beyond_solver_noise():
+    """The full-size case behind the direct solve's check (fuselage_pitch_damping 24, M0 + dM_q): anchor B at
+    (J_time, J_trim) = (-117017.6, 0.0277476018) dominates the direct point (68545.8, 0.0277476025): J_trim
+    equal within solver noise, J_time far better. Points equal within noise, or better in one objective and
+    worse in another, do not dominate."""
+    B, direct = [-117017.62448489462, 0.027747601849345455], [68545.7856677683, 0.0277476024669234]
+    assert dominating(direct, [[-117017.66, 0.02847], B]) == 1
+    assert dominating(B, [direct]) is None
+    assert dominating(direct, [[68545.7856, 0.0277476024]]) is None  # the same point within 1e-6
+    assert dominating([1.0, 1.0], [[0.5, 2.0], [2.0, 0.5]]) is None
+    assert dominating([1.0, 1.0, 1.0], [[1.0, 1.0, 0.9]]) == 0
 
 
 def test_solve_at_warm_starts_from_the_nearest_point_and_matches_the_closed_form(box_front):

@@ -49,8 +49,8 @@ from ..log import get_logger
 from ..nlp.parameters import free_parameter_values
 from ..nlp.scaling import apply_scaling
 from ..solvers import MULTIPLIER_MODES, SolverError, make_solver, scale_multipliers
-from .eq11 import (NADIR_RULES, nondominated, nondominated_nadir, payoff_nadir,  # noqa: F401 - re-exported
-                   utopia_distance_n)
+from .eq11 import (NADIR_RULES, dominating, nondominated, nondominated_nadir,  # noqa: F401 - re-exported
+                   payoff_nadir, utopia_distance_n)
 from .snapshot import Snapshot
 from .steps import (ANCHOR_NAMES, FRONT_STEP_OPTIONS, INFEASIBLE, IPOPT_INFEASIBLE,  # noqa: F401 - re-exported
                     LEAVE_ANCHOR_OPTIONS, TIGHT_MARGIN, EpsilonPoint, Outcome, _value, epsilon_grid,
@@ -630,14 +630,26 @@ class EpsilonConstraintSolver:
             return self.solve_point("direct", lambda: self._one_point_direct(start))
         starts = self.direct_starts(start, rule)
         d_start = float(utopia_distance_n([[_get(start, k) for k in self.names]], utopia, nadir)[0])
+        front = self.front_candidates()
 
-        def once():  # a solve that ends farther from utopia than its post-hoc start is a worse local minimum
+        def once():
+            # a solve that ends farther from utopia than its post-hoc start is a worse local minimum; one that a
+            # front point dominates has left the front along an objective Eq. 11 does not weigh (its range on
+            # the front is solver noise, so nadir = utopia there): neither is the Eq. 11 choice
             q = self._direct_once(utopia, nadir)
             if q.success:
-                d = float(utopia_distance_n([[_get(q, k) for k in self.names]], utopia, nadir)[0])
+                J = [_get(q, k) for k in self.names]
+                d = float(utopia_distance_n([J], utopia, nadir)[0])
+                by = dominating(J, [[_get(p, k) for k in self.names] for p in front], DIRECT_RTOL)
                 if d > d_start * (1 + DIRECT_RTOL) + DIRECT_RTOL:
                     q.success, q.status = False, (f"{q.status} but farther from utopia than the post-hoc choice "
                                                   f"(Eq. 11 distance {d:.4g} > {d_start:.4g}): not the minimiser")
+                elif by is not None:
+                    p = front[by]
+                    q.success, q.status = False, (
+                        f"{q.status} but dominated by front point {p.index} ({p.kind}: "
+                        + ", ".join(f"J_{k} {_get(p, k):.6g} against {v:.6g}" for k, v in zip(self.names, J))
+                        + "): off the front, not the Eq. 11 choice")
             return q
 
         return self.solve_point("direct", lambda: solve_from_starts(once, starts))
@@ -682,8 +694,9 @@ RANGE_RTOL = 1e-6
 ONE_POINT_FRONT = ("not solved: every objective's range on the front is solver noise (a one-point front), "
                    "so the post-hoc choice is the Eq. 11 minimiser")
 
-#: a direct Eq. 11 solve whose distance exceeds its post-hoc start's by more than this (relative and absolute) has
-#: stopped in a worse local minimum: it counts as failed (:meth:`EpsilonConstraintSolver.direct_choice`)
+#: a direct Eq. 11 solve whose distance exceeds its post-hoc start's by more than this (relative and absolute), or
+#: that a front point dominates by more than this (relative), counts as failed
+#: (:meth:`EpsilonConstraintSolver.direct_choice`)
 DIRECT_RTOL = 1e-6
 #: converged points the direct Eq. 11 solve starts from before its last start, midway between the first two
 #: (:meth:`EpsilonConstraintSolver.direct_starts`)

@@ -43,6 +43,16 @@ def nondominated(J) -> np.ndarray:
     return keep
 
 
+def dominating(j, J, rtol: float = 1e-6) -> int | None:
+    """The index of a row of J (points, objectives; all minimised) that dominates the point j beyond solver
+    noise: no worse in any objective and better in one, each by more than ``rtol`` of the larger magnitude
+    (at least ``rtol``); None if there is none."""
+    j, J = np.asarray(j, float), np.atleast_2d(np.asarray(J, float))
+    tol = rtol * np.maximum(np.maximum(np.abs(J), np.abs(j)), 1.0)
+    hit = np.all(J <= j + tol, axis=1) & np.any(J < j - tol, axis=1)
+    return int(np.argmax(hit)) if hit.any() else None
+
+
 def nondominated_nadir(J) -> tuple:
     """The nadir estimated from points: each objective's worst value over the non-dominated rows of J."""
     J = np.atleast_2d(np.asarray(J, float))

@@ -45,8 +45,8 @@ def nondominated(J) -> np.ndarray:
 
 def dominating(j, J, rtol: float = 1e-6) -> int | None:
     """The index of a row of J (points, objectives; all minimised) that dominates the point j beyond solver
-    noise: no worse in any objective and better in one, each by more than ``rtol`` of the larger magnitude
-    (at least ``rtol``); None if there is none."""
+    noise: worse in no objective by more than the noise, better in one by more than it; the noise is ``rtol``
+    times the larger magnitude (at least ``rtol``). None if no row does."""
     j, J = np.asarray(j, float), np.atleast_2d(np.asarray(J, float))
     tol = rtol * np.maximum(np.maximum(np.abs(J), np.abs(j)), 1.0)
     hit = np.all(J <= j + tol, axis=1) & np.any(J < j - tol, axis=1)

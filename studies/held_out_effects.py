@@ -712,6 +712,10 @@ def main(argv=None) -> int:
         missing = [str(f) for f in [out, *map(Path, a.merge)] if not (f / "held_out.csv").is_file()]
         if missing:
             ap.error(f"--merge: {Path(missing[0]) / 'held_out.csv'} not found")
+        for f in [out, *map(Path, a.merge)]:
+            cols = pd.read_csv(f / "held_out.csv", nrows=0).columns
+            if not {"truth", "seed"} <= set(cols):
+                ap.error(f"--merge: {f / 'held_out.csv'} has no 'truth' and 'seed' columns: not a study table")
         merge(out, [Path(f) for f in a.merge])
         print((out / "held_out.md").read_text())
         return 0

@@ -396,6 +396,11 @@ def test_merging_a_rerun_row_replaces_that_row_alone(tmp_path):
     with pytest.raises(SystemExit) as exc:
         study.main(["--merge", str(tmp_path / "nothing"), "--out", str(tmp_path / "t")])
     assert exc.value.code == 2
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "held_out.csv").write_text("effect,noise\nx,1\n")
+    with pytest.raises(SystemExit) as exc:
+        study.main(["--merge", str(tmp_path / "bad"), "--out", str(tmp_path / "t")])
+    assert exc.value.code == 2
 
 
 def test_a_constant_term_does_not_match_a_speed_dependent_truth():

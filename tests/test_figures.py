@@ -79,8 +79,10 @@ def test_diagnose_writes_figures_in_the_format_asked(tmp_path):
     assert main(["diagnose", str(res), "--config", str(ROOT / "tests" / "configs" / "m0_noise_small.toml"),
                  "--out", str(out), "--no-residuals", "--figure-format", "svg"]) == 0
     svgs = sorted(p.name for p in out.glob("*.svg"))
-    assert svgs == ["diagnosis_coherence.svg", "diagnosis_spectra.svg", "diagnosis_time.svg", "diagnosis_trim.svg"]
+    assert svgs == ["diagnosis_coherence.svg", "diagnosis_spectra.svg", "diagnosis_time.svg", "diagnosis_trim.svg",
+                    "diagnosis_trim_forces.svg"]
     assert not list(out.glob("*.png"))
     assert (out / "diagnosis_trim.svg").read_text().lstrip().startswith("<?xml")
     assert "(diagnosis_trim.svg)" in (out / "diagnosis.md").read_text()
+    assert "(diagnosis_trim_forces.svg)" in (out / "diagnosis.md").read_text()
     assert main(["diagnose", str(res), "--out", str(out), "--figure-format", "gif"]) == 2

@@ -109,9 +109,11 @@ def _data_rate_hz(cfg) -> tuple[float, str]:
 @_results_folder(lambda a: a.out or a.results_dir)
 def cmd_diagnose(args) -> int:
 
-    from ..diagnosis.analysis import diagnose
     from ..config import load_result_config
+    from ..dataset import load_flight_test
+    from ..diagnosis.analysis import diagnose
     from ..diagnosis.residuals import compute_residuals
+    from ..diagnosis.trim_forces import implied_forces
     from ..pareto.result import IdentificationResult
     from ..report.diagnosis import write_diagnosis_report
 
@@ -140,10 +142,16 @@ def cmd_diagnose(args) -> int:
         r.save(out / f"residuals_{args.point}")
     d = diagnose(r, alpha=args.alpha, test_rate_hz=args.test_rate_hz, seed=args.seed)
     d.save(out / "diagnosis.json")
+    ft = load_flight_test(cfg.dataset)
+    forces = implied_forces(cfg.model.with_parameters(**parameters) if parameters else cfg.model, ft.trims,
+                            ft.conventions, label=label)
+    forces.save(out)
     cmd = "pyomo-heli diagnose " + " ".join(sys.argv[1:][1:]) if sys.argv[1:2] == ["diagnose"] else None
-    write_diagnosis_report(out, r, d, results_dir=args.results_dir, command=cmd, figure_format=args.figure_format)
+    write_diagnosis_report(out, r, d, results_dir=args.results_dir, command=cmd, figure_format=args.figure_format,
+                           forces=forces)
     print(d)
-    print(f"wrote {out / 'diagnosis.json'}, {out / 'diagnosis.md'} and figures")
+    print(forces.summary().to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+    print(f"wrote {out / 'diagnosis.json'}, {out / 'diagnosis.md'}, {out / 'implied_forces.csv'} and figures")
     return 0
 
 

@@ -22,8 +22,10 @@ from matplotlib.figure import Figure
 from ..diagnosis.analysis import Diagnosis, summary_rows
 from ..diagnosis.residuals import DISPLAY, Residuals
 from ..diagnosis.timeseries import DYN_BAND, clean_time_residuals
+from ..diagnosis.trim_forces import ImpliedForces
 from ..diagnosis.trim_shape import ShapeTest, shape_curve
 from ..units import DEG, KT
+from . import plots
 from .identification import markdown_table
 
 FIGURES = ("diagnosis_trim.png", "diagnosis_spectra.png", "diagnosis_coherence.png", "diagnosis_time.png")
@@ -192,9 +194,28 @@ def record_bias_shapes(record_biases: dict) -> list[str]:
     return L
 
 
+def implied_forces_section(forces: ImpliedForces | dict, figure: str) -> list[str]:
+    """The report section of the steady force and moment the trims ask for (one model, or label -> model)."""
+    many = forces if isinstance(forces, dict) else {forces.label: forces}
+    first = next(iter(many.values()))
+    L = ["## Steady force and moment the trims ask for", "",
+         "At each recorded trim point, the force and moment the model would need to balance at the recorded "
+         "controls and attitude (equation error at the trims; no library of effects): zero where the model "
+         "trims as recorded. Standard errors from the trim channels' noise "
+         f"({first.sigma_source}: " + ", ".join(f"{c} {math.degrees(v):.3g} deg" for c, v in first.sigma.items())
+         + "); `pyomo_heli/diagnosis/trim_forces.py`, docs/diagnosis.md. chi2 = sum (value / SE)^2 over the "
+         "points; the identified parameters were fitted to the same trims, so its p is a pointer.", "",
+         f"![steady force and moment the trims ask for]({figure})", ""]
+    for lab, f in many.items():
+        L += [f"{lab}:", "", markdown_table(f.summary(), digits=4), ""]
+    return L
+
+
 def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir=None, command: str | None = None,
-                           figure_format: str = "png") -> Path:
-    """Write the figures and ``diagnosis.md`` into ``out_dir``; return the path of ``diagnosis.md``."""
+                           figure_format: str = "png", forces: ImpliedForces | None = None) -> Path:
+    """Write the figures and ``diagnosis.md`` into ``out_dir``; return the path of ``diagnosis.md``. ``forces``: the
+    steady force and moment the trims ask for (:func:`~pyomo_heli.diagnosis.trim_forces.implied_forces`), shown
+    when given."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     figs = {f"diagnosis_trim.{figure_format}": plot_trim_residuals(res, diag),
@@ -234,6 +255,11 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
         L += ["Shapes fitted by least squares; p-values of F against noise only (Monte Carlo); shape chosen by BIC "
               "when any p < alpha / shapes tested; n/a: shape not tested (absorbed by the parameter shift, "
               "see docs/diagnosis.md).", "", markdown_table(pd.DataFrame(trows), digits=3), ""]
+
+    if forces is not None and len(forces.table):
+        fig = plots.plot_implied_forces({forces.label: forces.table})
+        fig.savefig(out / f"diagnosis_trim_forces.{figure_format}", dpi=90)
+        L += implied_forces_section(forces, f"diagnosis_trim_forces.{figure_format}")
 
     w = pd.DataFrame(diag.whiteness)
     L += ["## Time-series residuals", ""]

@@ -28,7 +28,8 @@ from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
 from ..diagnosis.discovery import describe_fit
-from .diagnosis import record_bias_shapes
+from ..diagnosis.trim_forces import implied_forces
+from .diagnosis import implied_forces_section, record_bias_shapes
 from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
                              read_truth, truth_model_errors, truth_prediction, validation_rms)
 
@@ -275,6 +276,12 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
               "", markdown_table(validation_change_by_speed(first, last, val_mans), digits=3), ""]
     L += [f"![Trim vs speed before and after](loop_trim_vs_speed.{figure_format})", ""]
     L += discovery_summary(doc, cfg, out)
+    shown = [its[0]] + ([kept] if kept is not its[0] else [])
+    forces = {label(it): implied_forces(iteration_model(cfg.model, it).with_parameters(**it["parameters"]), trims,
+                                        ft.conventions, label=label(it)) for it in shown}
+    _save(plots.plot_implied_forces({k: f.table for k, f in forces.items()}),
+          out / f"loop_trim_forces.{figure_format}")
+    L += implied_forces_section(forces, f"loop_trim_forces.{figure_format}")
     if val_mans:
         L += [f"![Validation before and after](loop_validation.{figure_format})", ""]
     truth = read_truth(cfg.dataset)

@@ -179,6 +179,40 @@ def plot_trim_vs_speed(trims: pd.DataFrame, curves: Mapping[str, pd.DataFrame],
     return fig
 
 
+def plot_implied_forces(tables: Mapping[str, pd.DataFrame], title: str | None = None) -> Figure:
+    """The steady force and moment each model lacks at the recorded trims, against airspeed, +- 2 standard errors
+    (:func:`pyomo_heli.diagnosis.trim_forces.implied_forces`).
+
+    ``tables``: model label -> its table (columns ``V [kt]``, ``dX [N]``, ``dZ [N]``, ``dM [N m]``, ``se ...``;
+    optional ``source``: ``"level"`` or the maneuver whose start trim the point is, drawn hollow). Zero: the
+    model balances at the recorded controls and attitude.
+    """
+    forces = (("dX [N]", "$\\Delta X$ [N] (forward)"), ("dZ [N]", "$\\Delta Z$ [N] (down)"),
+              ("dM [N m]", "$\\Delta M$ [N m] (nose-up)"))
+    fig = Figure(figsize=(7.5, 8.6), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
+    st = _styles(list(tables), None)
+    n = max(len(tables), 1)
+    for j, (lab, t) in enumerate(tables.items()):
+        level = (t["source"].astype(str) == "level") if "source" in t else pd.Series(True, index=t.index)
+        dv = (j - (n - 1) / 2) * 0.8  # side by side at one speed
+        for ax, (col, _) in zip(axes, forces):
+            for mask, face in ((level, st[lab]["color"]), (~level, "none")):
+                if mask.any():
+                    ax.errorbar(t.loc[mask, "V [kt]"] + dv, t.loc[mask, col], yerr=2 * t.loc[mask, f"se {col}"],
+                                fmt="o" if face != "none" else "s", color=st[lab]["color"], markerfacecolor=face,
+                                markersize=4, capsize=2, linewidth=0.9,
+                                label=lab + ("" if face != "none" else " (maneuver start trims)"))
+    for ax, (_, name) in zip(axes, forces):
+        ax.axhline(0.0, color="black", linewidth=0.6)
+        ax.set_ylabel(name)
+        ax.grid(True, alpha=0.3)
+    axes[-1].set_xlabel("airspeed [kt]")
+    axes[0].legend(fontsize=8, loc="best")
+    fig.suptitle(title or "Steady force and moment the trims ask for (+- 2 SE)")
+    return fig
+
+
 # ---------------------------------------------------------------- Fig. 6
 def _ylim(data_vals: list, model_vals: list):
     """Y limits showing the data and the models, but not letting a diverging model flatten the data."""

@@ -86,7 +86,7 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("case2_tri", ("pyomo-heli identify studies/case2_tri.toml --out {out}/case2_tri --restart",), TRI_FILES,
           minutes=15),
     Entry("close_loop", ("pyomo-heli close-loop studies/close_loop.toml --out {out}/close_loop --restart",),
-          LOOP_FILES + ("loop_trim_vs_speed.png",), minutes=9),
+          LOOP_FILES + ("loop_trim_vs_speed.png", "loop_trim_forces.png"), minutes=9),
     Entry("close_loop_eiv", ("pyomo-heli close-loop studies/close_loop_eiv.toml --out {out}/close_loop_eiv "
                              "--restart",), LOOP_FILES, minutes=9),
     Entry("close_loop_seeds", (f"python studies/close_loop_seeds.py --seeds {SEEDS} --existing {{out}}/close_loop "

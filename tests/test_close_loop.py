@@ -62,6 +62,13 @@ def test_m0_with_noise_accepts_nothing_with_input_errors(tmp_path, seed):
     verdict = residual_verdict(cfg, IdentificationResult.load(tmp_path / "out").chosen["parameters"], print)
     assert verdict["verdict"]["white_identification"] and verdict["verdict"]["white_validation"], verdict["findings"]
     assert any("innovations of" in f for f in verdict["findings"])
+    # the steady force and moment the trims ask for, beyond a shift of the identified parameters: recorded, and on
+    # noise alone none is beyond the noise
+    tf = verdict["trim_forces"]
+    assert [r["force"] for r in tf["summary"]] == ["dX [N]", "dZ [N]", "dM [N m]"]
+    assert list(tf["shift"]) == ["theta_twist", "CL_alpha_HT"]
+    assert all(r["points"] == 13 and r["p beyond"] > 0.01 for r in tf["summary"]), tf["summary"]
+    assert not any(f.startswith("the trims ask") for f in verdict["findings"])
 
 
 def test_rigging_only_leads_to_rigging(tmp_path):

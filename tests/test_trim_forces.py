@@ -8,6 +8,8 @@ The standard errors are checked against a seeded Monte Carlo of the trim noise.
 from __future__ import annotations
 
 import math
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -110,3 +112,37 @@ def test_a_trim_table_without_a_channel_is_a_one_line_error():
     with pytest.raises(ValueError, match="trims: no column lon"):
         implied_forces(HelicopterModel(), pd.DataFrame({"V": [10.0], "gamma_fp": [0.0], "col": [0.1],
                                                         "theta": [0.05]}))
+
+
+def test_findings_name_the_force_beyond_the_noise(download):
+    truth, expected = download
+    got = implied_forces(HelicopterModel(), recorded_trims(truth, speeds=np.arange(0.0, 121.0, 10.0) * KT),
+                         sigma=SIGMA, label="M0")
+    rows = {r["force"]: r for r in got.summary().to_dict("records")}
+    # the download's dZ (667 N at hover, SE 179 N) is beyond the noise at 0.01, its dM (534 N m, SE 197) is not
+    assert rows["dZ [N]"]["p"] < 0.01 < rows["dM [N m]"]["p"]
+    assert rows["dZ [N]"]["largest"] == pytest.approx(expected[0, 1], rel=1e-6)
+    assert got.findings() == [f"the trims ask M0 for a steady dZ of up to {expected[0, 1]:+.3g} N at 0 kt (chi2 "
+                              f"{rows['dZ [N]']['chi2']:.3g} on 13 trim points, p = {rows['dZ [N]']['p']:.2g}; "
+                              "equation error at the trims, no library)"]
+
+
+def test_a_shift_of_the_identified_parameters_is_taken_out():
+    # trims of M0, a model with twist and tail lift slope far off (a time-domain anchor can sit there): what the
+    # trims ask it for is far beyond the noise, and all of it is a shift of those two parameters
+    m0 = HelicopterModel()
+    trims = recorded_trims(m0, speeds=np.arange(0.0, 121.0, 10.0) * KT)
+    off = m0.with_parameters(theta_twist=m0.parameters["theta_twist"] * 2.0,
+                             CL_alpha_HT=m0.parameters["CL_alpha_HT"] * 1.5)
+    got = implied_forces(off, trims, sigma=SIGMA, free=("theta_twist", "CL_alpha_HT", "Iyy"))
+    s = got.summary().set_index("force")
+    assert s.loc["dZ [N]", "chi2"] > 300.0 and s.loc["dM [N m]", "chi2"] > 300.0
+    assert (s["chi2 beyond parameters"] < 0.01 * s["chi2"]).all()
+    # Iyy does not act on a trim and is not counted; both others move dZ and dM
+    assert s.loc["dZ [N]", "df beyond"] == s.loc["dM [N m]", "df beyond"] == 13 - 2
+    assert got.findings() == []
+    raw = implied_forces(off, trims, sigma=SIGMA).findings()  # without the parameters: both named
+    assert [f.split(" of up to")[0] for f in raw] == ["the trims ask model for a steady dZ",
+                                                      "the trims ask model for a steady dM"]
+    back = ImpliedForces.load(got.save(Path(tempfile.mkdtemp())))
+    pd.testing.assert_frame_equal(back.summary(), got.summary())

@@ -143,8 +143,9 @@ def cmd_diagnose(args) -> int:
     d = diagnose(r, alpha=args.alpha, test_rate_hz=args.test_rate_hz, seed=args.seed)
     d.save(out / "diagnosis.json")
     ft = load_flight_test(cfg.dataset)
-    forces = implied_forces(cfg.model.with_parameters(**parameters) if parameters else cfg.model, ft.trims,
-                            ft.conventions, label=label)
+    model = cfg.model.with_parameters(**parameters) if parameters else cfg.model
+    forces = implied_forces(model, ft.trims, ft.conventions, label=label,
+                            free=[n for n in parameters if n in model.parameters])
     forces.save(out)
     cmd = "pyomo-heli diagnose " + " ".join(sys.argv[1:][1:]) if sys.argv[1:2] == ["diagnose"] else None
     write_diagnosis_report(out, r, d, results_dir=args.results_dir, command=cmd, figure_format=args.figure_format,

@@ -36,7 +36,7 @@ from ..channels import TRIM_CHANNELS
 from ..dataset.schema import TrimConventions
 from ..physics.conventions import THETA_DATUM
 from ..physics.model import STATES, HelicopterModel
-from ..simulation.recorded_trims import predict
+from ..simulation.recorded_trims import JAC_STEP, predict
 from ..simulation.trim import TrimError, hover_guess
 from ..units import KT
 
@@ -109,6 +109,8 @@ class ImpliedForces:
     sigma_source: str
     label: str = "model"
     problems: list = field(default_factory=list)
+    #: identified parameter -> d(dX, dZ, dM)/d(parameter) at each point of ``table`` (points x 3, SI)
+    shift: dict = field(default_factory=dict)
 
     def to_frame(self) -> pd.DataFrame:
         return self.table.copy()
@@ -120,19 +122,49 @@ class ImpliedForces:
 
     def summary(self) -> pd.DataFrame:
         """Per force: chi2 = sum (value / se)^2 over the trim points, its degrees of freedom (the points) and p,
-        the largest value and the speed it is at. The identified parameters were fitted to the same trims, so p
-        is a pointer, not a test at its level."""
+        the largest value and the speed it is at; with identified parameters (``shift``) also ``chi2 beyond
+        parameters``: the same after the weighted least-squares fit of a shift of those parameters is taken out
+        (df: points minus the shift's rank), as the trim-shape test does (docs/diagnosis.md). The parameters were
+        fitted to the same trims: read p as a pointer."""
         rows = []
-        for k, unit in FORCES.items():
+        for i, (k, unit) in enumerate(FORCES.items()):
             v, s = self.table[f"{k} [{unit}]"].to_numpy(float), self.table[f"se {k} [{unit}]"].to_numpy(float)
             ok = np.isfinite(v) & np.isfinite(s) & (s > 0)
             chi2 = float(np.sum((v[ok] / s[ok]) ** 2))
             j = int(np.nanargmax(np.abs(v))) if np.isfinite(v).any() else None
-            rows.append({"force": f"{k} [{unit}]", "points": int(ok.sum()), "chi2": chi2,
-                         "p": float(stats.chi2.sf(chi2, ok.sum())) if ok.any() else math.nan,
-                         "largest": float(v[j]) if j is not None else math.nan,
-                         "at V [kt]": float(self.table["V [kt]"].iloc[j]) if j is not None else math.nan})
+            row = {"force": f"{k} [{unit}]", "points": int(ok.sum()), "chi2": chi2,
+                   "p": float(stats.chi2.sf(chi2, ok.sum())) if ok.any() else math.nan,
+                   "largest": float(v[j]) if j is not None else math.nan,
+                   "at V [kt]": float(self.table["V [kt]"].iloc[j]) if j is not None else math.nan}
+            if self.shift:
+                D = np.column_stack([np.asarray(c, float)[:, i] for c in self.shift.values()])[ok] / s[ok, None]
+                y = v[ok] / s[ok]
+                rank = np.linalg.matrix_rank(D, tol=1e-9 * max(np.abs(D).max(), 1e-300)) if D.size else 0
+                r = y - D @ np.linalg.lstsq(D, y, rcond=None)[0] if rank else y
+                df = int(ok.sum()) - rank
+                row.update({"chi2 beyond parameters": float(r @ r), "df beyond": df,
+                            "p beyond": float(stats.chi2.sf(r @ r, df)) if df > 0 else math.nan})
+            rows.append(row)
         return pd.DataFrame(rows)
+
+    def findings(self, alpha: float = 0.01) -> list[str]:
+        """One sentence per force whose chi2 against zero has p < ``alpha``: its size, sign and where it peaks."""
+        out = []
+        for r in self.summary().to_dict("records"):
+            test = (f"chi2 {r['chi2']:.3g} on {r['points']} trim points, p = {r['p']:.2g}" if not self.shift else
+                    f"beyond a shift of {', '.join(self.shift)}: chi2 {r['chi2 beyond parameters']:.3g} on "
+                    f"{r['df beyond']} df, p = {r['p beyond']:.2g}")
+            p = r["p beyond"] if self.shift else r["p"]
+            if r["points"] and p < alpha:
+                out.append(f"the trims ask {self.label} for a steady {r['force'].split()[0]} of up to "
+                           f"{r['largest']:+.3g} {r['force'].split('[')[1].rstrip(']')} at {r['at V [kt]']:.0f} kt "
+                           f"({test}; equation error at the trims, no library)")
+        return out
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "sigma_rad": self.sigma, "sigma_source": self.sigma_source,
+                "summary": self.summary().to_dict("records"), "table": self.table.to_dict("records"),
+                "problems": self.problems, "shift": self.shift}
 
     def __str__(self) -> str:
         return (f"steady force and moment the trims ask {self.label} to add (noise: {self.sigma_source})\n"
@@ -145,7 +177,7 @@ class ImpliedForces:
         self.table.to_csv(folder / "implied_forces.csv", index=False)
         (folder / "implied_forces.json").write_text(json.dumps(
             {"label": self.label, "sigma_rad": self.sigma, "sigma_source": self.sigma_source,
-             "problems": self.problems}, indent=2))
+             "problems": self.problems, "shift": self.shift}, indent=1))
         return folder
 
     @classmethod
@@ -153,15 +185,17 @@ class ImpliedForces:
         folder = Path(folder)
         meta = json.loads((folder / "implied_forces.json").read_text())
         table = pd.read_csv(folder / "implied_forces.csv", keep_default_na=False, na_values=[""])
-        return cls(table, meta["sigma_rad"], meta["sigma_source"], meta["label"], meta.get("problems", []))
+        return cls(table, meta["sigma_rad"], meta["sigma_source"], meta["label"], meta.get("problems", []),
+                   meta.get("shift", {}))
 
 
 def implied_forces(model: HelicopterModel, trims: pd.DataFrame, conventions: TrimConventions | None = None,
-                   sigma: dict | None = None, label: str = "model") -> ImpliedForces:
+                   sigma: dict | None = None, label: str = "model", free=()) -> ImpliedForces:
     """The steady force and moment ``model`` lacks at each recorded trim point of ``trims`` (a flight test's trim
     table: ``V`` [m/s], ``gamma_fp``, ``col``, ``lon``, ``theta`` [rad]; rows without all three channels are left
     out) as :class:`ImpliedForces`. ``conventions``: the flight test's (default: the format's); ``sigma``: the
-    recorded channels' noise {col, lon, theta} [rad] (default: from the model's trim residual, module docstring)."""
+    recorded channels' noise {col, lon, theta} [rad] (default: from the model's trim residual, module docstring);
+    ``free``: the identified parameters, whose shift the summary takes out (:meth:`ImpliedForces.summary`)."""
     conventions = conventions or TrimConventions()
     missing = [c for c in ("V", "gamma_fp") + TRIM_CHANNELS if c not in trims]
     if missing:
@@ -170,6 +204,7 @@ def implied_forces(model: HelicopterModel, trims: pd.DataFrame, conventions: Tri
     pts = trims[trims[list(TRIM_CHANNELS)].notna().all(axis=1)].reset_index(drop=True)
     p = model.parameters
     rows, jac, problems, guess = [], [], [], None
+    shift = {n: [] for n in free}  # d(dX, dZ, dM)/d(parameter) at each point kept
     for _, r in pts.sort_values("V", kind="stable").iterrows():
         V, gam = float(r["V"]), float(r["gamma_fp"])
         rec = np.array([float(r[c]) for c in TRIM_CHANNELS])
@@ -182,12 +217,15 @@ def implied_forces(model: HelicopterModel, trims: pd.DataFrame, conventions: Tri
             F, guess = at(rec, guess)
             J = np.column_stack([(at(rec + STEP * d, guess)[0] - at(rec - STEP * d, guess)[0]) / (2 * STEP)
                                  for d in np.eye(3)])
+            D = {n: _parameter_column(model, n, V, gam, rec, conventions, guess) for n in free}
         except ValueError as exc:
             problems.append(str(exc))
             continue
         rows.append({"V [kt]": V / KT, "gamma_fp [deg]": math.degrees(gam), "source": r.get("source", ""),
                      **{f"{k} [{u}]": float(v) for (k, u), v in zip(FORCES.items(), F)}})
         jac.append(J)
+        for n in free:
+            shift[n].append(D[n].tolist())
     source = "given"
     if sigma is None:
         sigma, source = residual_sigma(model, pts, conventions), "the model's trim residual, neighbouring speeds"
@@ -199,7 +237,22 @@ def implied_forces(model: HelicopterModel, trims: pd.DataFrame, conventions: Tri
     cols = ["V [kt]", "gamma_fp [deg]", "source"] + [f"{k} [{u}]" for k, u in FORCES.items()] + \
         [f"se {k} [{u}]" for k, u in FORCES.items()]
     return ImpliedForces(pd.DataFrame(rows, columns=cols), {c: float(v) for c, v in zip(TRIM_CHANNELS, s)},
-                         source, label, problems)
+                         source, label, problems, shift)
+
+
+def _parameter_column(model: HelicopterModel, name: str, V: float, gam: float, rec, conventions, guess) -> np.ndarray:
+    """d(dX, dZ, dM)/d(parameter ``name``) at one recorded trim point (central difference; one-sided at a bound)."""
+    spec = model.parameters.spec(name)
+    v = model.parameters[name]
+    h = JAC_STEP * max(abs(v), spec.scale or 1.0)
+    lo, hi = spec.bounds or (-np.inf, np.inf)
+    a, b = max(v - h, lo), min(v + h, hi)
+    out = []
+    for x in (a, b):
+        m = model.with_parameters(**{name: x})
+        mt = model_trim(*rec, m.parameters, conventions)
+        out.append(forces_at(m, V, gam, mt["col"], mt["lon"], mt["theta"], guess)[0])
+    return (out[1] - out[0]) / (b - a)
 
 
 def residual_sigma(model: HelicopterModel, pts: pd.DataFrame, conventions: TrimConventions) -> dict:

@@ -204,7 +204,9 @@ def implied_forces_section(forces: ImpliedForces | dict, figure: str) -> list[st
          "trims as recorded. Standard errors from the trim channels' noise "
          f"({first.sigma_source}: " + ", ".join(f"{c} {math.degrees(v):.3g} deg" for c, v in first.sigma.items())
          + "); `pyomo_heli/diagnosis/trim_forces.py`, docs/diagnosis.md. chi2 = sum (value / SE)^2 over the "
-         "points; the identified parameters were fitted to the same trims, so its p is a pointer.", "",
+         "points; `beyond parameters`: after the least-squares fit of a shift of the identified parameters (what "
+         "the trade-off of the Pareto choice leaves without any missing physics). The parameters were fitted to "
+         "the same trims, so these p are pointers.", "",
          f"![steady force and moment the trims ask for]({figure})", ""]
     for lab, f in many.items():
         L += [f"{lab}:", "", markdown_table(f.summary(), digits=4), ""]

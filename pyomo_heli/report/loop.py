@@ -278,7 +278,7 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
     L += discovery_summary(doc, cfg, out)
     shown = [its[0]] + ([kept] if kept is not its[0] else [])
     forces = {label(it): implied_forces(iteration_model(cfg.model, it).with_parameters(**it["parameters"]), trims,
-                                        ft.conventions, label=label(it)) for it in shown}
+                                        ft.conventions, label=label(it), free=list(it["parameters"])) for it in shown}
     _save(plots.plot_implied_forces({k: f.table for k, f in forces.items()}),
           out / f"loop_trim_forces.{figure_format}")
     L += implied_forces_section(forces, f"loop_trim_forces.{figure_format}")

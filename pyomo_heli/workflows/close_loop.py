@@ -204,7 +204,21 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
         return {"status": f"failed: {exc}"}
     status = "noise only" if d.verdict.get("noise_only") else "unexplained residual"
     progress(f"residual diagnosis: {status}")
-    return {"status": status, "verdict": d.verdict, "findings": d.findings, "record_biases": d.record_biases}
+    out = {"status": status, "verdict": d.verdict, "findings": list(d.findings), "record_biases": d.record_biases}
+    try:  # what the missing effect looks like at the trims, with no library (a pointer; the status stands)
+        from ..dataset import load_flight_test
+        from ..diagnosis.trim_forces import implied_forces
+
+        ft = load_flight_test(cfg.dataset)
+        forces = implied_forces(cfg.model.with_parameters(**chosen), ft.trims, ft.conventions, label="the model",
+                                free=[p.name for p in cfg.free])
+        out["trim_forces"] = forces.to_dict()
+        out["findings"] += forces.findings()
+        for f in forces.findings():
+            progress(f"residual diagnosis: {f}")
+    except Exception as exc:  # noqa: BLE001 - as above
+        progress(f"steady forces the trims ask for: failed: {exc}")
+    return out
 
 
 def score_test_inputs(cfg: IdentificationConfig, settings: LoopSettings) -> dict:

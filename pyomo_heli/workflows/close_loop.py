@@ -451,7 +451,9 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             doc["stopped"] = _stop_message(doc, "every candidate of the library is in the model" + (
                 f" or was rejected ({', '.join(rejected)})" if rejected else ""))
         elif add is None:
-            doc["stopped"] = _stop_message(doc, f"nothing accepted ({decision}): {message}")
+            trims = [f for f in record["residual_diagnosis"].get("findings", []) if f.startswith("the trims ask")]
+            doc["stopped"] = _stop_message(doc, f"nothing accepted ({decision}): {message}"
+                                           + "".join(f"; {f}" for f in trims))
         elif i >= settings.max_iterations:
             doc["stopped"] = _stop_message(doc, f"iteration limit {settings.max_iterations} reached; {add} would be "
                                                 "added next")

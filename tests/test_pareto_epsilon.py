@@ -467,3 +467,26 @@ def test_a_solution_that_meets_the_bounds_is_the_start_and_no_row_minimum_is_nee
     for p in exact:
         q = next(q for q in grid if f"point {q.index} {q.grid}" == p.start)
         assert p.iterations <= 2 and p.parameters == pytest.approx(q.parameters, abs=1e-6)
+
+
+def test_where_one_objective_alone_has_a_range_its_anchor_is_the_direct_choice_without_a_solve():
+    """The full-size case behind it (fuselage_pitch_damping 24, M0 + dM_q): J_time's range on the front was solver
+    noise, so Eq. 11 weighed J_trim alone, and a direct solve could leave the front along J_time. With one objective
+    ranged, Eq. 11 is zero at that objective's own anchor: the direct choice is the anchor, not solved. Here f1
+    moves by 1e-9 of its size along the front (noise), f2 from 1.09 to 0: the choice is anchor B, (a, b) = (1, 0)."""
+    m = _model(lambda a, b: (5.0 + 1e-9 * a**2, (a - 1) ** 2 + b**2), names=("f1", "f2"))
+    settings = ParetoSettings(points=[4], solver_options={"tol": 1e-10, "constr_viol_tol": 1e-13}, max_iter=100)
+    ps = EpsilonConstraintSolver(m, ("f1", "f2"), settings)
+    ps.grid_front(settings.grid)
+    utopia, nadir = ps.utopia_nadir("payoff")
+    assert nadir[0] == utopia[0] and nadir[1] > utopia[1] + 1.0  # f1: noise; f2: ranged
+    calls = []
+    ps._direct_once = lambda u, n: calls.append(1)
+    try:
+        direct = ps.direct_choice(rule="payoff")
+    finally:
+        del ps._direct_once
+    assert calls == [] and direct.success and direct.kind == "direct" and direct.iterations == 0
+    assert "only J_f2 has a range" in direct.warm_start and "anchor B" in direct.warm_start
+    np.testing.assert_allclose([direct.parameters["a"], direct.parameters["b"]], [1.0, 0.0], atol=1e-5)
+    assert utopia_distance_n([[direct.J_f1, direct.J_f2]], utopia, nadir)[0] == pytest.approx(0.0, abs=1e-5)

@@ -628,6 +628,13 @@ class EpsilonConstraintSolver:
         start = start or self.eq11(rule)[0]
         if all(u == n for u, n in zip(utopia, nadir)):  # a one-point front: every point is the Eq. 11 minimiser
             return self.solve_point("direct", lambda: self._one_point_direct(start))
+        ranged = [k for k, u, n in zip(self.names, utopia, nadir) if u != n]
+        if len(ranged) == 1:  # Eq. 11 weighs one objective only: its own anchor is at utopia, distance 0
+            k = ranged[0]
+            anchor = self.anchor_points["A" if k == self.primary else ANCHOR_NAMES[1 + self.bounded.index(k)]]
+            if anchor.success:
+                return self.solve_point("direct", lambda: self._one_point_direct(anchor, ONE_RANGE.format(
+                    k=k, anchor=anchor.kind, others=", ".join(f"J_{n}" for n in self.names if n != k))))
         starts = self.direct_starts(start, rule)
         d_start = float(utopia_distance_n([[_get(start, k) for k in self.names]], utopia, nadir)[0])
         front = self.front_candidates()
@@ -654,14 +661,15 @@ class EpsilonConstraintSolver:
 
         return self.solve_point("direct", lambda: solve_from_starts(once, starts))
 
-    def _one_point_direct(self, start):
-        """The direct choice of a front whose every objective range is solver noise (:meth:`resolved_nadir`):
-        ``start`` itself, not solved again (Eq. 11 is zero on the whole front)."""
+    def _one_point_direct(self, start, why: str = ""):
+        """The direct choice where Eq. 11 needs no solve, ``start`` itself (``why``: the point's ``warm_start``):
+        a front whose every objective range is solver noise (:meth:`resolved_nadir`; Eq. 11 is zero on the whole
+        front), or one where a single objective has a range (its anchor: Eq. 11 is zero there)."""
         snap = self._snapshot_of(start)
         if snap is not None:
             snap.restore()
         return replace(start, index=self.direct_index, kind="direct", iterations=0, wall_time=0.0, setup_time=0.0,
-                       warm_start=ONE_POINT_FRONT)
+                       warm_start=why or ONE_POINT_FRONT)
 
     def _direct_once(self, utopia, nadir):
         """One solve of Eq. 11 squared from the model's current values."""
@@ -693,6 +701,10 @@ RANGE_RTOL = 1e-6
 #: the direct point's ``warm_start`` when the front is one point and nothing was solved
 ONE_POINT_FRONT = ("not solved: every objective's range on the front is solver noise (a one-point front), "
                    "so the post-hoc choice is the Eq. 11 minimiser")
+#: the direct point's ``warm_start`` when one objective alone has a range on the front and nothing was solved
+ONE_RANGE = ("not solved: only J_{k} has a range on the front beyond solver noise ({others}: nadir = utopia), so "
+             "Eq. 11 is J_{k}'s alone and its anchor {anchor}, at utopia, is the minimiser (a solve that weighs J_{k} "
+             "only can leave the front along the others)")
 
 #: a direct Eq. 11 solve whose distance exceeds its post-hoc start's by more than this (relative and absolute), or
 #: that a front point dominates by more than this (relative), counts as failed

@@ -73,7 +73,8 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("case2_project", ("pyomo-heli identify studies/case2_project.toml --out {out}/case2_project "
                             "--no-report --restart",), FRONT_FILES, minutes=1.5),
     Entry("case1_diagnosis", ("pyomo-heli diagnose {out}/case1 --out {out}/case1_diagnosis --no-residuals",),
-          ("diagnosis.md", "diagnosis.json", "diagnosis_trim.png"), needs=("case1",), minutes=1),
+          ("diagnosis.md", "diagnosis.json", "diagnosis_trim.png", "diagnosis_trim_forces.png", "implied_forces.csv"),
+          needs=("case1",), minutes=1),
     Entry("case2_diagnosis", ("pyomo-heli diagnose {out}/case2 --out {out}/case2_diagnosis --no-residuals",),
           ("diagnosis.md",), needs=("case2",), minutes=1),
     Entry("case2_uncertainty", ("pyomo-heli uncertainty studies/case2.toml --results {out}/case2 "

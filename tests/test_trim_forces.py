@@ -146,3 +146,16 @@ def test_a_shift_of_the_identified_parameters_is_taken_out():
                                                       "the trims ask model for a steady dM"]
     back = ImpliedForces.load(got.save(Path(tempfile.mkdtemp())))
     pd.testing.assert_frame_equal(back.summary(), got.summary())
+
+
+def test_a_climbing_trim_point_is_balanced_along_its_flight_path(download):
+    truth, _ = download
+    e = truth.extensions[0]
+    gam = math.radians(4.0)
+    tp = trim_sweep(truth, [40.0 * KT], gamma_fp=gam)[0]
+    expected = [float(np.asarray(f)) for f in e.extra_forces(truth.evaluate(tp.state(), tp.inputs()))]
+    trims = pd.DataFrame([{"V": tp.V, "gamma_fp": gam, "source": "climb",
+                           **recorded_trim(tp.col, tp.lon, tp.theta, truth.parameters, TrimConventions())}])
+    t = implied_forces(HelicopterModel(), trims, sigma=SIGMA).table
+    assert t["gamma_fp [deg]"].iloc[0] == pytest.approx(4.0)
+    assert [t["dX [N]"].iloc[0], t["dZ [N]"].iloc[0], t["dM [N m]"].iloc[0]] == pytest.approx(expected, abs=1e-6)

@@ -279,9 +279,10 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
     shown = [its[0]] + ([kept] if kept is not its[0] else [])
     forces = {label(it): implied_forces(iteration_model(cfg.model, it).with_parameters(**it["parameters"]), trims,
                                         ft.conventions, label=label(it), free=list(it["parameters"])) for it in shown}
-    _save(plots.plot_implied_forces({k: f.table for k, f in forces.items()}),
-          out / f"loop_trim_forces.{figure_format}")
-    L += implied_forces_section(forces, f"loop_trim_forces.{figure_format}")
+    if all(len(f.table) for f in forces.values()):  # trim points with all three channels recorded
+        _save(plots.plot_implied_forces({k: f.table for k, f in forces.items()}),
+              out / f"loop_trim_forces.{figure_format}")
+        L += implied_forces_section(forces, f"loop_trim_forces.{figure_format}")
     if val_mans:
         L += [f"![Validation before and after](loop_validation.{figure_format})", ""]
     truth = read_truth(cfg.dataset)

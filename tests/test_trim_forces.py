@@ -159,3 +159,12 @@ def test_a_climbing_trim_point_is_balanced_along_its_flight_path(download):
     t = implied_forces(HelicopterModel(), trims, sigma=SIGMA).table
     assert t["gamma_fp [deg]"].iloc[0] == pytest.approx(4.0)
     assert [t["dX [N]"].iloc[0], t["dZ [N]"].iloc[0], t["dM [N m]"].iloc[0]] == pytest.approx(expected, abs=1e-6)
+
+
+def test_trims_that_never_record_all_three_channels_give_an_empty_table_not_an_error():
+    # the Padfield flight trims record each channel at its own speeds: no point has all three
+    trims = pd.DataFrame({"V": [10.0, 20.0, 30.0], "gamma_fp": 0.0, "col": [0.2, np.nan, np.nan],
+                          "lon": [np.nan, 0.01, np.nan], "theta": [np.nan, np.nan, 0.05]})
+    got = implied_forces(HelicopterModel(), trims, sigma=SIGMA, free=("theta_twist",))
+    assert got.table.empty and got.findings() == []
+    assert (got.summary()["points"] == 0).all()

@@ -137,7 +137,8 @@ class ImpliedForces:
                    "largest": float(v[j]) if j is not None else math.nan,
                    "at V [kt]": float(self.table["V [kt]"].iloc[j]) if j is not None else math.nan}
             if self.shift:
-                D = np.column_stack([np.asarray(c, float)[:, i] for c in self.shift.values()])[ok] / s[ok, None]
+                D = np.column_stack([np.asarray(c, float).reshape(-1, 3)[:, i] for c in self.shift.values()])
+                D = D[ok] / s[ok, None]
                 y = v[ok] / s[ok]
                 rank = np.linalg.matrix_rank(D, tol=1e-9 * max(np.abs(D).max(), 1e-300)) if D.size else 0
                 r = y - D @ np.linalg.lstsq(D, y, rcond=None)[0] if rank else y

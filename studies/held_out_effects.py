@@ -548,12 +548,17 @@ def parse_term(text) -> dict | None:
     return {"name": m[1], "estimate": float(m[2]), "se": float(m[3])} if m else None
 
 
+#: columns the study writes as text although they can look like a number (iteration indices: "none", "1", "1, 2")
+TEXT_COLUMNS = ("direct solve failed",)
+
+
 def read_rows(path: Path) -> list[dict]:
     """The rows of a written ``held_out.csv`` as the study made them: a column that mixes numbers and "-" is read as
-    text, so its numbers go back to numbers (the md formats them); an empty cell stays empty."""
-    tab = pd.read_csv(path, keep_default_na=False)
-    return [{k: (float(v) if isinstance(v, str) and NUMBER.match(v) else v) for k, v in r.items()}
-            for r in tab.to_dict("records")]
+    text, so its numbers go back to numbers (the md formats them), except in :data:`TEXT_COLUMNS`; an empty cell
+    stays empty."""
+    tab = pd.read_csv(path, keep_default_na=False, dtype={c: str for c in TEXT_COLUMNS})
+    return [{k: (float(v) if isinstance(v, str) and NUMBER.match(v) and k not in TEXT_COLUMNS else v)
+             for k, v in r.items()} for r in tab.to_dict("records")]
 
 
 def merge(out: Path, sources: list[Path]) -> pd.DataFrame:

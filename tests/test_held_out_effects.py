@@ -382,7 +382,9 @@ def test_merging_a_rerun_row_replaces_that_row_alone(tmp_path):
     for name in ("held_out.csv", "held_out.md"):
         assert (tmp_path / "t" / name).read_bytes() == (committed / name).read_bytes()
     old = study.read_rows(committed / "held_out.csv")
-    rerun = {**old[5], "verdict": "ambiguous", "added (kept)": "-", "wrong acceptance": False, "new column": 1.5}
+    # the iterations whose direct solve failed are text ("none", "2", "1, 2"), not a number to format
+    rerun = {**old[5], "verdict": "ambiguous", "added (kept)": "-", "wrong acceptance": False, "new column": 1.5,
+             "direct solve failed": "2"}
     extra = {**old[0], "seed": 20261125, "verdict": "none"}
     (tmp_path / "r").mkdir()
     pd.DataFrame([rerun, extra]).to_csv(tmp_path / "r" / "held_out.csv", index=False)
@@ -393,6 +395,7 @@ def test_merging_a_rerun_row_replaces_that_row_alone(tmp_path):
     assert [r for i, r in enumerate(got) if i not in (3, 6)] == [{**r, "new column": ""} for i, r in enumerate(old)
                                                                  if i != 5]
     assert study.tallies(pd.DataFrame(got))["wrong"] == 0
+    assert got[6]["direct solve failed"] == "2" and "| 2 |" in (tmp_path / "t" / "held_out.md").read_text()
     with pytest.raises(SystemExit) as exc:
         study.main(["--merge", str(tmp_path / "nothing"), "--out", str(tmp_path / "t")])
     assert exc.value.code == 2

@@ -18,7 +18,7 @@ import pytest
 from pyomo_heli.dataset.schema import TrimConventions
 from pyomo_heli.diagnosis.trim_forces import ImpliedForces, implied_forces, neighbour_sigma
 from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS
-from pyomo_heli.physics.conventions import recorded_trim
+from pyomo_heli.physics.conventions import model_trim, recorded_trim
 from pyomo_heli.physics.model import HelicopterModel
 from pyomo_heli.physics.parameters import DEG
 from pyomo_heli.simulation.trim import trim_sweep
@@ -168,3 +168,11 @@ def test_trims_that_never_record_all_three_channels_give_an_empty_table_not_an_e
     got = implied_forces(HelicopterModel(), trims, sigma=SIGMA, free=("theta_twist",))
     assert got.table.empty and got.findings() == []
     assert (got.summary()["points"] == 0).all()
+
+
+def test_model_trim_inverts_recorded_trim():
+    p = HelicopterModel().parameters
+    c = TrimConventions(collective_station=0.0, lon_sign=-1, theta_datum=2 * DEG)
+    rec = recorded_trim(0.15, 0.02, 0.05, p, c)
+    back = model_trim(rec["col"], rec["lon"], rec["theta"], p, c)
+    assert [back["col"], back["lon"], back["theta"]] == pytest.approx([0.15, 0.02, 0.05], abs=1e-15)

@@ -6,8 +6,8 @@ moment that would cancel it are what the trims ask the model to add, in N and N 
 effects: what SIDPAC calls equation error, here at the trims.
 
 At a trim point (speed V, flight-path angle gamma_fp; recorded col, lon, theta taken to the model's conventions,
-:func:`model_trim`): u = V cos(theta - gamma_fp), w = V sin(theta - gamma_fp), q = 0, the inflow lambda_i and any
-extension state at rest (solved), and
+:func:`pyomo_heli.physics.conventions.model_trim`): u = V cos(theta - gamma_fp), w = V sin(theta - gamma_fp),
+q = 0, the inflow lambda_i and any extension state at rest (solved), and
 
     dX = -m du/dt,   dZ = -m dw/dt,   dM = -Iyy dq/dt                   [N, N, N m]
 
@@ -34,9 +34,9 @@ from scipy.optimize import root
 
 from ..channels import TRIM_CHANNELS
 from ..dataset.schema import TrimConventions
-from ..physics.conventions import THETA_DATUM
+from ..physics.conventions import model_trim
 from ..physics.model import STATES, HelicopterModel
-from ..simulation.recorded_trims import JAC_STEP, predict
+from ..simulation.recorded_trims import parameter_step, predict
 from ..simulation.trim import TrimError, hover_guess
 from ..units import KT
 
@@ -44,20 +44,6 @@ from ..units import KT
 FORCES = {"dX": "N", "dZ": "N", "dM": "N m"}
 #: central-difference step of the Jacobian with respect to the recorded channels [rad]
 STEP = 1e-5
-
-
-def model_trim(col: float, lon: float, theta: float, p, conventions: TrimConventions) -> dict:
-    """The inverse of :func:`pyomo_heli.physics.conventions.recorded_trim`: recorded col, lon, theta [rad] taken to
-    the model's (col at r_ref, lon = theta_1s positive aft, body-axis theta)."""
-    c = conventions
-    if c.collective_station is not None:
-        col = col - (c.collective_station - p["r_ref"]) * p["theta_twist"] * p["R"]
-    lon = c.lon_sign * lon  # lon_sign is +1 or -1: its own inverse
-    if THETA_DATUM in p:
-        theta = theta - p[THETA_DATUM]
-    elif c.theta_datum:
-        theta = theta - c.theta_datum
-    return {"col": col, "lon": lon, "theta": theta}
 
 
 def forces_at(model: HelicopterModel, V: float, gamma_fp: float, col: float, lon: float, theta: float,
@@ -243,11 +229,7 @@ def implied_forces(model: HelicopterModel, trims: pd.DataFrame, conventions: Tri
 
 def _parameter_column(model: HelicopterModel, name: str, V: float, gam: float, rec, conventions, guess) -> np.ndarray:
     """d(dX, dZ, dM)/d(parameter ``name``) at one recorded trim point (central difference; one-sided at a bound)."""
-    spec = model.parameters.spec(name)
-    v = model.parameters[name]
-    h = JAC_STEP * max(abs(v), spec.scale or 1.0)
-    lo, hi = spec.bounds or (-np.inf, np.inf)
-    a, b = max(v - h, lo), min(v + h, hi)
+    a, b = parameter_step(model, name)
     out = []
     for x in (a, b):
         m = model.with_parameters(**{name: x})

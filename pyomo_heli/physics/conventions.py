@@ -60,3 +60,17 @@ def recorded_trim(col, lon, theta, p, conventions) -> dict:
     elif c.theta_datum:
         theta = theta + c.theta_datum
     return {"col": col, "lon": lon, "theta": theta}
+
+
+def model_trim(col, lon, theta, p, conventions) -> dict:
+    """The inverse of :func:`recorded_trim`: recorded col, lon, theta [rad] taken to the model's (col at r_ref,
+    lon = theta_1s positive aft, body-axis theta)."""
+    c = conventions
+    if c.collective_station is not None:
+        col = col - (c.collective_station - p["r_ref"]) * p["theta_twist"] * p["R"]
+    lon = c.lon_sign * lon  # lon_sign is +1 or -1: its own inverse
+    if THETA_DATUM in p:
+        theta = theta - p[THETA_DATUM]
+    elif c.theta_datum:
+        theta = theta - c.theta_datum
+    return {"col": col, "lon": lon, "theta": theta}

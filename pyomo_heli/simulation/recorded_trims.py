@@ -24,19 +24,21 @@ def predict(model: HelicopterModel, conventions, V, channels) -> np.ndarray:
     return np.array([rec[v][c] for v, c in zip(V, channels)], dtype=float)
 
 
+def parameter_step(model: HelicopterModel, name: str) -> tuple[float, float]:
+    """The two values of parameter ``name`` a central difference takes: its value -+ :data:`JAC_STEP` x max(|value|,
+    scale), the value itself on a side that would cross a bound (one-sided there)."""
+    spec = model.parameters.spec(name)
+    v = model.parameters[name]
+    h = JAC_STEP * max(abs(v), spec.scale or 1.0)
+    lo, hi = spec.bounds or (-np.inf, np.inf)
+    return (v if v - h < lo else v - h), (v if v + h > hi else v + h)
+
+
 def jacobian(model: HelicopterModel, conventions, pts: pd.DataFrame, names) -> np.ndarray:
     """d(recorded trims)/d(parameter) [rad per SI unit], central differences of the float trims."""
     cols = []
     for n in names:
-        spec = model.parameters.spec(n)
-        v = model.parameters[n]
-        h = JAC_STEP * max(abs(v), spec.scale or 1.0)
-        lo, hi = spec.bounds or (-np.inf, np.inf)
-        a, b = (v - h, v + h)
-        if a < lo:
-            a = v
-        if b > hi:
-            b = v
+        a, b = parameter_step(model, n)
         ya = predict(model.with_parameters(**{n: a}), conventions, pts["V"], pts["channel"])
         yb = predict(model.with_parameters(**{n: b}), conventions, pts["V"], pts["channel"])
         cols.append((yb - ya) / (b - a))

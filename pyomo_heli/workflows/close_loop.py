@@ -212,9 +212,9 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
         ft = load_flight_test(cfg.dataset)
         forces = implied_forces(cfg.model.with_parameters(**chosen), ft.trims, ft.conventions, label="the model",
                                 free=[p.name for p in cfg.free])
-        out["trim_forces"] = forces.to_dict()
-        out["findings"] += forces.findings()
-        for f in forces.findings():
+        out["trim_forces"] = {**forces.to_dict(), "findings": forces.findings()}
+        out["findings"] += out["trim_forces"]["findings"]
+        for f in out["trim_forces"]["findings"]:
             progress(f"residual diagnosis: {f}")
     except Exception as exc:  # noqa: BLE001 - as above
         progress(f"steady forces the trims ask for: failed: {exc}")
@@ -451,7 +451,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             doc["stopped"] = _stop_message(doc, "every candidate of the library is in the model" + (
                 f" or was rejected ({', '.join(rejected)})" if rejected else ""))
         elif add is None:
-            trims = [f for f in record["residual_diagnosis"].get("findings", []) if f.startswith("the trims ask")]
+            trims = (record["residual_diagnosis"].get("trim_forces") or {}).get("findings", [])
             doc["stopped"] = _stop_message(doc, f"nothing accepted ({decision}): {message}"
                                            + "".join(f"; {f}" for f in trims))
         elif i >= settings.max_iterations:

@@ -418,7 +418,10 @@ def test_a_constant_term_does_not_match_a_speed_dependent_truth():
     assert study.shape_match("fuselage_download", {"name": "dM_bump00", "estimate": -0.009}).startswith("no (corr")
 
 
-@pytest.mark.parametrize("with_effect", [True, pytest.param(False, marks=pytest.mark.slow)])  # CI time
+# slow (50 s each; CI time): a study's evaluation, not the package's; the package's score of a term on the same kind
+# of small loop runs by default (tests/test_discovery.py)
+@pytest.mark.slow
+@pytest.mark.parametrize("with_effect", [True, False])
 def test_the_truth_forms_check_finds_the_held_out_effect_at_its_strength(tmp_path, with_effect):
     """studies/held_out_effects.truth_form_check on a finished small loop (iteration 0 only): the drag rise's own
     form, tested as the loop tests a library term, has p < 0.01 on a small flight test that holds it (at this size

@@ -334,27 +334,53 @@ def test_the_table_rescores_from_the_terms_it_reports(tmp_path, study):
 
 def test_the_summary_tallies_each_table_as_written(tmp_path):
     """--summary: one row per study folder with the counts its held_out.csv holds (read back as text, as
-    committed): two held-out rows, one wrong, one met with the truth's form significant; two noise rows, one
-    added something. A folder without a table is a one-line error naming the file (exit status 2)."""
+    committed): three held-out rows, one wrong, one met with the truth's form significant, one that achieves 60 % of
+    the truth model's trim cut (met with the cut measured above the noise floor); two noise rows, one added
+    something. A folder without a table is a one-line error naming the file (exit status 2)."""
     import pandas as pd
 
     study = _study()
-    rows = [{"truth": "drag_rise", "seed": 1, "wrong acceptance": True, "criterion met": False,
-             "truth form significant": False, "added (kept)": "cg_offset"},
-            {"truth": "drag_rise", "seed": 2, "wrong acceptance": False, "criterion met": True,
-             "truth form significant": True, "added (kept)": "dX_mu4"},
+    held = {"significant val rise (kept steps)": "none", "shape matches truth": "no",
+            "unexplained shape matches truth": "-"}
+    rows = [{**held, "truth": "drag_rise", "seed": 1, "wrong acceptance": True, "criterion met": False,
+             "truth form significant": False, "added (kept)": "cg_offset+dX_mu", "kept discovered term": "dX_mu",
+             "share of possible trim cut %": 80.0},
+            {**held, "truth": "drag_rise", "seed": 2, "wrong acceptance": False, "criterion met": True,
+             "truth form significant": True, "added (kept)": "dX_mu4", "kept discovered term": "dX_mu4",
+             "share of possible trim cut %": "-"},
+            {**held, "truth": "tail_stall", "seed": 1, "wrong acceptance": False, "criterion met": False,
+             "truth form significant": False, "added (kept)": "dM_q", "kept discovered term": "dM_q",
+             "share of possible trim cut %": 60.0},
             {"truth": "none", "seed": 1, "wrong acceptance": False, "criterion met": "", "truth form significant": "",
-             "added (kept)": "-"},
+             "added (kept)": "-", "kept discovered term": "-", "share of possible trim cut %": "-"},
             {"truth": "none", "seed": 2, "wrong acceptance": False, "criterion met": "", "truth form significant": "",
-             "added (kept)": "dM_q"}]
+             "added (kept)": "dM_q", "kept discovered term": "dM_q", "share of possible trim cut %": "-"}]
     (tmp_path / "a").mkdir()
     pd.DataFrame(rows).to_csv(tmp_path / "a" / "held_out.csv", index=False)
     assert study.main(["--summary", str(tmp_path / "a"), "--out", str(tmp_path / "s")]) == 0
     line = (tmp_path / "s" / "summary.md").read_text().splitlines()[2]
-    assert line == "| a | 1 | 2 | 1 | 1 | 1 | 1 | 2 | 0 | 1 |"
+    # three held-out rows (one wrong, one met; the third meets the reading above the noise floor alone), two effects
+    assert line == "| a | 2 | 3 | 1 | 1 | 1 | 1 | 2 | 2 | 0 | 1 |"
     with pytest.raises(SystemExit) as exc:
         study.main(["--summary", str(tmp_path / "nothing"), "--out", str(tmp_path / "s")])
     assert exc.value.code == 2
+
+
+def test_the_reading_above_the_noise_floor_needs_half_the_truth_models_cut_and_the_rest_of_the_criterion():
+    """criterion_met_above_floor: a kept discovered term that achieves >= 50 % of the trim cut the truth model makes
+    meets it; 49 % does not, nor a cut too small to share ("-"), a significant validation rise, a wrong acceptance or
+    no kept term; a row the issue's own reading meets stays met; M0 + noise is n/a."""
+    study = _study()
+    row = {"truth": "tail_stall", "seed": 1, "wrong acceptance": False, "criterion met": False,
+           "significant val rise (kept steps)": "none", "kept discovered term": "dM_q",
+           "share of possible trim cut %": 50.0}
+    assert study.criterion_met_above_floor(row) is True
+    for change in ({"share of possible trim cut %": 49.0}, {"share of possible trim cut %": "-"},
+                   {"significant val rise (kept steps)": "theta"}, {"wrong acceptance": True},
+                   {"kept discovered term": "-"}):
+        assert study.criterion_met_above_floor({**row, **change}) is False, change
+    assert study.criterion_met_above_floor({**row, "share of possible trim cut %": "-", "criterion met": True}) is True
+    assert study.criterion_met_above_floor({**row, "truth": "none"}) == "n/a"
 
 
 def test_the_committed_tallies_are_those_of_the_committed_tables():

@@ -296,7 +296,7 @@ def criterion_met_above_floor(row: dict) -> bool | str:
     holds the trims' noise that no model removes. Reported beside the issue's own reading, never in its place."""
     if row["truth"] == "none":
         return "n/a"
-    share = pd.to_numeric(pd.Series([row.get("share of possible trim cut %", "-")]), errors="coerce").iloc[0]
+    share = pd.to_numeric(row.get("share of possible trim cut %", "-"), errors="coerce")  # "-": NaN, not counted
     kept = row.get("kept discovered term", "-") != "-"
     literal = row["criterion met"] in (True, "True") if "criterion met" in row else criterion_met(row) is True
     return bool(literal

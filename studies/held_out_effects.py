@@ -273,7 +273,8 @@ def criterion_met(row: dict) -> bool | str:
     a discovered term kept that cuts the pooled trim RMS by >= 50 %, or an "unexplained" verdict whose reported shape
     matches the truth's. A kept discovered term is such a verdict (the loop reports it "not explained by any library
     effect; discovered ..."), as is the shape the loop reports when it stops unexplained, and the shape of an
-    output's record biases that the residual analysis of the kept model reports (:func:`record_bias_match`)."""
+    output's record biases that the residual analysis of the kept model reports (:func:`record_bias_match`), and the
+    input error it reports (:func:`input_path_match`)."""
     if row["truth"] == "none":
         return "n/a"
     kept = row.get("kept discovered term", "-") != "-"
@@ -281,7 +282,8 @@ def criterion_met(row: dict) -> bool | str:
                 and ((kept and float(row["trim change %"]) <= -50.0)
                      or (kept and row["shape matches truth"] == "yes")
                      or row["unexplained shape matches truth"] == "yes"
-                     or str(row.get("record bias shape matches truth", "-")).startswith("yes")))
+                     or str(row.get("record bias shape matches truth", "-")).startswith("yes")
+                     or str(row.get("input path shape matches truth", "-")).startswith("yes")))
 
 
 #: the second reading's trim cut: this share [%] of the cut the truth model makes (the part of the trim RMS above the
@@ -385,7 +387,8 @@ def truth_form_check(effect: str, loop: Path, config: Path = CONFIG) -> dict:
 
 
 #: the residual analysis a cached final verdict was made with (a new test in diagnosis/ invalidates the cache)
-RESIDUAL_ANALYSIS = "trim shape, whiteness, record biases (scaled by each record's innovation RMS)"
+RESIDUAL_ANALYSIS = ("trim shape, whiteness, record biases (scaled by each record's innovation RMS), input path "
+                     "(stepwise regression of the input errors, corrected for the input noise)")
 
 
 def final_residual(loop: Path) -> dict:
@@ -399,7 +402,7 @@ def final_residual(loop: Path) -> dict:
 
     doc = json.loads((loop / "loop.json").read_text())
     said = doc["iterations"][-1].get("residual_diagnosis") or {}
-    if "record_biases" in said:  # the loop ran with the current analysis
+    if "input_path" in said:  # the loop ran with the current analysis
         return {"analysis": RESIDUAL_ANALYSIS, **said}
     cache = loop.parent / "final_residual.json"
     if cache.is_file():
@@ -408,11 +411,13 @@ def final_residual(loop: Path) -> dict:
             return old
     rec = doc["iterations"][final_index(doc)]
     if not (loop / rec.get("results_dir", "-") / "chosen.json").is_file():  # nothing to analyse again
-        return {"analysis": "the loop's", "status": said.get("status", "-"), "record_biases": {}}
+        return {"analysis": "the loop's", "status": said.get("status", "-"),
+                "record_biases": said.get("record_biases") or {}, "input_path": {}}
     _, rec, cfg = loop_iteration(loop, rec["iteration"], doc["config"])
     v = residual_verdict(cfg, rec["parameters"], progress=lambda s: None)
     out = {"analysis": RESIDUAL_ANALYSIS, "status": v["status"], "findings": v.get("findings", []),
-           "record_biases": {o: t for o, t in (v.get("record_biases") or {}).items()}}
+           "record_biases": {o: t for o, t in (v.get("record_biases") or {}).items()},
+           "input_path": v.get("input_path") or {}}
     cache.write_text(json.dumps(out, indent=1))
     return out
 
@@ -461,6 +466,69 @@ def record_bias_match(effect: str, tests: dict) -> str:
     return "no (" + "; ".join(verdicts) + ")"
 
 
+@functools.lru_cache(maxsize=8)
+def truth_input_error(effect: str, setup: SignatureSetup) -> dict:
+    """What the rotor of the truth model sees minus the recorded input, per validation record and input channel
+    {maneuver: {"col": array, "lon": array}} [rad] (the truth model's replay at the M0 truth parameters, its
+    controls after the effect's ``adjust_controls``); zero for an effect that does not act on the control path."""
+    from pyomo_heli.physics.model import HelicopterModel
+
+    pred = truth_prediction(effect, setup)
+    model = HelicopterModel(extensions=(HELD_OUT_EFFECTS[effect](),)).with_parameters(
+        **setup.m0, **HELD_OUT_STRENGTHS[effect])
+    out = {}
+    for mv in setup.maneuvers:
+        df = pred.maneuvers[mv.name]
+        err = {"col": np.zeros(len(df)), "lon": np.zeros(len(df))}
+        for k, r in enumerate(df.itertuples(index=False)):
+            row = r._asdict()
+            ctx = model.evaluate({s: row[s] for s in model.state_names}, {"col": row["col"], "lon": row["lon"]})
+            err["col"][k], err["lon"][k] = float(ctx.col) - row["col"], float(ctx.lon) - row["lon"]
+        out[mv.name] = err
+    return out
+
+
+def input_path_history(terms: list, setup: SignatureSetup) -> dict:
+    """The input error the residual analysis reports, sum of estimate x signal (:mod:`pyomo_heli.diagnosis.input_path`),
+    along the validation records of M0 at the truth parameters {maneuver: {"col": array, "lon": array}} [rad]."""
+    out = {}
+    for mv in setup.maneuvers:
+        df, t = setup.base.maneuvers[mv.name], mv.data["t"].to_numpy(dtype=float)
+        inc = mv.increments()
+        sig = {"col": np.asarray(inc["col"], float), "lon": np.asarray(inc["lon"], float),
+               **{o: df[o].to_numpy(dtype=float) for o in ("q", "theta", "TAS")}}
+        sig["col_rate"], sig["lon_rate"] = np.gradient(sig["col"], t), np.gradient(sig["lon"], t)
+        h = {"col": np.zeros(len(t)), "lon": np.zeros(len(t))}
+        for term in terms:
+            h[term["channel"]] = h[term["channel"]] + term["estimate"] * sig[term["signal"]]
+        out[mv.name] = h
+    return out
+
+
+def input_path_match(effect: str, terms: list, setup: SignatureSetup | None = None) -> str:
+    """Does the input error the residual analysis reports match the truth's in shape? Along the validation records,
+    each record's mean taken out of both (a constant is a rigging offset, not this test's business), the channel where
+    the truth's error is largest: 'yes (channel, corr r)' when their correlation is > 0.7; 'no (...)' otherwise,
+    also for a truth that leaves the control path alone; '-' when nothing is reported."""
+    if effect == "none" or not terms:
+        return "n/a" if effect == "none" else "-"
+    setup = setup or signature_setup()
+    truth, rep = truth_input_error(effect, setup), input_path_history(list(terms), setup)
+
+    def pooled(d, c):
+        return np.concatenate([d[m][c] - d[m][c].mean() for m in d])
+
+    size = {c: float(np.std(pooled(truth, c))) for c in ("col", "lon")}
+    c = max(size, key=size.get)
+    if size[c] < 1e-9:
+        return "no (the truth does not act on the control path)"
+    a, b = pooled(truth, c), pooled(rep, c)
+    if not np.any(np.abs(b) > 0):
+        return f"no (nothing reported on {c}, where the truth acts)"
+    corr = float(np.corrcoef(a, b)[0, 1])
+    return f"yes ({c}, corr {corr:+.2f})" if corr > 0.7 else f"no ({c}, corr {corr:+.2f})"
+
+
 def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.diagnosis.discovery import best_fit
@@ -489,6 +557,9 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     row["record biases differ"] = (", ".join(f"{o} (chi2 {t['chi2']:.3g} on {t['df']})" for o, t in flagged.items())
                                    or "none")
     row["record bias shape matches truth"] = record_bias_match(effect, fr["record_biases"])
+    terms = (fr.get("input_path") or {}).get("terms") or []
+    row["input path"] = format_input_path(terms) if "input_path" in fr and fr["input_path"] else "-"
+    row["input path shape matches truth"] = input_path_match(effect, terms)
     # iterations that diagnosed the closest front point because the direct Eq. 11 solve failed from every start
     row["direct solve failed"] = ", ".join(str(j) for j, it in enumerate(its)
                                            if it.get("point") == DIRECT_FAILED) or "none"
@@ -563,6 +634,26 @@ TERM = re.compile(r"^(\S+): c = (\S+) \+- (\S+)$")
 NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
+INPUT_TERM = re.compile(r"^(col|lon) \+= (\S+) \+- (\S+)(?: \S+)? x (\S+)$")
+
+
+def format_input_path(terms: list) -> str:
+    """The input-path terms the residual analysis selected, as the table prints them ('none' when it selected none):
+    ``lon += +0.0528 +- 0.0024 x col; ...`` (estimate in rad per signal unit, SI)."""
+    return "; ".join(f"{t['channel']} += {t['estimate']:+.3g} +- {t['se']:.2g} x {t['signal']}"
+                     for t in terms) or "none"
+
+
+def parse_input_path(text) -> list:
+    """The terms of a table's "input path" cell (:func:`format_input_path`)."""
+    out = []
+    for part in str(text).split("; "):
+        m = INPUT_TERM.match(part.strip())
+        if m:
+            out.append({"channel": m[1], "estimate": float(m[2]), "se": float(m[3]), "signal": m[4]})
+    return out
+
+
 def parse_term(text) -> dict | None:
     """A table's ``name: c = X +- SE`` back to a fit (name, estimate, se); None for '-'."""
     m = TERM.match(str(text))
@@ -607,6 +698,8 @@ def rescore(out: Path) -> pd.DataFrame:
         r["kept discovered term"] = kept
         r["shape matches truth"] = match(r["truth"], described) if described else "-"
         r["unexplained shape matches truth"] = match(r["truth"], left) if left else "-"
+        if str(r.get("input path", "-")) not in ("-", "", "nan"):
+            r["input path shape matches truth"] = input_path_match(r["truth"], parse_input_path(r["input path"]))
         r["wrong acceptance"] = str(r["wrong acceptance"]) == "True"
         r["criterion met"] = criterion_met(r)
         rows.append(r)
@@ -847,6 +940,7 @@ def markdown(tab: pd.DataFrame) -> str:
                         "significant val rise (kept steps)", "val joint p (kept vs M0)", "unexplained verdict",
                         "unexplained shape",
                         "unexplained shape matches truth", "record biases differ", "record bias shape matches truth",
+                        "input path", "input path shape matches truth",
                         "direct solve failed", "wrong acceptance", "criterion met",
                         "truth form at M0", "truth form p", "truth form significant",
                         "theta_twist err0 %", "theta_twist err1 %", "CL_alpha_HT err0 %", "CL_alpha_HT err1 %",

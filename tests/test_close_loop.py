@@ -62,6 +62,8 @@ def test_m0_with_noise_accepts_nothing_with_input_errors(tmp_path, seed):
     verdict = residual_verdict(cfg, IdentificationResult.load(tmp_path / "out").chosen["parameters"], print)
     assert verdict["verdict"]["white_identification"] and verdict["verdict"]["white_validation"], verdict["findings"]
     assert any("innovations of" in f for f in verdict["findings"])
+    # no signal of the flight explains the input errors at the identified parameters (diagnosis/input_path.py)
+    assert verdict["verdict"]["input_path_consistent"], verdict["findings"]
     # the steady force and moment the trims ask for, beyond a shift of the identified parameters: recorded, and on
     # noise alone none is beyond the noise
     tf = verdict["trim_forces"]

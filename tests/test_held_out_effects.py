@@ -311,6 +311,33 @@ def test_a_time_signature_tells_the_truths_lag_from_another_channels(study):
     assert float(left.split()[2]) > 0.5 * float(s @ s) > 100 * study.SIGNATURE_LEFT_MAX
 
 
+def test_the_input_path_shape_is_scored_against_the_truths_own_control_error(study):
+    """A cross-feed of collective into the cyclic (control_mixing: the rotor sees lon + 0.05 (col - 0.17)): the
+    input error the residual analysis would report with the truth's gain follows the truth's along the validation
+    records (the truth's error taken from its own replay, its controls after the effect); the same gain on the pitch
+    rate does not; a truth that leaves the control path alone never matches. The table's text round-trips."""
+    import dataclasses
+
+    full = study.signature_setup()
+    mvs = tuple(dataclasses.replace(mv, data=mv.data[mv.data["t"] <= mv.data["t"].iloc[0] + 4.0])
+                for mv in full.maneuvers if mv.name in ("londoublet_80kt_val", "coldoublet_80kt_val"))
+    setup = study.SignatureSetup(mvs, full.m0, full.sigma, full.trim_sigma)
+    truth = study.truth_input_error("control_mixing", setup)
+    col = setup.base.maneuvers["coldoublet_80kt_val"]["col"].to_numpy()
+    assert np.allclose(truth["coldoublet_80kt_val"]["lon"], 0.05 * (col - 0.17), atol=1e-12)
+    assert not np.any(truth["coldoublet_80kt_val"]["col"])
+    cross = [{"channel": "lon", "signal": "col", "estimate": 0.05, "se": 0.002}]
+    assert study.input_path_match("control_mixing", cross, setup).startswith("yes (lon, corr +1.00")
+    assert study.input_path_match("control_mixing", [{**cross[0], "signal": "q"}], setup).startswith("no (lon")
+    assert study.input_path_match("drag_rise", cross, setup) == "no (the truth does not act on the control path)"
+    assert study.input_path_match("control_mixing", [], setup) == "-"
+    text = study.format_input_path(cross + [{"channel": "lon", "signal": "q", "estimate": -0.0155, "se": 0.0004}])
+    assert text == "lon += +0.05 +- 0.002 x col; lon += -0.0155 +- 0.0004 x q"
+    assert study.parse_input_path(text) == [{"channel": "lon", "estimate": 0.05, "se": 0.002, "signal": "col"},
+                                           {"channel": "lon", "estimate": -0.0155, "se": 0.0004, "signal": "q"}]
+    assert study.format_input_path([]) == "none" and study.parse_input_path("none") == []
+
+
 def test_the_table_rescores_from_the_terms_it_reports(tmp_path, study):
     """--rescore rebuilds the shape columns and the criterion from a table alone (its loops gone): a kept dX ~ mu^4
     against the drag-rise truth matches and meets the criterion with a trim cut short of 50 %."""

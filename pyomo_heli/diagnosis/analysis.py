@@ -13,7 +13,10 @@ of a parameter set and runs every test:
   inputs' noise gives them (:mod:`.innovations`);
 - with the innovations, the records' agreement on each output's bias: whiteness
   cannot see an error that is constant within a record and changes from record
-  to record (:mod:`.record_bias`).
+  to record (:mod:`.record_bias`);
+- with the innovations, whether the input errors follow a signal of the flight
+  (a control-path effect: stepwise regression on a generic dictionary,
+  :mod:`.input_path`).
 
 The result, :class:`Diagnosis`, is plain data: it saves to and loads from
 JSON, prints as readable tables and carries short findings in words. Figures
@@ -34,6 +37,7 @@ from ..units import DEG, KT
 from .residuals import DISPLAY, Residuals
 from .timeseries import (DYN_BAND, HIGH_BAND, TEST_RATE_HZ, clean_time_residuals, coherence_table,
                          correlation_table, spectra, whiteness_table, with_bound)
+from .input_path import InputPathTest
 from .record_bias import record_bias_tests
 from .trim_shape import ShapeTest, trim_shape_test
 
@@ -74,6 +78,7 @@ class Diagnosis:
     coherence_curves: dict = field(default_factory=dict)  # maneuver -> {"f": [...], "<in>:<out>": [...]}
     correlations: list = field(default_factory=list)
     record_biases: dict = field(default_factory=dict)  # output -> RecordBiasTest as dict
+    input_path: dict = field(default_factory=dict)  # InputPathTest as dict (with the innovations only)
     verdict: dict = field(default_factory=dict)
     findings: list = field(default_factory=list)
     problems: list = field(default_factory=list)
@@ -131,6 +136,9 @@ class Diagnosis:
         if len(rb):
             L += ["Record biases: do the records agree on each output's bias (chi-square across records, SI)?",
                   rb.to_string(index=False, float_format=lambda x: f"{x:.3g}"), ""]
+        if self.input_path:
+            L += ["Input path (stepwise regression of the input errors on the generic dictionary):",
+                  "  " + InputPathTest.from_dict(self.input_path).describe(), ""]
         for role, sp in self.spectra.items():
             br = ", ".join(f"{o} {v:.3g}" for o, v in sp.get("band_ratio", {}).items())
             L.append(f"Spectral band ratio ({role}; PSD {DYN_BAND[0]:g}-{DYN_BAND[1]:g} Hz / "
@@ -288,13 +296,23 @@ def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RAT
             verdict[f"white_{role}"] = bool(w["white"].astype(bool).all())
     if biases:
         verdict["record_biases_agree"] = all(t.consistent for t in biases.values())
+    path = InputPathTest.from_dict(res.info["innovations"]["input_path"]) \
+        if res.info.get("innovations", {}).get("input_path") else None
+    if path is not None:
+        d.input_path = path.to_dict()
+        verdict["input_path_consistent"] = path.consistent
+        if path.alpha != alpha:
+            d.problems.append(f"input path tested at alpha {path.alpha:g}, not {alpha:g}")
     verdict["noise_only"] = bool(all(t.shape == "noise" for t in shapes.values())
                                  and verdict.get("white_identification", True)
-                                 and verdict.get("record_biases_agree", True))
+                                 and verdict.get("record_biases_agree", True)
+                                 and verdict.get("input_path_consistent", True))
     d.verdict = verdict
-    d.findings = _findings(d, shapes, white, coh, corr) + [t.describe() for t in biases.values() if not t.consistent]
+    d.findings = (_findings(d, shapes, white, coh, corr) + [t.describe() for t in biases.values() if not t.consistent]
+                  + ([path.describe()] if path is not None and not path.consistent else []))
     d.findings.insert(0, "verdict: " + ("the residuals look like noise only (no trim shape, identification residuals "
-                                        "white" + (", record biases agree" if biases else "") + ")"
+                                        "white" + (", record biases agree" if biases else "")
+                                        + (", input errors white" if path is not None else "") + ")"
                                         if verdict["noise_only"] else
                                         "structure left in the residuals: something is missing from the model"))
     return d

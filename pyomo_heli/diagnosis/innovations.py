@@ -38,6 +38,7 @@ from ..nlp.objectives import noise_sigmas
 from ..physics.model import HelicopterModel
 from ..simulation.compiled import input_sensitivities
 from ..simulation.trim import trim_float
+from .input_path import input_path_test, parameter_columns, record_block, signals_of
 from .timeseries import decimation
 
 
@@ -67,7 +68,8 @@ def input_noise_factor(model: HelicopterModel, mv, outputs, input_errors, sigma:
 
 
 def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigma: dict, test_rate_hz: float,
-                         substeps: int = 2) -> tuple[pd.DataFrame, dict]:
+                         substeps: int = 2, path: list | None = None,
+                         nuisance_parameters=()) -> tuple[pd.DataFrame, dict]:
     """Innovations of one prepared maneuver at its test-rate samples (columns ``t`` and ``inn_<o>``), and the
     maneuver's output biases: ``{"bias_<o>": SI, "se_bias_<o>": SI}``, the generalised least-squares estimates
     of the nuisance with their standard errors under the same covariance, scaled by each output's innovation RMS in
@@ -75,6 +77,9 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
 
     ``sigma``: the noise sigma [SI] of every output and input channel. The sign follows
     :class:`~pyomo_heli.diagnosis.residuals.Residuals` (model - data); whiteness does not care.
+    ``path``: a list to which the record's rows for the input-path regression are appended
+    (:func:`.input_path.record_block`), with the output sensitivities to ``nuisance_parameters`` (the identified
+    parameters) among its nuisance.
     """
     t = mv.data["t"].to_numpy(dtype=float)
     n = len(t)
@@ -91,6 +96,10 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
         N[j::n_out, j] = 1.0
     for c in range(len(input_errors)):
         N[:, n_out + c] = Su[:, c * n:(c + 1) * n].sum(axis=1)
+    if path is not None:  # the input-path regression also allows a shift of the identified parameters
+        P = parameter_columns(model, mv, outputs, keep, nuisance_parameters, substeps)
+        path.append(record_block(-e, Su, np.column_stack([N, P]), L, signals_of(model, mv, y, input_errors, substeps),
+                                 input_errors, np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)))
     ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)
     coef, *_ = np.linalg.lstsq(Nw, ew, rcond=None)
     cov = np.linalg.pinv(Nw.T @ Nw)  # the estimates' covariance if the whitened rows have unit variance
@@ -105,7 +114,8 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
 
 
 def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_errors, noise_sigma: dict | None,
-                test_rate_hz: float, substeps: int = 2, problems: list | None = None) -> tuple[pd.DataFrame, dict]:
+                test_rate_hz: float, substeps: int = 2, problems: list | None = None,
+                parameters=()) -> tuple[pd.DataFrame, dict]:
     """Innovations of every maneuver: ``maneuvers`` is a list of (role, prepared maneuver).
 
     ``sigma_from``: the maneuvers whose lead-in gives the sigmas when ``noise_sigma`` is None (the
@@ -113,7 +123,9 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     ``noise_sigma`` table, or no noise in the lead-in) is left out and named in ``problems``; a maneuver
     whose computation fails likewise. Returns ``(table, settings)``: columns ``maneuver, role, t,
     inn_<o>``, and the channels and sigmas used, with ``record_biases``: per maneuver its role, trim speed and
-    output biases with their standard errors (:func:`maneuver_innovations`).
+    output biases with their standard errors (:func:`maneuver_innovations`), and ``input_path``: the stepwise
+    regression of the input errors on the generic dictionary (:mod:`.input_path`), a shift of ``parameters`` (the
+    identified ones) allowed.
     """
     problems = problems if problems is not None else []
     input_errors = list(input_errors)
@@ -127,10 +139,10 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
             outs.append(o)
         except ValueError as exc:
             problems.append(f"innovations: output {o} left out ({exc})")
-    frames, biases = [], []
+    frames, biases, path = [], [], []
     for role, mv in maneuvers:
         try:
-            df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps)
+            df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps, path, parameters)
         except Exception as exc:  # noqa: BLE001 - the raw residual tests stay available
             why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             problems.append(f"maneuver {mv.name}: innovations failed ({why})")
@@ -142,4 +154,6 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["maneuver", "role", "t"])
     settings = {"outputs": outs, "input_errors": input_errors, "test_rate_hz": float(test_rate_hz),
                 "sigma": {c: float(v) for c, v in sigma.items()}, "record_biases": biases}
+    if input_errors and path:
+        settings["input_path"] = input_path_test(path).to_dict()
     return table, settings

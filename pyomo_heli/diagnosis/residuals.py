@@ -252,7 +252,8 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
     identified parameters could still absorb. Costs two trim sweeps per parameter.
     With ``[objectives] input_errors`` or ``[diagnosis] input_noise`` the residuals' innovations at
     ``test_rate_hz`` are added (:mod:`pyomo_heli.diagnosis.innovations`; every maneuver at the
-    identification's sample rate).
+    identification's sample rate), with the input-path regression (:mod:`pyomo_heli.diagnosis.input_path`), which
+    allows a shift of the config's free parameters.
     """
     model = cfg.model.with_parameters(**parameters) if parameters else cfg.model
     ft = load_flight_test(cfg.dataset)
@@ -342,7 +343,8 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
     if noise.input_noise and inn_mans:
         try:
             inn, inn_info = innovations(model, inn_mans, id_mans or [mv for _, mv in inn_mans], outputs,
-                                        noise.input_noise, noise.noise_sigma, test_rate_hz, problems=problems)
+                                        noise.input_noise, noise.noise_sigma, test_rate_hz, problems=problems,
+                                        parameters=[p.name for p in cfg.free])
         except ValueError as exc:  # e.g. no input sigma: the raw residual tests stay
             problems.append(f"innovations not computed: {exc}")
     return Residuals(label=label, parameters={k: float(v) for k, v in (parameters or {}).items()}, time=time,

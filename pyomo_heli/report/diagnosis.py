@@ -281,6 +281,15 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
               "record under the innovations' covariance; chi-square of their spread, Bonferroni over the outputs; "
               "docs/diagnosis.md)?", "", markdown_table(diag.table("record_biases"), digits=3), ""]
         L += record_bias_shapes(diag.record_biases)
+    if diag.input_path:
+        ip = diag.input_path
+        rows = pd.DataFrame([{"": "selected", **t} for t in ip["terms"]]
+                            + [{"": "not selected", **t} for t in sorted(ip["screen"], key=lambda r: -abs(r["z"]))[:4]])
+        L += ["### Input path", "", "Do the input errors follow a signal of the flight (stepwise regression of each "
+              "input channel's error on the measured inputs, the model's q, theta, TAS and the inputs' rates, "
+              f"corrected for the input noise; level {ip['level']:.2g} per term; docs/diagnosis.md)? The error is what "
+              "the rotor sees minus the recorded input, estimate in rad per signal unit (SI):", "",
+              markdown_table(rows, digits=3), ""]
     if diag.spectra:
         L += ["### Spectra", "", f"![spectra](diagnosis_spectra.{figure_format})", "",
               "Band ratio = mean PSD in 0.1-2 Hz / mean PSD in 2-5 Hz (about 1 for white noise):", ""]

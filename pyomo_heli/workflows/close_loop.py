@@ -191,7 +191,8 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
     """When nothing is accepted: is the residual noise only, or an unexplained residual with a signature?
 
     Uses the residual analysis of :mod:`pyomo_heli.diagnosis.analysis` (trim shapes, whiteness,
-    coherence, the records' agreement on each output's bias) on the chosen parameters. A failure is reported,
+    coherence, the records' agreement on each output's bias, the input errors' regression on the flight's signals) on
+    the chosen parameters. A failure is reported,
     not raised (the loop's results stand).
     """
     try:
@@ -204,7 +205,8 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
         return {"status": f"failed: {exc}"}
     status = "noise only" if d.verdict.get("noise_only") else "unexplained residual"
     progress(f"residual diagnosis: {status}")
-    out = {"status": status, "verdict": d.verdict, "findings": list(d.findings), "record_biases": d.record_biases}
+    out = {"status": status, "verdict": d.verdict, "findings": list(d.findings), "record_biases": d.record_biases,
+           "input_path": d.input_path}
     try:  # what the missing effect looks like at the trims, with no library (a pointer; the status stands)
         from ..dataset import load_flight_test
         from ..diagnosis.trim_forces import implied_forces

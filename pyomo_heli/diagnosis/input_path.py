@@ -1,0 +1,260 @@
+"""What the measured inputs miss: the control-path equation error of the records, with no library of effects.
+
+A control-path effect (a cross-feed of collective into cyclic, a gearing error, an unrecorded feedback, a lag)
+makes the rotor see something other than the recorded control. When the identification estimates the input
+errors (``[objectives] input_errors``), their noise model is white; a control-path effect is an input error that
+follows a signal of the flight instead. The residual analysis asks which signal, by regression on a small generic
+dictionary, the input-path counterpart of estimation before modelling (Klein and Morelli, ch. 6):
+
+    input error of channel c  =  a * (s(t) - s_ref),     s in SIGNALS,
+
+each term's effect on the outputs taken to first order through the exact output sensitivities to every input
+sample (S_u, :func:`pyomo_heli.simulation.compiled.input_sensitivities`), in the whitened coordinates of the
+innovations (:mod:`.innovations`: covariance R + S_u Sigma_u S_u^T, rows at the test rate). The reference s_ref
+of a record is absorbed by its nuisance (a bias per output, a constant offset per input), so the regression sees
+only how the error changes within a record.
+
+Selection is forward with a backward check, as SIDPAC's stepwise regression: at each step the term with the
+largest |z| over the whole dictionary enters when its two-sided p is below ``alpha / (dictionary size)``
+(Bonferroni over the dictionary: the family-wise false-alarm rate on a right model is at most ``alpha`` per
+step); a term already in that is no longer below the level leaves. The residual variance is estimated from the
+whitened rows (F-type scale), so a noise level off by a constant factor does not make terms significant.
+
+The dictionary is generic: each input channel against the measured inputs, the model's pitch rate, attitude and
+airspeed (the replay's, not the measurements, whose noise is in the residual), and the inputs' rates. It names no
+effect; the held-out truth effects of the discovery study are never imported here.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy import stats
+
+#: the dictionary's signals: name -> (how it is taken, SI unit)
+SIGNALS = {
+    "col": ("measured collective (increment)", "rad"),
+    "lon": ("measured longitudinal cyclic (increment)", "rad"),
+    "q": ("model pitch rate", "rad/s"),
+    "theta": ("model pitch attitude", "rad"),
+    "TAS": ("model true airspeed", "m/s"),
+    "col_rate": ("rate of the measured collective", "rad/s"),
+    "lon_rate": ("rate of the measured longitudinal cyclic", "rad/s"),
+}
+#: most terms the selection takes
+MAX_TERMS = 3
+
+
+def signals_of(model, mv, y: dict, channels, substeps: int = 2) -> dict:
+    """The dictionary's signals of one prepared record at its samples, each with the linear map of the input noise
+    into it: ``{name: (x, A)}``, x the signal (SI) and A (n x len(channels) n) its part due to the measured inputs'
+    errors (the columns of every input sample, channel blocks in ``channels`` order). The measured inputs carry their
+    own noise, the replay's outputs that noise through the dynamics (their exact sensitivities); the regression takes
+    it out (corrected least squares), or a channel the pilot held still would be found to follow its own noise.
+    ``y``: the replay's outputs at every sample; a model output it does not carry is left out."""
+    from ..simulation.compiled import input_sensitivities
+    from ..simulation.trim import trim_float
+
+    t = mv.data["t"].to_numpy(dtype=float)
+    n, inc = len(t), mv.increments()
+    block = {c: slice(i * n, (i + 1) * n) for i, c in enumerate(channels)}
+    grad = np.gradient(np.eye(n), t, axis=0) if n > 1 else np.zeros((n, n))
+    out = {}
+    for c in ("col", "lon"):
+        x = np.asarray(inc[c], float)
+        A = np.zeros((n, len(channels) * n))
+        R = np.zeros_like(A)
+        if c in block:
+            A[:, block[c]] = np.eye(n)
+            R[:, block[c]] = grad
+        out[c], out[f"{c}_rate"] = (x, A), (grad @ x, R)
+    model_outs = [o for o in ("q", "theta", "TAS") if o in y]
+    if model_outs:
+        _, S = input_sensitivities(model, trim_float(model, mv.trim_speed), t, inc, model_outs, list(channels),
+                                   substeps)
+        for o in model_outs:
+            out[o] = (np.asarray(y[o], float), S[o])
+    return {k: out[k] for k in SIGNALS if k in out}
+
+
+def parameter_columns(model, mv, outputs, keep, names, substeps: int = 2) -> np.ndarray:
+    """The output sensitivities of one prepared record's rows (``keep``, time order) to the parameters ``names``,
+    by central differences of the replay from each perturbed model's own trim (the NLP starts every record at its
+    model's trim). Nuisance of the input-path regression: the chosen point of a front trades the time fit against
+    the trims, so its parameters leave a residual along these directions that is not a missing effect."""
+    from ..simulation.compiled import simulate_outputs
+    from ..simulation.sensitivity import parameter_steps
+    from ..simulation.trim import trim_float
+
+    t = mv.data["t"].to_numpy(dtype=float)
+    keep = np.asarray(keep, dtype=int)
+    cols = []
+    for name, h in zip(names, parameter_steps(model, names)):
+        v = model.parameters[name]
+        ys = []
+        for x in (v + h, v - h):
+            m = model.with_parameters(**{name: x})
+            y = simulate_outputs(m, trim_float(m, mv.trim_speed), t, mv.increments(), list(outputs), substeps)
+            ys.append(np.column_stack([np.asarray(y[o], float)[keep] for o in outputs]).ravel())
+        cols.append((ys[0] - ys[1]) / (2 * h))
+    return np.column_stack(cols) if cols else np.zeros((len(keep) * len(outputs), 0))
+
+
+def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, signals: dict, channels,
+                 var_u: np.ndarray) -> dict:
+    """One record's sums for the regression, in whitened rows with its nuisance projected out (Frisch-Waugh).
+
+    ``e``: data - model at the kept rows (time order, every output of a row together); ``Su``: their sensitivities
+    to every input sample (channel blocks in ``channels`` order, :func:`.innovations.input_noise_factor`); ``N``:
+    the nuisance columns; ``L``: the lower Cholesky factor of the rows' covariance; ``signals``:
+    :func:`signals_of`; ``var_u``: the variance of every input sample's error.
+
+    Returns ``DtD``, ``Dte``, ``ete`` (the least-squares sums), ``B`` and ``b``: their expectation due to the
+    input noise in the regressors (what corrected least squares subtracts), ``rows``, ``nuisance`` and ``labels``.
+    """
+    from scipy.linalg import solve_triangular
+
+    n = Su.shape[1] // len(channels)
+    Q, _ = np.linalg.qr(solve_triangular(L, N, lower=True))
+
+    def whiten(a):
+        a = solve_triangular(L, a, lower=True)
+        return a - Q @ (Q.T @ a)
+
+    ew, Z = whiten(e), whiten(Su)
+    cols, noise, labels = [], [], []
+    for ci, c in enumerate(channels):
+        Zc = Z[:, ci * n:(ci + 1) * n]
+        for s, (x, A) in signals.items():
+            cols.append(Zc @ x)
+            noise.append(Zc @ A)
+            labels.append((c, s))
+    D = np.column_stack(cols)
+    Zs = Z * var_u
+    b = -np.array([np.sum(U * Zs) for U in noise])  # E[d_j . e] from the noise both share (e = data - model)
+    Us = [U * var_u for U in noise]
+    B = np.array([[np.sum(U * V) for V in Us] for U in noise])
+    return {"DtD": D.T @ D, "Dte": D.T @ ew, "ete": float(ew @ ew), "B": B, "b": b, "rows": len(ew),
+            "nuisance": N.shape[1], "labels": labels}
+
+
+@dataclass
+class InputPathTest:
+    """The stepwise regression of the records' input errors on the dictionary (plain data; SI)."""
+
+    terms: list = field(default_factory=list)  # selected: channel, signal, estimate, se, z, p
+    screen: list = field(default_factory=list)  # the last step: every term not selected, as if added alone
+    level: float = float("nan")  # per-term level alpha / dictionary size
+    alpha: float = 0.01
+    scale: float = float("nan")  # residual standard deviation of the whitened rows (1 when the noise model holds)
+    rows: int = 0
+    records: int = 0
+    problems: list = field(default_factory=list)
+
+    @property
+    def consistent(self) -> bool:
+        """True when no term is selected: the input errors look like the white noise the NLP assumes."""
+        return not self.terms
+
+    def describe(self) -> str:
+        if self.consistent:
+            best = max(self.screen, key=lambda r: abs(r["z"]), default=None)
+            tail = (f"; strongest: {best['channel']} error vs {best['signal']}, p = {best['p']:.2g}" if best else "")
+            return (f"input path: no signal explains the input errors (level {self.level:.2g} per term over "
+                    f"{len(self.screen)} terms){tail}")
+        parts = [f"{t['estimate']:+.3g} +- {t['se']:.2g}{_unit(t)} x {t['signal']} (p = {t['p']:.1e})"
+                 for t in self.terms]
+        chans = ", ".join(dict.fromkeys(t["channel"] for t in self.terms))
+        return (f"input path: the rotor does not see the recorded {chans}: its error follows "
+                + "; ".join(f"{t['channel']} += {p}" for t, p in zip(self.terms, parts))
+                + f" (stepwise regression on {len(self.screen) + len(self.terms)} generic terms, level "
+                  f"{self.level:.2g}; not explained by any library effect)")
+
+    def to_dict(self) -> dict:
+        return {**asdict(self), "consistent": self.consistent}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "InputPathTest":
+        return cls(**{k: v for k, v in d.items() if k != "consistent"})
+
+
+def _unit(t: dict) -> str:
+    """The unit of a term's estimate (input rad per signal unit), with a leading space; none for rad per rad."""
+    su = SIGNALS[t["signal"]][1]
+    return "" if su == "rad" else " s" if su == "rad/s" else f" rad/({su})"
+
+
+def _fit(st: dict, idx: list) -> tuple[np.ndarray, np.ndarray, float, int] | None:
+    """Corrected least squares on the terms ``idx`` of the pooled sums ``st``: estimates, standard errors,
+    residual variance and its degrees of freedom; None when the noise-free part of the terms' information is not
+    positive definite (a signal that is mostly input noise carries nothing)."""
+    dof = max(st["rows"] - st["nuisance"] - len(idx), 1)
+    if not idx:
+        return np.zeros(0), np.zeros(0), st["ete"] / dof, dof
+    ix = np.ix_(idx, idx)
+    M, G, h = st["DtD"][ix], st["DtD"][ix] - st["B"][ix], st["Dte"][idx] - st["b"][idx]
+    try:
+        np.linalg.cholesky(G)
+    except np.linalg.LinAlgError:
+        return None
+    coef = np.linalg.solve(G, h)
+    rss = st["ete"] - 2 * coef @ st["Dte"][idx] + coef @ M @ coef
+    s2 = max(float(rss), 1e-300) / dof
+    Gi = np.linalg.inv(G)
+    cov = s2 * Gi @ M @ Gi
+    return coef, np.sqrt(np.maximum(np.diag(cov), 0.0)), s2, dof
+
+
+def input_path_test(blocks: list, alpha: float = 0.01, max_terms: int = MAX_TERMS) -> InputPathTest:
+    """Forward selection with a backward check over the dictionary of every record in ``blocks``
+    (:func:`record_block`), pooled."""
+    if not blocks:
+        return InputPathTest(alpha=alpha, problems=["no record to test"])
+    labels = blocks[0]["labels"]
+    st = {k: sum(b[k] for b in blocks) for k in ("DtD", "Dte", "ete", "B", "b", "rows", "nuisance")}
+    level = alpha / len(labels)
+
+    def pvals(fit):
+        coef, se, _, dof = fit
+        z = np.where(se > 0, coef / np.where(se > 0, se, 1.0), 0.0)
+        return z, 2 * stats.t.sf(np.abs(z), dof)
+
+    def table(chosen):
+        out = {}
+        for j in range(len(labels)):
+            if j in chosen:
+                continue
+            fit = _fit(st, chosen + [j])
+            if fit is None:
+                continue
+            z, p = pvals(fit)
+            out[j] = (float(fit[0][-1]), float(fit[1][-1]), float(z[-1]), float(p[-1]))
+        return out
+
+    chosen: list = []
+    for _ in range(max_terms):
+        tab = table(chosen)
+        if not tab:
+            break
+        j = max(tab, key=lambda k: abs(tab[k][2]))
+        if tab[j][3] >= level:
+            break
+        chosen.append(j)
+        while len(chosen) > 1:  # backward check: a term the new one made redundant leaves
+            fit = _fit(st, chosen)
+            p = pvals(fit)[1] if fit is not None else np.ones(len(chosen))
+            worst = int(np.argmax(p))
+            if p[worst] < level or chosen[worst] == j:
+                break
+            chosen.pop(worst)
+    terms = []
+    fit = _fit(st, chosen)
+    if chosen:
+        z, p = pvals(fit)
+        terms = [{"channel": labels[j][0], "signal": labels[j][1], "estimate": float(fit[0][k]),
+                  "se": float(fit[1][k]), "z": float(z[k]), "p": float(p[k])} for k, j in enumerate(chosen)]
+    screen = [{"channel": labels[j][0], "signal": labels[j][1], "estimate": v[0], "se": v[1], "z": v[2], "p": v[3]}
+              for j, v in table(chosen).items()]
+    return InputPathTest(terms=terms, screen=screen, level=level, alpha=alpha, scale=math.sqrt(fit[2]),
+                         rows=st["rows"], records=len(blocks))

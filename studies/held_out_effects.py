@@ -505,9 +505,15 @@ def input_path_history(terms: list, setup: SignatureSetup) -> dict:
     return out
 
 
+#: the centred moving average [s] both input-error histories get before they are compared (the recorded inputs'
+#: noise, in both, is no shape; 0.2 s keeps the rigid-body band, up to about 2.5 Hz)
+INPUT_PATH_SMOOTH_S = 0.2
+
+
 def input_path_match(effect: str, terms: list, setup: SignatureSetup | None = None) -> str:
     """Does the input error the residual analysis reports match the truth's in shape? Along the validation records,
-    each record's mean taken out of both (a constant is a rigging offset, not this test's business), the channel where
+    each record's mean taken out of both (a constant is a rigging offset, not this test's business) and both smoothed
+    over INPUT_PATH_SMOOTH_S, the channel where
     the truth's error is largest: 'yes (channel, corr r)' when their correlation is > 0.7; 'no (...)' otherwise,
     also for a truth that leaves the control path alone; '-' when nothing is reported."""
     if effect == "none" or not terms:
@@ -515,8 +521,14 @@ def input_path_match(effect: str, terms: list, setup: SignatureSetup | None = No
     setup = setup or signature_setup()
     truth, rep = truth_input_error(effect, setup), input_path_history(list(terms), setup)
 
+    def smooth(x, t):  # the records' inputs are measured: their noise is in both histories, and is no shape
+        k = max(int(round(INPUT_PATH_SMOOTH_S / float(np.median(np.diff(t))))), 1)
+        return np.convolve(x, np.ones(k) / k, mode="same") if len(x) > k else x
+
+    times = {mv.name: mv.data["t"].to_numpy(dtype=float) for mv in setup.maneuvers}
+
     def pooled(d, c):
-        return np.concatenate([d[m][c] - d[m][c].mean() for m in d])
+        return np.concatenate([smooth(d[m][c] - d[m][c].mean(), times[m]) for m in d])
 
     size = {c: float(np.std(pooled(truth, c))) for c in ("col", "lon")}
     c = max(size, key=size.get)

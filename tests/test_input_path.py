@@ -81,7 +81,7 @@ def cross_feed(tmp_path_factory):
     for name in MANEUVERS:
         f = ds / "maneuvers" / f"{name}.csv"
         df = pd.read_csv(f)
-        col = df["col_deg"].rolling(11, center=True, min_periods=1).mean()  # the pilot's input, without the sensor's noise
+        col = df["col_deg"].rolling(11, center=True, min_periods=1).mean()  # the pilot's input, not the noise
         df["lon_deg"] -= K_MIX * (col - col.iloc[0])
         df.to_csv(f, index=False)
     return _residuals(ds)
@@ -93,7 +93,7 @@ def test_a_cross_feed_the_recorder_misses_is_found_with_its_gain(cross_feed, tmp
     first = d.input_path["terms"][0]
     assert (first["channel"], first["signal"]) == ("lon", "col"), d.input_path["terms"]
     assert abs(first["estimate"] - K_MIX) < 3 * first["se"] and first["se"] < 0.2 * K_MIX, first
-    assert any(f.startswith("input path: the rotor does not see the recorded lon") for f in d.findings)
+    assert any(f.startswith("input path: the input errors follow the flight: lon += +0.05") for f in d.findings)
     # the result is plain data: it saves, loads and prints
     again = Diagnosis.load(d.save(tmp_path / "d.json"))
     assert again.input_path == d.input_path and "Input path" in str(again)

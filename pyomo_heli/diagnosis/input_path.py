@@ -165,11 +165,11 @@ class InputPathTest:
                     f"{len(self.screen)} terms){tail}")
         parts = [f"{t['estimate']:+.3g} +- {t['se']:.2g}{_unit(t)} x {t['signal']} (p = {t['p']:.1e})"
                  for t in self.terms]
-        chans = ", ".join(dict.fromkeys(t["channel"] for t in self.terms))
-        return (f"input path: the rotor does not see the recorded {chans}: its error follows "
+        return ("input path: the input errors follow the flight: "
                 + "; ".join(f"{t['channel']} += {p}" for t, p in zip(self.terms, parts))
                 + f" (stepwise regression on {len(self.screen) + len(self.terms)} generic terms, level "
-                  f"{self.level:.2g}; not explained by any library effect)")
+                  f"{self.level:.2g}): the rotor does not see the recorded input, or a missing force acts as if "
+                  "it did; not explained by any library effect")
 
     def to_dict(self) -> dict:
         return {**asdict(self), "consistent": self.consistent}

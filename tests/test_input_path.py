@@ -101,3 +101,11 @@ def test_a_cross_feed_the_recorder_misses_is_found_with_its_gain(cross_feed, tmp
 
     text = write_diagnosis_report(tmp_path, cross_feed, d).read_text()
     assert "### Input path" in text and "| selected | lon | col |" in text
+    assert "![input errors](diagnosis_input_path.png)" in text and (tmp_path / "diagnosis_input_path.png").is_file()
+    # the figure's histories: the records the selected term moves most are the collective ones, and where the
+    # cyclic's error is observable (in forward flight; at hover a slow error drifts unconstrained) what the residual
+    # asks of the cyclic, with no dictionary, follows the fitted term
+    h = {x["maneuver"]: x for x in d.input_path["histories"]}
+    assert len(h) == 3 and all(m.startswith("col") for m in h), list(h)
+    for m in ("coldoublet_20kt", "col3211_80kt_a"):
+        assert np.corrcoef(h[m]["asked_lon"], h[m]["fitted_lon"])[0, 1] > 0.6, m

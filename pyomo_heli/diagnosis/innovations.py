@@ -38,7 +38,7 @@ from ..nlp.objectives import noise_sigmas
 from ..physics.model import HelicopterModel
 from ..simulation.compiled import input_sensitivities
 from ..simulation.trim import trim_float
-from .input_path import input_path_test, parameter_columns, record_block, signals_of
+from .input_path import histories, input_path_test, parameter_columns, record_block, signals_of
 from .timeseries import decimation
 
 
@@ -96,10 +96,11 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
         N[j::n_out, j] = 1.0
     for c in range(len(input_errors)):
         N[:, n_out + c] = Su[:, c * n:(c + 1) * n].sum(axis=1)
+    block = None
     if path is not None:  # the input-path regression also allows a shift of the identified parameters
         P = parameter_columns(model, mv, outputs, keep, nuisance_parameters, substeps)
-        path.append(record_block(-e, Su, np.column_stack([N, P]), L, signals_of(model, mv, y, input_errors, substeps),
-                                 input_errors, np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)))
+        block = record_block(-e, Su, np.column_stack([N, P]), L, signals_of(model, mv, y, input_errors, substeps),
+                             input_errors, np.repeat([float(sigma[c]) ** 2 for c in input_errors], n), t)
     ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)
     coef, *_ = np.linalg.lstsq(Nw, ew, rcond=None)
     cov = np.linalg.pinv(Nw.T @ Nw)  # the estimates' covariance if the whitened rows have unit variance
@@ -110,6 +111,8 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     scale = np.sqrt(np.sum(ew**2, axis=0) / dof)
     biases = {**{f"bias_{o}": float(coef[j]) for j, o in enumerate(outputs)},
               **{f"se_bias_{o}": float(np.sqrt(cov[j, j]) * scale[j]) for j, o in enumerate(outputs)}}
+    if block is not None:  # appended last: a record that fails is in neither list
+        path.append(block)
     return pd.DataFrame({"t": t[keep], **{f"inn_{o}": ew[:, j] for j, o in enumerate(outputs)}}), biases
 
 
@@ -139,10 +142,13 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
             outs.append(o)
         except ValueError as exc:
             problems.append(f"innovations: output {o} left out ({exc})")
-    frames, biases, path = [], [], []
+    frames, biases, path, path_names, path_times = [], [], [], [], []
     for role, mv in maneuvers:
         try:
             df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps, path, parameters)
+            if len(path) > len(path_names):
+                path_names.append(mv.name)
+                path_times.append(mv.data["t"].to_numpy(dtype=float))
         except Exception as exc:  # noqa: BLE001 - the raw residual tests stay available
             why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             problems.append(f"maneuver {mv.name}: innovations failed ({why})")
@@ -155,5 +161,7 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     settings = {"outputs": outs, "input_errors": input_errors, "test_rate_hz": float(test_rate_hz),
                 "sigma": {c: float(v) for c, v in sigma.items()}, "record_biases": biases}
     if input_errors and path:
-        settings["input_path"] = input_path_test(path).to_dict()
+        test = input_path_test(path)
+        test.histories = histories(test, path, path_names, path_times, input_errors)
+        settings["input_path"] = test.to_dict()
     return table, settings

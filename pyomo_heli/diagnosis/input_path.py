@@ -102,7 +102,7 @@ def parameter_columns(model, mv, outputs, keep, names, substeps: int = 2) -> np.
 
 
 def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, signals: dict, channels,
-                 var_u: np.ndarray) -> dict:
+                 var_u: np.ndarray, t: np.ndarray) -> dict:
     """One record's sums for the regression, in whitened rows with its nuisance projected out (Frisch-Waugh).
 
     ``e``: data - model at the kept rows (time order, every output of a row together); ``Su``: their sensitivities
@@ -111,7 +111,9 @@ def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, si
     :func:`signals_of`; ``var_u``: the variance of every input sample's error.
 
     Returns ``DtD``, ``Dte``, ``ete`` (the least-squares sums), ``B`` and ``b``: their expectation due to the
-    input noise in the regressors (what corrected least squares subtracts), ``rows``, ``nuisance`` and ``labels``.
+    input noise in the regressors (what corrected least squares subtracts), ``rows``, ``nuisance`` and ``labels``;
+    for the figure, ``asked``: the input errors the residual asks for (:func:`asked_errors`), and ``signals``
+    (name -> x); ``t``: the record's sample times [s].
     """
     from scipy.linalg import solve_triangular
 
@@ -136,7 +138,27 @@ def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, si
     Us = [U * var_u for U in noise]
     B = np.array([[np.sum(U * V) for V in Us] for U in noise])
     return {"DtD": D.T @ D, "Dte": D.T @ ew, "ete": float(ew @ ew), "B": B, "b": b, "rows": len(ew),
-            "nuisance": N.shape[1], "labels": labels}
+            "nuisance": N.shape[1], "labels": labels, "asked": asked_errors(Z, ew, t, channels),
+            "signals": {s: x for s, (x, _) in signals.items()}}
+
+
+#: the time step [s] of the input-error history the residual asks for (a piecewise-constant error per channel)
+ASKED_STEP_S = 0.5
+
+
+def asked_errors(Z: np.ndarray, ew: np.ndarray, t: np.ndarray, channels) -> np.ndarray:
+    """The input error each channel would need, alone, to explain the record's whitened residual ``ew``: least
+    squares of a piecewise-constant error (steps of ASKED_STEP_S) through the channel's whitened sensitivities
+    (its block of ``Z``): estimation before modelling, with no dictionary. Every input sample, channel blocks."""
+    n = len(t)
+    bins = np.minimum(((t - t[0]) / ASKED_STEP_S).astype(int), max(int((t[-1] - t[0]) / ASKED_STEP_S) - 1, 0))
+    Bin = np.zeros((n, int(bins.max()) + 1))
+    Bin[np.arange(n), bins] = 1.0
+    out = []
+    for i in range(len(channels)):
+        A = Z[:, i * n:(i + 1) * n] @ Bin
+        out.append(Bin @ np.linalg.lstsq(A, ew, rcond=None)[0])
+    return np.concatenate(out)
 
 
 @dataclass
@@ -151,6 +173,7 @@ class InputPathTest:
     rows: int = 0
     records: int = 0
     problems: list = field(default_factory=list)
+    histories: list = field(default_factory=list)  # a few records: t, input error asked for and fitted (rad)
 
     @property
     def consistent(self) -> bool:
@@ -183,6 +206,36 @@ def _unit(t: dict) -> str:
     """The unit of a term's estimate (input rad per signal unit), with a leading space; none for rad per rad."""
     su = SIGNALS[t["signal"]][1]
     return "" if su == "rad" else " s" if su == "rad/s" else f" rad/({su})"
+
+
+#: records whose input-error histories the result keeps (those the selected terms move most), and at what rate [Hz]
+HISTORY_RECORDS = 3
+HISTORY_RATE_HZ = 10.0
+
+
+def histories(test: InputPathTest, blocks: list, names: list, times: list, channels,
+              keep: int = HISTORY_RECORDS) -> list:
+    """The input-error histories of the ``keep`` records the selected terms move most: per record its ``maneuver``,
+    ``t`` [s] and, per channel c, ``asked_<c>`` (the error the residual asks for, :func:`asked_errors`)
+    and ``fitted_<c>`` (the selected terms' sum), each record's mean removed (the nuisance takes any constant)."""
+    if not test.terms:
+        return []
+    out = []
+    for blk, name, t in zip(blocks, names, times):
+        n = len(t)
+        k = slice(None, None, max(int(round(1.0 / (HISTORY_RATE_HZ * float(np.median(np.diff(t)))))), 1)
+                  if n > 1 else 1)
+        row = {"maneuver": name, "t": [float(v) for v in t[k]]}
+        size = 0.0
+        for i, c in enumerate(channels):
+            fit = sum((term["estimate"] * blk["signals"][term["signal"]] for term in test.terms
+                       if term["channel"] == c), np.zeros(n))
+            asked = blk["asked"][i * n:(i + 1) * n]
+            row[f"asked_{c}"] = [float(v) for v in (asked - asked.mean())[k]]
+            row[f"fitted_{c}"] = [float(v) for v in (fit - fit.mean())[k]]
+            size += float(np.std(fit))
+        out.append((size, row))
+    return [r for _, r in sorted(out, key=lambda x: -x[0])[:keep]]
 
 
 def _fit(st: dict, idx: list) -> tuple[np.ndarray, np.ndarray, float, int] | None:

@@ -173,6 +173,34 @@ def plot_time_residuals(res: Residuals, diag: Diagnosis, n_maneuvers: int = 3) -
     return fig
 
 
+def plot_input_path(diag: Diagnosis) -> Figure:
+    """The input errors of the records the input-path terms move most (``Diagnosis.input_path["histories"]``): what
+    the residual asks of each input channel alone (a piecewise-constant error, no dictionary:
+    :func:`~pyomo_heli.diagnosis.input_path.asked_errors`) and what the selected terms give, in deg, each record's
+    mean removed."""
+    hist = (diag.input_path or {}).get("histories") or []
+    chans = [c for c in ("col", "lon") if hist and f"fitted_{c}" in hist[0]]
+    fig = Figure(figsize=(4.6 * max(len(hist), 1) + 0.8, 2.0 * max(len(chans), 1) + 1.2), layout="constrained")
+    axes = np.array(fig.subplots(max(len(chans), 1), max(len(hist), 1), sharex="col", squeeze=False))
+    terms = "; ".join(f"{t['channel']} += {t['estimate']:+.3g} x {t['signal']}" for t in diag.input_path["terms"]) \
+        if diag.input_path else ""
+    for j, h in enumerate(hist):
+        for i, c in enumerate(chans):
+            ax = axes[i, j]
+            ax.plot(h["t"], np.degrees(h[f"asked_{c}"]), color="grey", linewidth=0.9,
+                    label="asked by the residual (0.5 s steps, this channel alone)")
+            ax.plot(h["t"], np.degrees(h[f"fitted_{c}"]), color="tab:red", linewidth=1.2, label="selected terms")
+            ax.set_ylabel(f"{c} error [deg]")
+            ax.grid(True, alpha=0.3)
+        axes[0, j].set_title(h["maneuver"], fontsize=10)
+        axes[-1, j].set_xlabel("time [s]")
+    if hist:
+        hd, lab = axes[0, 0].get_legend_handles_labels()
+        fig.legend(hd, lab, loc="outside upper right", fontsize=8)
+    fig.suptitle(f"Input errors the rotor would have to see (what it saw minus the record): {terms}", fontsize=10)
+    return fig
+
+
 # ---------------------------------------------------------------- the report
 def _fmt(x, d=3):
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
@@ -290,6 +318,10 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
               f"corrected for the input noise; level {ip['level']:.2g} per term; docs/diagnosis.md)? The error is what "
               "the rotor sees minus the recorded input, estimate in rad per signal unit (SI):", "",
               markdown_table(rows, digits=3), ""]
+        if ip.get("histories"):
+            fig = plot_input_path(diag)
+            fig.savefig(out / f"diagnosis_input_path.{figure_format}", dpi=90)
+            L += [f"![input errors]({'diagnosis_input_path.' + figure_format})", ""]
     if diag.spectra:
         L += ["### Spectra", "", f"![spectra](diagnosis_spectra.{figure_format})", "",
               "Band ratio = mean PSD in 0.1-2 Hz / mean PSD in 2-5 Hz (about 1 for white noise):", ""]

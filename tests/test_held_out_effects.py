@@ -338,6 +338,57 @@ def test_the_input_path_shape_is_scored_against_the_truths_own_control_error(stu
     assert study.format_input_path([]) == "none" and study.parse_input_path("none") == []
 
 
+def test_reanalyse_rebuilds_a_kept_m0_from_the_table_and_runs_the_loops_own_residual_analysis(tmp_path, study,
+                                                                                               monkeypatch):
+    """--reanalyse: for a row whose loop kept M0 (its loop gone), the flight test is generated again for its truth
+    and seed, M0's parameters rebuilt from the row's errors against that truth.json, and the loop's residual verdict
+    (stubbed here: the call is tested in test_input_path.py and test_close_loop.py) fills the final residual and
+    input-path columns; a reported input error that is the truth's own (control_mixing's cross-feed) meets the
+    criterion; a row that kept a term is left as it is."""
+    import json
+
+    import pandas as pd
+
+    import pyomo_heli.workflows.close_loop as cl
+
+    calls = []
+
+    def verdict(cfg, pars, progress=None):
+        calls.append((cfg, dict(pars)))
+        return {"status": "unexplained residual", "findings": [], "record_biases": {},
+                "input_path": {"terms": [{"channel": "lon", "signal": "col", "estimate": 0.05, "se": 0.002,
+                                          "z": 25.0, "p": 1e-90}]}}
+
+    monkeypatch.setattr(cl, "residual_verdict", verdict)
+    monkeypatch.setattr(study, "input_path_match", lambda effect, terms: "yes (lon, corr +1.00)"
+                        if terms and effect == "control_mixing" else "-")
+    base = {"seed": 20261122, "verdict": "ambiguous", "final residual": "noise only", "record biases differ": "none",
+            "record bias shape matches truth": "-", "significant val rise (kept steps)": "none",
+            "trim change %": 0.0, "kept discovered term": "-", "shape matches truth": "-",
+            "unexplained shape matches truth": "no", "wrong acceptance": False, "criterion met": False,
+            "theta_twist err1 %": -1.5, "CL_alpha_HT err1 %": 11.0, "Iyy err1 %": 0.5}
+    out = tmp_path / "table"
+    out.mkdir()
+    pd.DataFrame([{**base, "truth": "control_mixing", "added (kept)": "-"},
+                  {**base, "truth": "cyclic_gearing", "added (kept)": "dM_q"}]).to_csv(out / "held_out.csv",
+                                                                                      index=False)
+    tab = study.reanalyse(out, tmp_path / "scratch", ROOT / "studies" / "held_out_small.toml",
+                          (ROOT / "studies" / "held_out_small_gen.toml").read_text())
+    truth = json.loads((tmp_path / "scratch" / "control_mixing_20261122" / "data" / "truth.json").read_text())
+    assert "control_mixing" in truth["effects"] and len(calls) == 1
+    assert calls[0][1] == pytest.approx({"theta_twist": truth["parameters"]["theta_twist"] * 0.985,
+                                         "CL_alpha_HT": truth["parameters"]["CL_alpha_HT"] * 1.11,
+                                         "Iyy": truth["parameters"]["Iyy"] * 1.005})
+    mix, gear = tab.iloc[0], tab.iloc[1]
+    assert mix["input path"] == "lon += +0.05 +- 0.002 x col" and mix["final residual"] == "unexplained residual"
+    assert mix["residual analysis of"] == "M0 rebuilt from the table" and mix["criterion met"] in (True, "True")
+    assert gear["final residual"] == "noise only" and gear["input path"] == "" and gear["criterion met"] in (False,
+                                                                                                          "False")
+    # a second run reads the case's cache, not the analysis again
+    study.reanalyse(out, tmp_path / "scratch", ROOT / "studies" / "held_out_small.toml", "")
+    assert len(calls) == 1
+
+
 def test_the_table_rescores_from_the_terms_it_reports(tmp_path, study):
     """--rescore rebuilds the shape columns and the criterion from a table alone (its loops gone): a kept dX ~ mu^4
     against the drag-rise truth matches and meets the criterion with a trim cut short of 50 %."""

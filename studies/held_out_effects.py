@@ -703,17 +703,22 @@ def merge(out: Path, sources: list[Path]) -> pd.DataFrame:
 
 def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataFrame:
     """The residual analysis of the kept model, made with the current analysis, for the rows of ``OUT/held_out.csv``
-    whose loop kept M0 (nothing added), their loops gone: the flight test generated again (``template``, the row's
-    truth and seed; deterministic) into ``SCRATCH/<effect>_<seed>/data``, M0's parameters rebuilt from the row's
-    parameter errors against its truth.json, and the loop's own call (``residual_verdict`` under ``config``).
-    Rewrites the final residual, record-bias and input-path columns and the criterion; a row that kept a term is
-    left as it is (the table does not hold every kept estimate). Cached per case in ``final_residual.json``."""
+    whose loops are gone and whose kept model the table holds: M0 (nothing added), or M0 plus the one discovered
+    term the row reports with its estimate (3 significant digits; the analysis allows a shift of every free
+    parameter, the term's strength included). The flight test is generated again (``template``, the row's truth and
+    seed; deterministic) into ``SCRATCH/<effect>_<seed>/data``, the parameters rebuilt from the row's parameter
+    errors against its truth.json, and the loop's own call (``residual_verdict`` under ``config``) made. Rewrites the
+    final residual, record-bias and input-path columns and the criterion; any other row is left as it is. Cached
+    per case in ``final_residual.json``."""
     from pyomo_heli.config import load_identification_config
+    from pyomo_heli.diagnosis.candidates import model_with_candidates
+    from pyomo_heli.nlp.parameters import FreeParameter
     from pyomo_heli.workflows.close_loop import residual_verdict
 
     rows = read_rows(out / "held_out.csv")
     for r in rows:
-        if str(r["added (kept)"]) != "-":
+        kept, term = str(r["added (kept)"]), parse_term(r.get("generic term", "-"))
+        if kept != "-" and not (term and kept == term["name"]):
             continue
         effect, seed = r["truth"], int(r["seed"])
         case = scratch / f"{effect}_{seed}"
@@ -731,6 +736,13 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
             if free != sorted(PARAMETERS):
                 raise ValueError(f"{config}: frees {free}, the table's parameter errors are of {sorted(PARAMETERS)}")
             pars = {n: truth[n] * (1 + float(r[f"{n} err1 %"]) / 100) for n in PARAMETERS}
+            if kept != "-":
+                model = model_with_candidates(cfg.model, [kept])
+                strength = model.extensions[-1].strength
+                spec = model.parameters.spec(strength)
+                cfg = dataclasses.replace(cfg, model=model, free=[*cfg.free, FreeParameter(
+                    strength, term["estimate"], spec.bounds[0], spec.bounds[1], spec.scale or 1.0)])
+                pars[strength] = term["estimate"]
             v = residual_verdict(cfg, pars, progress=lambda s: None)
             fr = {"analysis": RESIDUAL_ANALYSIS, "status": v["status"], "findings": v.get("findings", []),
                   "record_biases": v.get("record_biases") or {}, "input_path": v.get("input_path") or {},
@@ -744,7 +756,8 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
         terms = fr["input_path"].get("terms") or []
         r["input path"] = format_input_path(terms) if fr["input_path"] else "-"
         r["input path shape matches truth"] = input_path_match(effect, terms)
-        r["residual analysis of"] = "M0 rebuilt from the table"
+        r["residual analysis of"] = ("M0 rebuilt from the table" if kept == "-" else
+                                     f"M0 + {kept} rebuilt from the table")
         r["wrong acceptance"] = str(r["wrong acceptance"]) == "True"
         if effect != "none":
             r["criterion met"] = criterion_met(r)

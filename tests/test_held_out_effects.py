@@ -344,7 +344,8 @@ def test_reanalyse_rebuilds_a_kept_m0_from_the_table_and_runs_the_loops_own_resi
     and seed, M0's parameters rebuilt from the row's errors against that truth.json, and the loop's residual verdict
     (stubbed here: the call is tested in test_input_path.py and test_close_loop.py) fills the final residual and
     input-path columns; a reported input error that is the truth's own (control_mixing's cross-feed) meets the
-    criterion; a row that kept a term is left as it is."""
+    criterion. A row that kept one discovered term is rebuilt with it at the row's estimate; one that kept two is
+    left as it is (the table holds one estimate)."""
     import json
 
     import pandas as pd
@@ -369,24 +370,31 @@ def test_reanalyse_rebuilds_a_kept_m0_from_the_table_and_runs_the_loops_own_resi
             "theta_twist err1 %": -1.5, "CL_alpha_HT err1 %": 11.0, "Iyy err1 %": 0.5}
     out = tmp_path / "table"
     out.mkdir()
-    pd.DataFrame([{**base, "truth": "control_mixing", "added (kept)": "-"},
-                  {**base, "truth": "cyclic_gearing", "added (kept)": "dM_q"}]).to_csv(out / "held_out.csv",
-                                                                                      index=False)
+    pd.DataFrame([{**base, "truth": "control_mixing", "added (kept)": "-", "generic term": "-"},
+                  {**base, "truth": "cyclic_gearing", "added (kept)": "dM_q+dX_q",
+                   "generic term": "dM_q: c = 0.0012 +- 0.0003"},
+                  {**base, "truth": "drag_rise", "added (kept)": "dX_mu4", "generic term": "dX_mu4: c = -0.019 +- "
+                   "0.002"}]).to_csv(out / "held_out.csv", index=False)
     tab = study.reanalyse(out, tmp_path / "scratch", ROOT / "studies" / "held_out_small.toml",
                           (ROOT / "studies" / "held_out_small_gen.toml").read_text())
     truth = json.loads((tmp_path / "scratch" / "control_mixing_20261122" / "data" / "truth.json").read_text())
-    assert "control_mixing" in truth["effects"] and len(calls) == 1
+    assert "control_mixing" in truth["effects"] and len(calls) == 2
     assert calls[0][1] == pytest.approx({"theta_twist": truth["parameters"]["theta_twist"] * 0.985,
                                          "CL_alpha_HT": truth["parameters"]["CL_alpha_HT"] * 1.11,
                                          "Iyy": truth["parameters"]["Iyy"] * 1.005})
-    mix, gear = tab.iloc[0], tab.iloc[1]
+    # one kept discovered term: M0 plus that term at the row's estimate, its strength free like the loop's
+    cfg, pars = calls[1]
+    assert [e.name for e in cfg.model.extensions] == ["dX_mu4"] and pars["c_dX_mu4"] == -0.019
+    assert [f.name for f in cfg.free][-1] == "c_dX_mu4"
+    mix, gear, drag = tab.iloc[0], tab.iloc[1], tab.iloc[2]
+    assert drag["residual analysis of"] == "M0 + dX_mu4 rebuilt from the table"
     assert mix["input path"] == "lon += +0.05 +- 0.002 x col" and mix["final residual"] == "unexplained residual"
     assert mix["residual analysis of"] == "M0 rebuilt from the table" and mix["criterion met"] in (True, "True")
     assert gear["final residual"] == "noise only" and gear["input path"] == "" and gear["criterion met"] in (False,
                                                                                                           "False")
     # a second run reads the case's cache, not the analysis again
     study.reanalyse(out, tmp_path / "scratch", ROOT / "studies" / "held_out_small.toml", "")
-    assert len(calls) == 1
+    assert len(calls) == 2
 
 
 def test_the_table_rescores_from_the_terms_it_reports(tmp_path, study):

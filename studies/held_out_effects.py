@@ -274,7 +274,8 @@ def criterion_met(row: dict) -> bool | str:
     matches the truth's. A kept discovered term is such a verdict (the loop reports it "not explained by any library
     effect; discovered ..."), as is the shape the loop reports when it stops unexplained, and the shape of an
     output's record biases that the residual analysis of the kept model reports (:func:`record_bias_match`), and the
-    input error it reports (:func:`input_path_match`)."""
+    input error it reports (:func:`input_path_match`) where the loop kept no discovered term: after a kept term the
+    input error describes what that term left, which is not the truth's effect to compare with."""
     if row["truth"] == "none":
         return "n/a"
     kept = row.get("kept discovered term", "-") != "-"
@@ -283,7 +284,7 @@ def criterion_met(row: dict) -> bool | str:
                      or (kept and row["shape matches truth"] == "yes")
                      or row["unexplained shape matches truth"] == "yes"
                      or str(row.get("record bias shape matches truth", "-")).startswith("yes")
-                     or str(row.get("input path shape matches truth", "-")).startswith("yes")))
+                     or (not kept and str(row.get("input path shape matches truth", "-")).startswith("yes"))))
 
 
 #: the second reading's trim cut: this share [%] of the cut the truth model makes (the part of the trim RMS above the

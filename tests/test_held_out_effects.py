@@ -397,6 +397,17 @@ def test_reanalyse_rebuilds_a_kept_m0_from_the_table_and_runs_the_loops_own_resi
     assert len(calls) == 2
 
 
+def test_an_input_path_shape_counts_only_where_no_discovered_term_was_kept(study):
+    """After a kept discovered term the input error describes what that term left, not the truth's effect."""
+    row = {"truth": "cyclic_gearing", "wrong acceptance": False, "significant val rise (kept steps)": "none",
+           "trim change %": 0.0, "kept discovered term": "-", "shape matches truth": "-",
+           "unexplained shape matches truth": "no", "record bias shape matches truth": "-",
+           "input path shape matches truth": "yes (lon, corr +0.79)"}
+    assert study.criterion_met(row) is True
+    assert study.criterion_met({**row, "kept discovered term": "dM_q", "shape matches truth": "no"}) is False
+    assert study.criterion_met({**row, "input path shape matches truth": "no (lon, corr +0.66)"}) is False
+
+
 def test_the_table_rescores_from_the_terms_it_reports(tmp_path, study):
     """--rescore rebuilds the shape columns and the criterion from a table alone (its loops gone): a kept dX ~ mu^4
     against the drag-rise truth matches and meets the criterion with a trim cut short of 50 %."""

@@ -710,7 +710,7 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
     seed; deterministic) into ``SCRATCH/<effect>_<seed>/data``, the parameters rebuilt from the row's parameter
     errors against its truth.json, and the loop's own call (``residual_verdict`` under ``config``) made. Rewrites the
     final residual, record-bias and input-path columns and the criterion; any other row is left as it is. Cached
-    per case in ``final_residual.json``."""
+    per case and kept model in ``final_residual_<kept>.json`` (with the parameters it was made at)."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.diagnosis.candidates import model_with_candidates
     from pyomo_heli.nlp.parameters import FreeParameter
@@ -728,22 +728,23 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
             case.mkdir(parents=True, exist_ok=True)
             (case / "gen.toml").write_text(data_config(template, effect, seed))
             run_command(["generate-data", "--config", str(case / "gen.toml"), "--out", str(data)])
-        cache = case / "final_residual.json"
+        truth = json.loads((data / "truth.json").read_text())["parameters"]
+        cfg = load_identification_config(config, overrides={"data": {"dataset": str(data)}})
+        free = sorted(p.name for p in cfg.free)
+        if free != sorted(PARAMETERS):
+            raise ValueError(f"{config}: frees {free}, the table's parameter errors are of {sorted(PARAMETERS)}")
+        pars = {n: truth[n] * (1 + float(r[f"{n} err1 %"]) / 100) for n in PARAMETERS}
+        if kept != "-":
+            model = model_with_candidates(cfg.model, [kept])
+            strength = model.extensions[-1].strength
+            spec = model.parameters.spec(strength)
+            cfg = dataclasses.replace(cfg, model=model, free=[*cfg.free, FreeParameter(
+                strength, term["estimate"], spec.bounds[0], spec.bounds[1], spec.scale or 1.0)])
+            pars[strength] = term["estimate"]
+        # one cache per kept model: tables of other families share a case's flight test, not its kept model
+        cache = case / f"final_residual_{kept}.json"
         fr = json.loads(cache.read_text()) if cache.is_file() else {}
-        if fr.get("analysis") != RESIDUAL_ANALYSIS:
-            truth = json.loads((data / "truth.json").read_text())["parameters"]
-            cfg = load_identification_config(config, overrides={"data": {"dataset": str(data)}})
-            free = sorted(p.name for p in cfg.free)
-            if free != sorted(PARAMETERS):
-                raise ValueError(f"{config}: frees {free}, the table's parameter errors are of {sorted(PARAMETERS)}")
-            pars = {n: truth[n] * (1 + float(r[f"{n} err1 %"]) / 100) for n in PARAMETERS}
-            if kept != "-":
-                model = model_with_candidates(cfg.model, [kept])
-                strength = model.extensions[-1].strength
-                spec = model.parameters.spec(strength)
-                cfg = dataclasses.replace(cfg, model=model, free=[*cfg.free, FreeParameter(
-                    strength, term["estimate"], spec.bounds[0], spec.bounds[1], spec.scale or 1.0)])
-                pars[strength] = term["estimate"]
+        if fr.get("analysis") != RESIDUAL_ANALYSIS or fr.get("parameters") != pars:
             v = residual_verdict(cfg, pars, progress=lambda s: None)
             fr = {"analysis": RESIDUAL_ANALYSIS, "status": v["status"], "findings": v.get("findings", []),
                   "record_biases": v.get("record_biases") or {}, "input_path": v.get("input_path") or {},

@@ -27,9 +27,11 @@ a truth that adds a steady force or moment, sign and speed dependence of the sam
 trims (:func:`shape_match`); for one that adds none (control-path and sensor effects), its trim and time signature
 against M0 on the validation records (:func:`signature_match`). With an "unexplained" verdict, the shape it
 reports (a discovered term the validation rule rejected, else the last step's best generic term) and whether that
-matches. The residual analysis of the kept model (:func:`final_residual`): its verdict, and where an output's
-records disagree on its bias whether that shape matches the truth's (:func:`record_bias_match`). The criterion
-(:func:`criterion_met`) counts a kept discovered term as a reported shape: the loop reports
+matches. The residual analysis of the kept model (:func:`final_residual`): its verdict, where an output's
+records disagree on its bias whether that shape matches the truth's (:func:`record_bias_match`), and the input
+error it reports with whether that follows the truth's control error (:func:`input_path_match`). ``--reanalyse``
+makes that analysis again for rows whose loops are gone and whose kept model the table holds (:func:`reanalyse`).
+The criterion (:func:`criterion_met`) counts a kept discovered term as a reported shape: the loop reports
 it "not explained by any library effect; discovered ...". The tallies also read the criterion with the trim cut
 measured above the noise floor (:func:`criterion_met_above_floor`), beside the issue's reading. The trim RMS of
 the truth model (M0 + the held-out effect at the truth parameters: only the trim noise and offsets are left) is the

@@ -4,7 +4,8 @@ A control-path effect (a cross-feed of collective into cyclic, a gearing error, 
 makes the rotor see something other than the recorded control. When the identification estimates the input
 errors (``[objectives] input_errors``), their noise model is white; a control-path effect is an input error that
 follows a signal of the flight instead. The residual analysis asks which signal, by regression on a small generic
-dictionary, the input-path counterpart of estimation before modelling (Klein and Morelli, ch. 6):
+dictionary, the input-path counterpart of estimation before modelling (Klein and Morelli, *Aircraft System
+Identification*):
 
     input error of channel c  =  a * (s(t) - s_ref),     s in SIGNALS,
 
@@ -12,7 +13,9 @@ each term's effect on the outputs taken to first order through the exact output 
 sample (S_u, :func:`pyomo_heli.simulation.compiled.input_sensitivities`), in the whitened coordinates of the
 innovations (:mod:`.innovations`: covariance R + S_u Sigma_u S_u^T, rows at the test rate). The reference s_ref
 of a record is absorbed by its nuisance (a bias per output, a constant offset per input), so the regression sees
-only how the error changes within a record.
+only how the error changes within a record; a shift of the identified parameters (their output sensitivities) is
+projected out too. The regressors carry the measured inputs' noise, which is also in the residual; corrected least
+squares subtracts its expected share of the sums (:func:`record_block`).
 
 Selection is forward with a backward check, as SIDPAC's stepwise regression: at each step the term with the
 largest |z| over the whole dictionary enters when its two-sided p is below ``alpha / (dictionary size)``

@@ -88,13 +88,20 @@ def data_config(template: str, effect: str, seed: int, strengths: dict | None = 
     return text
 
 
-def run_case(effect: str, seed: int, out: Path, config: Path, template: str) -> Path:
-    case = out / f"{effect}_{seed}"
-    data, loop = case / "data", case / "loop"
+def generate_case(case: Path, template: str, effect: str, seed: int) -> Path:
+    """The flight test of ``effect`` and ``seed`` in ``case/data`` (generated unless it is there): its generator
+    config ``case/gen.toml`` is ``template`` with the truth effect and seed replaced (:func:`data_config`)."""
+    data = case / "data"
     if not (data / "truth.json").is_file():
         case.mkdir(parents=True, exist_ok=True)
         (case / "gen.toml").write_text(data_config(template, effect, seed))
         run_command(["generate-data", "--config", str(case / "gen.toml"), "--out", str(data)])
+    return data
+
+
+def run_case(effect: str, seed: int, out: Path, config: Path, template: str) -> Path:
+    case = out / f"{effect}_{seed}"
+    data, loop = generate_case(case, template, effect, seed), case / "loop"
     if not (loop / "loop.json").is_file() or not json.loads((loop / "loop.json").read_text()).get("stopped"):
         t0 = time.perf_counter()
         run_command(["close-loop", str(config), "--dataset", str(data), "--out", str(loop)])
@@ -494,17 +501,13 @@ def truth_input_error(effect: str, setup: SignatureSetup) -> dict:
 def input_path_history(terms: list, setup: SignatureSetup) -> dict:
     """The input error the residual analysis reports, sum of estimate x signal (:mod:`pyomo_heli.diagnosis.input_path`),
     along the validation records of M0 at the truth parameters {maneuver: {"col": array, "lon": array}} [rad]."""
+    from pyomo_heli.diagnosis.input_path import input_error, signal_values
+
     out = {}
     for mv in setup.maneuvers:
         df, t = setup.base.maneuvers[mv.name], mv.data["t"].to_numpy(dtype=float)
-        inc = mv.increments()
-        sig = {"col": np.asarray(inc["col"], float), "lon": np.asarray(inc["lon"], float),
-               **{o: df[o].to_numpy(dtype=float) for o in ("q", "theta", "TAS")}}
-        sig["col_rate"], sig["lon_rate"] = np.gradient(sig["col"], t), np.gradient(sig["lon"], t)
-        h = {"col": np.zeros(len(t)), "lon": np.zeros(len(t))}
-        for term in terms:
-            h[term["channel"]] = h[term["channel"]] + term["estimate"] * sig[term["signal"]]
-        out[mv.name] = h
+        sig = signal_values(t, mv.increments(), {o: df[o].to_numpy(dtype=float) for o in ("q", "theta", "TAS")})
+        out[mv.name] = input_error(terms, sig, len(t))
     return out
 
 
@@ -544,6 +547,19 @@ def input_path_match(effect: str, terms: list, setup: SignatureSetup | None = No
     return f"yes ({c}, corr {corr:+.2f})" if corr > 0.7 else f"no ({c}, corr {corr:+.2f})"
 
 
+def residual_columns(effect: str, fr: dict) -> dict:
+    """The table's columns of a kept model's residual analysis ``fr`` (:func:`final_residual`): the outputs whose
+    records disagree on their bias and whether that shape is the truth's, the input error it reports and whether that
+    follows the truth's."""
+    flagged = {o: t for o, t in fr["record_biases"].items() if not t["consistent"]}
+    terms = (fr.get("input_path") or {}).get("terms") or []
+    return {"record biases differ": (", ".join(f"{o} (chi2 {t['chi2']:.3g} on {t['df']})"
+                                               for o, t in flagged.items()) or "none"),
+            "record bias shape matches truth": record_bias_match(effect, fr["record_biases"]),
+            "input path": format_input_path(terms) if fr.get("input_path") else "-",
+            "input path shape matches truth": input_path_match(effect, terms)}
+
+
 def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.diagnosis.discovery import best_fit
@@ -568,13 +584,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     fr = final_residual(loop)
     row = {"truth": effect, "seed": seed, "verdict": "; ".join(decisions),
            "added (kept)": "+".join(ik["extensions"]) or "-", "final residual": fr["status"]}
-    flagged = {o: t for o, t in fr["record_biases"].items() if not t["consistent"]}
-    row["record biases differ"] = (", ".join(f"{o} (chi2 {t['chi2']:.3g} on {t['df']})" for o, t in flagged.items())
-                                   or "none")
-    row["record bias shape matches truth"] = record_bias_match(effect, fr["record_biases"])
-    terms = (fr.get("input_path") or {}).get("terms") or []
-    row["input path"] = format_input_path(terms) if "input_path" in fr and fr["input_path"] else "-"
-    row["input path shape matches truth"] = input_path_match(effect, terms)
+    row.update(residual_columns(effect, fr))
     row["residual analysis of"] = "the loop's kept model" if fr.get("input_path") else fr.get("analysis", "-")
     # iterations that diagnosed the closest front point because the direct Eq. 11 solve failed from every start
     row["direct solve failed"] = ", ".join(str(j) for j, it in enumerate(its)
@@ -725,11 +735,7 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
             continue
         effect, seed = r["truth"], int(r["seed"])
         case = scratch / f"{effect}_{seed}"
-        data = case / "data"
-        if not (data / "truth.json").is_file():
-            case.mkdir(parents=True, exist_ok=True)
-            (case / "gen.toml").write_text(data_config(template, effect, seed))
-            run_command(["generate-data", "--config", str(case / "gen.toml"), "--out", str(data)])
+        data = generate_case(case, template, effect, seed)
         truth = json.loads((data / "truth.json").read_text())["parameters"]
         cfg = load_identification_config(config, overrides={"data": {"dataset": str(data)}})
         free = sorted(p.name for p in cfg.free)
@@ -752,14 +758,8 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
                   "record_biases": v.get("record_biases") or {}, "input_path": v.get("input_path") or {},
                   "parameters": pars}
             cache.write_text(json.dumps(fr, indent=1))
-        flagged = {o: t for o, t in fr["record_biases"].items() if not t["consistent"]}
         r["final residual"] = fr["status"]
-        r["record biases differ"] = (", ".join(f"{o} (chi2 {t['chi2']:.3g} on {t['df']})"
-                                               for o, t in flagged.items()) or "none")
-        r["record bias shape matches truth"] = record_bias_match(effect, fr["record_biases"])
-        terms = fr["input_path"].get("terms") or []
-        r["input path"] = format_input_path(terms) if fr["input_path"] else "-"
-        r["input path shape matches truth"] = input_path_match(effect, terms)
+        r.update(residual_columns(effect, fr))
         r["residual analysis of"] = ("M0 rebuilt from the table" if kept == "-" else
                                      f"M0 + {kept} rebuilt from the table")
         r["wrong acceptance"] = str(r["wrong acceptance"]) == "True"
@@ -941,6 +941,12 @@ def main(argv=None) -> int:
     if a.reanalyse:
         if not (out / "held_out.csv").is_file():
             ap.error(f"--reanalyse: {out / 'held_out.csv'} not found")
+        from pyomo_heli.config import load_identification_config
+
+        free = sorted(p.name for p in load_identification_config(config).free)
+        if free != sorted(PARAMETERS):
+            ap.error(f"--config {config}: --reanalyse rebuilds the kept parameters {', '.join(PARAMETERS)} from the "
+                     f"table; this config frees {', '.join(free)}")
         reanalyse(out, Path(a.reanalyse), config, in_file(ap, a.data_config, "--data-config").read_text())
         print((out / "held_out.md").read_text())
         return 0

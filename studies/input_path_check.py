@@ -24,11 +24,11 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from held_out_effects import (CONFIG, ROOT, data_config, format_input_path, input_path_match,  # noqa: E402
+from held_out_effects import (CONFIG, ROOT, format_input_path, generate_case, input_path_match,  # noqa: E402
                               parse_input_path, seeds_of)
 from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS  # noqa: E402
 from pyomo_heli.studies.args import out_folder, positive_int  # noqa: E402
-from pyomo_heli.studies.commands import exit_status, run_command  # noqa: E402
+from pyomo_heli.studies.commands import exit_status  # noqa: E402
 
 
 def run_case(effect: str, seed: int, out: Path, template: str) -> dict:
@@ -39,11 +39,7 @@ def run_case(effect: str, seed: int, out: Path, template: str) -> dict:
     case = out / f"{effect}_{seed}"
     if (case / "row.json").is_file():
         return json.loads((case / "row.json").read_text())
-    data = case / "data"
-    if not (data / "truth.json").is_file():
-        case.mkdir(parents=True, exist_ok=True)
-        (case / "gen.toml").write_text(data_config(template, effect, seed))
-        run_command(["generate-data", "--config", str(case / "gen.toml"), "--out", str(data)])
+    data = generate_case(case, template, effect, seed)
     cfg = load_identification_config(CONFIG, overrides={"data": {"dataset": str(data)}})
     truth = json.loads((data / "truth.json").read_text())["parameters"]
     d = diagnose(compute_residuals(cfg, {p.name: truth[p.name] for p in cfg.free}, label="M0 at truth"))

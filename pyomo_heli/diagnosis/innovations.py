@@ -100,7 +100,7 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     if path is not None:  # the input-path regression also allows a shift of the identified parameters
         P = parameter_columns(model, mv, outputs, keep, nuisance_parameters, substeps)
         block = record_block(-e, Su, np.column_stack([N, P]), L, signals_of(model, mv, y, input_errors, substeps),
-                             input_errors, np.repeat([float(sigma[c]) ** 2 for c in input_errors], n), t)
+                             input_errors, np.repeat([float(sigma[c]) ** 2 for c in input_errors], n), t, mv.name)
     ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)
     coef, *_ = np.linalg.lstsq(Nw, ew, rcond=None)
     cov = np.linalg.pinv(Nw.T @ Nw)  # the estimates' covariance if the whitened rows have unit variance
@@ -142,13 +142,10 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
             outs.append(o)
         except ValueError as exc:
             problems.append(f"innovations: output {o} left out ({exc})")
-    frames, biases, path, path_names, path_times = [], [], [], [], []
+    frames, biases, path = [], [], []
     for role, mv in maneuvers:
         try:
             df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps, path, parameters)
-            if len(path) > len(path_names):
-                path_names.append(mv.name)
-                path_times.append(mv.data["t"].to_numpy(dtype=float))
         except Exception as exc:  # noqa: BLE001 - the raw residual tests stay available
             why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             problems.append(f"maneuver {mv.name}: innovations failed ({why})")
@@ -162,6 +159,6 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
                 "sigma": {c: float(v) for c, v in sigma.items()}, "record_biases": biases}
     if input_errors and path:
         test = input_path_test(path)
-        test.histories = histories(test, path, path_names, path_times, input_errors)
+        test.histories = histories(test, path, input_errors)
         settings["input_path"] = test.to_dict()
     return table, settings

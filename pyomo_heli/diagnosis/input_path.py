@@ -49,6 +49,24 @@ SIGNALS = {
 MAX_TERMS = 3
 
 
+def signal_values(t: np.ndarray, increments: dict, y: dict) -> dict:
+    """The dictionary's signals of one record at its samples ``t`` [s] (SI): the measured input ``increments``, the
+    model outputs ``y`` (q, theta, TAS; one ``y`` does not carry is left out) and the inputs' rates."""
+    out = {c: np.asarray(increments[c], float) for c in ("col", "lon")}
+    out.update({o: np.asarray(y[o], float) for o in ("q", "theta", "TAS") if o in y})
+    for c in ("col", "lon"):
+        out[f"{c}_rate"] = np.gradient(out[c], t) if len(t) > 1 else np.zeros_like(out[c])
+    return {k: out[k] for k in SIGNALS if k in out}
+
+
+def input_error(terms: list, signals: dict, n: int) -> dict:
+    """The input error the selected ``terms`` give along a record: {channel: sum of estimate x signal} [rad]."""
+    out = {"col": np.zeros(n), "lon": np.zeros(n)}
+    for t in terms:
+        out[t["channel"]] = out[t["channel"]] + t["estimate"] * signals[t["signal"]]
+    return out
+
+
 def signals_of(model, mv, y: dict, channels, substeps: int = 2) -> dict:
     """The dictionary's signals of one prepared record at its samples, each with the linear map of the input noise
     into it: ``{name: (x, A)}``, x the signal (SI) and A (n x len(channels) n) its part due to the measured inputs'
@@ -61,51 +79,43 @@ def signals_of(model, mv, y: dict, channels, substeps: int = 2) -> dict:
 
     t = mv.data["t"].to_numpy(dtype=float)
     n, inc = len(t), mv.increments()
+    values = signal_values(t, inc, y)
     block = {c: slice(i * n, (i + 1) * n) for i, c in enumerate(channels)}
     grad = np.gradient(np.eye(n), t, axis=0) if n > 1 else np.zeros((n, n))
-    out = {}
+    noise = {}
     for c in ("col", "lon"):
-        x = np.asarray(inc[c], float)
         A = np.zeros((n, len(channels) * n))
         R = np.zeros_like(A)
         if c in block:
             A[:, block[c]] = np.eye(n)
             R[:, block[c]] = grad
-        out[c], out[f"{c}_rate"] = (x, A), (grad @ x, R)
-    model_outs = [o for o in ("q", "theta", "TAS") if o in y]
+        noise[c], noise[f"{c}_rate"] = A, R
+    model_outs = [o for o in ("q", "theta", "TAS") if o in values]
     if model_outs:
         _, S = input_sensitivities(model, trim_float(model, mv.trim_speed), t, inc, model_outs, list(channels),
                                    substeps)
-        for o in model_outs:
-            out[o] = (np.asarray(y[o], float), S[o])
-    return {k: out[k] for k in SIGNALS if k in out}
+        noise.update({o: S[o] for o in model_outs})
+    return {k: (x, noise[k]) for k, x in values.items()}
 
 
 def parameter_columns(model, mv, outputs, keep, names, substeps: int = 2) -> np.ndarray:
     """The output sensitivities of one prepared record's rows (``keep``, time order) to the parameters ``names``,
     by central differences of the replay from each perturbed model's own trim (the NLP starts every record at its
     model's trim). Nuisance of the input-path regression: the chosen point of a front trades the time fit against
-    the trims, so its parameters leave a residual along these directions that is not a missing effect."""
-    from ..simulation.compiled import simulate_outputs
-    from ..simulation.sensitivity import parameter_steps
-    from ..simulation.trim import trim_float
+    the trims, so its parameters leave a residual along these directions that is not a missing effect
+    (:func:`pyomo_heli.simulation.sensitivity.sensitivities`, rows reordered)."""
+    from ..simulation.sensitivity import sensitivities
 
-    t = mv.data["t"].to_numpy(dtype=float)
     keep = np.asarray(keep, dtype=int)
-    cols = []
-    for name, h in zip(names, parameter_steps(model, names)):
-        v = model.parameters[name]
-        ys = []
-        for x in (v + h, v - h):
-            m = model.with_parameters(**{name: x})
-            y = simulate_outputs(m, trim_float(m, mv.trim_speed), t, mv.increments(), list(outputs), substeps)
-            ys.append(np.column_stack([np.asarray(y[o], float)[keep] for o in outputs]).ravel())
-        cols.append((ys[0] - ys[1]) / (2 * h))
-    return np.column_stack(cols) if cols else np.zeros((len(keep) * len(outputs), 0))
+    names = list(names)
+    if not names:
+        return np.zeros((len(keep) * len(outputs), 0))
+    S = sensitivities(model, names, maneuvers=[mv], time_outputs=list(outputs), substeps=substeps).time
+    return np.stack([S[o][keep] for o in outputs], axis=1).reshape(len(keep) * len(outputs), len(names))
 
 
 def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, signals: dict, channels,
-                 var_u: np.ndarray, t: np.ndarray) -> dict:
+                 var_u: np.ndarray, t: np.ndarray, maneuver: str = "") -> dict:
     """One record's sums for the regression, in whitened rows with its nuisance projected out (Frisch-Waugh).
 
     ``e``: data - model at the kept rows (time order, every output of a row together); ``Su``: their sensitivities
@@ -115,8 +125,8 @@ def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, si
 
     Returns ``DtD``, ``Dte``, ``ete`` (the least-squares sums), ``B`` and ``b``: their expectation due to the
     input noise in the regressors (what corrected least squares subtracts), ``rows``, ``nuisance`` and ``labels``;
-    for the figure, ``asked``: the input errors the residual asks for (:func:`asked_errors`), and ``signals``
-    (name -> x); ``t``: the record's sample times [s].
+    for the figure, ``asked``: the input errors the residual asks for (:func:`asked_errors`), ``signals``
+    (name -> x), ``t`` (the record's sample times [s]) and ``maneuver`` (its name).
     """
     from scipy.linalg import solve_triangular
 
@@ -142,7 +152,7 @@ def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, si
     B = np.array([[np.sum(U * V) for V in Us] for U in noise])
     return {"DtD": D.T @ D, "Dte": D.T @ ew, "ete": float(ew @ ew), "B": B, "b": b, "rows": len(ew),
             "nuisance": N.shape[1], "labels": labels, "asked": asked_errors(Z, ew, t, channels),
-            "signals": {s: x for s, (x, _) in signals.items()}}
+            "signals": {s: x for s, (x, _) in signals.items()}, "t": t, "maneuver": maneuver}
 
 
 #: the time step [s] of the input-error history the residual asks for (a piecewise-constant error per channel)
@@ -216,23 +226,22 @@ HISTORY_RECORDS = 3
 HISTORY_RATE_HZ = 10.0
 
 
-def histories(test: InputPathTest, blocks: list, names: list, times: list, channels,
-              keep: int = HISTORY_RECORDS) -> list:
+def histories(test: InputPathTest, blocks: list, channels, keep: int = HISTORY_RECORDS) -> list:
     """The input-error histories of the ``keep`` records the selected terms move most: per record its ``maneuver``,
     ``t`` [s] and, per channel c, ``asked_<c>`` (the error the residual asks for, :func:`asked_errors`)
     and ``fitted_<c>`` (the selected terms' sum), each record's mean removed (the nuisance takes any constant)."""
     if not test.terms:
         return []
     out = []
-    for blk, name, t in zip(blocks, names, times):
-        n = len(t)
+    for blk in blocks:
+        t, n = blk["t"], len(blk["t"])
         k = slice(None, None, max(int(round(1.0 / (HISTORY_RATE_HZ * float(np.median(np.diff(t)))))), 1)
                   if n > 1 else 1)
-        row = {"maneuver": name, "t": [float(v) for v in t[k]]}
+        row = {"maneuver": blk["maneuver"], "t": [float(v) for v in t[k]]}
         size = 0.0
+        fitted = input_error(test.terms, blk["signals"], n)
         for i, c in enumerate(channels):
-            fit = sum((term["estimate"] * blk["signals"][term["signal"]] for term in test.terms
-                       if term["channel"] == c), np.zeros(n))
+            fit = fitted[c]
             asked = blk["asked"][i * n:(i + 1) * n]
             row[f"asked_{c}"] = [float(v) for v in (asked - asked.mean())[k]]
             row[f"fitted_{c}"] = [float(v) for v in (fit - fit.mean())[k]]

@@ -24,8 +24,10 @@ pooled trim / identification / validation RMS of iteration 0 and of the kept mod
 parameter errors against truth before and after, wrong acceptance (a physical library candidate kept although the
 truth holds none), and for a discovered or described generic term whether its shape matches the truth term: for
 a truth that adds a steady force or moment, sign and speed dependence of the same force or moment along the level
-trims (:func:`shape_match`); for one that adds none (control-path and sensor effects), its trim and time signature
-against M0 on the validation records (:func:`signature_match`). With an "unexplained" verdict, the shape it
+trims (:func:`shape_match`); for one that adds a force or moment that is zero at every trim (a damping), sign and
+speed dependence of its derivative along the trims, for a force or moment term (:func:`derivative_match`); for
+control-path and sensor effects, and a sensor term against a damping, its trim and time signature against M0 on
+the validation records (:func:`signature_match`). With an "unexplained" verdict, the shape it
 reports (a discovered term the validation rule rejected, else the last step's best generic term) and whether that
 matches. The residual analysis of the kept model (:func:`final_residual`): its verdict, where an output's
 records disagree on its bias whether that shape matches the truth's (:func:`record_bias_match`), and the input
@@ -130,10 +132,25 @@ def truth_curve(effect: str, channel: str) -> np.ndarray | None:
     return None if not np.any(np.abs(vals) > 1e-9) else vals
 
 
-def shape_match(effect: str, fit: dict | None, kept_model=None, params=None) -> str:
-    """Does a generic term's force or moment along the level trims match the truth's in sign and speed dependence?
-    'yes' when the correlation over speed is > 0.7 and the values at the speed of the truth's largest |value| agree
-    in sign; 'no' otherwise; 'n/a' without a force/moment term or a truth force in that channel."""
+def curve_match(truth: np.ndarray, vals: np.ndarray) -> str:
+    """Do two curves over SPEEDS_KT agree in sign and speed dependence? 'yes' when their correlation over speed is
+    > 0.7 and they agree in sign at the speed of the truth's largest |value|; a curve constant over speed has no
+    speed dependence to match (two constants match by sign)."""
+    k = int(np.argmax(np.abs(truth)))
+    # constant over speed (to rounding): a correlation is not defined, and a constant has no speed dependence to match
+    flat = [np.ptp(a) <= 1e-9 * np.max(np.abs(a)) for a in (vals, truth)]
+    if all(flat):
+        corr = float(np.sign(truth[k] * vals[k]))
+    elif any(flat):
+        return "no (" + ("the term" if flat[0] else "the truth") + " is constant over speed)"
+    else:
+        corr = float(np.corrcoef(truth, vals)[0, 1])
+    return "yes" if corr > 0.7 and np.sign(vals[k]) == np.sign(truth[k]) else f"no (corr {corr:+.2f})"
+
+
+def shape_match(effect: str, fit: dict | None) -> str:
+    """Does a generic term's force or moment along the level trims match the truth's in sign and speed dependence
+    (:func:`curve_match`)? 'n/a' without a force/moment term or a truth force in that channel."""
     from pyomo_heli.physics.discrepancy import generic_term
     from pyomo_heli.physics.model import HelicopterModel
     from pyomo_heli.simulation.trim import trim_float
@@ -152,17 +169,76 @@ def shape_match(effect: str, fit: dict | None, kept_model=None, params=None) -> 
         tp = trim_float(m, v * KT)
         x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i}
         vals.append(float(t.value(m.evaluate(x, {"col": tp.col, "lon": tp.lon}))))
-    vals = np.array(vals)
-    k = int(np.argmax(np.abs(truth)))
-    # constant over speed (to rounding): a correlation is not defined, and a constant has no speed dependence to match
-    flat = [np.ptp(a) <= 1e-9 * np.max(np.abs(a)) for a in (vals, truth)]
-    if all(flat):
-        corr = float(np.sign(truth[k] * vals[k]))
-    elif any(flat):
-        return "no (" + ("the term" if flat[0] else "the truth") + " is constant over speed)"
-    else:
-        corr = float(np.corrcoef(truth, vals)[0, 1])
-    return "yes" if corr > 0.7 and np.sign(vals[k]) == np.sign(truth[k]) else f"no (corr {corr:+.2f})"
+    return curve_match(truth, np.array(vals))
+
+
+#: the states and controls a force derivative is taken with respect to, with the sizes that weigh them against each
+#: other (the discrepancy family's regressor scales, physics/discrepancy.py: w 5 m/s, q 0.2 rad/s, col 0.2 rad, lon
+#: 0.05 rad; u as w) and the central-difference steps (SI)
+DERIVATIVE_SCALES = {"u": 5.0, "w": 5.0, "q": 0.2, "col": 0.2, "lon": 0.05}
+DERIVATIVE_STEPS = {"u": 0.1, "w": 0.1, "q": 0.005, "col": 0.001, "lon": 0.001}
+
+
+def force_derivatives(extension, strengths: dict, channel: str) -> dict:
+    """d(force or moment in ``channel``)/d(state or control) that ``extension`` adds, along the level trims of M0
+    with it at ``strengths`` (central differences, SI): state -> array over SPEEDS_KT."""
+    from pyomo_heli.physics.model import HelicopterModel
+    from pyomo_heli.simulation.trim import trim_float
+    from pyomo_heli.units import KT
+
+    m = HelicopterModel(extensions=(extension,)).with_parameters(**strengths)
+    i = "XZM".index(channel)
+    out = {s: [] for s in DERIVATIVE_STEPS}
+    for v in SPEEDS_KT:
+        tp = trim_float(m, v * KT)
+        x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}
+        u = {"col": tp.col, "lon": tp.lon}
+        for s, h in DERIVATIVE_STEPS.items():
+            f = []
+            for sign in (1.0, -1.0):
+                xx, uu = dict(x), dict(u)
+                (xx if s in xx else uu)[s] += sign * h
+                f.append(float(np.asarray(extension.extra_forces(m.evaluate(xx, uu))[i])))
+            out[s].append((f[0] - f[1]) / (2 * h))
+    return {s: np.array(a) for s, a in out.items()}
+
+
+@functools.lru_cache(maxsize=64)
+def truth_derivative(effect: str, channel: str) -> tuple[str, np.ndarray] | None:
+    """The truth effect's dominant force derivative in ``channel`` along the level trims (the state whose derivative
+    times its scale, :data:`DERIVATIVE_SCALES`, is largest) as (state, curve), for a truth that adds a force or moment
+    with no steady value through M0's states alone (e.g. a damping); None otherwise. A truth with states of its own
+    (a lag, a mode) has no such quasi-steady derivative with them held, so it is compared by its signature."""
+    if effect == "none":
+        return None
+    e = HELD_OUT_EFFECTS[effect]()
+    if e.states or truth_curve(effect, channel) is not None:
+        return None
+    d = force_derivatives(e, HELD_OUT_STRENGTHS[effect], channel)
+    size = {s: float(np.max(np.abs(a))) * DERIVATIVE_SCALES[s] for s, a in d.items()}
+    s = max(size, key=size.get)
+    return (s, d[s]) if size[s] > 1e-9 else None
+
+
+def derivative_match(effect: str, fit: dict | None) -> str:
+    """Does a generic force or moment term match, in sign and speed dependence (:func:`curve_match`), the truth's
+    dominant force derivative (:func:`truth_derivative`), e.g. a pitch damping dM/dq that grows with speed? For a
+    truth whose force or moment is zero at every trim, where its steady curve says nothing. 'n/a' without a
+    force/moment term or such a truth derivative in its channel."""
+    from pyomo_heli.physics.discrepancy import generic_term
+
+    if not fit or fit["name"][:2] not in ("dX", "dZ", "dM"):
+        return "n/a"
+    truth = truth_derivative(effect, fit["name"][1])
+    if truth is None:
+        return "n/a"
+    s, curve = truth
+    t = generic_term(fit["name"])
+    d = force_derivatives(t, {t.strength: fit["estimate"]}, fit["name"][1])
+    size = {k: float(np.max(np.abs(a))) * DERIVATIVE_SCALES[k] for k, a in d.items()}
+    if size[s] <= 0.01 * max(size.values()):  # to rounding (mu moves with q through the hub's velocity)
+        return f"no (the term does not depend on {s})"
+    return curve_match(curve, d[s])
 
 
 #: a time signature matches when what the best positive multiple of the term leaves of the truth's is below
@@ -269,12 +345,23 @@ def has_steady_force(effect: str) -> bool:
     return any(truth_curve(effect, ch) is not None for ch in "XZM")
 
 
+def has_force_derivative(effect: str) -> bool:
+    return any(truth_derivative(effect, ch) is not None for ch in "XZM")
+
+
 def match(effect: str, fit: dict | None) -> str:
-    """The shape test of the study criterion: :func:`shape_match` (sign and speed dependence of the force or
-    moment) for a truth that adds a steady force or moment, :func:`signature_match` for one that adds none."""
+    """The shape test of the study criterion, the truth's sign and speed dependence where it has them:
+    :func:`shape_match` (the force or moment along the trims) for a truth that adds a steady force or moment;
+    :func:`derivative_match` (its derivative along the trims) for a force or moment term where the truth adds one
+    that is zero at every trim (a damping); :func:`signature_match` otherwise (control-path and sensor effects, a
+    sensor term against a damping)."""
     if effect == "none" or not fit:
         return "n/a" if effect == "none" else "-"
-    return shape_match(effect, fit) if has_steady_force(effect) else signature_match(effect, fit)
+    if has_steady_force(effect):
+        return shape_match(effect, fit)
+    if has_force_derivative(effect) and fit["name"][:2] in ("dX", "dZ", "dM"):
+        return derivative_match(effect, fit)
+    return signature_match(effect, fit)
 
 
 def criterion_met(row: dict) -> bool | str:

@@ -541,6 +541,36 @@ def test_a_constant_term_does_not_match_a_speed_dependent_truth():
     assert study.shape_match("fuselage_download", {"name": "dM_bump00", "estimate": -0.009}).startswith("no (corr")
 
 
+def test_a_damping_is_matched_by_its_derivative_over_speed():
+    """The fuselage pitch damping adds no moment at any trim (q = 0), so its shape is its derivative: the study's
+    dM/dq along the level trims is the equation's -k 0.25 rho V S_p l_p^2 (V the trim's airspeed, analytic). A
+    nose-down dM_qmu (dM/dq growing with mu) matches it; the opposite sign does not; a constant dM_q has no speed
+    dependence, nor has dM_mu's (through the hub's velocity); dM_w does not depend on q; a force term in X has no truth derivative to match (n/a); a sensor
+    term is compared by its signature instead, and a truth with a steady force keeps the steady curve."""
+    study = _study()
+    state, curve = study.truth_derivative("fuselage_pitch_damping", "M")
+    assert state == "q"
+    m = HelicopterModel()
+    for v_kt, d in zip(study.SPEEDS_KT, curve):
+        if v_kt >= 10:
+            tp = trim_float(m, v_kt * 0.514444)
+            want = -HELD_OUT_STRENGTHS["fuselage_pitch_damping"]["k_fq"] * 0.25 * m.parameters["rho"] * np.hypot(tp.u, tp.w) * 192
+            assert d == pytest.approx(want, rel=2e-3)
+    assert study.match("fuselage_pitch_damping", {"name": "dM_qmu", "estimate": -0.0070}) == "yes"
+    assert study.match("fuselage_pitch_damping", {"name": "dM_qmu", "estimate": 0.0070}).startswith("no (corr")
+    assert study.match("fuselage_pitch_damping", {"name": "dM_q", "estimate": -0.0078}) == \
+        "no (the term is constant over speed)"
+    # dM_mu moves with q only through the hub's velocity (mu), the same at every speed
+    assert study.match("fuselage_pitch_damping", {"name": "dM_mu", "estimate": 0.0036}) == \
+        "no (the term is constant over speed)"
+    assert study.match("fuselage_pitch_damping", {"name": "dM_w", "estimate": 0.0031}) == \
+        "no (the term does not depend on q)"
+    assert study.match("fuselage_pitch_damping", {"name": "dX_q", "estimate": 0.01}) == "n/a"
+    assert study.truth_derivative("fuselage_download", "M") is None  # a steady moment: shape_match decides
+    assert study.truth_derivative("rotor_pylon_mode", "M") is None  # states of its own: the signature decides
+    assert not study.has_force_derivative("pitch_rate_damper")
+
+
 # slow (50 s each; CI time): a study's evaluation, not the package's; the package's score of a term on the same kind
 # of small loop runs by default (tests/test_discovery.py)
 @pytest.mark.slow

@@ -545,8 +545,9 @@ def test_a_damping_is_matched_by_its_derivative_over_speed():
     """The fuselage pitch damping adds no moment at any trim (q = 0), so its shape is its derivative: the study's
     dM/dq along the level trims is the equation's -k 0.25 rho V S_p l_p^2 (V the trim's airspeed, analytic). A
     nose-down dM_qmu (dM/dq growing with mu) matches it; the opposite sign does not; a constant dM_q has no speed
-    dependence, nor has dM_mu's (through the hub's velocity); dM_w does not depend on q; a force term in X has no truth derivative to match (n/a); a sensor
-    term is compared by its signature instead, and a truth with a steady force keeps the steady curve."""
+    dependence, nor has dM_mu's (through the hub's velocity); dM_w does not depend on q; a force term in X has no
+    truth derivative to match (n/a); a sensor term is compared by its signature instead, and a truth with a
+    steady force keeps the steady curve."""
     study = _study()
     state, curve = study.truth_derivative("fuselage_pitch_damping", "M")
     assert state == "q"
@@ -554,7 +555,8 @@ def test_a_damping_is_matched_by_its_derivative_over_speed():
     for v_kt, d in zip(study.SPEEDS_KT, curve):
         if v_kt >= 10:
             tp = trim_float(m, v_kt * 0.514444)
-            want = -HELD_OUT_STRENGTHS["fuselage_pitch_damping"]["k_fq"] * 0.25 * m.parameters["rho"] * np.hypot(tp.u, tp.w) * 192
+            k_fq = HELD_OUT_STRENGTHS["fuselage_pitch_damping"]["k_fq"]
+            want = -k_fq * 0.25 * m.parameters["rho"] * np.hypot(tp.u, tp.w) * 12.0 * 4.0**2
             assert d == pytest.approx(want, rel=2e-3)
     assert study.match("fuselage_pitch_damping", {"name": "dM_qmu", "estimate": -0.0070}) == "yes"
     assert study.match("fuselage_pitch_damping", {"name": "dM_qmu", "estimate": 0.0070}).startswith("no (corr")

@@ -109,3 +109,43 @@ def test_a_cross_feed_the_recorder_misses_is_found_with_its_gain(cross_feed, tmp
     assert len(h) == 3 and all(m.startswith("col") for m in h), list(h)
     for m in ("coldoublet_20kt", "col3211_80kt_a"):
         assert np.corrcoef(h[m]["asked_lon"], h[m]["fitted_lon"])[0, 1] > 0.6, m
+
+
+def test_level_study_counts_a_seed_below_a_level_by_its_adjusted_smallest_p():
+    """pyomo_heli.studies.input_path_level: a seed is below a level when its first step's smallest p times the
+    dictionary size is; per term, the first step's z (mean, sd) and p shares over the seeds."""
+    from pyomo_heli.studies.input_path_level import below, summary
+
+    def doc(p_col, z_col, p_lon=0.5):
+        return {"alpha": 0.01, "terms": 14, "selected": [], "first step smallest p": min(p_col, p_lon),
+                "first step": {"col x col_rate": {"estimate": 0.0, "se": 1.0, "z": z_col, "p": p_col},
+                               "lon x col": {"estimate": 0.0, "se": 1.0, "z": 0.0, "p": p_lon}}}
+    quiet = doc(0.003, 3.0)  # adjusted 0.042
+    assert [below(quiet, a) for a in (0.01, 0.05, 0.1)] == [False, True, True]
+    assert [below(doc(1e-5, 4.4), a) for a in (0.01, 0.05, 0.1)] == [True, True, True]
+    tab = summary([quiet, doc(1e-5, 4.4), doc(0.5, -0.7), doc(0.005, 2.8)]).set_index("term")
+    assert tab.loc["col x col_rate", "mean z"] == pytest.approx((3.0 + 4.4 - 0.7 + 2.8) / 4)
+    assert tab.loc["col x col_rate", "p < 0.01 [%]"] == 75.0 and tab.loc["lon x col", "p < 0.05 [%]"] == 0.0
+    assert list(tab.loc["any (smallest p x terms)", ["p < 0.01 [%]", "p < 0.05 [%]", "p < 0.1 [%]"]]) == \
+        [25.0, 50.0, 75.0]
+
+
+def test_level_study_writes_each_seed_and_resumes(tmp_path):
+    """The level study (pyomo_heli.studies.input_path_level) on one seed of the small held-out flight test (three
+    records), M0 + noise at the true parameters: the 14-term dictionary at alpha 0.01, the seed's data removed once it
+    is done, and a rerun reads the seed back."""
+    import json
+
+    from pyomo_heli.studies.input_path_level import main
+
+    argv = ["--seeds", "7", "--config", str(ROOT / "studies" / "held_out_small.toml"),
+            "--data-config", str(ROOT / "studies" / "held_out_small_gen.toml"), "--out", str(tmp_path)]
+    assert main(argv) == 0
+    doc = json.loads((tmp_path / "seed_7.json").read_text())
+    assert doc["records"] == 3 and doc["terms"] == 14 and doc["alpha"] == 0.01 and not doc["problems"]
+    assert len(doc["first step"]) == 13 and 0.0 < doc["first step smallest p"] <= 1.0  # one term not fittable here
+    assert doc["first step smallest p"] == min(r["p"] for r in doc["first step"].values())
+    assert not (tmp_path / "data").exists()
+    assert list(pd.read_csv(tmp_path / "summary.csv")["term"])[-1] == "any (smallest p x terms)"
+    (tmp_path / "seed_7.json").write_text(json.dumps({**doc, "records": 99}))
+    assert main(argv) == 0 and "(99 records each" in (tmp_path / "summary.md").read_text()

@@ -35,6 +35,8 @@ ROOT = Path(__file__).resolve().parent.parent
      "--config nope.toml: file not found"),
     (["record_bias_level.py", "--seeds", "1", "--config", "studies/multistart_case1.toml", "--out", "OUT"],
      "the record-bias test needs the residuals' innovations"),
+    (["input_path_level.py", "--seeds", "1", "--config", "studies/multistart_case1.toml", "--out", "OUT"],
+     "the input path needs the residuals' innovations"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path, monkeypatch, capsys):

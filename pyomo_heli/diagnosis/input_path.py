@@ -180,6 +180,7 @@ class InputPathTest:
 
     terms: list = field(default_factory=list)  # selected: channel, signal, estimate, se, z, p
     screen: list = field(default_factory=list)  # the last step: every term not selected, as if added alone
+    first: list = field(default_factory=list)  # the first step: every term alone (the level studies' null statistic)
     level: float = float("nan")  # per-term level alpha / dictionary size
     alpha: float = 0.01
     scale: float = float("nan")  # residual standard deviation of the whitened rows (1 when the noise model holds)
@@ -297,7 +298,12 @@ def input_path_test(blocks: list, alpha: float = 0.01, max_terms: int = MAX_TERM
             out[j] = (float(fit[0][-1]), float(fit[1][-1]), float(z[-1]), float(p[-1]))
         return out
 
+    def rows(tab):
+        return [{"channel": labels[j][0], "signal": labels[j][1], "estimate": v[0], "se": v[1], "z": v[2], "p": v[3]}
+                for j, v in tab.items()]
+
     chosen: list = []
+    first = rows(table([]))
     for _ in range(max_terms):
         tab = table(chosen)
         if not tab:
@@ -319,7 +325,5 @@ def input_path_test(blocks: list, alpha: float = 0.01, max_terms: int = MAX_TERM
         z, p = pvals(fit)
         terms = [{"channel": labels[j][0], "signal": labels[j][1], "estimate": float(fit[0][k]),
                   "se": float(fit[1][k]), "z": float(z[k]), "p": float(p[k])} for k, j in enumerate(chosen)]
-    screen = [{"channel": labels[j][0], "signal": labels[j][1], "estimate": v[0], "se": v[1], "z": v[2], "p": v[3]}
-              for j, v in table(chosen).items()]
-    return InputPathTest(terms=terms, screen=screen, level=level, alpha=alpha, scale=math.sqrt(fit[2]),
-                         rows=st["rows"], records=len(blocks))
+    return InputPathTest(terms=terms, screen=rows(table(chosen)), first=first, level=level, alpha=alpha,
+                         scale=math.sqrt(fit[2]), rows=st["rows"], records=len(blocks))

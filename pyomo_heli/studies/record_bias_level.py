@@ -17,7 +17,6 @@ residual analysis flags (some output below 0.01 / outputs, the diagnosis's level
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import shutil
 import sys
@@ -26,12 +25,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pyomo_heli.config import load_identification_config
 from pyomo_heli.diagnosis.record_bias import record_bias_tests
-from pyomo_heli.diagnosis.residuals import compute_residuals
-from pyomo_heli.flighttest.generate import truth_model_of
 
-from .seeded import cached_seed, m0_noise_data, seeded_study_main
+from .seeded import cached_seed, needs_innovations, seeded_study_main, truth_residuals
 
 LEVELS = (0.05, 0.01)
 ALPHA = 0.01  # the residual analysis's default level
@@ -43,11 +39,7 @@ def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
     if done is not None:
         return done
     f = out / f"seed_{seed}.json"
-    data = m0_noise_data(seed, data_config, out)
-    cfg = load_identification_config(config, overrides={"data": {"dataset": str(data)}})
-    model = truth_model_of(data)
-    res = compute_residuals(dataclasses.replace(cfg, model=model), model.parameters.to_dict(), label="truth",
-                            input_offsets=False, trim_sensitivities=False)
+    res, data = truth_residuals(seed, config, data_config, out)
     inn = res.info["innovations"]["record_biases"]
     tests = record_bias_tests(inn, ALPHA)
     doc = {"seed": seed, "records": len(inn), "problems": res.problems,
@@ -80,15 +72,9 @@ def summarise(docs: list) -> tuple[pd.DataFrame, str]:
         f"flagged (some output below {ALPHA:g} / outputs) in about {100 * ALPHA:g} %.")
 
 
-def needs_innovations(cfg) -> None:
-    if not cfg.diagnosis_settings.input_noise:
-        raise ValueError(f"--config {cfg.path}: the record-bias test needs the residuals' innovations; set "
-                         f"[objectives] input_errors or [diagnosis] input_noise")
-
-
 def main(argv=None) -> int:
     return seeded_study_main(__doc__.splitlines()[0], argv, one_seed, summarise, "20261122-20261161",
-                             needs_innovations)
+                             needs_innovations("the record-bias test"))
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 """The command line shared by the Monte Carlo level studies on the bundled records (validation_test_level,
-record_bias_level): seeds, the loop config and the generator config, one JSON per seed in OUT, a summary."""
+record_bias_level, input_path_level): seeds, the loop config and the generator config, one JSON per seed in OUT, a
+summary."""
 from __future__ import annotations
 
 import argparse
@@ -83,3 +84,27 @@ def m0_noise_data(seed: int, data_config: Path, out: Path) -> Path:
     if not (data / "truth.json").is_file():
         generate(dataclasses.replace(load_config(data_config), seed=seed, effects={}), data, force=True)
     return data
+
+
+def truth_residuals(seed: int, config: Path, data_config: Path, out: Path):
+    """The residuals (:func:`pyomo_heli.diagnosis.residuals.compute_residuals`) of the exact model at its true
+    parameters on :func:`m0_noise_data`'s flight test, every identification and validation record as ``config``
+    prepares them; their innovations carry the record biases and the input path. Returns (residuals, data folder)."""
+    from pyomo_heli.diagnosis.residuals import compute_residuals
+    from pyomo_heli.flighttest.generate import truth_model_of
+
+    data = m0_noise_data(seed, data_config, out)
+    cfg = load_identification_config(config, overrides={"data": {"dataset": str(data)}})
+    model = truth_model_of(data)
+    return compute_residuals(dataclasses.replace(cfg, model=model), model.parameters.to_dict(), label="truth",
+                             input_offsets=False, trim_sensitivities=False), data
+
+
+def needs_innovations(test: str) -> Callable:
+    """A ``check_config`` for :func:`seeded_study_main`: ``test`` (a residual test on the innovations, e.g. "the
+    record-bias test") needs the config's input-noise model."""
+    def check(cfg) -> None:
+        if not cfg.diagnosis_settings.input_noise:
+            raise ValueError(f"--config {cfg.path}: {test} needs the residuals' innovations; set "
+                             f"[objectives] input_errors or [diagnosis] input_noise")
+    return check

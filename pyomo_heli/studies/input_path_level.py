@@ -8,7 +8,8 @@ Every seed generates the bundled flight test (``--data-config``: same maneuvers,
 residual analysis's input-path regression (:mod:`pyomo_heli.diagnosis.input_path`) runs on the residuals of the
 exact model at the true parameters, every identification and validation record as the config prepares them (a
 shift of its free parameters allowed, its input-noise model: ``[objectives] input_errors``). Nothing acts on the
-control path, so a selected term is a false alarm: Bonferroni over the dictionary bounds their rate by alpha.
+control path, so a selected term is a false alarm (Bonferroni over the dictionary bounds their rate by alpha) or a
+mismatch of the replay and the records, which a term's mean z over the seeds shows (docs/diagnosis.md).
 Each seed's selected terms and the first step's regression (every term alone) go to ``OUT/seed_<n>.json`` as it
 finishes (a rerun reuses them; the generated data are deleted once the seed is done).
 

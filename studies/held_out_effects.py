@@ -111,24 +111,33 @@ def run_case(effect: str, seed: int, out: Path, config: Path, template: str) -> 
     return loop
 
 
-def truth_curve(effect: str, channel: str) -> np.ndarray | None:
-    """The truth effect's steady force (X, Z) or moment (M) along the truth's level trims; None if it adds none."""
+def level_trims(extension, strengths: dict):
+    """M0 with ``extension`` at ``strengths`` and its level trims at SPEEDS_KT: (model, [(states, inputs)]), SI."""
     from pyomo_heli.physics.model import HelicopterModel
     from pyomo_heli.simulation.trim import trim_float
     from pyomo_heli.units import KT
 
-    if effect == "none":
-        return None
-    e = HELD_OUT_EFFECTS[effect]()
-    m = HelicopterModel(extensions=(e,)).with_parameters(**HELD_OUT_STRENGTHS[effect])
-    vals = []
+    m = HelicopterModel(extensions=(extension,)).with_parameters(**strengths)
+    points = []
     for v in SPEEDS_KT:
         tp = trim_float(m, v * KT)
-        x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}
-        ctx = m.evaluate(x, {"col": tp.col, "lon": tp.lon})
-        d = dict(zip("XZM", (float(np.asarray(f)) for f in e.extra_forces(ctx))))
-        vals.append(d[channel])
-    vals = np.array(vals)
+        points.append(({"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i,
+                        **tp.extra_states}, {"col": tp.col, "lon": tp.lon}))
+    return m, points
+
+
+def steady_force(extension, strengths: dict, channel: str) -> np.ndarray:
+    """The force (X, Z) or moment (M) ``extension`` adds along its level trims (:func:`level_trims`), SI."""
+    m, points = level_trims(extension, strengths)
+    i = "XZM".index(channel)
+    return np.array([float(np.asarray(extension.extra_forces(m.evaluate(x, u))[i])) for x, u in points])
+
+
+def truth_curve(effect: str, channel: str) -> np.ndarray | None:
+    """The truth effect's steady force (X, Z) or moment (M) along the truth's level trims; None if it adds none."""
+    if effect == "none":
+        return None
+    vals = steady_force(HELD_OUT_EFFECTS[effect](), HELD_OUT_STRENGTHS[effect], channel)
     return None if not np.any(np.abs(vals) > 1e-9) else vals
 
 
@@ -152,9 +161,6 @@ def shape_match(effect: str, fit: dict | None) -> str:
     """Does a generic term's force or moment along the level trims match the truth's in sign and speed dependence
     (:func:`curve_match`)? 'n/a' without a force/moment term or a truth force in that channel."""
     from pyomo_heli.physics.discrepancy import generic_term
-    from pyomo_heli.physics.model import HelicopterModel
-    from pyomo_heli.simulation.trim import trim_float
-    from pyomo_heli.units import KT
 
     if not fit or fit["name"][:2] not in ("dX", "dZ", "dM"):
         return "n/a"
@@ -163,13 +169,7 @@ def shape_match(effect: str, fit: dict | None) -> str:
     if truth is None:
         return "n/a"
     t = generic_term(fit["name"])
-    m = HelicopterModel(extensions=(t,)).with_parameters(**{t.strength: fit["estimate"]})
-    vals = []
-    for v in SPEEDS_KT:
-        tp = trim_float(m, v * KT)
-        x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i}
-        vals.append(float(t.value(m.evaluate(x, {"col": tp.col, "lon": tp.lon}))))
-    return curve_match(truth, np.array(vals))
+    return curve_match(truth, steady_force(t, {t.strength: fit["estimate"]}, ch))
 
 
 #: the states and controls a force derivative is taken with respect to, with the sizes that weigh them against each
@@ -182,17 +182,10 @@ DERIVATIVE_STEPS = {"u": 0.1, "w": 0.1, "q": 0.005, "col": 0.001, "lon": 0.001}
 def force_derivatives(extension, strengths: dict, channel: str) -> dict:
     """d(force or moment in ``channel``)/d(state or control) that ``extension`` adds, along the level trims of M0
     with it at ``strengths`` (central differences, SI): state -> array over SPEEDS_KT."""
-    from pyomo_heli.physics.model import HelicopterModel
-    from pyomo_heli.simulation.trim import trim_float
-    from pyomo_heli.units import KT
-
-    m = HelicopterModel(extensions=(extension,)).with_parameters(**strengths)
+    m, points = level_trims(extension, strengths)
     i = "XZM".index(channel)
     out = {s: [] for s in DERIVATIVE_STEPS}
-    for v in SPEEDS_KT:
-        tp = trim_float(m, v * KT)
-        x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}
-        u = {"col": tp.col, "lon": tp.lon}
+    for x, u in points:
         for s, h in DERIVATIVE_STEPS.items():
             f = []
             for sign in (1.0, -1.0):
@@ -201,6 +194,11 @@ def force_derivatives(extension, strengths: dict, channel: str) -> dict:
                 f.append(float(np.asarray(extension.extra_forces(m.evaluate(xx, uu))[i])))
             out[s].append((f[0] - f[1]) / (2 * h))
     return {s: np.array(a) for s, a in out.items()}
+
+
+def scaled_sizes(derivatives: dict) -> dict:
+    """Each derivative's largest |value| along the trims times its state's scale (:data:`DERIVATIVE_SCALES`)."""
+    return {s: float(np.max(np.abs(a))) * DERIVATIVE_SCALES[s] for s, a in derivatives.items()}
 
 
 @functools.lru_cache(maxsize=64)
@@ -215,7 +213,7 @@ def truth_derivative(effect: str, channel: str) -> tuple[str, np.ndarray] | None
     if e.states or truth_curve(effect, channel) is not None:
         return None
     d = force_derivatives(e, HELD_OUT_STRENGTHS[effect], channel)
-    size = {s: float(np.max(np.abs(a))) * DERIVATIVE_SCALES[s] for s, a in d.items()}
+    size = scaled_sizes(d)
     s = max(size, key=size.get)
     return (s, d[s]) if size[s] > 1e-9 else None
 
@@ -235,7 +233,7 @@ def derivative_match(effect: str, fit: dict | None) -> str:
     s, curve = truth
     t = generic_term(fit["name"])
     d = force_derivatives(t, {t.strength: fit["estimate"]}, fit["name"][1])
-    size = {k: float(np.max(np.abs(a))) * DERIVATIVE_SCALES[k] for k, a in d.items()}
+    size = scaled_sizes(d)
     if size[s] <= 0.01 * max(size.values()):  # to rounding (mu moves with q through the hub's velocity)
         return f"no (the term does not depend on {s})"
     return curve_match(curve, d[s])

@@ -133,7 +133,7 @@ def test_level_study_counts_a_seed_below_a_level_by_its_adjusted_smallest_p():
 def test_level_study_writes_each_seed_and_resumes(tmp_path):
     """The level study (pyomo_heli.studies.input_path_level) on one seed of the small held-out flight test (three
     records), M0 + noise at the true parameters: the 14-term dictionary at alpha 0.01, the seed's data removed once it
-    is done, and a rerun reads the seed back."""
+    is done, a rerun reads the seed back, and a rerun with another input resampling makes it again."""
     import json
 
     from pyomo_heli.studies.input_path_level import main
@@ -149,3 +149,12 @@ def test_level_study_writes_each_seed_and_resumes(tmp_path):
     assert list(pd.read_csv(tmp_path / "summary.csv")["term"])[-1] == "any (smallest p x terms)"
     (tmp_path / "seed_7.json").write_text(json.dumps({**doc, "records": 99}))
     assert main(argv) == 0 and "(99 records each" in (tmp_path / "summary.md").read_text()
+    # --resample-inputs replaces the config's [data] resample_inputs (projected here): the seed is made again with
+    # the inputs picked, its replay differs, and the summary says how the inputs were resampled
+    assert main([*argv, "--resample-inputs", "sample"]) == 0
+    picked = json.loads((tmp_path / "seed_7.json").read_text())
+    assert picked["overrides"] == {"data": {"resample_inputs": "sample"}} and picked["records"] == 3
+    terms = sorted(set(doc["first step"]) & set(picked["first step"]))
+    assert len(terms) >= 10
+    assert [picked["first step"][t]["z"] for t in terms] != pytest.approx([doc["first step"][t]["z"] for t in terms])
+    assert "inputs resampled by 'sample'" in (tmp_path / "summary.md").read_text()

@@ -37,6 +37,8 @@ ROOT = Path(__file__).resolve().parent.parent
      "the record-bias test needs the residuals' innovations"),
     (["input_path_level.py", "--seeds", "1", "--config", "studies/multistart_case1.toml", "--out", "OUT"],
      "the input path needs the residuals' innovations"),
+    (["input_path_level.py", "--seeds", "1", "--resample-inputs", "nearest", "--out", "OUT"],
+     "argument --resample-inputs: invalid choice: 'nearest'"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path, monkeypatch, capsys):

@@ -1,7 +1,8 @@
 """How often does the input path find a signal when nothing is missing? Monte Carlo on the bundled records.
 
     python studies/input_path_level.py --seeds 20261122-20261161 --out results/input_path_level \
-        [--config studies/held_out_discovery.toml] [--data-config data/bo105_synthetic.toml]
+        [--config studies/held_out_discovery.toml] [--data-config data/bo105_synthetic.toml] \
+        [--resample-inputs sample|project]
 
 Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
 **M0 with sensor noise only** (its truth effects removed, its seed replaced) into ``OUT/data/<seed>``. The
@@ -28,20 +29,21 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .seeded import cached_seed, needs_innovations, seeded_study_main, truth_residuals
+from .seeded import cached_seed, needs_innovations, overrides_note, seeded_study_main, truth_residuals
 
 LEVELS = (0.01, 0.05, 0.1)
 
 
-def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
+def one_seed(seed: int, config: Path, data_config: Path, out: Path, overrides: dict | None = None) -> dict:
     """The input path of one seed (read back from ``OUT/seed_<seed>.json`` when it is there)."""
     done = cached_seed(out, seed)
-    if done is not None:
+    if done is not None and done.get("overrides", {}) == (overrides or {}):  # made with the same resampling
         return done
-    res, data = truth_residuals(seed, config, data_config, out)
+    res, data = truth_residuals(seed, config, data_config, out, overrides)
     ip = res.info["innovations"]["input_path"]
     size = round(ip["alpha"] / ip["level"])  # the dictionary's size (a term a record set cannot fit is in it too)
     doc = {"seed": seed, "records": ip["records"], "problems": res.problems, "alpha": ip["alpha"], "terms": size,
+           **({"overrides": overrides} if overrides else {}),
            "selected": [f"{t['channel']} += {t['estimate']:+.3g} x {t['signal']} (p = {t['p']:.2g})"
                         for t in ip["terms"]],
            "first step smallest p": min((r["p"] for r in ip["first"]), default=1.0),
@@ -78,7 +80,8 @@ def summarise(docs: list) -> tuple[pd.DataFrame, str]:
     hits = [f"seed {d['seed']}: {'; '.join(d['selected'])}" for d in docs if d["selected"]]
     return summary(docs), (
         f"Input-path regression on the exact model's residuals, {len(docs)} seeds of M0 + noise "
-        f"({docs[0]['records']} records each, identification and validation; {docs[0]['terms']} terms, alpha "
+        f"({docs[0]['records']} records each, identification and validation{overrides_note(docs)}; "
+        f"{docs[0]['terms']} terms, alpha "
         f"{docs[0]['alpha']:g}); expected: mean z about 0 (+- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, p below "
         f"each level in that share of the seeds, and any term below it at most so often. Terms selected (false "
         f"alarms): {len(hits)} of {len(docs)} seeds" + (" (" + ", ".join(hits) + ")" if hits else "") + ".")
@@ -86,7 +89,7 @@ def summarise(docs: list) -> tuple[pd.DataFrame, str]:
 
 def main(argv=None) -> int:
     return seeded_study_main(__doc__.splitlines()[0], argv, one_seed, summarise, "20261122-20261161",
-                             needs_innovations("the input path"))
+                             needs_innovations("the input path"), data_overrides=True)
 
 
 if __name__ == "__main__":

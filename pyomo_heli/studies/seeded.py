@@ -20,20 +20,28 @@ from .score_test_level import seeds_of
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def seeded_study_main(description: str, argv, one_seed: Callable[[int, Path, Path, Path], dict],
+def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
                       summarise: Callable[[list], tuple], seeds_example: str = "20261122-20261147",
-                      check_config: Callable | None = None) -> int:
+                      check_config: Callable | None = None, data_overrides: bool = False) -> int:
     """Parse ``--seeds --config --data-config --out`` (both configs checked before any work), run ``one_seed(seed,
     config, data_config, out)`` for every seed (printing each as it ends); ``summarise(docs)`` gives the summary
     table and the sentence above it: ``OUT/summary.csv``, ``OUT/summary.md``, printed. ``OUT/data`` is removed when
     the seeds left it empty (another run into the same OUT may still be using it). ``check_config(cfg)``: what the
-    study needs of the loop config, a ValueError naming ``--config`` otherwise."""
+    study needs of the loop config, a ValueError naming ``--config`` otherwise. ``data_overrides``: the study also
+    takes ``--resample-inputs`` (replaces the config's ``[data] resample_inputs``) and passes ``one_seed`` the
+    config's overrides as a fifth argument (a dict, empty without the option)."""
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--seeds", required=True, help=f"e.g. {seeds_example}")
     ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
     ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
     ap.add_argument("--out", required=True)
+    if data_overrides:
+        ap.add_argument("--resample-inputs", choices=("sample", "project"),
+                        help="[data] resample_inputs of the config replaced: the inputs picked like the outputs "
+                             "or projected (default: the config's)")
     a = ap.parse_args(argv)
+    overrides = ({"data": {"resample_inputs": a.resample_inputs}}
+                 if data_overrides and a.resample_inputs else {})
     try:
         seeds = seeds_of(a.seeds)
     except ValueError as exc:
@@ -41,7 +49,7 @@ def seeded_study_main(description: str, argv, one_seed: Callable[[int, Path, Pat
     config, data_config = in_file(ap, a.config, "--config"), in_file(ap, a.data_config, "--data-config")
     try:
         load_config(data_config)
-        cfg = load_identification_config(config)
+        cfg = load_identification_config(config, overrides=overrides)
     except ConfigError as exc:
         ap.error(str(exc))
     if check_config:
@@ -53,7 +61,8 @@ def seeded_study_main(description: str, argv, one_seed: Callable[[int, Path, Pat
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds:
-        docs.append(one_seed(s, config.resolve(), data_config.resolve(), out))
+        args = (s, config.resolve(), data_config.resolve(), out) + ((overrides,) if data_overrides else ())
+        docs.append(one_seed(*args))
         print(f"seed {s} done", flush=True)
     try:
         (out / "data").rmdir()
@@ -86,18 +95,27 @@ def m0_noise_data(seed: int, data_config: Path, out: Path) -> Path:
     return data
 
 
-def truth_residuals(seed: int, config: Path, data_config: Path, out: Path):
+def truth_residuals(seed: int, config: Path, data_config: Path, out: Path, overrides: dict | None = None):
     """The residuals (:func:`pyomo_heli.diagnosis.residuals.compute_residuals`) of the exact model at its true
     parameters on :func:`m0_noise_data`'s flight test, every identification and validation record as ``config``
-    prepares them; their innovations carry the record biases and the input path. Returns (residuals, data folder)."""
+    (with ``overrides``, e.g. ``{"data": {"resample_inputs": "sample"}}``) prepares them; their innovations carry
+    the record biases and the input path. Returns (residuals, data folder)."""
     from pyomo_heli.diagnosis.residuals import compute_residuals
     from pyomo_heli.flighttest.generate import truth_model_of
 
     data = m0_noise_data(seed, data_config, out)
-    cfg = load_identification_config(config, overrides={"data": {"dataset": str(data)}})
+    over = dict(overrides or {})
+    over["data"] = {**over.get("data", {}), "dataset": str(data)}
+    cfg = load_identification_config(config, overrides=over)
     model = truth_model_of(data)
     return compute_residuals(dataclasses.replace(cfg, model=model), model.parameters.to_dict(), label="truth",
                              input_offsets=False, trim_sensitivities=False), data
+
+
+def overrides_note(docs: list) -> str:
+    """The summary's words for the config overrides the seeds were made with ("" without any)."""
+    ri = (docs[0].get("overrides") or {}).get("data", {}).get("resample_inputs")
+    return f"; inputs resampled by {ri!r} (--resample-inputs)" if ri else ""
 
 
 def needs_innovations(test: str) -> Callable:

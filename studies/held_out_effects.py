@@ -23,7 +23,8 @@ Written after every case: ``OUT/held_out.csv`` and ``OUT/held_out.md``, one row 
 pooled trim / identification / validation RMS of iteration 0 and of the kept model, a significant validation rise,
 parameter errors against truth before and after, wrong acceptance (a physical library candidate kept although the
 truth holds none), and for a discovered or described generic term whether its shape matches the truth term: for
-a truth that adds a steady force or moment, sign and speed dependence of the same force or moment along the level
+a truth that adds a steady force or moment (through the force equations or the rotor, e.g. a tilt of the
+tip-path plane; :func:`steady_force`), sign and speed dependence of the same force or moment along the level
 trims (:func:`shape_match`); for one that adds a force or moment that is zero at every trim (a damping), sign and
 speed dependence of its derivative along the trims, for a force or moment term (:func:`derivative_match`); for
 control-path and sensor effects, and a sensor term against a damping, its trim and time signature against M0 on
@@ -127,18 +128,49 @@ def level_trims(extension, strengths: dict):
 
 
 def steady_force(extension, strengths: dict, channel: str) -> np.ndarray:
-    """The force (X, Z) or moment (M) ``extension`` adds along its level trims (:func:`level_trims`), SI."""
+    """The force (X, Z) or moment (M) ``extension`` adds along its level trims (:func:`level_trims`), SI: the total
+    force of M0 with it at ``strengths`` minus M0's (the extension at zero strength) at the same states and controls,
+    so a term added to the force equations (``extra_forces``) and one that acts through the rotor (e.g. a tilt of
+    the tip-path plane, ``tip_path_plane``) are measured alike."""
+    from pyomo_heli.physics.model import HelicopterModel
+
     m, points = level_trims(extension, strengths)
-    i = "XZM".index(channel)
-    return np.array([float(np.asarray(extension.extra_forces(m.evaluate(x, u))[i])) for x, u in points])
+    m0 = HelicopterModel(extensions=(extension,))  # the extension's parameters at their defaults: zero strength
+    return np.array([float(getattr(m.evaluate(x, u).forces, channel) - getattr(m0.evaluate(x, u).forces, channel))
+                     for x, u in points])
 
 
+def acts_on_controls(extension) -> bool:
+    """Does ``extension`` change the controls the rotor sees (``adjust_controls``)? Its force at given stick
+    positions is the rotor's answer to other controls: such a truth is compared by its signature."""
+    from pyomo_heli.physics.extensions import Extension
+
+    return type(extension).adjust_controls is not Extension.adjust_controls
+
+
+@functools.lru_cache(maxsize=64)
 def truth_curve(effect: str, channel: str) -> np.ndarray | None:
-    """The truth effect's steady force (X, Z) or moment (M) along the truth's level trims; None if it adds none."""
-    if effect == "none":
+    """The truth effect's steady force (X, Z) or moment (M) along the truth's level trims (:func:`steady_force`);
+    None if it adds none there, or acts on the control path (:func:`acts_on_controls`)."""
+    if effect == "none" or acts_on_controls(HELD_OUT_EFFECTS[effect]()):
         return None
     vals = steady_force(HELD_OUT_EFFECTS[effect](), HELD_OUT_STRENGTHS[effect], channel)
     return None if not np.any(np.abs(vals) > 1e-9) else vals
+
+
+#: a channel whose truth force (in the family's units: X, Z by m g, M by m g R) is below this share of the truth's
+#: largest channel is not where its shape is: a term there matches nothing
+MINOR_CHANNEL = 0.1
+
+
+def minor_channel(effect: str, channel: str) -> bool:
+    """Is ``channel`` a minor one of the truth's steady force (:data:`MINOR_CHANNEL`)?"""
+    from pyomo_heli.physics.parameters import bo105
+
+    p = bo105().to_dict()
+    size = {ch: (0.0 if (c := truth_curve(effect, ch)) is None else
+                 float(np.max(np.abs(c))) / (p["m"] * p["g"] * (p["R"] if ch == "M" else 1.0))) for ch in "XZM"}
+    return size[channel] < MINOR_CHANNEL * max(size.values())
 
 
 def curve_match(truth: np.ndarray, vals: np.ndarray) -> str:
@@ -168,6 +200,8 @@ def shape_match(effect: str, fit: dict | None) -> str:
     truth = truth_curve(effect, ch)
     if truth is None:
         return "n/a"
+    if minor_channel(effect, ch):
+        return f"no (the truth adds little in {ch})"
     t = generic_term(fit["name"])
     return curve_match(truth, steady_force(t, {t.strength: fit["estimate"]}, ch))
 

@@ -989,3 +989,34 @@ def test_small_canted_tail_rotor_a_rejected_term_keeps_a_wrong_candidate_from_be
     assert not cg["encompasses"] and cg["p_G_given_P"] < 0.01
     row = json.loads((out / "canted_tail_rotor_20261122" / "row.json").read_text())
     assert row["added (kept)"] == "-" and not row["wrong acceptance"]
+
+
+def test_a_tilt_of_the_disc_is_a_steady_force_in_the_study():
+    """A truth that acts through the rotor (advancing_blade_compressibility tilts the tip-path plane aft) adds a
+    steady force although it adds nothing to the force equations: the study's curve is the total force of M0 with it
+    minus M0's at the same states and controls. Its X is the thrust tilted by the disc's tilt (small angles, T
+    d(beta_1c)), rearward and growing with speed, with a nose-up moment; nothing in hover; Z is a minor channel, where
+    no term matches. A drag that rises with speed (dX_mu4 < 0) matches its X; the opposite sign does not. A control-
+    path truth has no such curve (its signature decides), and a force-equation truth's curve is its extra force."""
+    study = _study()
+    e, k = HELD_OUT_EFFECTS["advancing_blade_compressibility"](), HELD_OUT_STRENGTHS["advancing_blade_compressibility"]
+    m, points = study.level_trims(e, k)
+    m0 = HelicopterModel(extensions=(e,))
+    X = study.truth_curve("advancing_blade_compressibility", "X")
+    M = study.truth_curve("advancing_blade_compressibility", "M")
+    for (x, u), dx in list(zip(points, X))[4:]:  # from 40 kt
+        a, b = m.evaluate(x, u), m0.evaluate(x, u)
+        assert dx == pytest.approx(float(a.thrust) * (a.beta_1c_tpp - b.beta_1c_tpp), rel=0.03)
+    assert abs(X[0]) < 1e-6 and np.all(np.diff(X) < 0) and np.all(np.diff(M) > 0) and M[-1] > 0
+    assert study.minor_channel("advancing_blade_compressibility", "Z")
+    assert not study.minor_channel("advancing_blade_compressibility", "X")
+    assert study.match("advancing_blade_compressibility", {"name": "dX_mu4", "estimate": -0.0035}) == "yes"
+    assert study.match("advancing_blade_compressibility", {"name": "dX_mu4", "estimate": 0.0035}).startswith("no (")
+    assert study.match("advancing_blade_compressibility", {"name": "dZ_mu", "estimate": -0.001}) == \
+        "no (the truth adds little in Z)"
+    assert study.acts_on_controls(HELD_OUT_EFFECTS["cyclic_gearing"]())
+    assert study.truth_curve("cyclic_gearing", "M") is None
+    d = HELD_OUT_EFFECTS["fuselage_download"]()
+    m, points = study.level_trims(d, HELD_OUT_STRENGTHS["fuselage_download"])
+    assert study.truth_curve("fuselage_download", "Z") == pytest.approx(
+        [float(d.extra_forces(m.evaluate(x, u))[1]) for x, u in points], rel=1e-9, abs=1e-9)

@@ -554,9 +554,10 @@ def screen_case(tmp_path_factory):
     return cfg, start, normal
 
 
-def _failing_solvers(monkeypatch, fails_of):
+def _failing_solvers(monkeypatch, fails_of, log: list | None = None):
     """make_solver whose k-th solver (0: the first NLP's) fails its first ``fails_of(k)`` solves, stopped where they
-    started; returns the list of (solver index, warm start, options) of the calls that failed."""
+    started; returns the list of (solver index, warm start, options) of the calls that failed (``log``: of every
+    call, appended)."""
     from types import SimpleNamespace
 
     import pyomo_heli.solvers as solvers
@@ -570,6 +571,8 @@ def _failing_solvers(monkeypatch, fails_of):
         class Failing:
             def solve(self, warm_start="none", options=None):
                 calls.append(warm_start)
+                if log is not None:
+                    log.append((k_, warm_start, options))
                 if len(calls) <= fails_of(k_):
                     failed.append((k_, warm_start, options))
                     return SimpleNamespace(success=False, status="Maximum_Iterations_Exceeded", iterations=0,
@@ -594,12 +597,16 @@ def test_a_base_that_stopped_short_is_solved_again_from_the_best_fit_and_the_rat
     at a worse point): its J is the start's, and every LR against it would be inflated. The base is then solved
     from the best single fit's solution with that term at zero, and the estimates and likelihood ratios equal
     those of a screen whose base solved normally."""
-    from pyomo_heli.diagnosis.discovery import nlp_screen
+    from pyomo_heli.diagnosis.discovery import SCREEN_BASE_MAX_ITER, nlp_screen
 
     cfg, start, normal = screen_case
-    _failing_solvers(monkeypatch, lambda k: 2)
+    log = []
+    _failing_solvers(monkeypatch, lambda k: 2, log)
     got = nlp_screen(cfg, start, SCREEN_TERMS, progress=print, separate_on_failure=False)
     assert got["base_refined"] and got["base_refined"]["status_before"] == "Maximum_Iterations_Exceeded"
+    # the base again from the best fit, after the two base solves and one solve per term, is capped like them
+    assert [(o or {}).get("max_iter") for _, _, o in log[:2] + log[2 + len(SCREEN_TERMS):][:1]] == \
+        [SCREEN_BASE_MAX_ITER] * 3
     assert got["base_success"] and got["J0"] == pytest.approx(normal["J0"], abs=0.05)
     _same_fits(got, normal)
 

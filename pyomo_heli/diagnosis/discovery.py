@@ -68,7 +68,8 @@ SCREEN_PHYSICAL = 3
 #: Ipopt iteration cap of each of the screen's two base solves: a base from the diagnosed point takes 29-52
 #: iterations on the held-out flight tests; one that needs more is stuck (a flight test's base with three lag
 #: terms pinned crept for 1955 iterations under Hessian regularization), and the screen then runs one NLP per
-#: term and per pair instead (:func:`nlp_screen`)
+#: term and per pair instead (:func:`nlp_screen`); the base solved again from the best single fit is capped alike
+#: (from lon_scale's solution on a flight test with three discovered terms pinned, it ran 1000 iterations, 30+ min)
 SCREEN_BASE_MAX_ITER = 200
 
 
@@ -108,9 +109,10 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
     their bounds (module docstring, step 2).
 
     The base (every term pinned at zero) is solved with at most :data:`SCREEN_BASE_MAX_ITER` Ipopt iterations, and
-    once more from where it stopped. When both fail and there is more than one term, the screen is run again as
-    one NLP per term and one per pair (:func:`_separate_screens`; ``separate`` in the result), each with its own
-    base (``separate_on_failure=False``: keep the failed base and go on).
+    once more from where it stopped; so is the base solved again from the best single fit's solution. When both
+    fail and there is more than one term, the screen is run again as one NLP per term and one per pair
+    (:func:`_separate_screens`; ``separate`` in the result), each with its own base (``separate_on_failure=False``:
+    keep the failed base and go on).
 
     ``cfg``: the current identification config (its model and free parameters); ``start``: values of its free
     parameters to start from (the diagnosed point); ``terms``: library names or extension objects
@@ -252,7 +254,7 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
         best["snap"].restore()
         for n in own[best["name"]]:
             pin(n, False)
-        ok_b, status_b = solve("primal")
+        ok_b, status_b = solve("primal", cap)  # a base solve too: one stuck beyond the cap keeps the first base
         J0b = float(pyo.value(m.discovery_objective))
         if ok_b and (not ok or 2.0 * (J0 - J0b) > 1.0):
             refined = {"from": best["name"], "J_before": J0, "status_before": status, "J": J0b}

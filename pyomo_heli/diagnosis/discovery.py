@@ -69,7 +69,7 @@ SCREEN_PHYSICAL = 3
 #: iterations on the held-out flight tests; one that needs more is stuck (a flight test's base with three lag
 #: terms pinned crept for 1955 iterations under Hessian regularization), and the screen then runs one NLP per
 #: term and per pair instead (:func:`nlp_screen`); the base solved again from the best single fit is capped alike
-#: (from lon_scale's solution on a flight test with three discovered terms pinned, it ran 1000 iterations, 30+ min)
+#: (from lon_scale's solution, after three kept discovered terms, it ran 1000 iterations, 30+ min)
 SCREEN_BASE_MAX_ITER = 200
 
 

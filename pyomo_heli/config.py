@@ -58,9 +58,14 @@ class DiagnosisSettings:
     keeps the exact model from being called "not white" because its replay is driven by noisy inputs.
     ``noise_sigma``: the sigmas [SI] of the input and output channels (``[diagnosis.noise_sigma]``, same
     keys and units as ``[objectives.noise_sigma]``); None: from the records' quiet lead-in.
+    ``replay``: the model outputs the innovations compare with the records: ``"fit"``, the replay driven by the
+    inputs as the NLP takes them (``[data] resample_hz``, ``resample_inputs``); ``"record"``, the replay driven by
+    the recorded inputs at the record's own rate, taken at the NLP's samples (the input-noise model and the
+    sensitivities stay the NLP's; without resampling the two are the same). docs/diagnosis.md, step 7.
     """
     input_noise: tuple = ()
     noise_sigma: dict | None = None
+    replay: str = "fit"
 
 
 def unit_factor(spec, unit: str | None) -> float:
@@ -186,7 +191,10 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
     use, linear = _objectives_use(s, raw, problems)
     diagnosis = None
     if s.diagnosis is not None:
-        diagnosis = DiagnosisSettings(*_input_errors(s.diagnosis, problems, in_ref, "diagnosis", "input_noise"))
+        chans, sigma = _input_errors(s.diagnosis, problems, in_ref, "diagnosis", "input_noise")
+        if "input_noise" not in (raw.get("diagnosis") or {}) and s.diagnosis.noise_sigma is None:
+            chans, sigma = in_err, noise_sigma  # a [diagnosis] table of other settings: the identification's model
+        diagnosis = DiagnosisSettings(chans, sigma, s.diagnosis.replay)
 
     # ---- the solver and the front
     sol = s.solver

@@ -93,59 +93,6 @@ def test_default_is_project_and_the_fingerprint_keys_on_the_resolved_value():
     assert identification_fingerprint(other) == before
 
 
-FILTERED_NOISE_FREE = """
-[dataset]
-name = "m0_filtered_noise_free"
-aircraft = "Bo-105 (synthetic: M0, recorded through the anti-alias filter, noise 1e-6 of the bundled)"
-description = "two 80 kt 3211s"
-seed = 7
-
-[truth]
-parameters = {}
-
-[sensors]
-noise = true
-sim_rate_hz = 400.0
-record_rate_hz = 50.0
-antialias_hz = 10.0
-tas_sigma_low_speed_m_s = 1e-6
-vibration = { q_deg_s = 0.0, nx_g = 0.0, nz_g = 0.0 }
-
-[sensors.sigma]
-q_deg_s = 0.2e-6
-theta_deg = 0.1e-6
-nx_g = 0.005e-6
-nz_g = 0.01e-6
-tas_m_s = 0.5e-6
-beta0_deg = 0.05e-6
-col_deg = 0.02e-6
-lon_deg = 0.02e-6
-
-[trims]
-speeds_kt = [80]
-
-[[maneuvers]]
-name = "lon3211_80kt_a"
-role = "identification"
-speed_kt = 80
-channel = "lon"
-shape = "3211"
-amplitude_deg = 0.5
-step_s = 0.5
-duration_s = 8
-
-[[maneuvers]]
-name = "col3211_80kt_a"
-role = "identification"
-speed_kt = 80
-channel = "col"
-shape = "3211"
-amplitude_deg = 0.75
-step_s = 0.5
-duration_s = 8
-"""
-
-
 @pytest.fixture(scope="module")
 def filtered_noise_free(tmp_path_factory):
     """M0's records of two 80 kt 3211s through the generator's 10 Hz anti-alias filter, noise-free (sigmas 1e-6 of
@@ -154,8 +101,7 @@ def filtered_noise_free(tmp_path_factory):
     from pyomo_heli.flighttest.generate import generate
 
     root = tmp_path_factory.mktemp("filtered")
-    (root / "gen.toml").write_text(FILTERED_NOISE_FREE)
-    return generate(load_config(root / "gen.toml"), root / "data", force=True)
+    return generate(load_config(CONFIGS / "m0_filtered_noise_free_gen.toml"), root / "data", force=True)
 
 
 @pytest.mark.parametrize("maneuver", ["lon3211_80kt_a", "col3211_80kt_a"])

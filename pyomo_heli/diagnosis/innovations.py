@@ -30,13 +30,15 @@ so that the input-noise model is the NLP's), identification maneuvers cut to ``m
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 from scipy.linalg import cholesky, solve_triangular
 
 from ..nlp.objectives import noise_sigmas
 from ..physics.model import HelicopterModel
-from ..simulation.compiled import input_sensitivities
+from ..simulation.compiled import input_sensitivities, simulate_outputs
 from ..simulation.trim import trim_float
 from .input_path import histories, input_path_test, parameter_columns, record_block, signals_of
 from .timeseries import decimation
@@ -67,9 +69,25 @@ def input_noise_factor(model: HelicopterModel, mv, outputs, input_errors, sigma:
     return y, Su, cholesky(V, lower=True)
 
 
+def record_rate_outputs(model: HelicopterModel, mv, record, outputs, substeps: int = 2) -> dict:
+    """The model outputs at ``mv``'s samples (a resampled record) from the replay driven by ``record``, the same
+    maneuver at the record's own rate: the recorded inputs, not the resampled ones (their difference is the
+    resampling's, not the model's). The replay is integrated on the record's samples up to ``mv``'s last, each of
+    which falls on one of them."""
+    t = mv.data["t"].to_numpy(dtype=float)
+    data = record.data[record.data["t"] <= t[-1] + 1e-9].reset_index(drop=True)
+    rec = dataclasses.replace(record, data=data)
+    tf = data["t"].to_numpy(dtype=float)
+    idx = np.clip(np.searchsorted(tf, t - 1e-9), 0, len(tf) - 1)
+    if not np.allclose(tf[idx], t, atol=1e-9):
+        raise ValueError(f"maneuver {mv.name}: its samples are not samples of the record")
+    yf = simulate_outputs(model, trim_float(model, mv.trim_speed), tf, rec.increments(), list(outputs), substeps)
+    return {o: np.asarray(yf[o], dtype=float)[idx] for o in outputs}
+
+
 def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigma: dict, test_rate_hz: float,
-                         substeps: int = 2, path: list | None = None,
-                         nuisance_parameters=()) -> tuple[pd.DataFrame, dict]:
+                         substeps: int = 2, path: list | None = None, nuisance_parameters=(),
+                         record=None) -> tuple[pd.DataFrame, dict]:
     """Innovations of one prepared maneuver at its test-rate samples (columns ``t`` and ``inn_<o>``), and the
     maneuver's output biases: ``{"bias_<o>": SI, "se_bias_<o>": SI}``, the generalised least-squares estimates
     of the nuisance with their standard errors under the same covariance, scaled by each output's innovation RMS in
@@ -79,13 +97,17 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     :class:`~pyomo_heli.diagnosis.residuals.Residuals` (model - data); whiteness does not care.
     ``path``: a list to which the record's rows for the input-path regression are appended
     (:func:`.input_path.record_block`), with the output sensitivities to ``nuisance_parameters`` (the identified
-    parameters) among its nuisance.
+    parameters) among its nuisance. ``record``: the same maneuver at the record's own rate; given, the residual is
+    taken against the replay its recorded inputs drive (at ``mv``'s samples; :func:`record_rate_outputs`), the
+    input-noise model and the sensitivities stay ``mv``'s.
     """
     t = mv.data["t"].to_numpy(dtype=float)
     n = len(t)
     k = decimation(t, test_rate_hz)
     keep = np.arange(0, n, k)
     y, Su, L = input_noise_factor(model, mv, outputs, input_errors, sigma, substeps, keep)
+    if record is not None:
+        y = record_rate_outputs(model, mv, record, outputs, substeps)
     n_out, m = len(outputs), len(keep)
     # rows in time order: (test sample 0: every output), (test sample 1: ...), ...
     e = np.column_stack([y[o][keep] - mv.data[o].to_numpy(dtype=float)[keep] for o in outputs]).ravel()
@@ -118,7 +140,7 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
 
 def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_errors, noise_sigma: dict | None,
                 test_rate_hz: float, substeps: int = 2, problems: list | None = None,
-                parameters=()) -> tuple[pd.DataFrame, dict]:
+                parameters=(), records: dict | None = None) -> tuple[pd.DataFrame, dict]:
     """Innovations of every maneuver: ``maneuvers`` is a list of (role, prepared maneuver).
 
     ``sigma_from``: the maneuvers whose lead-in gives the sigmas when ``noise_sigma`` is None (the
@@ -128,7 +150,8 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     inn_<o>``, and the channels and sigmas used, with ``record_biases``: per maneuver its role, trim speed and
     output biases with their standard errors (:func:`maneuver_innovations`), and ``input_path``: the stepwise
     regression of the input errors on the generic dictionary (:mod:`.input_path`), a shift of ``parameters`` (the
-    identified ones) allowed.
+    identified ones) allowed. ``records``: maneuver name -> the same maneuver at the record's rate, whose recorded
+    inputs drive the replay the residuals are taken against (``[diagnosis] replay = "record"``).
     """
     problems = problems if problems is not None else []
     input_errors = list(input_errors)
@@ -145,7 +168,8 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     frames, biases, path = [], [], []
     for role, mv in maneuvers:
         try:
-            df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps, path, parameters)
+            df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps, path, parameters,
+                                         (records or {}).get(mv.name))
         except Exception as exc:  # noqa: BLE001 - the raw residual tests stay available
             why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             problems.append(f"maneuver {mv.name}: innovations failed ({why})")
@@ -156,6 +180,7 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
         biases.append({"maneuver": mv.name, "role": role, "trim_speed": float(mv.trim_speed), **b})
     table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["maneuver", "role", "t"])
     settings = {"outputs": outs, "input_errors": input_errors, "test_rate_hz": float(test_rate_hz),
+                "replay": "record" if records else "fit",
                 "sigma": {c: float(v) for c, v in sigma.items()}, "record_biases": biases}
     if input_errors and path:
         test = input_path_test(path)

@@ -341,10 +341,14 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
     inn, inn_info = None, None
     noise = cfg.diagnosis_settings  # [diagnosis], else the identification's input errors
     if noise.input_noise and inn_mans:
+        records = None
+        if noise.replay == "record" and cfg.resample_hz:  # the recorded inputs drive the replay (DiagnosisSettings)
+            names = [mv.name for _, mv in inn_mans]
+            records = {mv.name: mv for mv in prepare_data(ft, names, input_reference_s=cfg.input_reference_s).maneuvers}
         try:
             inn, inn_info = innovations(model, inn_mans, id_mans or [mv for _, mv in inn_mans], outputs,
                                         noise.input_noise, noise.noise_sigma, test_rate_hz, problems=problems,
-                                        parameters=[p.name for p in cfg.free])
+                                        parameters=[p.name for p in cfg.free], records=records)
         except ValueError as exc:  # e.g. no input sigma: the raw residual tests stay
             problems.append(f"innovations not computed: {exc}")
     return Residuals(label=label, parameters={k: float(v) for k, v in (parameters or {}).items()}, time=time,

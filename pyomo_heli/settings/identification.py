@@ -281,11 +281,16 @@ class LinearTable(Table):
 class DiagnosisTable(Table):
     """``[diagnosis]``: the input-noise model of the residual analysis (docs/diagnosis.md)."""
 
+    messages = {"replay": "field 'replay' must be \"fit\" or \"record\", got {v!r}"}
+
     input_noise: InputChannels("input_noise") = Field(
         default_factory=list, description="input channels whose measurement noise the whiteness test takes out "
                                           "(default: [objectives] input_errors)")
     noise_sigma: Optional[NoiseSigmaTable] = Field(None, description="their sigmas (default: from the records' "
                                                                      "quiet lead-in)")
+    replay: Literal["fit", "record"] = Field(
+        "fit", description="the replay the innovations compare with the records: \"fit\" (the inputs as the NLP "
+                           "takes them) or \"record\" (the recorded inputs at the record's rate)")
 
 
 NON_EMPTY = "field '{field}' must be a non-empty list of names"

@@ -28,8 +28,8 @@ def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
     table and the sentence above it: ``OUT/summary.csv``, ``OUT/summary.md``, printed. ``OUT/data`` is removed when
     the seeds left it empty (another run into the same OUT may still be using it). ``check_config(cfg)``: what the
     study needs of the loop config, a ValueError naming ``--config`` otherwise. ``data_overrides``: the study also
-    takes ``--resample-inputs`` (replaces the config's ``[data] resample_inputs``) and passes ``one_seed`` the
-    config's overrides as a fifth argument (a dict, empty without the option)."""
+    takes ``--resample-inputs`` and ``--replay`` (replace the config's ``[data] resample_inputs`` and ``[diagnosis]
+    replay``) and passes ``one_seed`` the config's overrides as a fifth argument (a dict, empty without them)."""
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--seeds", required=True, help=f"e.g. {seeds_example}")
     ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
@@ -39,9 +39,15 @@ def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
         ap.add_argument("--resample-inputs", choices=("sample", "project"),
                         help="[data] resample_inputs of the config replaced: the inputs picked like the outputs "
                              "or projected (default: the config's)")
+        ap.add_argument("--replay", choices=("fit", "record"),
+                        help="[diagnosis] replay of the config replaced: the residuals against the replay of the "
+                             "inputs as the NLP takes them or as recorded (default: the config's)")
     a = ap.parse_args(argv)
-    overrides = ({"data": {"resample_inputs": a.resample_inputs}}
-                 if data_overrides and a.resample_inputs else {})
+    overrides = {}
+    if data_overrides and a.resample_inputs:
+        overrides["data"] = {"resample_inputs": a.resample_inputs}
+    if data_overrides and a.replay:
+        overrides["diagnosis"] = {"replay": a.replay}
     try:
         seeds = seeds_of(a.seeds)
     except ValueError as exc:
@@ -114,8 +120,10 @@ def truth_residuals(seed: int, config: Path, data_config: Path, out: Path, overr
 
 def overrides_note(docs: list) -> str:
     """The summary's words for the config overrides the seeds were made with ("" without any)."""
-    ri = (docs[0].get("overrides") or {}).get("data", {}).get("resample_inputs")
-    return f"; inputs resampled by {ri!r} (--resample-inputs)" if ri else ""
+    o = docs[0].get("overrides") or {}
+    ri, rp = o.get("data", {}).get("resample_inputs"), o.get("diagnosis", {}).get("replay")
+    return ((f"; inputs resampled by {ri!r} (--resample-inputs)" if ri else "")
+            + (f"; residuals against the replay {rp!r} (--replay)" if rp else ""))
 
 
 def needs_innovations(test: str) -> Callable:

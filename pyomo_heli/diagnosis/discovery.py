@@ -69,8 +69,13 @@ SCREEN_PHYSICAL = 3
 #: iterations on the held-out flight tests; one that needs more is stuck (a flight test's base with three lag
 #: terms pinned crept for 1955 iterations under Hessian regularization), and the screen then runs one NLP per
 #: term and per pair instead (:func:`nlp_screen`); the base solved again from the best single fit is capped alike
-#: (from lon_scale's solution, after three kept discovered terms, it ran 1000 iterations, 30+ min)
 SCREEN_BASE_MAX_ITER = 200
+#: Ipopt iteration cap of each of the screen's fits (a term or a pair freed from the base): they take 5-80
+#: iterations on the held-out flight tests, 227 at most (col_delay, 862 s); one stuck under Hessian
+#: regularization otherwise runs to the solver's max_iter and once more from its primal (inflow_time_constant on
+#: fuselage_wake_incidence 22 with the extended family: 1000 iterations, more than 30 min, then the retry). A fit
+#: stopped at the cap is a failed fit: no likelihood ratio.
+SCREEN_FIT_MAX_ITER = 300
 
 
 def library(model, physical=None, generic=None) -> list[str]:
@@ -109,7 +114,8 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
     their bounds (module docstring, step 2).
 
     The base (every term pinned at zero) is solved with at most :data:`SCREEN_BASE_MAX_ITER` Ipopt iterations, and
-    once more from where it stopped; so is the base solved again from the best single fit's solution. When both
+    once more from where it stopped; so is the base solved again from the best single fit's solution. Each fit
+    is capped at :data:`SCREEN_FIT_MAX_ITER`. When both
     fail and there is more than one term, the screen is run again as one NLP per term and one per pair
     (:func:`_separate_screens`; ``separate`` in the result), each with its own base (``separate_on_failure=False``:
     keep the failed base and go on).
@@ -173,7 +179,9 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
     for names in own.values():
         for n in names:
             pin(n, False)
-    cap = {"max_iter": min(SCREEN_BASE_MAX_ITER, int((cfg.pareto.solver_options or {}).get("max_iter", 3000)))}
+    max_iter = int((cfg.pareto.solver_options or {}).get("max_iter", 3000))
+    cap = {"max_iter": min(SCREEN_BASE_MAX_ITER, max_iter)}
+    fit_cap = {"max_iter": min(SCREEN_FIT_MAX_ITER, max_iter)}
     ok, status = solve("none", cap)
     if not ok:  # once more from where it stopped (its primal values)
         progress(f"    NLP screen: base solve failed ({status}, {effort.get('iterations')} iterations); once more "
@@ -200,12 +208,12 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
 
     def fit(group):
         free(group)
-        ok_k, status_k = solve(warm_start)
+        ok_k, status_k = solve(warm_start, fit_cap)
         if not ok_k and warm_start != "primal":  # the base's multipliers did not carry it: from its primal alone
             progress(f"    NLP screen: {'+'.join(group)}: {warm_start} warm start failed ({status_k}); primal")
             snap.restore()
             free(group)
-            ok_k, status_k = solve("primal")
+            ok_k, status_k = solve("primal", fit_cap)
         J = float(pyo.value(m.discovery_objective))
         J_tr = float(pyo.value(m.discovery_trim_nll))
         vals = free_parameter_values(m)

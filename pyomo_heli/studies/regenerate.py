@@ -130,6 +130,9 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("input_path_level_sample", ("python studies/input_path_level.py --seeds 20261122-20261161 "
                                       "--resample-inputs sample --out {out}/input_path_level_sample",),
           ("summary.csv", "summary.md"), minutes=40),
+    Entry("input_path_level_record", ("python studies/input_path_level.py --seeds 20261122-20261161 "
+                                      "--replay record --out {out}/input_path_level_record",),
+          ("summary.csv", "summary.md"), minutes=40),
     Entry("input_path", ("python studies/input_path_check.py --seeds 1 --out {out}/input_path",
                          "python studies/input_path_check.py --effects none --seeds 5 --out {out}/input_path"),
           ("input_path.csv", "input_path.md"), minutes=20),

@@ -124,15 +124,11 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("record_bias_level", ("python studies/record_bias_level.py --seeds 20261122-20261161 "
                                 "--out {out}/record_bias_level",),
           ("summary.csv", "summary.md"), minutes=30),
-    Entry("input_path_level", ("python studies/input_path_level.py --seeds 20261122-20261161 "
-                               "--out {out}/input_path_level",),
-          ("summary.csv", "summary.md"), minutes=40),
-    Entry("input_path_level_sample", ("python studies/input_path_level.py --seeds 20261122-20261161 "
-                                      "--resample-inputs sample --out {out}/input_path_level_sample",),
-          ("summary.csv", "summary.md"), minutes=40),
-    Entry("input_path_level_record", ("python studies/input_path_level.py --seeds 20261122-20261161 "
-                                      "--replay record --out {out}/input_path_level_record",),
-          ("summary.csv", "summary.md"), minutes=40),
+    # the input path's level as configured, with the inputs picked, and against the record-rate replay
+    *(Entry(f"input_path_level{suffix}", (f"python studies/input_path_level.py --seeds 20261122-20261161{flag} "
+                                          f"--out {{out}}/input_path_level{suffix}",),
+            ("summary.csv", "summary.md"), minutes=40)
+      for suffix, flag in (("", ""), ("_sample", " --resample-inputs sample"), ("_record", " --replay record"))),
     Entry("input_path", ("python studies/input_path_check.py --seeds 1 --out {out}/input_path",
                          "python studies/input_path_check.py --effects none --seeds 5 --out {out}/input_path"),
           ("input_path.csv", "input_path.md"), minutes=20),

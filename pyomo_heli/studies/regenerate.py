@@ -121,9 +121,11 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("validation_test_level", ("python studies/validation_test_level.py --seeds 20261122-20261147 "
                                     "--out {out}/validation_test_level",),
           ("summary.csv", "summary.md"), minutes=30),
-    Entry("record_bias_level", ("python studies/record_bias_level.py --seeds 20261122-20261161 "
-                                "--out {out}/record_bias_level",),
-          ("summary.csv", "summary.md"), minutes=30),
+    # the record-bias test's level as configured and against the record-rate replay
+    *(Entry(f"record_bias_level{suffix}", (f"python studies/record_bias_level.py --seeds 20261122-20261161{flag} "
+                                           f"--out {{out}}/record_bias_level{suffix}",),
+            ("summary.csv", "summary.md"), minutes=30)
+      for suffix, flag in (("", ""), ("_record", " --replay record"))),
     # the input path's level as configured, with the inputs picked, and against the record-rate replay
     *(Entry(f"input_path_level{suffix}", (f"python studies/input_path_level.py --seeds 20261122-20261161{flag} "
                                           f"--out {{out}}/input_path_level{suffix}",),

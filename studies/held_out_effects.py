@@ -841,7 +841,8 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
     seed; deterministic) into ``SCRATCH/<effect>_<seed>/data``, the parameters rebuilt from the row's parameter
     errors against its truth.json, and the loop's own call (``residual_verdict`` under ``config``) made. Rewrites the
     final residual, record-bias and input-path columns and the criterion; any other row is left as it is. Cached
-    per case and kept model in ``final_residual_<kept>.json`` (with the parameters it was made at)."""
+    per case and kept model in ``final_residual_<kept>.json`` (with the parameters, and the config's resampling and
+    ``[diagnosis]`` input noise and replay, it was made with)."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.diagnosis.candidates import model_with_candidates
     from pyomo_heli.nlp.parameters import FreeParameter
@@ -871,11 +872,16 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
         # one cache per kept model: tables of other families share a case's flight test, not its kept model
         cache = case / f"final_residual_{kept}.json"
         fr = json.loads(cache.read_text()) if cache.is_file() else {}
-        if fr.get("analysis") != RESIDUAL_ANALYSIS or fr.get("parameters") != pars:
+        # what of the config the analysis depends on: another resampling or replay is another analysis
+        noise = cfg.diagnosis_settings
+        made_with = {"resample_hz": cfg.resample_hz, "resample_inputs": cfg.resample_inputs,
+                     "input_noise": list(noise.input_noise), "replay": noise.replay}
+        if (fr.get("analysis") != RESIDUAL_ANALYSIS or fr.get("parameters") != pars
+                or fr.get("made_with", {**made_with, "replay": "fit"}) != made_with):
             v = residual_verdict(cfg, pars, progress=lambda s: None)
             fr = {"analysis": RESIDUAL_ANALYSIS, "status": v["status"], "findings": v.get("findings", []),
                   "record_biases": v.get("record_biases") or {}, "input_path": v.get("input_path") or {},
-                  "parameters": pars}
+                  "parameters": pars, "made_with": made_with}
             cache.write_text(json.dumps(fr, indent=1))
         r["final residual"] = fr["status"]
         r.update(residual_columns(effect, fr))

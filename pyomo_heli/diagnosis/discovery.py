@@ -114,11 +114,11 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
     their bounds (module docstring, step 2).
 
     The base (every term pinned at zero) is solved with at most :data:`SCREEN_BASE_MAX_ITER` Ipopt iterations, and
-    once more from where it stopped; so is the base solved again from the best single fit's solution. Each fit
-    is capped at :data:`SCREEN_FIT_MAX_ITER`. When both
-    fail and there is more than one term, the screen is run again as one NLP per term and one per pair
-    (:func:`_separate_screens`; ``separate`` in the result), each with its own base (``separate_on_failure=False``:
-    keep the failed base and go on).
+    once more from where it stopped; so is the base solved again from the best single fit's solution. When the
+    first two base solves fail and there is more than one term, the screen is run again as one NLP per term and one
+    per pair (:func:`_separate_screens`; ``separate`` in the result), each with its own base
+    (``separate_on_failure=False``: keep the failed base and go on). Each fit is capped at
+    :data:`SCREEN_FIT_MAX_ITER` Ipopt iterations.
 
     ``cfg``: the current identification config (its model and free parameters); ``start``: values of its free
     parameters to start from (the diagnosed point); ``terms``: library names or extension objects

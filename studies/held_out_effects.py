@@ -132,10 +132,8 @@ def steady_force(extension, strengths: dict, channel: str) -> np.ndarray:
     force of M0 with it at ``strengths`` minus M0's (the extension at zero strength) at the same states and controls,
     so a term added to the force equations (``extra_forces``) and one that acts through the rotor (e.g. a tilt of
     the tip-path plane, ``tip_path_plane``) are measured alike."""
-    from pyomo_heli.physics.model import HelicopterModel
-
     m, points = level_trims(extension, strengths)
-    m0 = HelicopterModel(extensions=(extension,))  # the extension's parameters at their defaults: zero strength
+    m0 = m.with_parameters(**dict.fromkeys(strengths, 0.0))
     return np.array([float(getattr(m.evaluate(x, u).forces, channel) - getattr(m0.evaluate(x, u).forces, channel))
                      for x, u in points])
 
@@ -165,11 +163,12 @@ MINOR_CHANNEL = 0.1
 
 def minor_channel(effect: str, channel: str) -> bool:
     """Is ``channel`` a minor one of the truth's steady force (:data:`MINOR_CHANNEL`)?"""
+    from pyomo_heli.physics.discrepancy import force_scale
     from pyomo_heli.physics.parameters import bo105
 
     p = bo105().to_dict()
-    size = {ch: (0.0 if (c := truth_curve(effect, ch)) is None else
-                 float(np.max(np.abs(c))) / (p["m"] * p["g"] * (p["R"] if ch == "M" else 1.0))) for ch in "XZM"}
+    size = {ch: (0.0 if (c := truth_curve(effect, ch)) is None else float(np.max(np.abs(c))) / force_scale(p, ch))
+            for ch in "XZM"}
     return size[channel] < MINOR_CHANNEL * max(size.values())
 
 

@@ -162,8 +162,7 @@ class GenericTerm(Extension):
         if self.channel == "sensor":
             return 0.0
         p = ctx.p
-        norm = p["m"] * p["g"] * (p["R"] if self.channel == "M" else 1.0)
-        return p[self.strength] * norm * REGRESSORS[self.regressor][1](ctx)
+        return p[self.strength] * force_scale(p, self.channel) * REGRESSORS[self.regressor][1](ctx)
 
     def extra_forces(self, ctx):
         if self.channel == "sensor":
@@ -219,6 +218,11 @@ def generic_names(family: str = "standard") -> list[str]:
 
 def is_generic(name: str) -> bool:
     return name in set(generic_names("extended"))
+
+
+def force_scale(p, channel: str):
+    """The family's normalisation of a force or moment channel: W = m g [N] for X and Z, W R [N m] for M."""
+    return p["m"] * p["g"] * (p["R"] if channel == "M" else 1.0)
 
 
 def generic_term(name: str) -> GenericTerm:

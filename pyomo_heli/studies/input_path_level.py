@@ -36,8 +36,8 @@ LEVELS = (0.01, 0.05, 0.1)
 
 def one_seed(seed: int, config: Path, data_config: Path, out: Path, overrides: dict | None = None) -> dict:
     """The input path of one seed (read back from ``OUT/seed_<seed>.json`` when it is there)."""
-    done = cached_seed(out, seed)
-    if done is not None and done.get("overrides", {}) == (overrides or {}):  # made with the same config overrides
+    done = cached_seed(out, seed, overrides)
+    if done is not None:
         return done
     res, data = truth_residuals(seed, config, data_config, out, overrides)
     ip = res.info["innovations"]["input_path"]

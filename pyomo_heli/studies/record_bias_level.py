@@ -36,8 +36,8 @@ ALPHA = 0.01  # the residual analysis's default level
 
 def one_seed(seed: int, config: Path, data_config: Path, out: Path, overrides: dict | None = None) -> dict:
     """The record-bias tests of one seed (read back from ``OUT/seed_<seed>.json`` when it is there)."""
-    done = cached_seed(out, seed)
-    if done is not None and done.get("overrides", {}) == (overrides or {}):  # made with the same config overrides
+    done = cached_seed(out, seed, overrides)
+    if done is not None:
         return done
     f = out / f"seed_{seed}.json"
     res, data = truth_residuals(seed, config, data_config, out, overrides)

@@ -81,14 +81,16 @@ def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
     return 0
 
 
-def cached_seed(out: Path, seed: int) -> dict | None:
-    """A finished seed's ``OUT/seed_<seed>.json``; None when it is missing or was cut short by a kill."""
+def cached_seed(out: Path, seed: int, overrides: dict | None = None) -> dict | None:
+    """A finished seed's ``OUT/seed_<seed>.json``; None when it is missing, was cut short by a kill, or was made with
+    other config ``overrides`` than these (its ``overrides`` key; none when absent)."""
     f = out / f"seed_{seed}.json"
     if f.is_file():
         try:
-            return json.loads(f.read_text())
+            doc = json.loads(f.read_text())
         except ValueError:
-            pass
+            return None
+        return doc if doc.get("overrides", {}) == (overrides or {}) else None
     return None
 
 

@@ -58,14 +58,16 @@ class DiagnosisSettings:
     keeps the exact model from being called "not white" because its replay is driven by noisy inputs.
     ``noise_sigma``: the sigmas [SI] of the input and output channels (``[diagnosis.noise_sigma]``, same
     keys and units as ``[objectives.noise_sigma]``); None: from the records' quiet lead-in.
-    ``replay``: the model outputs the innovations compare with the records: ``"fit"``, the replay driven by the
-    inputs as the NLP takes them (``[data] resample_hz``, ``resample_inputs``); ``"record"``, the replay driven by
-    the recorded inputs at the record's own rate, taken at the NLP's samples (the input-noise model and the
-    sensitivities stay the NLP's; without resampling the two are the same). docs/diagnosis.md, step 7.
+    ``replay``: the model outputs the innovations compare with the records: ``"record"`` (default), the replay
+    driven by the recorded inputs at the record's own rate, taken at the NLP's samples (the input-noise model and
+    the sensitivities stay the NLP's); ``"fit"``, the replay driven by the inputs as the NLP takes them (``[data]
+    resample_hz``, ``resample_inputs``), which differ from the recorded ones and leave a deterministic residual
+    that the input path reads as an input error. Without resampling the two are the same. docs/diagnosis.md,
+    step 7.
     """
     input_noise: tuple = ()
     noise_sigma: dict | None = None
-    replay: str = "fit"
+    replay: str = "record"
 
 
 def unit_factor(spec, unit: str | None) -> float:

@@ -204,13 +204,13 @@ def test_the_replay_of_the_recorded_inputs_leaves_no_resampling_residual(tmp_pat
 
 
 def test_diagnosis_replay_is_checked_and_keeps_the_input_noise_model():
-    """``[diagnosis] replay`` takes "fit" or "record" (one line naming the field otherwise); a [diagnosis] table
-    that gives only the replay keeps the identification's input-noise model."""
+    """``[diagnosis] replay`` takes "fit" or "record" (one line naming the field otherwise; "record" by default); a
+    [diagnosis] table that gives only the replay keeps the identification's input-noise model."""
     from pyomo_heli.config import ConfigError
 
     with pytest.raises(ConfigError, match=r"\[diagnosis\]: field 'replay' must be \"fit\" or \"record\""):
         load_identification_config(EIV, overrides={"diagnosis": {"replay": "fine"}})
-    cfg = load_identification_config(EIV, overrides={"diagnosis": {"replay": "record"}})
+    cfg = load_identification_config(EIV, overrides={"diagnosis": {"replay": "fit"}})
     plain = load_identification_config(EIV)
-    assert cfg.diagnosis_settings.replay == "record" and plain.diagnosis_settings.replay == "fit"
+    assert cfg.diagnosis_settings.replay == "fit" and plain.diagnosis_settings.replay == "record"
     assert cfg.diagnosis_settings.input_noise == plain.diagnosis_settings.input_noise != ()

@@ -289,7 +289,7 @@ class DiagnosisTable(Table):
     noise_sigma: Optional[NoiseSigmaTable] = Field(None, description="their sigmas (default: from the records' "
                                                                      "quiet lead-in)")
     replay: Literal["fit", "record"] = Field(
-        "fit", description="the replay the innovations compare with the records: \"fit\" (the inputs as the NLP "
+        "record", description="the replay the innovations compare with the records: \"fit\" (the inputs as the NLP "
                            "takes them) or \"record\" (the recorded inputs at the record's rate)")
 
 

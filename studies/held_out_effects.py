@@ -112,13 +112,21 @@ def run_case(effect: str, seed: int, out: Path, config: Path, template: str) -> 
     return loop
 
 
+def extensions_of(extension) -> tuple:
+    """One extension or several (a kept model's terms) as a tuple; () for None."""
+    if extension is None:
+        return ()
+    return tuple(extension) if isinstance(extension, (tuple, list)) else (extension,)
+
+
 def level_trims(extension, strengths: dict):
-    """M0 with ``extension`` at ``strengths`` and its level trims at SPEEDS_KT: (model, [(states, inputs)]), SI."""
+    """M0 with ``extension`` (one, or a sequence of several) at ``strengths`` and its level trims at SPEEDS_KT:
+    (model, [(states, inputs)]), SI."""
     from pyomo_heli.physics.model import HelicopterModel
     from pyomo_heli.simulation.trim import trim_float
     from pyomo_heli.units import KT
 
-    m = HelicopterModel(extensions=(extension,)).with_parameters(**strengths)
+    m = HelicopterModel(extensions=extensions_of(extension)).with_parameters(**strengths)
     points = []
     for v in SPEEDS_KT:
         tp = trim_float(m, v * KT)
@@ -128,7 +136,8 @@ def level_trims(extension, strengths: dict):
 
 
 def steady_force(extension, strengths: dict, channel: str) -> np.ndarray:
-    """The force (X, Z) or moment (M) ``extension`` adds along its level trims (:func:`level_trims`), SI: the total
+    """The force (X, Z) or moment (M) ``extension`` (one, or several together) adds along its level trims
+    (:func:`level_trims`), SI: the total
     force of M0 with it at ``strengths`` minus M0's (the extension at zero strength) at the same states and controls,
     so a term added to the force equations (``extra_forces``) and one that acts through the rotor (e.g. a tilt of
     the tip-path plane, ``tip_path_plane``) are measured alike."""
@@ -213,9 +222,10 @@ DERIVATIVE_STEPS = {"u": 0.1, "w": 0.1, "q": 0.005, "col": 0.001, "lon": 0.001}
 
 
 def force_derivatives(extension, strengths: dict, channel: str) -> dict:
-    """d(force or moment in ``channel``)/d(state or control) that ``extension`` adds, along the level trims of M0
-    with it at ``strengths`` (central differences, SI): state -> array over SPEEDS_KT."""
-    m, points = level_trims(extension, strengths)
+    """d(force or moment in ``channel``)/d(state or control) that ``extension`` (one, or several: their sum) adds,
+    along the level trims of M0 with it at ``strengths`` (central differences, SI): state -> array over SPEEDS_KT."""
+    exts = extensions_of(extension)
+    m, points = level_trims(exts, strengths)
     i = "XZM".index(channel)
     out = {s: [] for s in DERIVATIVE_STEPS}
     for x, u in points:
@@ -224,7 +234,8 @@ def force_derivatives(extension, strengths: dict, channel: str) -> dict:
             for sign in (1.0, -1.0):
                 xx, uu = dict(x), dict(u)
                 (xx if s in xx else uu)[s] += sign * h
-                f.append(float(np.asarray(extension.extra_forces(m.evaluate(xx, uu))[i])))
+                ctx = m.evaluate(xx, uu)
+                f.append(sum(float(np.asarray(e.extra_forces(ctx)[i])) for e in exts))
             out[s].append((f[0] - f[1]) / (2 * h))
     return {s: np.array(a) for s, a in out.items()}
 
@@ -297,7 +308,7 @@ class SignatureSetup:
         from pyomo_heli.simulation.replay import predict
         from pyomo_heli.units import KT
 
-        model = HelicopterModel(extensions=(extension,) if extension else ())
+        model = HelicopterModel(extensions=extensions_of(extension))
         return predict("signature", model.with_parameters(**self.m0, **strengths), {},
                        [v * KT for v in SPEEDS_KT], list(self.maneuvers))
 
@@ -395,20 +406,101 @@ def match(effect: str, fit: dict | None) -> str:
     return signature_match(effect, fit)
 
 
+FORCE_TERM = ("dX", "dZ", "dM")
+
+
+def model_match(effect: str, fits: list[dict]) -> str:
+    """:func:`match` for the kept model of several discovered terms, all at their estimates: for a truth with a steady
+    force or moment, the force the model's force and moment terms add together in each channel they touch
+    (:func:`steady_force` of them all); for a damping truth, their summed derivative in each channel they touch
+    (:func:`force_derivatives`); otherwise (control-path and sensor truths) the signature of all of them together
+    (:func:`signature`). 'yes' when every channel the terms touch matches (a channel where the truth adds little or
+    nothing matches nothing, as for one term), 'no (channel: why; ...)' otherwise. One term: :func:`match`."""
+    from pyomo_heli.physics.discrepancy import generic_term
+
+    if effect == "none" or not fits:
+        return "n/a" if effect == "none" else "-"
+    if len(fits) == 1:
+        return match(effect, fits[0])
+    terms = [generic_term(f["name"]) for f in fits]
+    strengths = {t.strength: f["estimate"] for t, f in zip(terms, fits)}
+    forces = [(t, f) for t, f in zip(terms, fits) if f["name"][:2] in FORCE_TERM]
+    channels = sorted({f["name"][1] for _, f in forces}, key="XZM".index)
+    force_strengths = {t.strength: f["estimate"] for t, f in forces}
+    verdicts = {}
+    if has_steady_force(effect) or (has_force_derivative(effect) and forces):
+        if not forces:
+            return "n/a"
+        for ch in channels:
+            if has_steady_force(effect):
+                truth = truth_curve(effect, ch)
+                if truth is None:
+                    verdicts[ch] = "no (the truth adds nothing here)"
+                elif minor_channel(effect, ch):
+                    verdicts[ch] = "no (the truth adds little here)"
+                else:
+                    verdicts[ch] = curve_match(truth, steady_force([t for t, _ in forces], force_strengths, ch))
+            else:
+                truth = truth_derivative(effect, ch)
+                if truth is None:
+                    verdicts[ch] = "no (the truth adds no derivative here)"
+                    continue
+                s, curve = truth
+                d = force_derivatives([t for t, _ in forces], force_strengths, ch)
+                size = scaled_sizes(d)
+                verdicts[ch] = (f"no (the terms do not depend on {s})" if size[s] <= 0.01 * max(size.values())
+                                else curve_match(curve, d[s]))
+        if all(v == "yes" for v in verdicts.values()):
+            return "yes"
+        return "no (" + "; ".join(f"{ch}: {v}" for ch, v in verdicts.items()) + ")"
+    setup = signature_setup()
+    s, v = truth_signature(effect, setup), signature(terms, strengths, setup)
+    if s is None or v is None or not np.any(v):
+        return "n/a"
+    beta = float(s @ v / (v @ v))
+    left = float(np.sum((s - max(beta, 0.0) * v) ** 2))
+    return "yes" if beta > 0 and left < SIGNATURE_LEFT_MAX else f"no (left {left:.3g} of {float(s @ s):.3g})"
+
+
+def format_terms(fits: list[dict]) -> str:
+    """Terms as the table prints them: ``name: c = X +- SE; ...`` ('-' for none)."""
+    return "; ".join(f"{f['name']}: c = {f['estimate']:.3g} +- {f['se']:.2g}" for f in fits) or "-"
+
+
+def parse_terms(text) -> list[dict]:
+    """A table's :func:`format_terms` cell back to fits."""
+    return [f for part in str(text).split("; ") if (f := parse_term(part.strip()))]
+
+
+def kept_model_shape(row: dict) -> str:
+    """The shape verdict of the row's kept model: "kept model matches truth" where the row records all its kept
+    terms ("kept terms"); else, for a model of one discovered term, that term's ("shape matches truth"); '-' for a
+    kept model of several terms whose estimates the row does not hold (rows made before the column)."""
+    whole = str(row.get("kept model matches truth", ""))
+    if whole not in ("", "-", "nan"):
+        return whole
+    if row.get("kept discovered term", "-") != "-" and "+" not in str(row.get("added (kept)", "-")):
+        return str(row.get("shape matches truth", "-"))
+    return "-"
+
+
 def criterion_met(row: dict) -> bool | str:
     """Issue 27's criterion for a row: no wrong acceptance, no significant validation rise of a kept step, and either
     a discovered term kept that cuts the pooled trim RMS by >= 50 %, or an "unexplained" verdict whose reported shape
-    matches the truth's. A kept discovered term is such a verdict (the loop reports it "not explained by any library
-    effect; discovered ..."), as is the shape the loop reports when it stops unexplained, and the shape of an
-    output's record biases that the residual analysis of the kept model reports (:func:`record_bias_match`), and the
-    input error it reports (:func:`input_path_match`) where the loop kept no discovered term: after a kept term the
-    input error describes what that term left, which is not the truth's effect to compare with."""
+    matches the truth's. A kept discovered model is such a verdict (the loop reports it "not explained by any library
+    effect; discovered ..."), scored as a whole (:func:`kept_model_shape`: all its terms together, or its first term
+    in a row made before the table recorded them all); so are the shape the loop reports when it stops unexplained,
+    the shape of an output's record biases that the residual analysis of the kept model reports
+    (:func:`record_bias_match`), and the input error it reports (:func:`input_path_match`) where the loop kept no
+    discovered term: after a kept term the input error describes what that term left, which is not the truth's
+    effect to compare with."""
     if row["truth"] == "none":
         return "n/a"
     kept = row.get("kept discovered term", "-") != "-"
     return bool(not row["wrong acceptance"] and row["significant val rise (kept steps)"] == "none"
                 and ((kept and float(row["trim change %"]) <= -50.0)
-                     or (kept and row["shape matches truth"] == "yes")
+                     or (kept and kept_model_shape(row) == "yes")
+                     or (kept and kept_model_shape(row) == "-" and row["shape matches truth"] == "yes")
                      or row["unexplained shape matches truth"] == "yes"
                      or str(row.get("record bias shape matches truth", "-")).startswith("yes")
                      or (not kept and str(row.get("input path shape matches truth", "-")).startswith("yes"))))
@@ -681,6 +773,7 @@ def residual_columns(effect: str, fr: dict) -> dict:
 def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.diagnosis.discovery import best_fit
+    from pyomo_heli.physics.discrepancy import generic_term
     from pyomo_heli.report.identification import read_truth
     from pyomo_heli.report.loop import JOINT, discovered_terms, final_index, rejected_discovery
     from pyomo_heli.workflows.close_loop import DIRECT_FAILED
@@ -753,6 +846,12 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
                            if described else "-")
     row["kept discovered term"] = disc["name"] if disc else "-"
     row["shape matches truth"] = match(effect, described)
+    # the kept model as a whole: every discovered term it kept, at the kept model's estimates
+    ses = ik.get("standard_errors") or {}
+    whole = [{"name": fit["name"], "estimate": ik["parameters"][s], "se": ses.get(s, math.nan)}
+             for _it, fit in discovered_terms(doc) if (s := generic_term(fit["name"]).strength) in ik["parameters"]]
+    row["kept terms"] = format_terms(whole)
+    row["kept model matches truth"] = model_match(effect, whole) if whole else "-"
     # "unexplained": the step said so (best generic term significant on its own), the residual analysis did, or the
     # discovered term's step was rejected by the validation rule (the loop stops with its shape reported)
     alpha = doc["settings"].get("alpha", 0.01)
@@ -908,6 +1007,8 @@ def rescore(out: Path) -> pd.DataFrame:
         kept = described["name"] if described and described["name"] in str(r["added (kept)"]).split("+") else "-"
         r["kept discovered term"] = kept
         r["shape matches truth"] = match(r["truth"], described) if described else "-"
+        if str(r.get("kept terms", "")) not in ("", "-", "nan"):
+            r["kept model matches truth"] = model_match(r["truth"], parse_terms(r["kept terms"]))
         r["unexplained shape matches truth"] = match(r["truth"], left) if left else "-"
         if str(r.get("input path", "-")) not in ("-", "", "nan"):
             r["input path shape matches truth"] = input_path_match(r["truth"], parse_input_path(r["input path"]))
@@ -1160,7 +1261,7 @@ def write_table(out: Path) -> pd.DataFrame:
 
 def markdown(tab: pd.DataFrame) -> str:
     cols = [c for c in ("truth", "seed", "verdict", "added (kept)", "final residual", "generic term",
-                        "shape matches truth",
+                        "shape matches truth", "kept terms", "kept model matches truth",
                         "trim RMS before [deg]", "trim RMS after [deg]", "trim change %",
                         "trim RMS truth model [deg]", "trim change possible %", "share of possible trim cut %",
                         "val RMS / truth model's, worst output",

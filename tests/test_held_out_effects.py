@@ -1020,3 +1020,36 @@ def test_a_tilt_of_the_disc_is_a_steady_force_in_the_study():
     m, points = study.level_trims(d, HELD_OUT_STRENGTHS["fuselage_download"])
     assert study.truth_curve("fuselage_download", "Z") == pytest.approx(
         [float(d.extra_forces(m.evaluate(x, u))[1]) for x, u in points], rel=1e-9, abs=1e-9)
+
+
+def test_a_kept_model_of_several_terms_is_scored_as_a_whole():
+    """The fuselage wake on the incidence adds a nose-down moment that grows from nothing in hover to a constant
+    above 30 kt. A constant dM_one alone has no speed dependence; with a hover bump of the opposite sign,
+    c (1 - exp(-(mu/0.05)^2)), the two together rise from zero like the truth and match it. Their moment along the
+    trims is the sum of each one's (superposition; the trims move little). A kept X bump that is not the truth's X
+    spoils the model ("no", naming the channel). The criterion reads the whole model where the row records its terms,
+    and the first term's shape only in a row made before it did."""
+    study = _study()
+    e = "fuselage_wake_incidence"
+    one, hover = {"name": "dM_one", "estimate": -0.0067}, {"name": "dM_bump00", "estimate": 0.0067}
+    assert study.model_match(e, [one]) == study.match(e, one) == "no (the term is constant over speed)"
+    assert study.model_match(e, [one, hover]) == "yes"
+    from pyomo_heli.physics.discrepancy import generic_term
+
+    ts = [generic_term(f["name"]) for f in (one, hover)]
+    both = study.steady_force(ts, {t.strength: f["estimate"] for t, f in zip(ts, (one, hover))}, "M")
+    alone = sum(study.steady_force(t, {t.strength: f["estimate"]}, "M") for t, f in zip(ts, (one, hover)))
+    assert both == pytest.approx(alone, rel=0.02, abs=1.0)
+    bump = {"name": "dX_bump10", "estimate": -0.0027}
+    verdict = study.model_match(e, [bump, one, hover])
+    assert verdict.startswith("no (X: no (corr") and verdict.endswith("M: yes)"), verdict
+    fits = [{**bump, "se": 0.0013}, {**one, "se": 0.0005}]
+    assert study.parse_terms(study.format_terms(fits)) == fits
+    row = {"truth": e, "wrong acceptance": False, "significant val rise (kept steps)": "none", "trim change %": -20.0,
+           "kept discovered term": "dM_one", "added (kept)": "dM_one+dM_bump00", "shape matches truth": "no (x)",
+           "unexplained shape matches truth": "-", "kept model matches truth": "yes"}
+    assert study.criterion_met(row) is True
+    assert study.criterion_met({**row, "kept model matches truth": "no (X: no)", "shape matches truth": "yes"}) is False
+    # a row made before the table recorded every kept term: its first term's shape, as before
+    assert study.criterion_met({**row, "kept model matches truth": "", "shape matches truth": "yes"}) is True
+    assert study.criterion_met({**row, "kept model matches truth": "", "shape matches truth": "no (x)"}) is False

@@ -415,6 +415,40 @@ def test_a_rejected_discovered_term_is_reported_unexplained_with_its_shape(tmp_p
     assert rejected_discovery({"iterations": [its[0], {**its[1], "rejected": None}], "final_iteration": 1}) is None
 
 
+def test_the_report_adds_the_kept_discovered_terms_together(tmp_path):
+    """A loop that kept two discovered moment terms and one force term: the report shows, beside each term, the
+    discrepancy they add together per channel along the kept model's level trims (loop_discovered_total.png and
+    its table); in each channel the sum of the terms' own curves (each read on its own at the same model); with one
+    force or moment term kept there is no total."""
+    from types import SimpleNamespace
+
+    from pyomo_heli.report.loop import discovered_curve, discovered_total, discovery_summary, iteration_model
+
+    fits = [{"name": n, "formula": n, "strength": f"c_{n}", "estimate": c, "se": 0.001}
+            for n, c in (("dX_bump10", -0.003), ("dM_one", -0.0067), ("dM_bump00", 0.0067))]
+    its = [{"iteration": k, "extensions": [f["name"] for f in fits[:k]],
+            "parameters": {"Iyy": 4900.0, **{f["strength"]: f["estimate"] for f in fits[:k]}},
+            "discovery": {"decision": "discovered", "added": fits[k]["name"], "discovered": fits[k]} if k < 3 else {}}
+           for k in range(4)]
+    doc = {"iterations": its, "final_iteration": 3}
+    text = "\n".join(discovery_summary(doc, SimpleNamespace(model=HelicopterModel()), tmp_path))
+    assert "The kept discovered terms together (dX_bump10, dM_one, dM_bump00)" in text
+    assert (tmp_path / "loop_discovered_total.png").is_file()
+    model, pars, speeds = iteration_model(HelicopterModel(), its[3]), its[3]["parameters"], [0, 20, 60, 120]
+    tab = discovered_total(model, pars, ["dX_bump10", "dM_one", "dM_bump00"], speeds)
+    assert list(tab.columns) == ["V [kt]", "dX [N]", "dM [N m]"]
+    alone = {n: discovered_curve(model, pars, n, speeds)["value"].to_numpy() for n in ("dX_bump10", "dM_one",
+                                                                                          "dM_bump00")}
+    assert tab["dX [N]"].to_numpy() == pytest.approx(alone["dX_bump10"])
+    assert tab["dM [N m]"].to_numpy() == pytest.approx(alone["dM_one"] + alone["dM_bump00"])
+    assert tab["dM [N m]"].iloc[0] == pytest.approx(0.0, abs=1e-9) and tab["dM [N m]"].iloc[-1] < -600  # 0 in hover
+    one = {**doc, "iterations": its[:2], "final_iteration": 1}
+    (tmp_path / "one").mkdir()
+    assert "together" not in "\n".join(discovery_summary(one, SimpleNamespace(model=HelicopterModel()),
+                                                          tmp_path / "one"))
+    assert not (tmp_path / "one" / "loop_discovered_total.png").exists()
+
+
 def _stubbed_step(monkeypatch, p_values, LM, screen, rejected=()):
     """discovery_step on lon_rigging (physical) and col_delay (generic), and the generic terms ``rejected`` by
     earlier steps, with the score test (``p_values``, ``LM`` in that order, white = robust, df infinite) and the

@@ -437,6 +437,24 @@ def discovered_curve(model: HelicopterModel, params: dict, term, speeds_kt) -> p
     return pd.DataFrame(rows)
 
 
+def discovered_total(model: HelicopterModel, params: dict, terms, speeds_kt) -> pd.DataFrame:
+    """The force and moment the discovered force/moment ``terms`` add together along the model's level trims: speed
+    [kt] and one column per channel they touch, ``dX [N]``, ``dZ [N]``, ``dM [N m]`` (the sum of their values)."""
+    from ..simulation.trim import trim_float
+
+    m = model.with_parameters(**params)
+    exts = [e for e in m.extensions if e.name in set(terms)]
+    chans = [ch for ch in "XZM" if any(e.channel == ch for e in exts)]
+    rows = []
+    for v in speeds_kt:
+        tp = trim_float(m, v * KT)
+        x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}
+        ctx = m.evaluate(x, {"col": tp.col, "lon": tp.lon})
+        rows.append({"V [kt]": v, **{f"d{ch} [{'N m' if ch == 'M' else 'N'}]":
+                                     sum(float(e.value(ctx)) for e in exts if e.channel == ch) for ch in chans}})
+    return pd.DataFrame(rows)
+
+
 def rejected_discoveries(doc: dict) -> list[tuple[dict, dict]]:
     """(rejected iteration record, fit) of every generic term the loop discovered at the kept model and did not keep.
 
@@ -494,6 +512,7 @@ def discovery_summary(doc: dict, cfg, out) -> list[str]:
             L += [f"- iteration {it['iteration']}: not explained by any library effect; discovered {fit['formula']}, "
                   f"c = {c:.4g} +- {se:.2g} (the kept model's estimate and standard error)", ""]
             L += _discovered_figure(model, kept["parameters"], fit, c, se, out)
+        L += _total_figure(model, kept["parameters"], [fit for _, fit in found], out)
     if rejected:
         L += ["## Discovered, not kept (validation rule): the residual stays unexplained", ""]
         for it, fit in rejected:
@@ -504,6 +523,33 @@ def discovery_summary(doc: dict, cfg, out) -> list[str]:
         L += ["To test an effect you suspect behind it (an extension whose strength has bounds): "
               f"`pyomo-heli check-effect {out} --effect FILE.py:CLASS --iteration K` (docs/discovery.md).", ""]
     return L
+
+
+def _total_figure(model: HelicopterModel, params: dict, fits: list, out) -> list[str]:
+    """``loop_discovered_total.png`` and its table: what the kept discovered force and moment terms add together
+    along the level trims, one panel per channel; only where two or more of them are kept."""
+    names = [f["name"] for f in fits if f["name"][:2] in ("dX", "dZ", "dM")]
+    if len(names) < 2:
+        return []
+    from matplotlib.figure import Figure
+
+    tab = discovered_total(model, params, names, list(range(0, 121, 10)))
+    cols = [c for c in tab.columns if c != "V [kt]"]
+    fig = Figure(figsize=(3.6 * len(cols) + 1, 3.4))
+    for ax, col in zip(fig.subplots(1, len(cols), squeeze=False)[0], cols):
+        ax.plot(tab["V [kt]"], tab[col], "o-")
+        ax.set_xlabel("V [kt]")
+        ax.set_ylabel(col)
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.grid(alpha=0.3)
+    fig.suptitle("The kept discovered terms together along the level trims (" + " + ".join(names) + ")")
+    fig.tight_layout()
+    fig.savefig(Path(out) / "loop_discovered_total.png", dpi=90)
+    return ["The kept discovered terms together (" + ", ".join(names) + "), per channel: the discrepancy the kept "
+            "model adds along its level trims. Their estimates are correlated, so a band from the standard errors "
+            "alone would mislead; none is drawn.", "",
+            "![the kept discovered terms together vs airspeed](loop_discovered_total.png)", "",
+            markdown_table(tab, digits=4), ""]
 
 
 def _discovered_figure(model: HelicopterModel, params: dict, fit: dict, c: float, se: float, out) -> list[str]:

@@ -274,13 +274,18 @@ def derivative_match(effect: str, fit: dict | None) -> str:
     truth = truth_derivative(effect, fit["name"][1])
     if truth is None:
         return "n/a"
-    s, curve = truth
     t = generic_term(fit["name"])
-    d = force_derivatives(t, {t.strength: fit["estimate"]}, fit["name"][1])
-    size = scaled_sizes(d)
+    return derivative_verdict(truth, force_derivatives(t, {t.strength: fit["estimate"]}, fit["name"][1]))
+
+
+def derivative_verdict(truth: tuple[str, np.ndarray], derivatives: dict, what: str = "the term does") -> str:
+    """The truth's dominant derivative (state, curve) against a model's ``derivatives`` (:func:`force_derivatives`):
+    :func:`curve_match` of the same state's derivative, or 'no' when the model hardly depends on that state."""
+    s, curve = truth
+    size = scaled_sizes(derivatives)
     if size[s] <= 0.01 * max(size.values()):  # to rounding (mu moves with q through the hub's velocity)
-        return f"no (the term does not depend on {s})"
-    return curve_match(curve, d[s])
+        return f"no ({what} not depend on {s})"
+    return curve_match(curve, derivatives[s])
 
 
 #: a time signature matches when what the best positive multiple of the term leaves of the truth's is below
@@ -375,12 +380,17 @@ def signature_match(effect: str, fit: dict | None, setup: SignatureSetup | None 
     setup = setup or signature_setup()
     s = truth_signature(effect, setup)
     t = generic_term(fit["name"])
-    v = signature(t, {t.strength: fit["estimate"]}, setup)
-    if s is None or v is None or not np.any(v):
+    return signature_verdict(s, signature(t, {t.strength: fit["estimate"]}, setup))
+
+
+def signature_verdict(truth: np.ndarray | None, sig: np.ndarray | None) -> str:
+    """'yes' when the best positive multiple of ``sig`` leaves less than :data:`SIGNATURE_LEFT_MAX` of the truth's
+    signature ``truth``; 'no (left L of T)' otherwise; 'n/a' without both."""
+    if truth is None or sig is None or not np.any(sig):
         return "n/a"
-    beta = float(s @ v / (v @ v))
-    left = float(np.sum((s - max(beta, 0.0) * v) ** 2))
-    return "yes" if beta > 0 and left < SIGNATURE_LEFT_MAX else f"no (left {left:.3g} of {float(s @ s):.3g})"
+    beta = float(truth @ sig / (sig @ sig))
+    left = float(np.sum((truth - max(beta, 0.0) * sig) ** 2))
+    return "yes" if beta > 0 and left < SIGNATURE_LEFT_MAX else f"no (left {left:.3g} of {float(truth @ truth):.3g})"
 
 
 def has_steady_force(effect: str) -> bool:
@@ -445,21 +455,13 @@ def model_match(effect: str, fits: list[dict]) -> str:
                 if truth is None:
                     verdicts[ch] = "no (the truth adds no derivative here)"
                     continue
-                s, curve = truth
-                d = force_derivatives([t for t, _ in forces], force_strengths, ch)
-                size = scaled_sizes(d)
-                verdicts[ch] = (f"no (the terms do not depend on {s})" if size[s] <= 0.01 * max(size.values())
-                                else curve_match(curve, d[s]))
+                verdicts[ch] = derivative_verdict(
+                    truth, force_derivatives([t for t, _ in forces], force_strengths, ch), "the terms do")
         if all(v == "yes" for v in verdicts.values()):
             return "yes"
         return "no (" + "; ".join(f"{ch}: {v}" for ch, v in verdicts.items()) + ")"
     setup = signature_setup()
-    s, v = truth_signature(effect, setup), signature(terms, strengths, setup)
-    if s is None or v is None or not np.any(v):
-        return "n/a"
-    beta = float(s @ v / (v @ v))
-    left = float(np.sum((s - max(beta, 0.0) * v) ** 2))
-    return "yes" if beta > 0 and left < SIGNATURE_LEFT_MAX else f"no (left {left:.3g} of {float(s @ s):.3g})"
+    return signature_verdict(truth_signature(effect, setup), signature(terms, strengths, setup))
 
 
 def format_terms(fits: list[dict]) -> str:

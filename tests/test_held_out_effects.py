@@ -1043,6 +1043,12 @@ def test_a_kept_model_of_several_terms_is_scored_as_a_whole():
     bump = {"name": "dX_bump10", "estimate": -0.0027}
     verdict = study.model_match(e, [bump, one, hover])
     assert verdict.startswith("no (X: no (corr") and verdict.endswith("M: yes)"), verdict
+    # a damping (no moment at any trim): the terms' summed derivative in each channel they touch
+    qmu, q = {"name": "dM_qmu", "estimate": -0.0070}, {"name": "dM_q", "estimate": -0.002}
+    assert study.model_match("fuselage_pitch_damping", [q, qmu]) == "yes"
+    assert study.model_match("fuselage_pitch_damping", [q, {**qmu, "estimate": 0.0070}]).startswith("no (M: no (")
+    assert study.model_match("fuselage_pitch_damping", [qmu, {"name": "dX_q", "estimate": 0.004}]) == \
+        "no (X: no (the truth adds no derivative here); M: yes)"
     fits = [{**bump, "se": 0.0013}, {**one, "se": 0.0005}]
     assert study.parse_terms(study.format_terms(fits)) == fits
     row = {"truth": e, "wrong acceptance": False, "significant val rise (kept steps)": "none", "trim change %": -20.0,

@@ -28,7 +28,9 @@ tip-path plane; :func:`steady_force`), sign and speed dependence of the same for
 trims (:func:`shape_match`); for one that adds a force or moment that is zero at every trim (a damping), sign and
 speed dependence of its derivative along the trims, for a force or moment term (:func:`derivative_match`); for
 control-path and sensor effects, and a sensor term against a damping, its trim and time signature against M0 on
-the validation records (:func:`signature_match`). With an "unexplained" verdict, the shape it
+the validation records (:func:`signature_match`). A kept model of several discovered terms is also scored as a
+whole ("kept terms" at the kept model's estimates, "kept model matches truth", :func:`model_match`): what its terms
+add together, in every channel they touch. With an "unexplained" verdict, the shape it
 reports (a discovered term the validation rule rejected, else the last step's best generic term) and whether that
 matches. The residual analysis of the kept model (:func:`final_residual`): its verdict, where an output's
 records disagree on its bias whether that shape matches the truth's (:func:`record_bias_match`), and the input
@@ -137,10 +139,9 @@ def level_trims(extension, strengths: dict):
 
 def steady_force(extension, strengths: dict, channel: str) -> np.ndarray:
     """The force (X, Z) or moment (M) ``extension`` (one, or several together) adds along its level trims
-    (:func:`level_trims`), SI: the total
-    force of M0 with it at ``strengths`` minus M0's (the extension at zero strength) at the same states and controls,
-    so a term added to the force equations (``extra_forces``) and one that acts through the rotor (e.g. a tilt of
-    the tip-path plane, ``tip_path_plane``) are measured alike."""
+    (:func:`level_trims`), SI: the total force of M0 with it at ``strengths`` minus M0's (the extension at zero
+    strength) at the same states and controls, so a term added to the force equations (``extra_forces``) and one that
+    acts through the rotor (e.g. a tilt of the tip-path plane, ``tip_path_plane``) are measured alike."""
     m, points = level_trims(extension, strengths)
     m0 = m.with_parameters(**dict.fromkeys(strengths, 0.0))
     return np.array([float(getattr(m.evaluate(x, u).forces, channel) - getattr(m0.evaluate(x, u).forces, channel))

@@ -68,6 +68,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a check
 from pyomo_heli.studies.commands import exit_status, run_command  # noqa: E402
 from pyomo_heli.cli.options import nonneg_int  # noqa: E402
 from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS  # noqa: E402
+from pyomo_heli.physics.discrepancy import is_force_term  # noqa: E402
 from pyomo_heli.studies.args import in_file, out_folder, positive_int  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -203,7 +204,7 @@ def shape_match(effect: str, fit: dict | None) -> str:
     (:func:`curve_match`)? 'n/a' without a force/moment term or a truth force in that channel."""
     from pyomo_heli.physics.discrepancy import generic_term
 
-    if not fit or fit["name"][:2] not in ("dX", "dZ", "dM"):
+    if not fit or not is_force_term(fit["name"]):
         return "n/a"
     ch = fit["name"][1]
     truth = truth_curve(effect, ch)
@@ -270,7 +271,7 @@ def derivative_match(effect: str, fit: dict | None) -> str:
     force/moment term or such a truth derivative in its channel."""
     from pyomo_heli.physics.discrepancy import generic_term
 
-    if not fit or fit["name"][:2] not in ("dX", "dZ", "dM"):
+    if not fit or not is_force_term(fit["name"]):
         return "n/a"
     truth = truth_derivative(effect, fit["name"][1])
     if truth is None:
@@ -412,12 +413,9 @@ def match(effect: str, fit: dict | None) -> str:
         return "n/a" if effect == "none" else "-"
     if has_steady_force(effect):
         return shape_match(effect, fit)
-    if has_force_derivative(effect) and fit["name"][:2] in ("dX", "dZ", "dM"):
+    if has_force_derivative(effect) and is_force_term(fit["name"]):
         return derivative_match(effect, fit)
     return signature_match(effect, fit)
-
-
-FORCE_TERM = ("dX", "dZ", "dM")
 
 
 def model_match(effect: str, fits: list[dict]) -> str:
@@ -435,15 +433,16 @@ def model_match(effect: str, fits: list[dict]) -> str:
         return match(effect, fits[0])
     terms = [generic_term(f["name"]) for f in fits]
     strengths = {t.strength: f["estimate"] for t, f in zip(terms, fits)}
-    forces = [(t, f) for t, f in zip(terms, fits) if f["name"][:2] in FORCE_TERM]
+    forces = [(t, f) for t, f in zip(terms, fits) if is_force_term(f["name"])]
     channels = sorted({f["name"][1] for _, f in forces}, key="XZM".index)
     force_strengths = {t.strength: f["estimate"] for t, f in forces}
     verdicts = {}
-    if has_steady_force(effect) or (has_force_derivative(effect) and forces):
+    steady = has_steady_force(effect)
+    if steady or (has_force_derivative(effect) and forces):
         if not forces:
             return "n/a"
         for ch in channels:
-            if has_steady_force(effect):
+            if steady:
                 truth = truth_curve(effect, ch)
                 if truth is None:
                     verdicts[ch] = "no (the truth adds nothing here)"
@@ -477,14 +476,10 @@ def parse_terms(text) -> list[dict]:
 
 def kept_model_shape(row: dict) -> str:
     """The shape verdict of the row's kept model: "kept model matches truth" where the row records all its kept
-    terms ("kept terms"); else, for a model of one discovered term, that term's ("shape matches truth"); '-' for a
-    kept model of several terms whose estimates the row does not hold (rows made before the column)."""
+    terms ("kept terms"); else its first discovered term's ("shape matches truth": the only one, or a row made
+    before the table recorded them all)."""
     whole = str(row.get("kept model matches truth", ""))
-    if whole not in ("", "-", "nan"):
-        return whole
-    if row.get("kept discovered term", "-") != "-" and "+" not in str(row.get("added (kept)", "-")):
-        return str(row.get("shape matches truth", "-"))
-    return "-"
+    return whole if whole not in ("", "-", "nan") else str(row.get("shape matches truth", "-"))
 
 
 def criterion_met(row: dict) -> bool | str:
@@ -503,7 +498,6 @@ def criterion_met(row: dict) -> bool | str:
     return bool(not row["wrong acceptance"] and row["significant val rise (kept steps)"] == "none"
                 and ((kept and float(row["trim change %"]) <= -50.0)
                      or (kept and kept_model_shape(row) == "yes")
-                     or (kept and kept_model_shape(row) == "-" and row["shape matches truth"] == "yes")
                      or row["unexplained shape matches truth"] == "yes"
                      or str(row.get("record bias shape matches truth", "-")).startswith("yes")
                      or (not kept and str(row.get("input path shape matches truth", "-")).startswith("yes"))))

@@ -220,6 +220,11 @@ def is_generic(name: str) -> bool:
     return name in set(generic_names("extended"))
 
 
+def is_force_term(name: str) -> bool:
+    """Is ``name`` a force or moment term of the family (dX, dZ, dM), not a data-compatibility term?"""
+    return is_generic(name) and name[1] in FORCE_CHANNELS and name[0] == "d"
+
+
 def force_scale(p, channel: str):
     """The family's normalisation of a force or moment channel: W = m g [N] for X and Z, W R [N m] for M."""
     return p["m"] * p["g"] * (p["R"] if channel == "M" else 1.0)

@@ -23,7 +23,7 @@ import pandas as pd
 from ..dataset import load_flight_test
 from ..diagnosis.candidates import model_with_candidates
 from ..nlp.identification import validation_maneuvers
-from ..physics.discrepancy import REGRESSORS
+from ..physics.discrepancy import REGRESSORS, is_force_term
 from ..physics.model import HelicopterModel
 from ..units import KT
 from . import plots
@@ -420,39 +420,39 @@ def discovered_terms(doc: dict) -> list[tuple[dict, dict]]:
     return out
 
 
-def discovered_curve(model: HelicopterModel, params: dict, term, speeds_kt) -> pd.DataFrame:
-    """The discovered force or moment along the model's level trims: speed [kt], the regressor's state and the value."""
+def _trim_contexts(model: HelicopterModel, params: dict, speeds_kt):
+    """(speed [kt], trim point, evaluated context) of the model's level trims at ``speeds_kt``."""
     from ..simulation.trim import trim_float
 
     m = model.with_parameters(**params)
-    ext = next(e for e in m.extensions if e.name == term)
-    rows = []
     for v in speeds_kt:
         tp = trim_float(m, v * KT)
         x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}
-        ctx = m.evaluate(x, {"col": tp.col, "lon": tp.lon})
-        rows.append({"V [kt]": v, "mu": float(ctx.flow.mu), "alpha [deg]": float(math.degrees(math.atan2(tp.w, tp.u))),
-                     "lambda_i": tp.lambda_i, "col [deg]": math.degrees(tp.col), "lon [deg]": math.degrees(tp.lon),
-                     "w [m/s]": tp.w, "value": float(ext.value(ctx))})
-    return pd.DataFrame(rows)
+        yield v, tp, m.evaluate(x, {"col": tp.col, "lon": tp.lon})
+
+
+def _extensions(model: HelicopterModel, names) -> list:
+    return [e for e in model.extensions if e.name in set(names)]
+
+
+def discovered_curve(model: HelicopterModel, params: dict, term, speeds_kt) -> pd.DataFrame:
+    """The discovered force or moment along the model's level trims: speed [kt], the regressor's state and the value."""
+    ext = _extensions(model, [term])[0]
+    return pd.DataFrame([{"V [kt]": v, "mu": float(ctx.flow.mu),
+                          "alpha [deg]": float(math.degrees(math.atan2(tp.w, tp.u))), "lambda_i": tp.lambda_i,
+                          "col [deg]": math.degrees(tp.col), "lon [deg]": math.degrees(tp.lon), "w [m/s]": tp.w,
+                          "value": float(ext.value(ctx))}
+                         for v, tp, ctx in _trim_contexts(model, params, speeds_kt)])
 
 
 def discovered_total(model: HelicopterModel, params: dict, terms, speeds_kt) -> pd.DataFrame:
     """The force and moment the discovered force/moment ``terms`` add together along the model's level trims: speed
     [kt] and one column per channel they touch, ``dX [N]``, ``dZ [N]``, ``dM [N m]`` (the sum of their values)."""
-    from ..simulation.trim import trim_float
-
-    m = model.with_parameters(**params)
-    exts = [e for e in m.extensions if e.name in set(terms)]
+    exts = _extensions(model, terms)
     chans = [ch for ch in "XZM" if any(e.channel == ch for e in exts)]
-    rows = []
-    for v in speeds_kt:
-        tp = trim_float(m, v * KT)
-        x = {"u": tp.u, "w": tp.w, "q": 0.0, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}
-        ctx = m.evaluate(x, {"col": tp.col, "lon": tp.lon})
-        rows.append({"V [kt]": v, **{f"d{ch} [{'N m' if ch == 'M' else 'N'}]":
-                                     sum(float(e.value(ctx)) for e in exts if e.channel == ch) for ch in chans}})
-    return pd.DataFrame(rows)
+    return pd.DataFrame([{"V [kt]": v, **{f"d{ch} [{'N m' if ch == 'M' else 'N'}]":
+                                          sum(float(e.value(ctx)) for e in exts if e.channel == ch) for ch in chans}}
+                         for v, _, ctx in _trim_contexts(model, params, speeds_kt)])
 
 
 def rejected_discoveries(doc: dict) -> list[tuple[dict, dict]]:
@@ -528,7 +528,7 @@ def discovery_summary(doc: dict, cfg, out) -> list[str]:
 def _total_figure(model: HelicopterModel, params: dict, fits: list, out) -> list[str]:
     """``loop_discovered_total.png`` and its table: what the kept discovered force and moment terms add together
     along the level trims, one panel per channel; only where two or more of them are kept."""
-    names = [f["name"] for f in fits if f["name"][:2] in ("dX", "dZ", "dM")]
+    names = [f["name"] for f in fits if is_force_term(f["name"])]
     if len(names) < 2:
         return []
     from matplotlib.figure import Figure
@@ -554,7 +554,7 @@ def _total_figure(model: HelicopterModel, params: dict, fits: list, out) -> list
 
 def _discovered_figure(model: HelicopterModel, params: dict, fit: dict, c: float, se: float, out) -> list[str]:
     """``loop_discovered_<term>.png`` and its table: the term's force or moment along the level trims."""
-    if fit["name"][:2] not in ("dX", "dZ", "dM"):
+    if not is_force_term(fit["name"]):
         return []
     from matplotlib.figure import Figure
 

@@ -321,7 +321,8 @@ class LoopTable(Table):
         "after_rejection": "field 'after_rejection' must be \"next\" or \"stop\", got {v!r}",
     }
 
-    max_iterations: int = Field(3, ge=0, description="most loop iterations after the first identification")
+    max_iterations: int = Field(3, ge=0, description="most loop iterations after the first identification (a "
+                                "backward-check removal goes past it)")
     candidates: Optional[Names(empty=NON_EMPTY)] = Field(None, description="the candidate effects offered (names of "
                                                             "pyomo_heli.diagnosis.candidates; default all)")
     alpha: Finite = Field(ALPHA, gt=0, le=1, description="significance level of the score test")

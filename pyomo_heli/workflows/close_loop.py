@@ -29,10 +29,13 @@ With ``[loop] discovery``, the name check: a physical candidate added at the las
 taken by the library) must leave the generic family nothing significant at the next step; when the best generic
 term is significant there, the candidate described the missing effect only in part, and its step is rejected in
 the same way (``name_check`` in the record: that step; the loop goes back and tries the next term).
+With ``[loop] discovery``, the backward check as well: from the second added term on, an earlier added term whose
+strength is no longer significant at the level it entered at (Wald, Cramer-Rao SE) is removed, not offered again,
+and the model re-identified; a removal is carried out past the iteration limit too.
 
 ``out/loop.json`` is rewritten as each iteration finishes, so nothing
 finished is lost. Settings come from the config's ``[loop]`` table:
-``max_iterations`` (identifications after the first, default 3),
+``max_iterations`` (identifications after the first, default 3; a backward-check removal goes past it),
 ``candidates`` (names, default the whole library), ``alpha``, ``ratio``,
 ``confound_corr``, ``robust``, ``point`` (``direct``: the Eq. 11 solution solved
 directly, default; ``chosen``: the closest sampled front point) (see :mod:`pyomo_heli.diagnosis.attribution`),
@@ -304,6 +307,13 @@ def _reject(doc, record, krec, added, reason: str, rejected: list, settings, out
     return False
 
 
+def _entry_level(doc: dict, alpha: float) -> float:
+    """The level the loop's terms entered at: the last structure step's alpha / L (Bonferroni over its library);
+    ``alpha`` before any step."""
+    steps = (r.get("discovery") or {} for r in reversed(doc["iterations"]))
+    return next((s["level"] for s in steps if s.get("level")), alpha)
+
+
 def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) -> dict:
     out, restart = run.root, run.restart
     run.mark()
@@ -374,18 +384,19 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         pool = settings.candidates or list(CANDIDATES)
         left = [n for n in pool if n not in names and n not in rejected]
         att, add, init = None, None, None
-        # the backward check once per kept model (not again after a rejected step)
-        backward = (backward_check(cfg, record, base_names, settings.alpha)
+        # the backward check once per kept model (not again after a rejected step), at the level the terms entered at
+        backward = (backward_check(cfg, record, base_names, _entry_level(doc, settings.alpha))
                     if settings.discovery and not record.get("rejected") else [])
         if backward:
             record["backward_check"] = backward
         dropped = [b["name"] for b in backward if not b["significant"]]
-        if dropped and i < settings.max_iterations:
-            p_drop = next(b["p"] for b in backward if b["name"] == dropped[0])
+        if dropped:  # past the iteration limit too: the kept model never holds a term its own check rejects
+            b = next(b for b in backward if b["name"] == dropped[0])
             record["decision"] = {"decision": "dropped", "message": f"backward check: {dropped[0]} no longer "
-                                  f"significant (Wald p = {p_drop:.2g})"}
+                                  f"significant (Wald p = {b['p']:.2g} >= {b['level']:.2g})"}
             write_json(out / LOOP_FILE, doc)
-            progress(record["decision"]["message"] + "; removed")
+            progress(record["decision"]["message"] + "; removed, not offered again")
+            rejected.append(dropped[0])
             cfg = _without(cfg, chosen, dropped[0])
             added_shape, added = None, None
             i += 1

@@ -67,9 +67,11 @@ def validation_check(model0: HelicopterModel, params0: dict, model1: HelicopterM
     return {"rise": bool(bad), "rows": rows, "message": msg}
 
 
-def backward_check(cfg: IdentificationConfig, record: dict, base_names, alpha: float) -> list[dict]:
+def backward_check(cfg: IdentificationConfig, record: dict, base_names, level: float) -> list[dict]:
     """Wald test of every loop-added effect's strength but the last added (forward selection's backward check), from
-    the Cramer-Rao standard errors at the diagnosed point; skipped for a strength without one."""
+    the Cramer-Rao standard errors at the diagnosed point; skipped for a strength without one. ``level``: the level a
+    term entered at (the structure step's alpha / L), so that every term of a kept model stays significant at the level
+    it needed to enter, as in stepwise regression with equal F-to-enter and F-to-remove."""
     from scipy.stats import norm
 
     se = record.get("standard_errors") or {}
@@ -81,7 +83,8 @@ def backward_check(cfg: IdentificationConfig, record: dict, base_names, alpha: f
             continue
         z = record["parameters"][e.strength] / s
         p = float(norm.sf(z) if getattr(e, "one_sided", False) else 2 * norm.sf(abs(z)))
-        rows.append({"name": e.name, "strength": e.strength, "z": float(z), "p": p, "significant": p < alpha})
+        rows.append({"name": e.name, "strength": e.strength, "z": float(z), "p": p, "level": level,
+                     "significant": p < level})
     return rows
 
 

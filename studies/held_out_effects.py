@@ -784,10 +784,15 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     if last_disc.get("decision") == "ambiguous" and "best_generic" not in last_disc:
         # loops run before the ambiguous record carried it: the generic term its message names (largest LR)
         last_disc = {**last_disc, "best_generic": best_fit((last_disc.get("screen") or {}).get("fits", {}), True)}
-    # each step's decision and the term it added, "(rejected)" where the validation rule rejected that term's step
-    decisions = [f"{(it.get('discovery') or {}).get('decision', '-')}"
-                 + (f" {it['discovery']['added']}" if (it.get("discovery") or {}).get("added") else "")
-                 + (" (rejected)" if j + 1 < len(its) and its[j + 1].get("rejected") else "")
+    # each step's decision and the term it added (or the term the backward check dropped), "(rejected)" where the
+    # validation rule rejected that term's step (or the model without the dropped term)
+    def step_words(it):
+        if (it.get("decision") or {}).get("decision") == "dropped":
+            return f"dropped {it['decision'].get('name', '')}".strip()
+        d = it.get("discovery") or {}
+        return d.get("decision", "-") + (f" {d['added']}" if d.get("added") else "")
+
+    decisions = [step_words(it) + (" (rejected)" if j + 1 < len(its) and its[j + 1].get("rejected") else "")
                  for j, it in enumerate(its)]
     fr = final_residual(loop)
     row = {"truth": effect, "seed": seed, "verdict": "; ".join(decisions),

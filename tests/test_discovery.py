@@ -25,9 +25,10 @@ from pyomo_heli.report.loop import JOINT
 GENERIC = ["dM_one", "dM_mu2", "dM_bump00", "dM_bump05", "dM_bump10", "dX_mu4", "dZ_one", "dZ_bump00", "TAS_scale"]
 
 
-def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iterations: int = 0, generic=GENERIC):
-    loop = ('\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\ndiscovery = true\nuncertainty = "none"\n'
-            f"max_iterations = {max_iterations}\ngeneric = {json.dumps(list(generic))}\n{extra}")
+def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iterations: int = 0, generic=GENERIC,
+          uncertainty: str = "none"):
+    loop = ('\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\ndiscovery = true\n'
+            f'uncertainty = "{uncertainty}"\nmax_iterations = {max_iterations}\ngeneric = {json.dumps(list(generic))}\n{extra}")
     cfg = make_case(tmp_path, effect_table, seed=seed, points=2, loop=loop, maneuvers=WAKE_MANEUVERS,
                     input_reference_s=1.9)
     assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
@@ -694,3 +695,56 @@ def test_the_screen_warm_start_from_the_base_multipliers_gives_the_primal_warm_s
         assert a["LR"] == pytest.approx(b["LR"], rel=1e-3, abs=0.05)
     its = {ws: sum(f["iterations"] for f in r["fits"].values()) for ws, r in got.items()}
     assert its["continuation"] < its["primal"], its
+
+
+def test_the_backward_check_removes_at_the_level_the_terms_entered_at():
+    """A term added earlier whose Wald z is 2.9 (two-sided p = 0.0037) is kept at alpha = 0.01 but not at the level
+    it needed to enter, alpha / L = 0.01 / 58: the check tests at that level, the last step's. The last added term
+    is not tested."""
+    from types import SimpleNamespace
+
+    from pyomo_heli.workflows.close_loop import _entry_level
+    from pyomo_heli.workflows.loop_steps import backward_check
+
+    ext = [SimpleNamespace(name=n, strength=f"c_{n}") for n in ("dX_bump10", "dM_mu", "dM_mu2")]
+    cfg = SimpleNamespace(model=SimpleNamespace(extensions=ext))
+    record = {"parameters": {"c_dX_bump10": -2.9e-3, "c_dM_mu": -0.02, "c_dM_mu2": 0.0},
+              "standard_errors": {"c_dX_bump10": 1e-3, "c_dM_mu": 3.1e-3, "c_dM_mu2": 1e-9}}
+    doc = {"iterations": [{"discovery": {"level": 0.01 / 57}}, {"discovery": {"level": 0.01 / 58}}, {}]}
+    level = _entry_level(doc, 0.01)
+    assert level == 0.01 / 58 and _entry_level({"iterations": [{}]}, 0.01) == 0.01
+    rows = {r["name"]: r for r in backward_check(cfg, record, [], level)}
+    assert set(rows) == {"dX_bump10", "dM_mu"}  # not the last added
+    assert rows["dX_bump10"]["p"] == pytest.approx(0.003732, rel=1e-3) and not rows["dX_bump10"]["significant"]
+    assert rows["dM_mu"]["significant"] and rows["dM_mu"]["level"] == level
+    assert backward_check(cfg, record, [], 0.01)[0]["significant"]  # at alpha itself it would have stayed
+
+
+def test_a_term_the_backward_check_rejects_is_removed_past_the_iteration_limit(tmp_path, monkeypatch):
+    """M0 + noise, the first two steps made to add dM_one and then dZ_one (the test's stand-in; each step itself
+    runs). At the iteration limit (2) the backward check finds dM_one not significant at the level the terms
+    entered at: it is removed all the same, the model re-identified, and the next step does not offer it again."""
+    import pyomo_heli.diagnosis.discovery as disc
+
+    real, offered, forced = disc.discovery_step, [], ["dM_one", "dZ_one"]
+
+    def step(cfg, model, start, data, **kw):
+        offered.append(list(kw["generic"]))
+        out = real(cfg, model, start, data, **kw)
+        if forced:
+            name = forced.pop(0)
+            out = {**out, "decision": "accepted", "added": name, "initial": 0.0, "message": f"{name} (test)"}
+        return out
+
+    monkeypatch.setattr(disc, "discovery_step", step)
+    _cfg, doc = _loop(tmp_path, "", seed=21, max_iterations=2, generic=["dM_one", "dZ_one", "dM_mu2"],
+                      extra='candidates = ["nx_bias"]\nvalidation_rule = false\n', uncertainty="chosen")
+    its = doc["iterations"]
+    print([(it["extensions"], it.get("backward_check"), (it.get("decision") or {}).get("message")) for it in its])
+    assert [it["extensions"] for it in its] == [[], ["dM_one"], ["dM_one", "dZ_one"], ["dZ_one"]]
+    check = its[2]["backward_check"]
+    assert [r["name"] for r in check] == ["dM_one"] and not check[0]["significant"]
+    # alpha / L of the step that added dZ_one: its library was dZ_one, dM_mu2 and nx_bias
+    assert check[0]["level"] == pytest.approx(0.01 / 3) == its[1]["discovery"]["level"]
+    assert its[2]["decision"]["decision"] == "dropped" and ">= 0.0033" in its[2]["decision"]["message"]
+    assert doc["final_iteration"] == 3 and "dM_one" not in offered[-1]

@@ -31,7 +31,8 @@ term is significant there, the candidate described the missing effect only in pa
 the same way (``name_check`` in the record: that step; the loop goes back and tries the next term).
 With ``[loop] discovery``, the backward check as well: from the second added term on, an earlier added term whose
 strength is no longer significant at the level it entered at (Wald, Cramer-Rao SE) is removed, not offered again,
-and the model re-identified; a removal is carried out past the iteration limit too.
+and the model re-identified, past the iteration limit too; the validation rule judges the model without it as it
+judges a step, and keeps the term when its removal makes the validation significantly worse.
 
 ``out/loop.json`` is rewritten as each iteration finishes, so nothing
 finished is lost. Settings come from the config's ``[loop]`` table:
@@ -390,9 +391,10 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         if backward:
             record["backward_check"] = backward
         dropped = [b["name"] for b in backward if not b["significant"]]
-        if dropped:  # past the iteration limit too: the kept model never holds a term its own check rejects
+        if dropped:  # past the iteration limit too; the validation rule judges the model without it as any step
             b = next(b for b in backward if b["name"] == dropped[0])
-            record["decision"] = {"decision": "dropped", "message": f"backward check: {dropped[0]} no longer "
+            record["decision"] = {"decision": "dropped", "name": dropped[0],
+                                  "message": f"backward check: {dropped[0]} no longer "
                                   f"significant (Wald p = {b['p']:.2g} >= {b['level']:.2g})"}
             write_json(out / LOOP_FILE, doc)
             progress(record["decision"]["message"] + "; removed, not offered again")

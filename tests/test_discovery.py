@@ -28,7 +28,8 @@ GENERIC = ["dM_one", "dM_mu2", "dM_bump00", "dM_bump05", "dM_bump10", "dX_mu4", 
 def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iterations: int = 0, generic=GENERIC,
           uncertainty: str = "none"):
     loop = ('\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\ndiscovery = true\n'
-            f'uncertainty = "{uncertainty}"\nmax_iterations = {max_iterations}\ngeneric = {json.dumps(list(generic))}\n{extra}")
+            f'uncertainty = "{uncertainty}"\nmax_iterations = {max_iterations}\n'
+            f"generic = {json.dumps(list(generic))}\n{extra}")
     cfg = make_case(tmp_path, effect_table, seed=seed, points=2, loop=loop, maneuvers=WAKE_MANEUVERS,
                     input_reference_s=1.9)
     assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0

@@ -787,8 +787,9 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     # each step's decision and the term it added (or the term the backward check dropped), "(rejected)" where the
     # validation rule rejected that term's step (or the model without the dropped term)
     def step_words(it):
-        if (it.get("decision") or {}).get("decision") == "dropped":
-            return f"dropped {it['decision'].get('name', '')}".strip()
+        if (it.get("decision") or {}).get("decision") == "dropped":  # the name: in the message for older loops
+            d = it["decision"]
+            return f"dropped {d.get('name') or d['message'].split()[2]}"
         d = it.get("discovery") or {}
         return d.get("decision", "-") + (f" {d['added']}" if d.get("added") else "")
 

@@ -605,7 +605,8 @@ def truth_form_check(effect: str, loop: Path, config: Path = CONFIG) -> dict:
 
 #: the residual analysis a cached final verdict was made with (a new test in diagnosis/ invalidates the cache)
 RESIDUAL_ANALYSIS = ("trim shape, whiteness, record biases (scaled by each record's innovation RMS), input path "
-                     "(stepwise regression of the input errors, corrected for the input noise)")
+                     "(stepwise regression of the input errors, corrected for the input noise; parameter shift from "
+                     "the inputs less their expected error)")
 
 
 def final_residual(loop: Path) -> dict:

@@ -40,7 +40,8 @@ from ..nlp.objectives import noise_sigmas
 from ..physics.model import HelicopterModel
 from ..simulation.compiled import input_sensitivities, simulate_outputs
 from ..simulation.trim import trim_float
-from .input_path import histories, input_path_test, parameter_columns, record_block, signals_of
+from .input_path import (expected_inputs, histories, input_path_test, parameter_columns, record_block,
+                         signals_of)
 from .timeseries import decimation
 
 
@@ -120,9 +121,11 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
         N[:, n_out + c] = Su[:, c * n:(c + 1) * n].sum(axis=1)
     block = None
     if path is not None:  # the input-path regression also allows a shift of the identified parameters
-        P = parameter_columns(model, mv, outputs, keep, nuisance_parameters, substeps)
+        var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
+        quiet = dataclasses.replace(mv, data=mv.data.assign(**expected_inputs(mv, e, Su, N, L, var_u, input_errors)))
+        P = parameter_columns(model, quiet, outputs, keep, nuisance_parameters, substeps)
         block = record_block(-e, Su, np.column_stack([N, P]), L, signals_of(model, mv, y, input_errors, substeps),
-                             input_errors, np.repeat([float(sigma[c]) ** 2 for c in input_errors], n), t, mv.name)
+                             input_errors, var_u, t, mv.name)
     ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)
     coef, *_ = np.linalg.lstsq(Nw, ew, rcond=None)
     cov = np.linalg.pinv(Nw.T @ Nw)  # the estimates' covariance if the whitened rows have unit variance

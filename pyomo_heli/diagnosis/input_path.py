@@ -109,9 +109,10 @@ def expected_inputs(mv, e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndar
     Why: the parameter columns (:func:`parameter_columns`) are differences of replays driven by the inputs. Driven
     by the measured ones they carry the input noise's response scaled by the parameter, ``d(S_u du)/dtheta``, which
     lies along the residual's own noise; projecting it out leaves a share of that noise in every regressor and
-    shifts every term's z the same way (+0.14 on average, +1.3 for one term at four times the noise, on the exact
-    model). What is left of the error once its conditional mean is removed is independent of the residual (jointly
-    Gaussian), so columns driven by these inputs do not carry it."""
+    shifts every term's z upward (on the exact model about +0.14 on average at the sensor's noise, up to +1.5 for
+    one term at four times it). When the model is right, what is left of the error once its conditional mean is
+    removed is independent of the residual (jointly Gaussian), so columns driven by these inputs do not carry it
+    (``tests/test_input_path.py``)."""
     from scipy.linalg import solve_triangular
 
     ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)

@@ -119,17 +119,18 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
         N[j::n_out, j] = 1.0
     for c in range(len(input_errors)):
         N[:, n_out + c] = Su[:, c * n:(c + 1) * n].sum(axis=1)
+    ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)
+    coef, *_ = np.linalg.lstsq(Nw, ew, rcond=None)
+    ew = ew - Nw @ coef  # the innovations: whitened, the nuisance projected out
     block = None
     if path is not None:  # the input-path regression also allows a shift of the identified parameters
         var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
-        quiet = dataclasses.replace(mv, data=mv.data.assign(**expected_inputs(mv, e, Su, N, L, var_u, input_errors)))
+        quiet = dataclasses.replace(mv, data=mv.data.assign(**expected_inputs(mv, ew, Su, L, var_u, input_errors)))
         P = parameter_columns(model, quiet, outputs, keep, nuisance_parameters, substeps)
         block = record_block(-e, Su, np.column_stack([N, P]), L, signals_of(model, mv, y, input_errors, substeps),
                              input_errors, var_u, t, mv.name)
-    ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)
-    coef, *_ = np.linalg.lstsq(Nw, ew, rcond=None)
     cov = np.linalg.pinv(Nw.T @ Nw)  # the estimates' covariance if the whitened rows have unit variance
-    ew = (ew - Nw @ coef).reshape(m, n_out)
+    ew = ew.reshape(m, n_out)
     # each output's noise scale in this record: the RMS of its innovations (1 when the sigmas are right; a record
     # noisier than the lead-in's sigma says, e.g. at hover, widens its bias's standard error)
     dof = max(m - N.shape[1] / n_out, 1.0)

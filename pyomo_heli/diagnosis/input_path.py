@@ -98,13 +98,12 @@ def signals_of(model, mv, y: dict, channels, substeps: int = 2) -> dict:
     return {k: (x, noise[k]) for k, x in values.items()}
 
 
-def expected_inputs(mv, e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, var_u: np.ndarray,
-                    channels) -> dict:
+def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, var_u: np.ndarray, channels) -> dict:
     """The record's inputs with the part of their noise the residual reveals taken out: the measured input minus
-    the conditional mean of its error given the residual, ``E[du | e] = Sigma_u Su^T V^-1 e`` (``e``: model - data
-    at the kept rows, its nuisance ``N`` projected out by generalised least squares; ``V = L L^T``; ``var_u``: the
-    variance of every input sample's error, channel blocks in ``channels`` order). Channel -> values at the
-    record's samples [rad].
+    the conditional mean of its error given the residual, ``E[du | e] = Sigma_u Su^T V^-1 e`` (``rw``: the whitened
+    residual ``L^-1 e``, e = model - data at the kept rows, with the record's nuisance projected out; ``V = L L^T``;
+    ``var_u``: the variance of every input sample's error, channel blocks in ``channels`` order). Channel -> values
+    at the record's samples [rad].
 
     Why: the parameter columns (:func:`parameter_columns`) are differences of replays driven by the inputs. Driven
     by the measured ones they carry the input noise's response scaled by the parameter, ``d(S_u du)/dtheta``, which
@@ -115,9 +114,7 @@ def expected_inputs(mv, e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndar
     (``tests/test_input_path.py``)."""
     from scipy.linalg import solve_triangular
 
-    ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)
-    ew = ew - Nw @ np.linalg.lstsq(Nw, ew, rcond=None)[0]
-    du = var_u * (Su.T @ solve_triangular(L.T, ew, lower=False))
+    du = var_u * (Su.T @ solve_triangular(L.T, rw, lower=False))
     n = Su.shape[1] // len(channels)
     return {c: mv.data[c].to_numpy(dtype=float) - du[i * n:(i + 1) * n] for i, c in enumerate(channels)}
 

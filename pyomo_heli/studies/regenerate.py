@@ -165,7 +165,7 @@ ENTRIES: tuple[Entry, ...] = (
         "python studies/held_out_effects.py --seeds 1 --effects rotor_pylon_mode pitch_rate_damper "
         "skewed_inflow_gradient cyclic_free_play advancing_blade_compressibility fuselage_wake_incidence "
         "--generic-family extended --out {out}/held_out_extended --workers 2",
-        # held_out rows so far run with the extended family, one seed each
+        # held_out rows so far run with the extended family, one or two seeds each
         "python studies/held_out_effects.py --seeds 1 --effects tail_stall --generic-family extended "
         "--out {out}/held_out_extended",
         "python studies/held_out_effects.py --seeds 1 --first-seed 1 --effects drag_rise canted_tail_rotor "

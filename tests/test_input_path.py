@@ -2,8 +2,8 @@
 
 The stepwise regression is checked on rows built by hand (a known column found, pure noise leaves nothing at the
 family-wise level), its corrected least squares on an exact linear Gaussian model (every z standard normal); on the
-bundled flight test the exact model at the true parameters passes it, and a cross-feed
-of collective into the cyclic that the recorder does not see (written here, on the records) is found with its gain.
+bundled flight test the exact model at the true parameters passes it, and a cross-feed of collective into the cyclic
+that the recorder does not see (written here, on the records) is found with its gain.
 """
 from __future__ import annotations
 

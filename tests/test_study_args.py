@@ -39,6 +39,10 @@ ROOT = Path(__file__).resolve().parent.parent
      "the input path needs the residuals' innovations"),
     (["input_path_level.py", "--seeds", "1", "--resample-inputs", "nearest", "--out", "OUT"],
      "argument --resample-inputs: invalid choice: 'nearest'"),
+    (["generic_term_level.py", "--seeds", "1", "--terms", "col_scale", "dM_nope", "--out", "OUT"],
+     "--terms: dM_nope not in the generic family"),
+    (["generic_term_level.py", "--seeds", "1", "--config", "nope.toml", "--out", "OUT"],
+     "--config nope.toml: file not found"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path, monkeypatch, capsys):

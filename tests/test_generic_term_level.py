@@ -27,7 +27,7 @@ def test_summary_gives_the_estimates_and_z_moments_over_the_seeds():
     assert row["mean c"] == pytest.approx(c.mean()) and row["sd c"] == pytest.approx(c.std(ddof=1))
     assert row["t of mean c"] == pytest.approx(c.mean() / (c.std(ddof=1) / math.sqrt(3)))
     assert row["mean z"] == pytest.approx(-5.0 / 3)
-    assert row["|z| > 2 [%]"] == pytest.approx(200 / 3) and row["|z| > 3 [%]"] == pytest.approx(100 / 3)
+    assert row["z beyond +-2 [%]"] == pytest.approx(200 / 3) and row["z beyond +-3 [%]"] == pytest.approx(100 / 3)
     assert list(per_seed(docs, ["col_scale"])["col_scale z"]) == [-3.4, 0.5, -2.1, 9.0]
 
 

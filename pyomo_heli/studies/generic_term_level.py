@@ -85,15 +85,15 @@ def summary(docs: list[dict], terms: list[str]) -> pd.DataFrame:
         rows.append({"term": n, "seeds": len(ok), "mean c": float(np.mean(c)), "sd c": sd_c,
                      "t of mean c": float(np.mean(c) / (sd_c / np.sqrt(len(c)))) if len(c) > 1 else float("nan"),
                      "mean z": float(np.mean(z)), "sd z": float(np.std(z, ddof=1)) if len(z) > 1 else float("nan"),
-                     "|z| > 2 [%]": 100.0 * float(np.mean(np.abs(z) > 2)),
-                     "|z| > 3 [%]": 100.0 * float(np.mean(np.abs(z) > 3))})
+                     "z beyond +-2 [%]": 100.0 * float(np.mean(np.abs(z) > 2)),
+                     "z beyond +-3 [%]": 100.0 * float(np.mean(np.abs(z) > 3))})
     return pd.DataFrame(rows)
 
 
 def per_seed(docs: list[dict], terms: list[str]) -> pd.DataFrame:
     """One row per seed: each term's estimate and z."""
-    return pd.DataFrame([{"seed": d["seed"], **{f"{n} {k}": d["fits"][n][k] for n in terms for k in ("estimate", "z")}}
-                         for d in docs])
+    return pd.DataFrame([{"seed": str(d["seed"]),
+                          **{f"{n} {k}": d["fits"][n][k] for n in terms for k in ("estimate", "z")}} for d in docs])
 
 
 def main(argv=None) -> int:
@@ -135,7 +135,7 @@ def main(argv=None) -> int:
     tab.to_csv(out / "summary.csv", index=False)
     header = (f"Generic terms estimated alone in the identification NLP ({Path(a.config).name}, its free parameters "
               f"from their initial values), {len(docs)} seeds of M0 + noise; expected: mean c and mean z about 0 "
-              f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, |z| > 2 in about 4.6 % of the seeds.")
+              f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, z beyond +-2 in about 4.6 % of the seeds.")
     (out / "summary.md").write_text(header + "\n\n" + markdown_table(tab, digits=3) + "\n\nPer seed:\n\n"
                                     + markdown_table(seeds_tab, digits=3) + "\n")
     print(tab.to_string(index=False))

@@ -131,6 +131,9 @@ ENTRIES: tuple[Entry, ...] = (
                                           f"--out {{out}}/input_path_level{suffix}",),
             ("summary.csv", "summary.md"), minutes=40)
       for suffix, flag in (("", ""), ("_sample", " --resample-inputs sample"), ("_record", " --replay record"))),
+    # the input scale factors' NLP estimates when nothing is missing (the held-out rows' col_scale)
+    Entry("generic_term_level", ("python studies/generic_term_level.py --seeds 20261122-20261141 "
+                                 "--out {out}/generic_term_level",), ("summary.csv", "summary.md"), minutes=30),
     Entry("input_path", ("python studies/input_path_check.py --seeds 1 --out {out}/input_path",
                          "python studies/input_path_check.py --effects none --seeds 5 --out {out}/input_path"),
           ("input_path.csv", "input_path.md"), minutes=20),

@@ -51,3 +51,34 @@ def test_level_study_writes_each_seed_and_resumes(tmp_path):
     (tmp_path / "seed_7.json").write_text(json.dumps(doc))
     assert main(argv) == 0
     assert pd.read_csv(tmp_path / "summary.csv").set_index("term").loc["col_scale", "mean c"] == 0.123
+
+
+def test_exact_inputs_keep_every_other_draw_and_give_the_generator_sigmas(tmp_path):
+    """--exact-inputs: the flight test of the same seed with the recorded inputs' noise removed: inputs constant over
+    the lead-in, every output and trim exactly as in the noisy flight test (the same draws); the fit's sigmas are the
+    generator's for the inputs and the lead-in's for the outputs; one seed runs and is stored under exact_inputs/."""
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.dataset import load_flight_test
+    from pyomo_heli.studies.generic_term_level import exact_input_data, given_sigmas, main
+    from pyomo_heli.studies.seeded import m0_noise_data
+
+    gen = ROOT / "studies" / "held_out_small_gen.toml"
+    noisy = load_flight_test(m0_noise_data(7, gen, tmp_path / "a"))
+    exact = load_flight_test(exact_input_data(7, gen, tmp_path / "b"))
+    for name, mv in noisy.maneuvers.items():
+        rec, ex = mv.data, exact.maneuvers[name].data
+        lead = ex["t"] <= ex["t"].iloc[0] + 1.9
+        assert ex.loc[lead, ["col", "lon"]].std().max() < 1e-12 and rec.loc[lead, "col"].std() > 1e-5
+        for ch in ("q", "theta", "n_x", "n_z", "TAS"):
+            assert np.array_equal(ex[ch].to_numpy(), rec[ch].to_numpy()), (name, ch)
+    pd.testing.assert_frame_equal(exact.trims, noisy.trims)
+    plain = load_identification_config(ROOT / "studies" / "held_out_small.toml", overrides={
+        "data": {"dataset": str(tmp_path / "b" / "data" / "7")}, "objectives": {"input_errors": []}})
+    sig = given_sigmas(plain, ("col", "lon"), gen)
+    assert sig["col_deg"] == pytest.approx(0.02) and sig["lon_deg"] == pytest.approx(0.02)
+    assert sig["q_deg_s"] > 0.1 and sig["nz_g"] > 0.005  # the lead-in's noise (and vibration) of the outputs
+    argv = ["--seeds", "7", "--config", str(ROOT / "studies" / "held_out_small.toml"), "--data-config", str(gen),
+            "--out", str(tmp_path / "c"), "--exact-inputs"]
+    assert main(argv) == 0
+    doc = json.loads((tmp_path / "c" / "exact_inputs" / "seed_7.json").read_text())
+    assert doc["exact_inputs"] and all(f["success"] and abs(f["z"]) < 4.0 for f in doc["fits"].values())

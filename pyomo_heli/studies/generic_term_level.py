@@ -2,7 +2,7 @@
 
     python studies/generic_term_level.py --seeds 20261122-20261131 --out results/generic_term_level \
         [--terms col_scale lon_scale] [--config studies/held_out_discovery.toml] \
-        [--data-config data/bo105_synthetic.toml]
+        [--data-config data/bo105_synthetic.toml] [--exact-inputs]
 
 Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
 **M0 with sensor noise only** (its truth effects removed, its seed replaced) into ``OUT/data/<seed>``, and estimates
@@ -15,6 +15,11 @@ draws (the truth effect changes the aircraft, not the noise), so a term that one
 every held-out row of that seed. Each seed's fits go to ``OUT/seed_<n>.json`` as it finishes (a rerun reuses them;
 the generated data are deleted once the seed is done).
 
+``--exact-inputs``: the same seeds with the recorded inputs' noise removed (outputs and trims drawn as before), into
+``OUT/exact_inputs``; the fit's noise sigmas are then given (``[objectives] noise_sigma``: the outputs' from the
+records' lead-in, the inputs' the generator's), since a lead-in without input noise has none to measure. The
+difference to the plain run is what the input noise does to each estimate.
+
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per term the seeds, the mean and standard deviation of the
 estimate, the mean and standard deviation of z, the t statistic of the mean estimate (mean over its standard error
 over the seeds) and the share of seeds with |z| above 2 and 3 (4.6 % and 0.3 % for N(0, 1)); and the per-seed
@@ -23,6 +28,7 @@ estimates.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import shutil
@@ -34,8 +40,11 @@ import pandas as pd
 
 from pyomo_heli.config import ConfigError, load_identification_config
 from pyomo_heli.flighttest.config import load_config
+from pyomo_heli.flighttest.generate import generate
 from pyomo_heli.physics.discrepancy import generic_names
 from pyomo_heli.report.identification import markdown_table
+from pyomo_heli.channels import INPUTS
+from pyomo_heli.units import SENSOR_SIGMA_KEYS
 
 from .args import in_file, out_folder
 from .score_test_level import seeds_of
@@ -44,7 +53,33 @@ from .seeded import ROOT, m0_noise_data
 TERMS = ("col_scale", "lon_scale")
 
 
-def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: Path) -> dict:
+def exact_input_data(seed: int, data_config: Path, out: Path) -> Path:
+    """``OUT/data/<seed>``: :func:`~.seeded.m0_noise_data`'s flight test with the recorded inputs' noise removed (the
+    other channels' and the trims' draws unchanged)."""
+    data = out / "data" / str(seed)
+    if not (data / "truth.json").is_file():
+        g = load_config(data_config)
+        sigma = {k: 0.0 if k in INPUTS else v for k, v in g.sensors.sigma.items()}
+        sensors = dataclasses.replace(g.sensors, sigma=sigma)
+        generate(dataclasses.replace(g, seed=seed, effects={}, sensors=sensors), data, force=True)
+    return data
+
+
+def given_sigmas(cfg, inputs, data_config: Path) -> dict:
+    """``[objectives] noise_sigma`` for a flight test without input noise: the time outputs' sigmas from the records'
+    lead-in (``cfg`` without input errors), the ``inputs``' the generator's (display units, as the config table takes
+    them)."""
+    from pyomo_heli.nlp.identification import identification_data
+    from pyomo_heli.nlp.objectives import lead_in_sigma
+
+    outs = list(cfg.nlp.time_outputs)
+    si = dict(lead_in_sigma(identification_data(cfg).maneuvers, outs))
+    si.update({c: load_config(data_config).sensors.sigma[c] for c in inputs})
+    return {key: si[ch] / unit for key, (ch, unit) in SENSOR_SIGMA_KEYS.items() if ch in si}
+
+
+def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: Path,
+             exact_inputs: bool = False) -> dict:
     """The NLP estimates of ``terms`` on one seed (read back from ``OUT/seed_<seed>.json`` when it holds them)."""
     from pyomo_heli.diagnosis.discovery import nlp_screen
 
@@ -56,8 +91,13 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
             doc = None
         if doc and doc.get("config") == str(config) and set(terms) <= set(doc["fits"]):
             return doc
-    data = m0_noise_data(seed, data_config, out)
-    cfg = load_identification_config(config, overrides={"data": {"dataset": str(data)}})
+    data = exact_input_data(seed, data_config, out) if exact_inputs else m0_noise_data(seed, data_config, out)
+    over = {"data": {"dataset": str(data)}}
+    cfg = load_identification_config(config, overrides=over)
+    if exact_inputs and cfg.nlp.input_errors:
+        plain = load_identification_config(config, overrides={**over, "objectives": {"input_errors": []}})
+        cfg = load_identification_config(config, overrides={
+            **over, "objectives": {"noise_sigma": given_sigmas(plain, cfg.nlp.input_errors, data_config)}})
     start = {p.name: p.initial for p in cfg.free}
     s = nlp_screen(cfg, start, list(terms), progress=lambda _: None)
     fits = {}
@@ -67,7 +107,7 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
                    "z": math.copysign(math.sqrt(max(lr, 0.0)), r["estimate"]) if r["success"] else float("nan"),
                    "LR_time": float(r.get("LR_time", float("nan"))), "LR_trim": float(r.get("LR_trim", float("nan"))),
                    "success": bool(r["success"])}
-    doc = {"seed": seed, "config": str(config), "J0": float(s["J0"]), "fits": fits}
+    doc = {"seed": seed, "config": str(config), "exact_inputs": exact_inputs, "J0": float(s["J0"]), "fits": fits}
     f.write_text(json.dumps(doc, indent=1))
     shutil.rmtree(data, ignore_errors=True)
     return doc
@@ -104,6 +144,8 @@ def main(argv=None) -> int:
     ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
     ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
     ap.add_argument("--out", required=True)
+    ap.add_argument("--exact-inputs", action="store_true",
+                    help="the recorded inputs without noise, the fit's sigmas given, into OUT/exact_inputs")
     a = ap.parse_args(argv)
     try:
         seeds = seeds_of(a.seeds)
@@ -119,11 +161,11 @@ def main(argv=None) -> int:
         load_identification_config(config)
     except ConfigError as exc:
         ap.error(str(exc))
-    out = out_folder(ap, a.out)
+    out = out_folder(ap, a.out) / ("exact_inputs" if a.exact_inputs else "")
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds:
-        docs.append(one_seed(s, a.terms, config.resolve(), data_config.resolve(), out))
+        docs.append(one_seed(s, a.terms, config.resolve(), data_config.resolve(), out, a.exact_inputs))
         fits = docs[-1]["fits"]
         print(f"seed {s}: " + ", ".join(f"{n} c = {fits[n]['estimate']:+.4g} (z {fits[n]['z']:+.2f})" for n in a.terms),
               flush=True)
@@ -134,7 +176,9 @@ def main(argv=None) -> int:
     tab, seeds_tab = summary(docs, a.terms), per_seed(docs, a.terms)
     tab.to_csv(out / "summary.csv", index=False)
     header = (f"Generic terms estimated alone in the identification NLP ({Path(a.config).name}, its free parameters "
-              f"from their initial values), {len(docs)} seeds of M0 + noise; expected: mean c and mean z about 0 "
+              f"from their initial values), {len(docs)} seeds of M0 + noise"
+              + (" without the recorded inputs' noise (the fit's sigmas given)" if a.exact_inputs else "")
+              + "; expected: mean c and mean z about 0 "
               f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, z beyond +-2 in about 4.6 % of the seeds.")
     (out / "summary.md").write_text(header + "\n\n" + markdown_table(tab, digits=3) + "\n\nPer seed:\n\n"
                                     + markdown_table(seeds_tab, digits=3) + "\n")

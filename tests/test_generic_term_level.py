@@ -51,6 +51,11 @@ def test_level_study_writes_each_seed_and_resumes(tmp_path):
     (tmp_path / "seed_7.json").write_text(json.dumps(doc))
     assert main(argv) == 0
     assert pd.read_csv(tmp_path / "summary.csv").set_index("term").loc["col_scale", "mean c"] == 0.123
+    # --identification oe: the measured inputs taken as exact, a fit of its own (another J) into OUT/oe
+    assert main([*argv, "--identification", "oe"]) == 0
+    oe = json.loads((tmp_path / "oe" / "seed_7.json").read_text())
+    assert oe["identification"] == "oe" and oe["J0"] != pytest.approx(doc["J0"], rel=1e-3)
+    assert all(f["success"] and abs(f["z"]) < 4.0 for f in oe["fits"].values())
 
 
 def test_exact_inputs_keep_every_other_draw_and_give_the_generator_sigmas(tmp_path):

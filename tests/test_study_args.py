@@ -41,6 +41,8 @@ ROOT = Path(__file__).resolve().parent.parent
      "argument --resample-inputs: invalid choice: 'nearest'"),
     (["generic_term_level.py", "--seeds", "1", "--terms", "col_scale", "dM_nope", "--out", "OUT"],
      "--terms: dM_nope not in the generic family"),
+    (["generic_term_level.py", "--seeds", "1", "--identification", "ls", "--out", "OUT"],
+     "argument --identification: invalid choice: 'ls'"),
     (["generic_term_level.py", "--seeds", "1", "--config", "nope.toml", "--out", "OUT"],
      "--config nope.toml: file not found"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),

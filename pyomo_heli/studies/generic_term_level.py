@@ -2,7 +2,7 @@
 
     python studies/generic_term_level.py --seeds 20261122-20261131 --out results/generic_term_level \
         [--terms col_scale lon_scale] [--config studies/held_out_discovery.toml] \
-        [--data-config data/bo105_synthetic.toml] [--exact-inputs]
+        [--data-config data/bo105_synthetic.toml] [--exact-inputs] [--identification eiv|oe]
 
 Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
 **M0 with sensor noise only** (its truth effects removed, its seed replaced) into ``OUT/data/<seed>``, and estimates
@@ -18,7 +18,10 @@ the generated data are deleted once the seed is done).
 ``--exact-inputs``: the same seeds with the recorded inputs' noise removed (outputs and trims drawn as before), into
 ``OUT/exact_inputs``; the fit's noise sigmas are then given (``[objectives] noise_sigma``: the outputs' from the
 records' lead-in, the inputs' the generator's), since a lead-in without input noise has none to measure. The
-difference to the plain run is what the input noise does to each estimate.
+difference to the plain run is what the input noise does to each estimate. ``--identification oe``: the config's
+input errors dropped (the measured inputs taken as exact), into ``OUT/oe`` (``OUT/exact_inputs_oe``); with
+``--exact-inputs`` that is the reference where nothing is mis-stated, and its difference to the errors-in-variables
+run on the same data is what that formulation does to each estimate.
 
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per term the seeds, the mean and standard deviation of the
 estimate, the mean and standard deviation of z, the t statistic of the mean estimate (mean over its standard error
@@ -79,7 +82,7 @@ def given_sigmas(cfg, inputs, data_config: Path) -> dict:
 
 
 def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: Path,
-             exact_inputs: bool = False) -> dict:
+             exact_inputs: bool = False, identification: str = "eiv") -> dict:
     """The NLP estimates of ``terms`` on one seed (read back from ``OUT/seed_<seed>.json`` when it holds them)."""
     from pyomo_heli.diagnosis.discovery import nlp_screen
 
@@ -93,6 +96,8 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
             return doc
     data = exact_input_data(seed, data_config, out) if exact_inputs else m0_noise_data(seed, data_config, out)
     over = {"data": {"dataset": str(data)}}
+    if identification == "oe":
+        over["objectives"] = {"input_errors": []}
     cfg = load_identification_config(config, overrides=over)
     if exact_inputs and cfg.nlp.input_errors:
         plain = load_identification_config(config, overrides={**over, "objectives": {"input_errors": []}})
@@ -107,7 +112,8 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
                    "z": math.copysign(math.sqrt(max(lr, 0.0)), r["estimate"]) if r["success"] else float("nan"),
                    "LR_time": float(r.get("LR_time", float("nan"))), "LR_trim": float(r.get("LR_trim", float("nan"))),
                    "success": bool(r["success"])}
-    doc = {"seed": seed, "config": str(config), "exact_inputs": exact_inputs, "J0": float(s["J0"]), "fits": fits}
+    doc = {"seed": seed, "config": str(config), "exact_inputs": exact_inputs, "identification": identification,
+           "J0": float(s["J0"]), "fits": fits}
     f.write_text(json.dumps(doc, indent=1))
     shutil.rmtree(data, ignore_errors=True)
     return doc
@@ -146,6 +152,9 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     ap.add_argument("--exact-inputs", action="store_true",
                     help="the recorded inputs without noise, the fit's sigmas given, into OUT/exact_inputs")
+    ap.add_argument("--identification", choices=("eiv", "oe"), default="eiv",
+                    help="eiv: the config's input errors (default); oe: none, the measured inputs taken as exact "
+                         "(into OUT/oe or OUT/exact_inputs_oe)")
     a = ap.parse_args(argv)
     try:
         seeds = seeds_of(a.seeds)
@@ -161,11 +170,13 @@ def main(argv=None) -> int:
         load_identification_config(config)
     except ConfigError as exc:
         ap.error(str(exc))
-    out = out_folder(ap, a.out) / ("exact_inputs" if a.exact_inputs else "")
+    sub = "_".join((["exact_inputs"] if a.exact_inputs else []) + (["oe"] if a.identification == "oe" else []))
+    out = out_folder(ap, a.out) / sub
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds:
-        docs.append(one_seed(s, a.terms, config.resolve(), data_config.resolve(), out, a.exact_inputs))
+        docs.append(one_seed(s, a.terms, config.resolve(), data_config.resolve(), out, a.exact_inputs,
+                             a.identification))
         fits = docs[-1]["fits"]
         print(f"seed {s}: " + ", ".join(f"{n} c = {fits[n]['estimate']:+.4g} (z {fits[n]['z']:+.2f})" for n in a.terms),
               flush=True)
@@ -177,7 +188,9 @@ def main(argv=None) -> int:
     tab.to_csv(out / "summary.csv", index=False)
     header = (f"Generic terms estimated alone in the identification NLP ({Path(a.config).name}, its free parameters "
               f"from their initial values), {len(docs)} seeds of M0 + noise"
-              + (" without the recorded inputs' noise (the fit's sigmas given)" if a.exact_inputs else "")
+              + (" without the recorded inputs' noise" if a.exact_inputs else "")
+              + (", the measured inputs taken as exact (no input errors)" if a.identification == "oe"
+                 else ", input errors estimated" + (" (sigmas given)" if a.exact_inputs else ""))
               + "; expected: mean c and mean z about 0 "
               f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, z beyond +-2 in about 4.6 % of the seeds.")
     (out / "summary.md").write_text(header + "\n\n" + markdown_table(tab, digits=3) + "\n\nPer seed:\n\n"

@@ -41,12 +41,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pyomo_heli.channels import INPUTS
 from pyomo_heli.config import ConfigError, load_identification_config
 from pyomo_heli.flighttest.config import load_config
 from pyomo_heli.flighttest.generate import generate
 from pyomo_heli.physics.discrepancy import generic_names
 from pyomo_heli.report.identification import markdown_table
-from pyomo_heli.channels import INPUTS
 from pyomo_heli.units import SENSOR_SIGMA_KEYS
 
 from .args import in_file, out_folder

@@ -132,8 +132,13 @@ ENTRIES: tuple[Entry, ...] = (
             ("summary.csv", "summary.md"), minutes=40)
       for suffix, flag in (("", ""), ("_sample", " --resample-inputs sample"), ("_record", " --replay record"))),
     # the input scale factors' NLP estimates when nothing is missing (the held-out rows' col_scale)
-    Entry("generic_term_level", ("python studies/generic_term_level.py --seeds 20261122-20261141 "
-                                 "--out {out}/generic_term_level",), ("summary.csv", "summary.md"), minutes=30),
+    Entry("generic_term_level", (
+        "python studies/generic_term_level.py --seeds 20261122-20261141 --out {out}/generic_term_level",
+        "python studies/generic_term_level.py --seeds 20261122-20261141 --exact-inputs --out {out}/generic_term_level",
+        "python studies/generic_term_level.py --seeds 20261122-20261131 --exact-inputs --identification oe "
+        "--out {out}/generic_term_level"),
+        ("summary.csv", "summary.md", "exact_inputs/summary.csv", "exact_inputs/summary.md",
+         "exact_inputs_oe/summary.csv", "exact_inputs_oe/summary.md"), minutes=60),
     Entry("input_path", ("python studies/input_path_check.py --seeds 1 --out {out}/input_path",
                          "python studies/input_path_check.py --effects none --seeds 5 --out {out}/input_path"),
           ("input_path.csv", "input_path.md"), minutes=20),

@@ -64,12 +64,12 @@ def test_exact_inputs_keep_every_other_draw_and_give_the_generator_sigmas(tmp_pa
     generator's for the inputs and the lead-in's for the outputs; one seed runs and is stored under exact_inputs/."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.dataset import load_flight_test
-    from pyomo_heli.studies.generic_term_level import exact_input_data, given_sigmas, main
+    from pyomo_heli.studies.generic_term_level import given_sigmas, main
     from pyomo_heli.studies.seeded import m0_noise_data
 
     gen = ROOT / "studies" / "held_out_small_gen.toml"
     noisy = load_flight_test(m0_noise_data(7, gen, tmp_path / "a"))
-    exact = load_flight_test(exact_input_data(7, gen, tmp_path / "b"))
+    exact = load_flight_test(m0_noise_data(7, gen, tmp_path / "b", input_noise=False))
     for name, mv in noisy.maneuvers.items():
         rec, ex = mv.data, exact.maneuvers[name].data
         lead = ex["t"] <= ex["t"].iloc[0] + 1.9
@@ -77,9 +77,9 @@ def test_exact_inputs_keep_every_other_draw_and_give_the_generator_sigmas(tmp_pa
         for ch in ("q", "theta", "n_x", "n_z", "TAS"):
             assert np.array_equal(ex[ch].to_numpy(), rec[ch].to_numpy()), (name, ch)
     pd.testing.assert_frame_equal(exact.trims, noisy.trims)
-    plain = load_identification_config(ROOT / "studies" / "held_out_small.toml", overrides={
-        "data": {"dataset": str(tmp_path / "b" / "data" / "7")}, "objectives": {"input_errors": []}})
-    sig = given_sigmas(plain, ("col", "lon"), gen)
+    cfg = load_identification_config(ROOT / "studies" / "held_out_small.toml", overrides={
+        "data": {"dataset": str(tmp_path / "b" / "data" / "7")}})
+    sig = given_sigmas(cfg, gen)
     assert sig["col_deg"] == pytest.approx(0.02) and sig["lon_deg"] == pytest.approx(0.02)
     assert sig["q_deg_s"] > 0.1 and sig["nz_g"] > 0.005  # the lead-in's noise (and vibration) of the outputs
     argv = ["--seeds", "7", "--config", str(ROOT / "studies" / "held_out_small.toml"), "--data-config", str(gen),

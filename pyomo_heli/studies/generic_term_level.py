@@ -31,7 +31,6 @@ estimates.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import shutil
@@ -41,10 +40,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pyomo_heli.channels import INPUTS
 from pyomo_heli.config import ConfigError, load_identification_config
 from pyomo_heli.flighttest.config import load_config
-from pyomo_heli.flighttest.generate import generate
 from pyomo_heli.physics.discrepancy import generic_names
 from pyomo_heli.report.identification import markdown_table
 from pyomo_heli.units import SENSOR_SIGMA_KEYS
@@ -56,28 +53,14 @@ from .seeded import ROOT, m0_noise_data
 TERMS = ("col_scale", "lon_scale")
 
 
-def exact_input_data(seed: int, data_config: Path, out: Path) -> Path:
-    """``OUT/data/<seed>``: :func:`~.seeded.m0_noise_data`'s flight test with the recorded inputs' noise removed (the
-    other channels' and the trims' draws unchanged)."""
-    data = out / "data" / str(seed)
-    if not (data / "truth.json").is_file():
-        g = load_config(data_config)
-        sigma = {k: 0.0 if k in INPUTS else v for k, v in g.sensors.sigma.items()}
-        sensors = dataclasses.replace(g.sensors, sigma=sigma)
-        generate(dataclasses.replace(g, seed=seed, effects={}, sensors=sensors), data, force=True)
-    return data
-
-
-def given_sigmas(cfg, inputs, data_config: Path) -> dict:
+def given_sigmas(cfg, data_config: Path) -> dict:
     """``[objectives] noise_sigma`` for a flight test without input noise: the time outputs' sigmas from the records'
-    lead-in (``cfg`` without input errors), the ``inputs``' the generator's (display units, as the config table takes
-    them)."""
+    lead-in, those of ``cfg``'s input errors the generator's (display units, as the config table takes them)."""
     from pyomo_heli.nlp.identification import identification_data
     from pyomo_heli.nlp.objectives import lead_in_sigma
 
-    outs = list(cfg.nlp.time_outputs)
-    si = dict(lead_in_sigma(identification_data(cfg).maneuvers, outs))
-    si.update({c: load_config(data_config).sensors.sigma[c] for c in inputs})
+    si = dict(lead_in_sigma(identification_data(cfg).maneuvers, list(cfg.nlp.time_outputs)))
+    si.update({c: load_config(data_config).sensors.sigma[c] for c in cfg.nlp.input_errors})
     return {key: si[ch] / unit for key, (ch, unit) in SENSOR_SIGMA_KEYS.items() if ch in si}
 
 
@@ -94,15 +77,14 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
             doc = None
         if doc and doc.get("config") == str(config) and set(terms) <= set(doc["fits"]):
             return doc
-    data = exact_input_data(seed, data_config, out) if exact_inputs else m0_noise_data(seed, data_config, out)
+    data = m0_noise_data(seed, data_config, out, input_noise=not exact_inputs)
     over = {"data": {"dataset": str(data)}}
     if identification == "oe":
         over["objectives"] = {"input_errors": []}
     cfg = load_identification_config(config, overrides=over)
     if exact_inputs and cfg.nlp.input_errors:
-        plain = load_identification_config(config, overrides={**over, "objectives": {"input_errors": []}})
         cfg = load_identification_config(config, overrides={
-            **over, "objectives": {"noise_sigma": given_sigmas(plain, cfg.nlp.input_errors, data_config)}})
+            **over, "objectives": {"noise_sigma": given_sigmas(cfg, data_config)}})
     start = {p.name: p.initial for p in cfg.free}
     s = nlp_screen(cfg, start, list(terms), progress=lambda _: None)
     fits = {}

@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 from typing import Callable
 
+from pyomo_heli.channels import INPUTS
 from pyomo_heli.config import ConfigError, load_identification_config
 from pyomo_heli.flighttest.config import load_config
 from pyomo_heli.flighttest.generate import generate
@@ -94,12 +95,17 @@ def cached_seed(out: Path, seed: int, overrides: dict | None = None) -> dict | N
     return None
 
 
-def m0_noise_data(seed: int, data_config: Path, out: Path) -> Path:
+def m0_noise_data(seed: int, data_config: Path, out: Path, input_noise: bool = True) -> Path:
     """``OUT/data/<seed>``: the flight test of ``data_config`` generated from M0 with sensor noise only (its truth
-    effects removed, its seed replaced); kept if it is already there."""
+    effects removed, its seed replaced); kept if it is already there. ``input_noise=False``: the recorded inputs
+    without their noise, every other draw (outputs, trims) unchanged."""
     data = out / "data" / str(seed)
     if not (data / "truth.json").is_file():
-        generate(dataclasses.replace(load_config(data_config), seed=seed, effects={}), data, force=True)
+        g = load_config(data_config)
+        if not input_noise:
+            sigma = {k: 0.0 if k in INPUTS else v for k, v in g.sensors.sigma.items()}
+            g = dataclasses.replace(g, sensors=dataclasses.replace(g.sensors, sigma=sigma))
+        generate(dataclasses.replace(g, seed=seed, effects={}), data, force=True)
     return data
 
 

@@ -87,3 +87,43 @@ def test_exact_inputs_keep_every_other_draw_and_give_the_generator_sigmas(tmp_pa
     assert main(argv) == 0
     doc = json.loads((tmp_path / "c" / "exact_inputs" / "seed_7.json").read_text())
     assert doc["exact_inputs"] and all(f["success"] and abs(f["z"]) < 4.0 for f in doc["fits"].values())
+
+
+def test_input_sigma_scale_multiplies_the_lead_in_sigmas_of_the_inputs_only(tmp_path):
+    """--input-sigma-scale K: the fit's input-error sigmas are K times the records' lead-in sigmas (computed here
+    from the records), the outputs' stay the lead-in's; one small seed runs into input_sigma_x2/, records its K, and
+    a doc of another K is not taken for it."""
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.nlp.identification import identification_data
+    from pyomo_heli.studies.generic_term_level import given_sigmas, main
+    from pyomo_heli.studies.seeded import m0_noise_data
+
+    gen = ROOT / "studies" / "held_out_small_gen.toml"
+    data = m0_noise_data(7, gen, tmp_path / "a")
+    cfg = load_identification_config(ROOT / "studies" / "held_out_small.toml",
+                                     overrides={"data": {"dataset": str(data)}})
+    recs = [mv.data for mv in identification_data(cfg).maneuvers]  # the records as the NLP takes them (25 Hz)
+    ref = cfg.input_reference_s
+
+    def pooled_deg(ch):  # the pooled variance about each lead-in's mean
+        ss = dof = 0
+        for d in recs:
+            x = np.degrees(d.loc[d["t"] <= d["t"].iloc[0] + ref, ch].to_numpy())
+            ss, dof = ss + float(np.sum((x - x.mean()) ** 2)), dof + len(x) - 1
+        return math.sqrt(ss / dof)
+    one, two = given_sigmas(cfg, None), given_sigmas(cfg, None, 2.0)
+    for key, ch in (("col_deg", "col"), ("lon_deg", "lon")):
+        assert one[key] == pytest.approx(pooled_deg(ch), rel=1e-9) and two[key] == pytest.approx(2 * one[key])
+    assert {k: v for k, v in two.items() if k not in ("col_deg", "lon_deg")} == \
+        {k: v for k, v in one.items() if k not in ("col_deg", "lon_deg")}
+    argv = ["--seeds", "7", "--config", str(ROOT / "studies" / "held_out_small.toml"), "--data-config", str(gen),
+            "--out", str(tmp_path / "c"), "--input-sigma-scale", "2"]
+    assert main(argv) == 0
+    f = tmp_path / "c" / "input_sigma_x2" / "seed_7.json"
+    doc = json.loads(f.read_text())
+    assert doc["input_sigma_scale"] == 2.0 and all(r["success"] for r in doc["fits"].values())
+    doc["input_sigma_scale"] = 3.0  # a stored seed of another K is solved again, not read back
+    f.write_text(json.dumps(doc))
+    assert main(argv) == 0
+    assert json.loads(f.read_text())["input_sigma_scale"] == 2.0
+

@@ -45,6 +45,10 @@ ROOT = Path(__file__).resolve().parent.parent
      "argument --identification: invalid choice: 'ls'"),
     (["generic_term_level.py", "--seeds", "1", "--config", "nope.toml", "--out", "OUT"],
      "--config nope.toml: file not found"),
+    (["generic_term_level.py", "--seeds", "1", "--input-sigma-scale", "0", "--out", "OUT"],
+     "--input-sigma-scale: must be a positive number, got 0"),
+    (["generic_term_level.py", "--seeds", "1", "--input-sigma-scale", "2", "--identification", "oe", "--out", "OUT"],
+     "--input-sigma-scale: scales the input errors' sigmas, which --identification oe has none of"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path, monkeypatch, capsys):

@@ -2,7 +2,7 @@
 
     python studies/generic_term_level.py --seeds 20261122-20261131 --out results/generic_term_level \
         [--terms col_scale lon_scale] [--config studies/held_out_discovery.toml] \
-        [--data-config data/bo105_synthetic.toml] [--exact-inputs] [--identification eiv|oe]
+        [--data-config data/bo105_synthetic.toml] [--exact-inputs] [--identification eiv|oe] [--input-sigma-scale K]
 
 Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
 **M0 with sensor noise only** (its truth effects removed, its seed replaced) into ``OUT/data/<seed>``, and estimates
@@ -21,7 +21,10 @@ records' lead-in, the inputs' the generator's), since a lead-in without input no
 difference to the plain run is what the input noise does to each estimate. ``--identification oe``: the config's
 input errors dropped (the measured inputs taken as exact), into ``OUT/oe`` (``OUT/exact_inputs_oe``); with
 ``--exact-inputs`` that is the reference where nothing is mis-stated, and its difference to the errors-in-variables
-run on the same data is what that formulation does to each estimate.
+run on the same data is what that formulation does to each estimate. ``--input-sigma-scale K``: the input errors'
+sigmas the fit assumes times K (the lead-in's; with ``--exact-inputs`` the generator's), into
+``OUT/input_sigma_x<K>`` (``OUT/exact_inputs_input_sigma_x<K>``): how the errors-in-variables estimates move with
+the assumed input noise.
 
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per term the seeds, the mean and standard deviation of the
 estimate, the mean and standard deviation of z, the t statistic of the mean estimate (mean over its standard error
@@ -53,19 +56,24 @@ from .seeded import ROOT, m0_noise_data
 TERMS = ("col_scale", "lon_scale")
 
 
-def given_sigmas(cfg, data_config: Path) -> dict:
-    """``[objectives] noise_sigma`` for a flight test without input noise: the time outputs' sigmas from the records'
-    lead-in, those of ``cfg``'s input errors the generator's (display units, as the config table takes them)."""
+def given_sigmas(cfg, data_config: Path | None, input_scale: float = 1.0) -> dict:
+    """``[objectives] noise_sigma`` (display units, as the config table takes them): the time outputs' sigmas from the
+    records' lead-in; those of ``cfg``'s input errors the generator's (``data_config``: a flight test without input
+    noise, whose lead-in has none to measure) or, with ``data_config`` None, the lead-in's; the inputs' times
+    ``input_scale``."""
     from pyomo_heli.nlp.identification import identification_data
     from pyomo_heli.nlp.objectives import lead_in_sigma
 
-    si = dict(lead_in_sigma(identification_data(cfg).maneuvers, list(cfg.nlp.time_outputs)))
-    si.update({c: load_config(data_config).sensors.sigma[c] for c in cfg.nlp.input_errors})
+    mans = identification_data(cfg).maneuvers
+    si = dict(lead_in_sigma(mans, list(cfg.nlp.time_outputs)))
+    inputs = (lead_in_sigma(mans, list(cfg.nlp.input_errors)) if data_config is None
+              else {c: load_config(data_config).sensors.sigma[c] for c in cfg.nlp.input_errors})
+    si.update({c: input_scale * v for c, v in inputs.items()})
     return {key: si[ch] / unit for key, (ch, unit) in SENSOR_SIGMA_KEYS.items() if ch in si}
 
 
 def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: Path,
-             exact_inputs: bool = False, identification: str = "eiv") -> dict:
+             exact_inputs: bool = False, identification: str = "eiv", input_sigma_scale: float = 1.0) -> dict:
     """The NLP estimates of ``terms`` on one seed (read back from ``OUT/seed_<seed>.json`` when it holds them)."""
     from pyomo_heli.diagnosis.discovery import nlp_screen
 
@@ -75,16 +83,17 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
             doc = json.loads(f.read_text())
         except ValueError:
             doc = None
-        if doc and doc.get("config") == str(config) and set(terms) <= set(doc["fits"]):
+        if (doc and doc.get("config") == str(config) and set(terms) <= set(doc["fits"])
+                and doc.get("input_sigma_scale", 1.0) == input_sigma_scale):
             return doc
     data = m0_noise_data(seed, data_config, out, input_noise=not exact_inputs)
     over = {"data": {"dataset": str(data)}}
     if identification == "oe":
         over["objectives"] = {"input_errors": []}
     cfg = load_identification_config(config, overrides=over)
-    if exact_inputs and cfg.nlp.input_errors:
-        cfg = load_identification_config(config, overrides={
-            **over, "objectives": {"noise_sigma": given_sigmas(cfg, data_config)}})
+    if cfg.nlp.input_errors and (exact_inputs or input_sigma_scale != 1.0):
+        cfg = load_identification_config(config, overrides={**over, "objectives": {"noise_sigma": given_sigmas(
+            cfg, data_config if exact_inputs else None, input_sigma_scale)}})
     start = {p.name: p.initial for p in cfg.free}
     s = nlp_screen(cfg, start, list(terms), progress=lambda _: None)
     fits = {}
@@ -95,6 +104,7 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
                    "LR_time": float(r.get("LR_time", float("nan"))), "LR_trim": float(r.get("LR_trim", float("nan"))),
                    "success": bool(r["success"])}
     doc = {"seed": seed, "config": str(config), "exact_inputs": exact_inputs, "identification": identification,
+           "input_sigma_scale": input_sigma_scale,
            "J0": float(s["J0"]), "fits": fits}
     f.write_text(json.dumps(doc, indent=1))
     shutil.rmtree(data, ignore_errors=True)
@@ -134,6 +144,9 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     ap.add_argument("--exact-inputs", action="store_true",
                     help="the recorded inputs without noise, the fit's sigmas given, into OUT/exact_inputs")
+    ap.add_argument("--input-sigma-scale", type=float, default=1.0, metavar="K",
+                    help="errors in variables: the input errors' sigmas times K (the lead-in's, or with "
+                         "--exact-inputs the generator's), into OUT/.../input_sigma_x<K>")
     ap.add_argument("--identification", choices=("eiv", "oe"), default="eiv",
                     help="eiv: the config's input errors (default); oe: none, the measured inputs taken as exact "
                          "(into OUT/oe or OUT/exact_inputs_oe)")
@@ -152,13 +165,18 @@ def main(argv=None) -> int:
         load_identification_config(config)
     except ConfigError as exc:
         ap.error(str(exc))
-    sub = "_".join((["exact_inputs"] if a.exact_inputs else []) + (["oe"] if a.identification == "oe" else []))
+    if not (math.isfinite(a.input_sigma_scale) and a.input_sigma_scale > 0):
+        ap.error(f"--input-sigma-scale: must be a positive number, got {a.input_sigma_scale:g}")
+    if a.input_sigma_scale != 1.0 and a.identification == "oe":
+        ap.error("--input-sigma-scale: scales the input errors' sigmas, which --identification oe has none of")
+    sub = "_".join((["exact_inputs"] if a.exact_inputs else []) + (["oe"] if a.identification == "oe" else [])
+                   + ([f"input_sigma_x{a.input_sigma_scale:g}"] if a.input_sigma_scale != 1.0 else []))
     out = out_folder(ap, a.out) / sub
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds:
         docs.append(one_seed(s, a.terms, config.resolve(), data_config.resolve(), out, a.exact_inputs,
-                             a.identification))
+                             a.identification, a.input_sigma_scale))
         fits = docs[-1]["fits"]
         print(f"seed {s}: " + ", ".join(f"{n} c = {fits[n]['estimate']:+.4g} (z {fits[n]['z']:+.2f})" for n in a.terms),
               flush=True)
@@ -172,7 +190,8 @@ def main(argv=None) -> int:
               f"from their initial values), {len(docs)} seeds of M0 + noise"
               + (" without the recorded inputs' noise" if a.exact_inputs else "")
               + (", the measured inputs taken as exact (no input errors)" if a.identification == "oe"
-                 else ", input errors estimated" + (" (sigmas given)" if a.exact_inputs else ""))
+                 else ", input errors estimated" + (" (sigmas given)" if a.exact_inputs else "")
+                 + (f", their sigmas times {a.input_sigma_scale:g}" if a.input_sigma_scale != 1.0 else ""))
               + "; expected: mean c and mean z about 0 "
               f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, z beyond +-2 in about 4.6 % of the seeds.")
     (out / "summary.md").write_text(header + "\n\n" + markdown_table(tab, digits=3) + "\n\nPer seed:\n\n"

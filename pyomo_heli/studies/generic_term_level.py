@@ -67,7 +67,7 @@ def given_sigmas(cfg, data_config: Path | None, input_scale: float = 1.0) -> dic
     mans = identification_data(cfg).maneuvers
     si = dict(lead_in_sigma(mans, list(cfg.nlp.time_outputs)))
     inputs = (lead_in_sigma(mans, list(cfg.nlp.input_errors)) if data_config is None
-              else {c: load_config(data_config).sensors.sigma[c] for c in cfg.nlp.input_errors})
+              else {c: v for c, v in load_config(data_config).sensors.sigma.items() if c in cfg.nlp.input_errors})
     si.update({c: input_scale * v for c, v in inputs.items()})
     return {key: si[ch] / unit for key, (ch, unit) in SENSOR_SIGMA_KEYS.items() if ch in si}
 

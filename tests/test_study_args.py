@@ -49,6 +49,8 @@ ROOT = Path(__file__).resolve().parent.parent
      "--input-sigma-scale: must be a positive number, got 0"),
     (["generic_term_level.py", "--seeds", "1", "--input-sigma-scale", "2", "--identification", "oe", "--out", "OUT"],
      "--input-sigma-scale: scales the input errors' sigmas, which --identification oe has none of"),
+    (["generic_term_level.py", "--seeds", "1", "--resample-inputs", "nearest", "--out", "OUT"],
+     "argument --resample-inputs: invalid choice: 'nearest'"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path, monkeypatch, capsys):

@@ -2,7 +2,8 @@
 
     python studies/generic_term_level.py --seeds 20261122-20261131 --out results/generic_term_level \
         [--terms col_scale lon_scale] [--config studies/held_out_discovery.toml] \
-        [--data-config data/bo105_synthetic.toml] [--exact-inputs] [--identification eiv|oe] [--input-sigma-scale K]
+        [--data-config data/bo105_synthetic.toml] [--exact-inputs] [--identification eiv|oe] [--input-sigma-scale K] \
+        [--resample-inputs sample|project]
 
 Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
 **M0 with sensor noise only** (its truth effects removed, its seed replaced) into ``OUT/data/<seed>``, and estimates
@@ -24,7 +25,8 @@ input errors dropped (the measured inputs taken as exact), into ``OUT/oe`` (``OU
 run on the same data is what that formulation does to each estimate. ``--input-sigma-scale K``: the input errors'
 sigmas the fit assumes times K (the lead-in's; with ``--exact-inputs`` the generator's), into
 ``OUT/input_sigma_x<K>`` (``OUT/exact_inputs_input_sigma_x<K>``): how the errors-in-variables estimates move with
-the assumed input noise.
+the assumed input noise. ``--resample-inputs sample|project``: the fit's ``[data] resample_inputs`` instead of the
+config's, into ``OUT/inputs_<choice>``: how the estimates move with the way the recorded inputs reach the NLP's grid.
 
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per term the seeds, the mean and standard deviation of the
 estimate, the mean and standard deviation of z, the t statistic of the mean estimate (mean over its standard error
@@ -73,8 +75,10 @@ def given_sigmas(cfg, data_config: Path | None, input_scale: float = 1.0) -> dic
 
 
 def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: Path,
-             exact_inputs: bool = False, identification: str = "eiv", input_sigma_scale: float = 1.0) -> dict:
-    """The NLP estimates of ``terms`` on one seed (read back from ``OUT/seed_<seed>.json`` when it holds them)."""
+             exact_inputs: bool = False, identification: str = "eiv", input_sigma_scale: float = 1.0,
+             resample_inputs: str | None = None) -> dict:
+    """The NLP estimates of ``terms`` on one seed (read back from ``OUT/seed_<seed>.json`` when it holds them);
+    ``resample_inputs`` overrides the config's ``[data] resample_inputs``."""
     from pyomo_heli.diagnosis.discovery import nlp_screen
 
     f = out / f"seed_{seed}.json"
@@ -84,10 +88,11 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
         except ValueError:
             doc = None
         if (doc and doc.get("config") == str(config) and set(terms) <= set(doc["fits"])
-                and doc.get("input_sigma_scale", 1.0) == input_sigma_scale):
+                and doc.get("input_sigma_scale", 1.0) == input_sigma_scale
+                and doc.get("resample_inputs") == resample_inputs):
             return doc
     data = m0_noise_data(seed, data_config, out, input_noise=not exact_inputs)
-    over = {"data": {"dataset": str(data)}}
+    over = {"data": {"dataset": str(data), **({"resample_inputs": resample_inputs} if resample_inputs else {})}}
     if identification == "oe":
         over["objectives"] = {"input_errors": []}
     cfg = load_identification_config(config, overrides=over)
@@ -104,7 +109,7 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
                    "LR_time": float(r.get("LR_time", float("nan"))), "LR_trim": float(r.get("LR_trim", float("nan"))),
                    "success": bool(r["success"])}
     doc = {"seed": seed, "config": str(config), "exact_inputs": exact_inputs, "identification": identification,
-           "input_sigma_scale": input_sigma_scale,
+           "input_sigma_scale": input_sigma_scale, "resample_inputs": resample_inputs,
            "J0": float(s["J0"]), "fits": fits}
     f.write_text(json.dumps(doc, indent=1))
     shutil.rmtree(data, ignore_errors=True)
@@ -150,6 +155,8 @@ def main(argv=None) -> int:
     ap.add_argument("--identification", choices=("eiv", "oe"), default="eiv",
                     help="eiv: the config's input errors (default); oe: none, the measured inputs taken as exact "
                          "(into OUT/oe or OUT/exact_inputs_oe)")
+    ap.add_argument("--resample-inputs", choices=("sample", "project"), default=None,
+                    help="[data] resample_inputs for the fit (default: the config's), into OUT/.../inputs_<choice>")
     a = ap.parse_args(argv)
     try:
         seeds = seeds_of(a.seeds)
@@ -170,13 +177,14 @@ def main(argv=None) -> int:
     if a.input_sigma_scale != 1.0 and a.identification == "oe":
         ap.error("--input-sigma-scale: scales the input errors' sigmas, which --identification oe has none of")
     sub = "_".join((["exact_inputs"] if a.exact_inputs else []) + (["oe"] if a.identification == "oe" else [])
-                   + ([f"input_sigma_x{a.input_sigma_scale:g}"] if a.input_sigma_scale != 1.0 else []))
+                   + ([f"input_sigma_x{a.input_sigma_scale:g}"] if a.input_sigma_scale != 1.0 else [])
+                   + ([f"inputs_{a.resample_inputs}"] if a.resample_inputs else []))
     out = out_folder(ap, a.out) / sub
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds:
         docs.append(one_seed(s, a.terms, config.resolve(), data_config.resolve(), out, a.exact_inputs,
-                             a.identification, a.input_sigma_scale))
+                             a.identification, a.input_sigma_scale, a.resample_inputs))
         fits = docs[-1]["fits"]
         print(f"seed {s}: " + ", ".join(f"{n} c = {fits[n]['estimate']:+.4g} (z {fits[n]['z']:+.2f})" for n in a.terms),
               flush=True)
@@ -192,6 +200,7 @@ def main(argv=None) -> int:
               + (", the measured inputs taken as exact (no input errors)" if a.identification == "oe"
                  else ", input errors estimated" + (" (sigmas given)" if a.exact_inputs else "")
                  + (f", their sigmas times {a.input_sigma_scale:g}" if a.input_sigma_scale != 1.0 else ""))
+              + (f"; inputs resampled by {a.resample_inputs!r}" if a.resample_inputs else "")
               + "; expected: mean c and mean z about 0 "
               f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, z beyond +-2 in about 4.6 % of the seeds.")
     (out / "summary.md").write_text(header + "\n\n" + markdown_table(tab, digits=3) + "\n\nPer seed:\n\n"

@@ -128,7 +128,6 @@ def test_input_sigma_scale_multiplies_the_lead_in_sigmas_of_the_inputs_only(tmp_
     assert json.loads(f.read_text())["input_sigma_scale"] == 2.0
 
 
-
 def test_resample_inputs_sample_fits_the_picked_inputs_into_its_own_folder(tmp_path):
     """--resample-inputs sample: the fit's [data] resample_inputs overridden (the NLP's inputs are then the recorded
     samples at its grid's times, checked here against the record), one small seed runs into inputs_sample/ and

@@ -47,6 +47,7 @@ import pandas as pd
 
 from pyomo_heli.config import ConfigError, load_identification_config
 from pyomo_heli.flighttest.config import load_config
+from pyomo_heli.nlp.identification import RESAMPLE_INPUTS
 from pyomo_heli.physics.discrepancy import generic_names
 from pyomo_heli.report.identification import markdown_table
 from pyomo_heli.units import SENSOR_SIGMA_KEYS
@@ -155,7 +156,7 @@ def main(argv=None) -> int:
     ap.add_argument("--identification", choices=("eiv", "oe"), default="eiv",
                     help="eiv: the config's input errors (default); oe: none, the measured inputs taken as exact "
                          "(into OUT/oe or OUT/exact_inputs_oe)")
-    ap.add_argument("--resample-inputs", choices=("sample", "project"), default=None,
+    ap.add_argument("--resample-inputs", choices=RESAMPLE_INPUTS, default=None,
                     help="[data] resample_inputs for the fit (default: the config's), into OUT/.../inputs_<choice>")
     a = ap.parse_args(argv)
     try:

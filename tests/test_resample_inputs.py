@@ -50,11 +50,11 @@ def test_resample_inputs_is_checked():
     assert not np.array_equal(mv.data["lon"], raw["lon"].to_numpy()[::2][: len(mv.data)])  # inputs: projected
 
 
-@pytest.mark.parametrize("mode, tol", [("sample", None), ("project", 2e-4)])
+@pytest.mark.parametrize("mode, tol", [("sample", None), ("project", 2e-4), ("record", 2e-4)])
 def test_noise_free_time_domain_fit_at_25_hz(mode, tol):
     """M0 fitted to M0's noise-free records at 25 Hz (every 2nd sample): with the inputs picked, the
-    moved input edges bias CL_alpha_HT and Iyy by a few tenths of a percent; projected, they come back
-    to the nominal values."""
+    moved input edges bias CL_alpha_HT and Iyy by a few tenths of a percent; projected, or driven by every
+    50 Hz input sample (``record``), they come back to the nominal values."""
     cfg = load_identification_config(CONFIGS / "mc_time_small.toml", {"data": {"resample_inputs": mode}})
     m, _, _ = build_problem(cfg)
     point = ParetoSolver(m, cfg.pareto).point_a()
@@ -120,3 +120,70 @@ def test_noise_free_filtered_records_fit_either_way(filtered_noise_free, maneuve
         err[mode] = max(abs(est[n] / cfg.model.parameters[n] - 1) for n in ("CL_alpha_HT", "Iyy"))
     print(maneuver, err)
     assert err["sample"] < 1.5e-3 and err["project"] < 6e-4 and err["project"] <= err["sample"]
+
+
+def test_record_drives_the_nlp_and_its_input_errors_at_the_recorded_rate():
+    """``resample_inputs = "record"``: the outputs are every 2nd sample, the NLP's input at every collocation point
+    is the linear interpolant of the 50 Hz record (less its lead-in mean), and an input error is estimated at
+    every 50 Hz sample; the lead-in sigma is the record's."""
+    import dataclasses
+
+    import pyomo.environ as pyo
+
+    from pyomo_heli.nlp.objectives import lead_in_sigma
+
+    over = {"data": {"resample_inputs": "record", "input_reference_s": 1.0},  # sigmas given: the data are exact
+            "objectives": {"input_errors": ["col", "lon"], "noise_sigma": {
+                "q_deg_s": 0.2, "theta_deg": 0.1, "nx_g": 0.005, "nz_g": 0.01, "tas_m_s": 0.5, "col_deg": 0.02,
+                "lon_deg": 0.02}}}
+    cfg = load_identification_config(CONFIGS / "mc_time_small.toml", over)
+    m, data, ft = build_problem(cfg)
+    raw = ft.maneuvers["lon3211_80kt_a"].data
+    mv = data.maneuvers[0]
+    n = len(mv.data)
+    np.testing.assert_array_equal(mv.data["q"], raw["q"].to_numpy()[::2][:n])
+    rec = raw[raw["t"] <= mv.data["t"].iloc[-1] + 1e-9]
+    assert len(mv.inputs_record) == 2 * n - 1
+    np.testing.assert_array_equal(mv.inputs_record["lon"], rec["lon"])
+    blk = m.man[mv.name]
+    assert len(blk.input_samples) == 2 * n - 1 and len(blk.u_err) == 2 * (2 * n - 1)
+    t_rec = rec["t"].to_numpy()
+    lon = rec["lon"].to_numpy()
+    inc = lon - lon[t_rec <= t_rec[0] + 1.0].mean()
+    times = list(blk.t)
+    np.testing.assert_allclose([pyo.value(blk.du["lon", t]) for t in times], np.interp(times, t_rec, inc),
+                               rtol=0, atol=1e-15)
+    # the lead-in sigma comes from the record (every sample), not from the projected 25 Hz inputs
+    noisy_lon = lon + np.random.default_rng(1).normal(0.0, 1e-3, len(lon))
+    noisy = dataclasses.replace(mv, inputs_record=mv.inputs_record.assign(lon=noisy_lon))
+    lead = t_rec <= t_rec[0] + 1.0
+    assert lead_in_sigma([noisy], ["lon"], input_record=True)["lon"] == pytest.approx(np.std(noisy_lon[lead], ddof=1),
+                                                                                     rel=1e-12)
+    # without input_record (the diagnosis, which takes the inputs at the samples) the sigma is that of data's
+    # samples, here exact
+    with pytest.raises(ValueError, match="'lon' shows no noise"):
+        lead_in_sigma([noisy], ["lon"])
+
+
+def test_replay_of_record_inputs_is_the_full_rate_replay_at_the_output_samples():
+    """The one replay drives a maneuver whose inputs are at the recorded rate by those inputs: its outputs at the
+    25 Hz samples equal the replay of the whole 50 Hz record taken at every 2nd sample (the same RK4 steps)."""
+    from pyomo_heli.physics.model import HelicopterModel
+    from pyomo_heli.simulation.replay import replay
+    from pyomo_heli.simulation.trim import trim_float
+
+    ft = load_flight_test(Path(__file__).parent.parent / "data" / "bo105_clean")
+    coarse = prepare_data(ft, ["lon3211_80kt_a"], 25, max_duration=4.0, resample_inputs="record").maneuvers[0]
+    full = prepare_data(ft, ["lon3211_80kt_a"], max_duration=4.0).maneuvers[0]
+    model = HelicopterModel()
+    tp = trim_float(model, coarse.trim_speed)
+    for compiled in (True, False):
+        a = replay(model, coarse, tp, substeps=2, compiled=compiled)
+        b = replay(model, full, tp, substeps=1, compiled=compiled)
+        assert len(a) == len(coarse.data)
+        for col in ("q", "theta", "n_z"):
+            np.testing.assert_allclose(a[col], b[col].to_numpy()[::2], rtol=0, atol=1e-12)
+    # projected inputs (the 25 Hz samples closest to the record) do not give the full-rate replay exactly
+    proj = prepare_data(ft, ["lon3211_80kt_a"], 25, max_duration=4.0).maneuvers[0]
+    c = replay(model, proj, tp, substeps=2)
+    assert np.max(np.abs(c["q"] - b["q"].to_numpy()[::2])) > 1e-6

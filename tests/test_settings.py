@@ -227,7 +227,8 @@ def test_every_bundled_config_is_valid_under_its_schema(path):
 
 @pytest.mark.parametrize("raw, needle", [
     ({"data": {"dataset": "x"}, "parameters": {}, "paretto": {}}, "unknown key paretto"),
-    ({"data": {"dataset": "x", "resample_inputs": "nearest"}, "parameters": {}}, "not in ['sample', 'project']"),
+    ({"data": {"dataset": "x", "resample_inputs": "nearest"}, "parameters": {}},
+     "not in ['sample', 'project', 'record']"),
     ({"data": {"dataset": 3}, "parameters": {}}, "3 is not string"),
     ({"parameters": {}}, "missing data"),
 ])

@@ -257,6 +257,10 @@ class Maneuver:
     #: inputs are referred to their mean over the first ``input_reference_s`` seconds of the record
     #: (0: to the first sample); set by :func:`pyomo_heli.nlp.identification.prepare_data`
     input_reference_s: float = 0.0
+    #: ``t`` and the input columns at the recorded rate when ``data`` holds fewer samples (``[data]
+    #: resample_inputs = "record"``, set by :func:`pyomo_heli.nlp.identification.prepare_data`); None: the
+    #: inputs are ``data``'s
+    inputs_record: pd.DataFrame | None = None
 
     @property
     def t(self) -> np.ndarray:
@@ -290,13 +294,24 @@ class Maneuver:
         samples with t <= t[0] + input_reference_s (the quiet lead-in before the first input): the
         noise of one sample would otherwise act as a constant input offset over the whole record.
         """
-        t = self.t
-        lead = t <= t[0] + self.input_reference_s if self.input_reference_s > 0 else slice(0, 1)
-        out = {}
-        for ch in channels:
-            x = self.data[ch].to_numpy(dtype=float)
-            out[ch] = x - float(np.mean(x[lead]))
-        return out
+        return _increments(self.data, channels, self.input_reference_s)
+
+    def input_series(self, channels=INPUT_CHANNELS) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """(times [s], channel -> input increment [rad]) of the inputs the model is driven by: the
+        recorded-rate inputs (``inputs_record``) when there are any, else ``data``'s (:meth:`increments`)."""
+        src = self.data if self.inputs_record is None else self.inputs_record
+        return src["t"].to_numpy(dtype=float), _increments(src, channels, self.input_reference_s)
+
+
+def _increments(df: pd.DataFrame, channels, reference_s: float) -> dict[str, np.ndarray]:
+    """Channel -> the column of ``df`` minus its first value, or its mean over t <= t[0] + ``reference_s``."""
+    t = df["t"].to_numpy(dtype=float)
+    lead = t <= t[0] + reference_s if reference_s > 0 else slice(0, 1)
+    out = {}
+    for ch in channels:
+        x = df[ch].to_numpy(dtype=float)
+        out[ch] = x - float(np.mean(x[lead]))
+    return out
 
 
 @dataclass(eq=False)

@@ -153,9 +153,10 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
     residuals = {o: [] for o in opts.time_outputs}
     for mv in data.maneuvers:
         blk = m.man[mv.name]
-        build_maneuver_block(blk, model, pmap, mv.data["t"].to_numpy(), mv.increments(),
+        t_in, increments = mv.input_series()
+        build_maneuver_block(blk, model, pmap, mv.data["t"].to_numpy(), increments,
                              m.trim[data.speed_index(mv.trim_speed)], ncp=opts.ncp, scheme=opts.scheme,
-                             input_errors=opts.input_errors)
+                             input_errors=opts.input_errors, input_times=t_in)
         if opts.mutable_data:
             blk.y_meas = pyo.Var(list(opts.time_outputs), blk.samples)
         for o in opts.time_outputs:
@@ -169,9 +170,11 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
         raise ValueError("input_errors with mutable_data needs noise_sigma: sigmas estimated from the lead-in "
                          "of the first data set would be kept for every other one")
     if data.maneuvers and opts.time_outputs and opts.input_errors:
-        sigma = noise_sigmas(data.maneuvers, (*opts.time_outputs, *opts.input_errors), opts.noise_sigma)
+        sigma = noise_sigmas(data.maneuvers, (*opts.time_outputs, *opts.input_errors), opts.noise_sigma,
+                             input_record=True)
         m.noise_sigma_source = "given" if opts.noise_sigma is not None else "lead-in"
-        errs = {c: [m.man[n].u_err[c, tt] for n in names for tt in m.man[n].samples] for c in opts.input_errors}
+        errs = {c: [m.man[n].u_err[c, tt] for n in names for tt in m.man[n].input_samples]
+                for c in opts.input_errors}
         for c, vs in errs.items():
             # An error beyond INPUT_ERROR_BOUND sigmas has no probability worth the name; the bound keeps
             # the first iterates from a far start (30 % off) from spending the outputs' misfit on the inputs.
@@ -271,7 +274,7 @@ def set_objective(m: pyo.ConcreteModel, expr) -> None:
     m.objective = pyo.Objective(expr=expr)
 
 
-RESAMPLE_INPUTS = ("sample", "project")
+RESAMPLE_INPUTS = ("sample", "project", "record")
 
 
 def project_inputs(t_fine: np.ndarray, u_fine: np.ndarray, t_coarse: np.ndarray) -> np.ndarray:
@@ -311,7 +314,9 @@ def prepare_data(ft, maneuvers="identification", resample_hz: float | None = Non
     ``resample_inputs``: how the measured inputs (col, lon) reach the coarse samples: ``sample``
     keeps every k-th sample like the outputs; ``project`` (the default since 2026-11-25; it removes the
     picked inputs' bias, docs/model_nlp.md 10.3) takes the coarse values whose linear interpolant is closest to
-    the whole record (:func:`project_inputs`).
+    the whole record (:func:`project_inputs`); ``record`` projects them too and keeps the inputs at the
+    recorded rate in ``Maneuver.inputs_record``: the NLP is then driven by (and estimates input errors at)
+    every recorded sample.
     ``input_reference_s``: the input increments are referred to the mean over the first
     ``input_reference_s`` seconds of each record (0: its first sample), see ``Maneuver.increments``.
     """
@@ -329,7 +334,7 @@ def prepare_data(ft, maneuvers="identification", resample_hz: float | None = Non
         chosen = [ft.maneuvers[n] for n in maneuvers]
     out = []
     for mv in chosen:
-        df = mv.data
+        df, record = mv.data, None
         if resample_hz:
             k = mv.sample_rate / resample_hz
             if abs(k - round(k)) > 1e-6 or round(k) < 1:
@@ -337,22 +342,27 @@ def prepare_data(ft, maneuvers="identification", resample_hz: float | None = Non
                                  f"of maneuver {mv.name}")
             full = df
             df = df.iloc[:: int(round(k))].copy()
-            if resample_inputs == "project" and int(round(k)) > 1:
+            if resample_inputs != "sample" and int(round(k)) > 1:
                 t_f, t_c = full["t"].to_numpy(dtype=float), df["t"].to_numpy(dtype=float)
                 inside = t_f <= t_c[-1] + 1e-9  # the tail beyond the last coarse sample has no element
                 for ch in INPUTS:
                     if ch in df:
                         df[ch] = project_inputs(t_f[inside], full[ch].to_numpy(dtype=float)[inside], t_c)
+                if resample_inputs == "record":
+                    record = full.loc[inside, ["t", *[ch for ch in INPUTS if ch in full]]].reset_index(drop=True)
         if max_duration is not None:
             df = df[df["t"] <= df["t"].iloc[0] + max_duration + 1e-9]
             if len(df) < 2:
                 raise ValueError(f"max_duration_s = {max_duration:g} leaves fewer than 2 samples of maneuver "
                                  f"{mv.name}")
+        if record is not None:
+            record = record[record["t"] <= df["t"].iloc[-1] + 1e-9].reset_index(drop=True)
         span = float(df["t"].iloc[-1] - df["t"].iloc[0])
         if input_reference_s and input_reference_s >= span:
             raise ValueError(f"input_reference_s = {input_reference_s:g} s is not shorter than maneuver {mv.name} "
                              f"({span:g} s): the input reference is the mean over its quiet lead-in")
-        out.append(dataclasses.replace(mv, data=df.reset_index(drop=True), input_reference_s=float(input_reference_s)))
+        out.append(dataclasses.replace(mv, data=df.reset_index(drop=True), input_reference_s=float(input_reference_s),
+                                       inputs_record=record))
     return IdentificationData(maneuvers=out, trims=ft.trims)
 
 

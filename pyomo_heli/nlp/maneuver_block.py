@@ -55,19 +55,20 @@ def output_equation(ctx, k: str, y):
 
 def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples, increments: Mapping[str, np.ndarray],
                          start, ncp: int = 3, scheme: str = "LAGRANGE-RADAU",
-                         initial_guess=None, input_errors: tuple = ()) -> None:
+                         initial_guess=None, input_errors: tuple = (), input_times=None) -> None:
     """Populate ``blk`` with one maneuver.
 
     t_samples: increasing sample times [s] (element boundaries).
-    increments: channel -> input increment at each sample [rad].
+    increments: channel -> input increment [rad] at each sample, or at each of ``input_times`` [s] when
+    given (the inputs at a finer rate than the outputs, ``resample_inputs = "record"``).
     start: an object with ``col, lon, u, w, theta, lambda_i`` (floats or
     Pyomo components, e.g. a trim block) giving the initial state and the
     base inputs.
     initial_guess: optional DataFrame (t + state/flap columns) used to
     initialise the variables, e.g. a simulation.
     input_errors: input channels whose measurement error is estimated (errors in
-    variables): ``blk.u_err[k, t_i]`` at every sample, added to the measured input and,
-    like it, linearly interpolated inside each element (the likelihood term is
+    variables): ``blk.u_err[k, t_i]`` at every input sample ``blk.input_samples``, added to the measured
+    input and, like it, linearly interpolated between the input samples (the likelihood term is
     :func:`.objectives.add_known_noise_time_objective`).
     """
     ops = get_ops("pyomo")
@@ -95,11 +96,16 @@ def build_maneuver_block(blk: pyo.Block, model: HelicopterModel, pmap, t_samples
     for s in states:
         blk.dx[s, t0].fix(0.0)
 
-    inc = {k: np.interp(times, t_samples, np.asarray(increments.get(k, np.zeros_like(t_samples)), dtype=float))
+    t_in = t_samples if input_times is None else np.asarray(input_times, dtype=float)
+    if input_times is not None and (t_in[0] > t_samples[0] + 1e-9 or t_in[-1] < t_samples[-1] - 1e-9):
+        raise ValueError(f"input times {t_in[0]:g}-{t_in[-1]:g} s do not cover the samples "
+                         f"{t_samples[0]:g}-{t_samples[-1]:g} s")
+    blk.input_samples = pyo.Set(initialize=list(t_in), ordered=True)
+    inc = {k: np.interp(times, t_in, np.asarray(increments.get(k, np.zeros_like(t_in)), dtype=float))
            for k in INPUTS}
     blk.du = pyo.Param(INPUTS, blk.t, mutable=True,
                        initialize={(k, t): float(inc[k][i]) for k in INPUTS for i, t in enumerate(times)})
-    u_err, err_where = _input_error_terms(blk, t_samples, times, input_errors)
+    u_err, err_where = _input_error_terms(blk, t_in, times, input_errors)
 
     # Named intermediates (rotor flow, thrust coefficient, total forces) of each
     # time point: the NL writer exports them once as defined variables instead
@@ -190,13 +196,13 @@ def _point_rows(blk, model, pmap, start, states, out_names, channels, err_where)
         return ca.Function("collocation_point", [z, d], [ca.vertcat(*rows)], ["z", "d"], ["r"])
 
     pr = PointRows(leaf_names=leaf_names, data_names=data_names, make_function=make_function)
-    sample_list = list(blk.samples)
+    error_samples = list(blk.input_samples)
     ns = len(states)
     for i, t in enumerate(times):
         errs = []
         for k in channels:
             a, b, w = err_where[t]
-            errs += [blk.u_err[k, sample_list[a]], blk.u_err[k, sample_list[a if b is None else b]]]
+            errs += [blk.u_err[k, error_samples[a]], blk.u_err[k, error_samples[a if b is None else b]]]
         pr.leaves.append([blk.x[s, t] for s in states] + [blk.dx[s, t] for s in states]
                          + [blk.beta[b, t] for b in FLAPPING]
                          + [blk.y[k, t] if t in samples else 0.0 for k in out_names]
@@ -211,9 +217,10 @@ def _point_rows(blk, model, pmap, start, states, out_names, channels, err_where)
 
 
 def _input_error_terms(blk: pyo.Block, t_samples: np.ndarray, times: list, channels: tuple):
-    """``blk.u_err`` (one variable per channel and sample) and a function (k, t) -> its value at t.
+    """``blk.u_err`` (one variable per channel and input sample ``blk.input_samples``, at ``t_samples``) and a
+    function (k, t) -> its value at t.
 
-    The error at a collocation point is the linear interpolation of the errors at the two samples
+    The error at a collocation point is the linear interpolation of the errors at the two input samples
     around it, as the measured input there is the interpolation of the measured samples.
     """
     unknown = set(channels) - set(INPUTS)
@@ -221,8 +228,8 @@ def _input_error_terms(blk: pyo.Block, t_samples: np.ndarray, times: list, chann
         raise ValueError(f"unknown input channel(s) {sorted(unknown)} for input errors; choose from {INPUTS}")
     if not channels:
         return (lambda k, t: 0.0), {}
-    blk.u_err = pyo.Var(list(channels), blk.samples, initialize=0.0)
-    samples = list(blk.samples)
+    blk.u_err = pyo.Var(list(channels), blk.input_samples, initialize=0.0)
+    samples = list(blk.input_samples)
     where = {}
     for t in times:
         i = min(int(np.searchsorted(t_samples, t, side="right")) - 1, len(samples) - 1)

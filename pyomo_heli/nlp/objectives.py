@@ -141,26 +141,30 @@ def add_known_noise_time_objective(m: pyo.Block, residuals: dict, outputs: list[
 SIGMA_MIN = dict(R_FLOOR, col=1e-5, lon=1e-5)
 
 
-def noise_sigmas(maneuvers, channels, given: dict | None = None) -> dict:
+def noise_sigmas(maneuvers, channels, given: dict | None = None, input_record: bool = False) -> dict:
     """The known noise sigma [SI] of each channel of an errors-in-variables fit: from ``given`` (the
     ``[objectives.noise_sigma]`` table, which must then cover every channel) or else from the records'
     quiet lead-in (:func:`lead_in_sigma`). The one rule the NLP, the Cramer-Rao bounds and the score test
-    share, so that all three weigh the data alike."""
+    share, so that all three weigh the data alike. ``input_record``: an input's lead-in is taken from the samples
+    its errors sit on, the recorded-rate inputs (``Maneuver.inputs_record``) where a maneuver has them (the NLP
+    with ``resample_inputs = "record"``); else from ``data`` (the input sensitivities of the diagnosis and the
+    Cramer-Rao bounds, which take the inputs at the samples)."""
     channels = list(channels)
     if given is None:
-        return lead_in_sigma(maneuvers, channels)
+        return lead_in_sigma(maneuvers, channels, input_record)
     missing = [c for c in channels if c not in given]
     if missing:
         raise ValueError(f"noise_sigma has no value for {missing}")
     return {c: float(given[c]) for c in channels}
 
 
-def lead_in_sigma(maneuvers, channels) -> dict:
+def lead_in_sigma(maneuvers, channels, input_record: bool = False) -> dict:
     """Noise sigma of each channel from the quiet lead-in of the records (no model involved).
 
     Over the samples with t <= t0 + ``input_reference_s`` (the aircraft in trim, before the first
     input) each record's channel is constant up to its noise: sigma^2 is the pooled variance about
-    each lead-in's own mean. Raises ValueError when the maneuvers have no lead-in set or too short a one,
+    each lead-in's own mean. ``input_record``: an input channel from ``Maneuver.inputs_record`` where a maneuver
+    has one. Raises ValueError when the maneuvers have no lead-in set or too short a one,
     or when a channel shows no noise there (sigma below ``SIGMA_MIN``).
     """
     out = {}
@@ -170,8 +174,10 @@ def lead_in_sigma(maneuvers, channels) -> dict:
             if mv.input_reference_s <= 0:
                 raise ValueError(f"maneuver {mv.name}: the noise sigmas come from the quiet lead-in, but no "
                                  f"lead-in is set: give [data] input_reference_s > 0 or [objectives.noise_sigma]")
-            t = mv.data["t"].to_numpy()
-            x = mv.data[ch].to_numpy(dtype=float)[t <= t[0] + mv.input_reference_s]
+            rec = mv.inputs_record if input_record else None
+            src = rec if rec is not None and ch in rec else mv.data
+            t = src["t"].to_numpy()
+            x = src[ch].to_numpy(dtype=float)[t <= t[0] + mv.input_reference_s]
             if len(x) < 3:
                 raise ValueError(f"maneuver {mv.name}: only {len(x)} sample(s) in the {mv.input_reference_s} s "
                                  f"lead-in; the noise sigma of '{ch}' needs at least 3")

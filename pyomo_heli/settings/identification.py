@@ -66,7 +66,7 @@ class DataTable(Table):
     messages = {
         "resample_hz": (None, "field 'resample_hz' must be a positive number"),
         "max_duration_s": (None, "field 'max_duration_s' must be a positive number"),
-        "resample_inputs": "field 'resample_inputs' must be \"sample\" or \"project\", got {v!r}",
+        "resample_inputs": "field 'resample_inputs' must be \"sample\", \"project\" or \"record\", got {v!r}",
         "input_reference_s": "field 'input_reference_s' must be a number >= 0, got {v!r}",
     }
 
@@ -80,9 +80,10 @@ class DataTable(Table):
                                   "of maneuver names (may be empty)")
     resample_hz: Optional[Finite] = Field(None, gt=0, description="resample the records to this rate [Hz] "
                                                                   "(default: as recorded)")
-    resample_inputs: Literal["sample", "project"] = Field(
-        "project", description="how the inputs reach the resampled grid: \"sample\" (take the recorded value) or "
-                               "\"project\" (average over the interval)")
+    resample_inputs: Literal["sample", "project", "record"] = Field(
+        "project", description="how the inputs reach the resampled grid: \"sample\" (take the recorded value), "
+                               "\"project\" (average over the interval) or \"record\" (every recorded sample "
+                               "drives the model; input errors at the recorded rate)")
     max_duration_s: Optional[Finite] = Field(None, gt=0, description="cut every record after this time [s]")
     input_reference_s: Finite = Field(0.0, ge=0, description="inputs are increments from their mean over the "
                                                              "first this many seconds [s] (0: from the first sample)")

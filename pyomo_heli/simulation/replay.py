@@ -86,7 +86,8 @@ def model_trims(model: HelicopterModel, speeds, gamma_fp: float = 0.0) -> tuple[
 
 
 def maneuver_increments(maneuver, offsets: dict | None = None) -> dict:
-    """Channel -> measured input increment [rad] at the maneuver's samples (+ a constant ``offsets``)."""
+    """Channel -> measured input increment [rad] at the maneuver's samples (+ a constant ``offsets``); a
+    maneuver with inputs at a finer rate (``inputs_record``) is replayed from those (:func:`replay`)."""
     offsets = offsets or {}
     return {k: v + offsets.get(k, 0.0) for k, v in maneuver.increments().items()}
 
@@ -106,6 +107,8 @@ def replay(model: HelicopterModel, maneuver, trim: TrimPoint, substeps: int = 4,
     the integration itself fails (a non-finite state).
     """
     t = maneuver.data["t"].to_numpy(dtype=float)
+    if maneuver.inputs_record is not None and len(maneuver.inputs_record) != len(t):
+        return _replay_at_input_rate(model, maneuver, trim, substeps, offsets, check, method, compiled, integrator)
     inc = {k: sampled(t, v) for k, v in maneuver_increments(maneuver, offsets).items()}
     if method == "rk4" and len(t) > 1:
         substeps = stable_substeps(model, trim, float(np.max(np.diff(t))), substeps)
@@ -152,6 +155,29 @@ def _first_implausible(sim: pd.DataFrame) -> tuple[int, str] | None:
     return k, f"diverged: {col} left its plausible range at t = {sim['t'].iloc[k]:.2f} s"
 
 
+def _replay_at_input_rate(model, maneuver, trim, substeps, offsets, check, method, compiled, integrator):
+    """:func:`replay` of a maneuver whose inputs are recorded at a finer rate than its outputs
+    (``Maneuver.inputs_record``): integrated on the input samples (the same RK4 step length), then taken at
+    the output samples."""
+    import dataclasses
+    import math
+
+    t = maneuver.data["t"].to_numpy(dtype=float)
+    t_in = maneuver.inputs_record["t"].to_numpy(dtype=float)
+    idx = np.searchsorted(t_in, t - 1e-9)
+    if np.any(idx >= len(t_in)) or not np.allclose(t_in[np.minimum(idx, len(t_in) - 1)], t, atol=1e-9):
+        raise ValueError(f"maneuver {maneuver.name}: the output samples are not among the input samples")
+    fine = dataclasses.replace(maneuver, data=maneuver.inputs_record, inputs_record=None)
+    k = (len(t_in) - 1) / max(len(t) - 1, 1)
+    try:
+        sim = replay(model, fine, trim, max(1, math.ceil(substeps / k)), offsets, check, method, compiled,
+                     **integrator)
+    except Diverged as exc:
+        keep = idx[idx < len(exc.partial)]
+        raise Diverged(str(exc), exc.partial.iloc[keep].reset_index(drop=True)) from None
+    return sim.iloc[idx].reset_index(drop=True)
+
+
 def _replay_compiled(model, trim, t, inc, substeps, check) -> pd.DataFrame:
     """:func:`replay` by the compiled RK4: the whole record at once, then the same divergence rule."""
     arrays = {k: np.asarray(f(t), dtype=float) for k, f in inc.items()}
@@ -186,7 +212,7 @@ def maneuver_outputs(model: HelicopterModel, maneuvers, outputs, substeps: int =
     out = {o: [] for o in outputs}
     for mv in maneuvers:
         tp = trim_float(model, mv.trim_speed)
-        if compiled:
+        if compiled and mv.inputs_record is None:
             y = simulate_outputs(model, tp, mv.data["t"].to_numpy(), maneuver_increments(mv), outputs, substeps)
         else:
             df = replay(model, mv, tp, substeps=substeps, check=False)

@@ -3,7 +3,7 @@
     python studies/generic_term_level.py --seeds 20261122-20261131 --out results/generic_term_level \
         [--terms col_scale lon_scale] [--config studies/held_out_discovery.toml] \
         [--data-config data/bo105_synthetic.toml] [--exact-inputs] [--identification eiv|oe] [--input-sigma-scale K] \
-        [--resample-inputs sample|project]
+        [--resample-inputs sample|project|record]
 
 Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
 **M0 with sensor noise only** (its truth effects removed, its seed replaced) into ``OUT/data/<seed>``, and estimates
@@ -25,8 +25,9 @@ input errors dropped (the measured inputs taken as exact), into ``OUT/oe`` (``OU
 run on the same data is what that formulation does to each estimate. ``--input-sigma-scale K``: the input errors'
 sigmas the fit assumes times K (the lead-in's; with ``--exact-inputs`` the generator's), into
 ``OUT/input_sigma_x<K>`` (``OUT/exact_inputs_input_sigma_x<K>``): how the errors-in-variables estimates move with
-the assumed input noise. ``--resample-inputs sample|project``: the fit's ``[data] resample_inputs`` instead of the
-config's, into ``OUT/inputs_<choice>``: how the estimates move with the way the recorded inputs reach the NLP's grid.
+the assumed input noise. ``--resample-inputs sample|project|record``: the fit's ``[data] resample_inputs`` instead
+of the config's, into ``OUT/inputs_<choice>``: how the estimates move with the way the recorded inputs reach the
+NLP's grid.
 
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per term the seeds, the mean and standard deviation of the
 estimate, the mean and standard deviation of z, the t statistic of the mean estimate (mean over its standard error

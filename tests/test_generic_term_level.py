@@ -130,8 +130,9 @@ def test_input_sigma_scale_multiplies_the_lead_in_sigmas_of_the_inputs_only(tmp_
 
 def test_resample_inputs_sample_fits_the_picked_inputs_into_its_own_folder(tmp_path):
     """--resample-inputs sample: the fit's [data] resample_inputs overridden (the NLP's inputs are then the recorded
-    samples at its grid's times, checked here against the record), one small seed runs into inputs_sample/ and
-    records the choice; a stored seed of the config's own resampling is not taken for it."""
+    samples at its grid's times, checked here against the record; with ``record`` every recorded sample), one small
+    seed runs into inputs_sample/ and records the choice; a stored seed of the config's own resampling is not taken
+    for it."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.dataset import load_flight_test
     from pyomo_heli.nlp.identification import identification_data
@@ -141,13 +142,18 @@ def test_resample_inputs_sample_fits_the_picked_inputs_into_its_own_folder(tmp_p
     gen, small = ROOT / "studies" / "held_out_small_gen.toml", ROOT / "studies" / "held_out_small.toml"
     data = m0_noise_data(7, gen, tmp_path / "a")
     rec = load_flight_test(data).maneuvers
-    for how in ("sample", "project"):
+    for how in ("sample", "project", "record"):
         cfg = load_identification_config(small, overrides={"data": {"dataset": str(data), "resample_inputs": how}})
         mv = identification_data(cfg).maneuvers[0]
         raw = rec[mv.name].data.set_index("t")
         picked = raw["col"].reindex(mv.data["t"].to_numpy(), method="nearest").to_numpy()
         same = np.allclose(mv.data["col"].to_numpy(), picked, rtol=0, atol=1e-12)
         assert same == (how == "sample"), how
+        # "record" keeps every recorded input sample up to the last fitted one beside the projected samples
+        assert (mv.inputs_record is not None) == (how == "record"), how
+        if how == "record":
+            kept = raw.loc[raw.index <= mv.data["t"].iloc[-1] + 1e-9, "col"].to_numpy()
+            np.testing.assert_array_equal(mv.inputs_record["col"].to_numpy(), kept)
     argv = ["--seeds", "7", "--config", str(small), "--data-config", str(gen), "--out", str(tmp_path / "c"),
             "--resample-inputs", "sample"]
     assert main(argv) == 0

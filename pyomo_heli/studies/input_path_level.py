@@ -2,7 +2,7 @@
 
     python studies/input_path_level.py --seeds 20261122-20261161 --out results/input_path_level \
         [--config studies/held_out_discovery.toml] [--data-config data/bo105_synthetic.toml] \
-        [--resample-inputs sample|project] [--replay fit|record]
+        [--resample-inputs sample|project|record] [--replay fit|record]
 
 Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
 **M0 with sensor noise only** (its truth effects removed, its seed replaced) into ``OUT/data/<seed>``. The

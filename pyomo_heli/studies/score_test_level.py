@@ -47,7 +47,7 @@ from pyomo_heli.config import load_identification_config
 from pyomo_heli.diagnosis.attribution import SEGMENT_S, Attribution, attribute
 from pyomo_heli.diagnosis.candidates import make_candidate
 from pyomo_heli.workflows.identify import run_identification
-from pyomo_heli.nlp.identification import identification_data
+from pyomo_heli.nlp.identification import RESAMPLE_INPUTS, identification_data
 
 from . import small_instances as T
 from .args import nonneg_int, out_folder, positive_float
@@ -173,7 +173,7 @@ def main(argv=None) -> int:
                          "the finished seeds' identified points into seed_<n>_white.json; white_offsets: the "
                          "input-offset nuisance projected off as in the loop's test, variance F, into "
                          "seed_<n>_white_offsets.json")
-    ap.add_argument("--resample-inputs", choices=("sample", "project"), default="sample",
+    ap.add_argument("--resample-inputs", choices=RESAMPLE_INPUTS, default="sample",
                     help="[data] resample_inputs of the instances (default sample: the committed numbers were "
                          "made so, before project became the config default)")
     ap.add_argument("--workers", type=nonneg_int, default=0,

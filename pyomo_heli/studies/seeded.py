@@ -37,9 +37,11 @@ def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
     ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
     ap.add_argument("--out", required=True)
     if data_overrides:
-        ap.add_argument("--resample-inputs", choices=("sample", "project"),
-                        help="[data] resample_inputs of the config replaced: the inputs picked like the outputs "
-                             "or projected (default: the config's)")
+        from ..nlp.identification import RESAMPLE_INPUTS
+
+        ap.add_argument("--resample-inputs", choices=RESAMPLE_INPUTS,
+                        help="[data] resample_inputs of the config replaced: the inputs picked like the outputs, "
+                             "projected, or every recorded sample (default: the config's)")
         ap.add_argument("--replay", choices=("fit", "record"),
                         help="[diagnosis] replay of the config replaced: the residuals against the replay of the "
                              "inputs as the NLP takes them or as recorded (default: the config's)")

@@ -190,6 +190,11 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
         if lacking:
             problems.add("objectives.noise_sigma", f"no sigma for {lacking} (every time output and every channel of "
                                                    f"input_errors needs one); keys: {', '.join(SENSOR_SIGMA_KEYS)}")
+    if obj.input_error_ar and not in_err:
+        problems.add("objectives", "field 'input_error_ar' models the input errors: give input_errors too")
+    elif obj.input_error_ar and not in_ref:
+        problems.add("objectives", "field 'input_error_ar': the errors' model comes from the records' quiet lead-in; "
+                                   "give [data] input_reference_s > 0")
     use, linear = _objectives_use(s, raw, problems)
     diagnosis = None
     if s.diagnosis is not None:
@@ -216,7 +221,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
         solver_options["point_rows"] = False
     problems.raise_if_any()
     nlp = NLPOptions(time_outputs=t_out, trim_outputs=r_out, covariance=obj.covariance, ncp=s.discretization.ncp,
-                     input_errors=in_err, noise_sigma=noise_sigma)
+                     input_errors=in_err, noise_sigma=noise_sigma, input_error_ar=obj.input_error_ar)
     par = s.pareto
     counts = par.points if isinstance(par.points, list) else [par.points]
     if not counts or not all(2 <= n <= 1000 for n in counts):

@@ -100,7 +100,69 @@ def test_j_time_equals_the_numpy_likelihood(fits):
     assert 0.2 * DEFAULT_SIGMA["col"] < np.std(d) < 1.5 * DEFAULT_SIGMA["col"]
 
 
+def test_lead_in_ar_recovers_a_known_autoregressive_noise():
+    """Yule-Walker on the lead-ins of an AR(2) noise d_k = 1.2 d_(k-1) - 0.5 d_(k-2) + w_k (seeded): the
+    coefficients, and the innovation-to-noise sigma ratio of the process, sqrt((1 + a2)((1 - a2)^2 - a1^2) /
+    (1 - a2)) = 0.520 (the AR(2) variance formula)."""
+    import pandas as pd
+    from scipy.signal import lfilter
+
+    from pyomo_heli.dataset.schema import Maneuver
+    from pyomo_heli.nlp.objectives import lead_in_ar
+
+    rng = np.random.default_rng(20261201)
+    mvs = []
+    for i in range(8):
+        x = lfilter([1.0], [1.0, -1.2, 0.5], rng.normal(0.0, 1e-3, 3000))[500:]  # 500 samples to settle
+        t = np.arange(len(x)) * 0.02
+        mvs.append(Maneuver(f"m{i}", "identification", 40.0, ["col"], pd.DataFrame({"t": t, "col": x}),
+                            input_reference_s=float(t[-1])))
+    a, ratio = lead_in_ar(mvs, "col", 2)
+    np.testing.assert_allclose(a, [1.2, -0.5], atol=0.02)
+    a1, a2 = 1.2, -0.5
+    assert ratio == pytest.approx(math.sqrt((1 + a2) * ((1 - a2) ** 2 - a1**2) / (1 - a2)), rel=0.03)
+    a0, r0 = lead_in_ar(mvs, "col", 0)
+    assert len(a0) == 0 and r0 == 1.0
+    with pytest.raises(ValueError, match="m0: 3 sample"):
+        lead_in_ar([dataclasses.replace(mvs[0], input_reference_s=0.05)], "col", 2)
+
+
+def test_input_error_ar_weighs_the_errors_by_their_innovations(tmp_path):
+    """``input_error_ar = 2`` with the inputs at the record rate: J_input is the likelihood of the errors' one-step
+    prediction errors under the AR model of the lead-in (recomputed with numpy at random error values), the
+    innovation sigma that of the model."""
+    import pyomo.environ as pyo
+
+    from pyomo_heli.nlp.objectives import lead_in_ar
+
+    cfg = load_identification_config(CONFIG, {"objectives": {"input_error_ar": 2},
+                                              "data": {"resample_inputs": "record"}})
+    m, data, _ = build_problem(cfg)
+    rng = np.random.default_rng(1)
+    for v in m.component_data_objects(pyo.Var):
+        if v.parent_component().local_name == "u_err":
+            v.set_value(float(rng.normal(0.0, 3e-4)))
+    sigma = lead_in_sigma(data.maneuvers, ["col", "lon"], input_record=True)
+    total = 0.0
+    for c in ("col", "lon"):
+        a, ratio = lead_in_ar(data.maneuvers, c, 2, input_record=True)
+        print(c, "AR(2) coefficients", a, "innovation / noise sigma", ratio)
+        assert list(a) == m.input_error_ar[c] and 0.3 < ratio < 0.9  # the filtered noise: correlated samples
+        s_w = sigma[c] * ratio
+        for mv in data.maneuvers:
+            blk = m.man[mv.name]
+            d = np.array([pyo.value(blk.u_err[c, t]) for t in blk.input_samples])
+            w = d - a[0] * np.r_[0.0, d[:-1]] - a[1] * np.r_[0.0, 0.0, d[:-2]]
+            total += np.sum(w**2) / (2 * s_w**2) + len(w) * math.log(s_w)
+    # mean_square is a variable defined by an equality: evaluate J_input from its defining sums
+    for c in ("col", "lon"):
+        m.mean_square[c].set_value(pyo.value(m.sum_square[c]) / pyo.value(m.square_count[c]))
+    assert pyo.value(m.J_input) == pytest.approx(total, rel=1e-10)
+
+
 @pytest.mark.parametrize("edit, message", [
+    ('input_errors = ["col", "lon"]\ninput_error_ar = 9', "'input_error_ar' must be an integer 0..8"),
+    ('input_error_ar = 2', "'input_error_ar' models the input errors: give input_errors too"),
     ('input_errors = ["col", "ped"]', "unknown input channel.*'ped'"),
     ('input_errors = ["col"]\nnoise_sigma = { nz_gee = 0.01 }', "unknown key 'nz_gee'"),
     ('input_errors = ["col"]\nnoise_sigma = { nz_g = -0.01 }', "'nz_g' must be a positive number"),

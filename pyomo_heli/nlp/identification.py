@@ -27,7 +27,8 @@ from ..physics.model import FLAPPING, HelicopterModel
 from ..simulation.replay import replay
 from ..simulation.trim import trim_sweep
 from .maneuver_block import build_maneuver_block, initialise_from
-from .objectives import add_known_noise_time_objective, add_time_objective, add_trim_objective, noise_sigmas
+from .objectives import (add_known_noise_time_objective, add_time_objective, add_trim_objective, lead_in_ar,
+                         noise_sigmas)
 from .parameters import FreeParameter, add_parameters
 from .trim_block import build_trim_block
 
@@ -35,6 +36,8 @@ TIME_OUTPUTS = OUTPUTS
 TRIM_OUTPUTS = TRIM_CHANNELS
 #: bound of the estimated input errors, in noise sigmas (NLPOptions.input_errors)
 INPUT_ERROR_BOUND = 6.0
+#: highest order of the input errors' autoregressive model (NLPOptions.input_error_ar)
+MAX_INPUT_ERROR_AR = 8
 
 
 @dataclass
@@ -56,6 +59,9 @@ class NLPOptions:
     #: channel -> noise sigma [SI] of the outputs and the error inputs when ``input_errors`` is set;
     #: None: estimated from the records' quiet lead-in (``objectives.lead_in_sigma``)
     noise_sigma: dict | None = None
+    #: order of the autoregressive model of the input errors, fitted to the records' quiet lead-in
+    #: (``objectives.lead_in_ar``); 0: independent errors from sample to sample
+    input_error_ar: int = 0
 
     def __post_init__(self):
         bad = [o for o in self.time_outputs if o not in TIME_OUTPUTS]
@@ -70,6 +76,8 @@ class NLPOptions:
         bad = [c for c in self.input_errors if c not in INPUTS]
         if bad:
             raise ValueError(f"unknown input channel(s) {bad} in input_errors; choose from {', '.join(INPUTS)}")
+        if not (isinstance(self.input_error_ar, int) and 0 <= self.input_error_ar <= MAX_INPUT_ERROR_AR):
+            raise ValueError(f"input_error_ar = {self.input_error_ar!r}: an integer from 0 to {MAX_INPUT_ERROR_AR}")
         if self.noise_sigma is not None:
             bad = [k for k, v in self.noise_sigma.items() if not (isinstance(v, (int, float)) and v > 0)]
             if bad:
@@ -181,7 +189,18 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
             for v in vs:
                 v.setlb(-INPUT_ERROR_BOUND * sigma[c])
                 v.setub(INPUT_ERROR_BOUND * sigma[c])
-        add_known_noise_time_objective(m, residuals, list(opts.time_outputs), sigma, errs, sigma)
+        err_sigma = dict(sigma)
+        if opts.input_error_ar:
+            # the errors' likelihood through their one-step prediction errors (innovations) under an AR model of
+            # the lead-in's noise, per maneuver, the samples before each record's first taken as zero
+            m.input_error_ar = {}
+            for c in opts.input_errors:
+                a, ratio = lead_in_ar(data.maneuvers, c, opts.input_error_ar, input_record=True)
+                m.input_error_ar[c] = list(a)
+                err_sigma[c] = sigma[c] * ratio
+                errs[c] = [w for n in names
+                           for w in _ar_innovation([m.man[n].u_err[c, tt] for tt in m.man[n].input_samples], a)]
+        add_known_noise_time_objective(m, residuals, list(opts.time_outputs), sigma, errs, err_sigma)
     elif data.maneuvers and opts.time_outputs:
         add_time_objective(m, residuals, list(opts.time_outputs), opts.covariance,
                            {o: np.array(v) for o, v in init_res.items()})
@@ -202,6 +221,11 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
     if opts.mutable_data:
         set_measurements(m, data)
     return m
+
+
+def _ar_innovation(errors: list, a) -> list:
+    """``w_k = e_k - sum_j a_j e_{k-j}`` of a record's error variables (pre-record errors zero)."""
+    return [e - sum(a[j] * errors[k - 1 - j] for j in range(min(len(a), k))) for k, e in enumerate(errors)]
 
 
 def _float_start(sim_model: HelicopterModel, data: IdentificationData) -> tuple[list, dict]:

@@ -158,6 +158,42 @@ def noise_sigmas(maneuvers, channels, given: dict | None = None, input_record: b
     return {c: float(given[c]) for c in channels}
 
 
+def lead_in_ar(maneuvers, channel: str, order: int, input_record: bool = False) -> tuple[np.ndarray, float]:
+    """An autoregressive model of a channel's noise from the quiet lead-in of the records (no model involved).
+
+    The autocovariances at lags 0..``order`` are pooled over the lead-ins (t <= t0 + ``input_reference_s``, each
+    about its own mean; ``input_record`` as in :func:`lead_in_sigma`) and solved by Yule-Walker. Returns ``(a,
+    ratio)``: the coefficients of ``d_k = sum_j a_j d_{k-1-j} + w_k`` and the innovation sigma over the noise
+    sigma, sqrt(var w / var d). Raises ValueError when a lead-in is missing or shorter than ``order + 2`` samples.
+    """
+    from scipy.linalg import solve_toeplitz
+
+    r, n = np.zeros(order + 1), np.zeros(order + 1)
+    for mv in maneuvers:
+        if mv.input_reference_s <= 0:
+            raise ValueError(f"maneuver {mv.name}: the input errors' autoregressive model comes from the quiet "
+                             f"lead-in, but no lead-in is set: give [data] input_reference_s > 0")
+        rec = mv.inputs_record if input_record else None
+        src = rec if rec is not None and channel in rec else mv.data
+        t = src["t"].to_numpy()
+        x = src[channel].to_numpy(dtype=float)[t <= t[0] + mv.input_reference_s]
+        if len(x) < order + 2:
+            raise ValueError(f"maneuver {mv.name}: {len(x)} sample(s) in the {mv.input_reference_s} s lead-in; an "
+                             f"autoregressive model of order {order} of '{channel}' needs at least {order + 2}")
+        x = x - x.mean()
+        for lag in range(order + 1):
+            r[lag] += float(np.dot(x[: len(x) - lag], x[lag:]))
+            n[lag] += len(x) - lag
+    r = r / n
+    if not r[0] > 0:
+        raise ValueError(f"channel '{channel}' shows no noise in the lead-in of the maneuvers: no autoregressive "
+                         f"model of it")
+    if order == 0:
+        return np.zeros(0), 1.0
+    a = solve_toeplitz(r[:-1], r[1:])
+    return a, math.sqrt(max(float(r[0] - a @ r[1:]), 0.0) / r[0])
+
+
 def lead_in_sigma(maneuvers, channels, input_record: bool = False) -> dict:
     """Noise sigma of each channel from the quiet lead-in of the records (no model involved).
 

@@ -141,8 +141,12 @@ class ObjectivesTable(Table):
                                           "in variables)")
     noise_sigma: Optional[NoiseSigmaTable] = Field(None, description="the sigmas of input_errors' fit (default: "
                                                                      "from the records' quiet lead-in)")
+    input_error_ar: int = Field(0, ge=0, le=8, description="order of the autoregressive model of the input errors, "
+                                                           "fitted to the records' quiet lead-in (0: independent "
+                                                           "errors)")
 
-    messages = {"covariance": "field 'covariance' must be diagonal or full"}
+    messages = {"covariance": "field 'covariance' must be diagonal or full",
+                "input_error_ar": (None, "field 'input_error_ar' must be an integer 0..8")}
 
 
 class DiscretizationTable(Table):

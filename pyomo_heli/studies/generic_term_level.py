@@ -3,7 +3,7 @@
     python studies/generic_term_level.py --seeds 20261122-20261131 --out results/generic_term_level \
         [--terms col_scale lon_scale] [--config studies/held_out_discovery.toml] \
         [--data-config data/bo105_synthetic.toml] [--exact-inputs] [--identification eiv|oe] [--input-sigma-scale K] \
-        [--resample-inputs sample|project|record]
+        [--resample-inputs sample|project|record] [--input-error-ar P]
 
 Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
 **M0 with sensor noise only** (its truth effects removed, its seed replaced) into ``OUT/data/<seed>``, and estimates
@@ -27,7 +27,8 @@ sigmas the fit assumes times K (the lead-in's; with ``--exact-inputs`` the gener
 ``OUT/input_sigma_x<K>`` (``OUT/exact_inputs_input_sigma_x<K>``): how the errors-in-variables estimates move with
 the assumed input noise. ``--resample-inputs sample|project|record``: the fit's ``[data] resample_inputs`` instead
 of the config's, into ``OUT/inputs_<choice>``: how the estimates move with the way the recorded inputs reach the
-NLP's grid.
+NLP's grid. ``--input-error-ar P``: the fit's ``[objectives] input_error_ar`` (the input errors an AR(P) process
+fitted to the lead-in), into ``OUT/.../input_error_ar<P>``.
 
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per term the seeds, the mean and standard deviation of the
 estimate, the mean and standard deviation of z, the t statistic of the mean estimate (mean over its standard error
@@ -53,7 +54,7 @@ from pyomo_heli.physics.discrepancy import generic_names
 from pyomo_heli.report.identification import markdown_table
 from pyomo_heli.units import SENSOR_SIGMA_KEYS
 
-from .args import in_file, out_folder
+from .args import in_file, nonneg_int, out_folder
 from .score_test_level import seeds_of
 from .seeded import ROOT, m0_noise_data
 
@@ -78,9 +79,10 @@ def given_sigmas(cfg, data_config: Path | None, input_scale: float = 1.0) -> dic
 
 def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: Path,
              exact_inputs: bool = False, identification: str = "eiv", input_sigma_scale: float = 1.0,
-             resample_inputs: str | None = None) -> dict:
+             resample_inputs: str | None = None, input_error_ar: int | None = None) -> dict:
     """The NLP estimates of ``terms`` on one seed (read back from ``OUT/seed_<seed>.json`` when it holds them);
-    ``resample_inputs`` overrides the config's ``[data] resample_inputs``."""
+    ``resample_inputs`` and ``input_error_ar`` override the config's ``[data] resample_inputs`` and ``[objectives]
+    input_error_ar``."""
     from pyomo_heli.diagnosis.discovery import nlp_screen
 
     f = out / f"seed_{seed}.json"
@@ -91,12 +93,14 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
             doc = None
         if (doc and doc.get("config") == str(config) and set(terms) <= set(doc["fits"])
                 and doc.get("input_sigma_scale", 1.0) == input_sigma_scale
-                and doc.get("resample_inputs") == resample_inputs):
+                and doc.get("resample_inputs") == resample_inputs and doc.get("input_error_ar") == input_error_ar):
             return doc
     data = m0_noise_data(seed, data_config, out, input_noise=not exact_inputs)
     over = {"data": {"dataset": str(data), **({"resample_inputs": resample_inputs} if resample_inputs else {})}}
     if identification == "oe":
         over["objectives"] = {"input_errors": []}
+    elif input_error_ar is not None:
+        over["objectives"] = {"input_error_ar": input_error_ar}
     cfg = load_identification_config(config, overrides=over)
     if cfg.nlp.input_errors and (exact_inputs or input_sigma_scale != 1.0):
         cfg = load_identification_config(config, overrides={**over, "objectives": {"noise_sigma": given_sigmas(
@@ -111,7 +115,7 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
                    "LR_time": float(r.get("LR_time", float("nan"))), "LR_trim": float(r.get("LR_trim", float("nan"))),
                    "success": bool(r["success"])}
     doc = {"seed": seed, "config": str(config), "exact_inputs": exact_inputs, "identification": identification,
-           "input_sigma_scale": input_sigma_scale, "resample_inputs": resample_inputs,
+           "input_sigma_scale": input_sigma_scale, "resample_inputs": resample_inputs, "input_error_ar": input_error_ar,
            "J0": float(s["J0"]), "fits": fits}
     f.write_text(json.dumps(doc, indent=1))
     shutil.rmtree(data, ignore_errors=True)
@@ -159,6 +163,9 @@ def main(argv=None) -> int:
                          "(into OUT/oe or OUT/exact_inputs_oe)")
     ap.add_argument("--resample-inputs", choices=RESAMPLE_INPUTS, default=None,
                     help="[data] resample_inputs for the fit (default: the config's), into OUT/.../inputs_<choice>")
+    ap.add_argument("--input-error-ar", type=nonneg_int, default=None, metavar="P",
+                    help="[objectives] input_error_ar for the fit: the input errors an AR(P) process fitted to the "
+                         "lead-in (default: the config's), into OUT/.../input_error_ar<P>")
     a = ap.parse_args(argv)
     try:
         seeds = seeds_of(a.seeds)
@@ -176,17 +183,25 @@ def main(argv=None) -> int:
         ap.error(str(exc))
     if not (math.isfinite(a.input_sigma_scale) and a.input_sigma_scale > 0):
         ap.error(f"--input-sigma-scale: must be a positive number, got {a.input_sigma_scale:g}")
+    if a.input_error_ar is not None and a.identification == "oe":
+        ap.error("--input-error-ar: models the input errors, which --identification oe has none of")
+    if a.input_error_ar is not None:
+        try:
+            load_identification_config(config, {"objectives": {"input_error_ar": a.input_error_ar}})
+        except ConfigError as exc:
+            ap.error(f"--input-error-ar: {exc}")
     if a.input_sigma_scale != 1.0 and a.identification == "oe":
         ap.error("--input-sigma-scale: scales the input errors' sigmas, which --identification oe has none of")
     sub = "_".join((["exact_inputs"] if a.exact_inputs else []) + (["oe"] if a.identification == "oe" else [])
                    + ([f"input_sigma_x{a.input_sigma_scale:g}"] if a.input_sigma_scale != 1.0 else [])
-                   + ([f"inputs_{a.resample_inputs}"] if a.resample_inputs else []))
+                   + ([f"inputs_{a.resample_inputs}"] if a.resample_inputs else [])
+                   + ([f"input_error_ar{a.input_error_ar}"] if a.input_error_ar is not None else []))
     out = out_folder(ap, a.out) / sub
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds:
         docs.append(one_seed(s, a.terms, config.resolve(), data_config.resolve(), out, a.exact_inputs,
-                             a.identification, a.input_sigma_scale, a.resample_inputs))
+                             a.identification, a.input_sigma_scale, a.resample_inputs, a.input_error_ar))
         fits = docs[-1]["fits"]
         print(f"seed {s}: " + ", ".join(f"{n} c = {fits[n]['estimate']:+.4g} (z {fits[n]['z']:+.2f})" for n in a.terms),
               flush=True)
@@ -203,6 +218,7 @@ def main(argv=None) -> int:
                  else ", input errors estimated" + (" (sigmas given)" if a.exact_inputs else "")
                  + (f", their sigmas times {a.input_sigma_scale:g}" if a.input_sigma_scale != 1.0 else ""))
               + (f"; inputs resampled by {a.resample_inputs!r}" if a.resample_inputs else "")
+              + (f"; input errors an AR({a.input_error_ar}) process" if a.input_error_ar is not None else "")
               + "; expected: mean c and mean z about 0 "
               f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, z beyond +-2 in about 4.6 % of the seeds.")
     (out / "summary.md").write_text(header + "\n\n" + markdown_table(tab, digits=3) + "\n\nPer seed:\n\n"

@@ -158,6 +158,18 @@ def noise_sigmas(maneuvers, channels, given: dict | None = None, input_record: b
     return {c: float(given[c]) for c in channels}
 
 
+def _lead_in(mv, channel: str, input_record: bool, what: str, remedy: str) -> np.ndarray:
+    """A record's samples of ``channel`` over its quiet lead-in (t <= t0 + ``input_reference_s``): from
+    ``inputs_record`` when ``input_record`` and the maneuver has it, else from ``data``. ``what`` and ``remedy``
+    word the error of a record without a lead-in."""
+    if mv.input_reference_s <= 0:
+        raise ValueError(f"maneuver {mv.name}: {what} from the quiet lead-in, but no lead-in is set: {remedy}")
+    rec = mv.inputs_record if input_record else None
+    src = rec if rec is not None and channel in rec else mv.data
+    t = src["t"].to_numpy()
+    return src[channel].to_numpy(dtype=float)[t <= t[0] + mv.input_reference_s]
+
+
 def lead_in_ar(maneuvers, channel: str, order: int, input_record: bool = False) -> tuple[np.ndarray, float]:
     """An autoregressive model of a channel's noise from the quiet lead-in of the records (no model involved).
 
@@ -170,13 +182,8 @@ def lead_in_ar(maneuvers, channel: str, order: int, input_record: bool = False) 
 
     r, n = np.zeros(order + 1), np.zeros(order + 1)
     for mv in maneuvers:
-        if mv.input_reference_s <= 0:
-            raise ValueError(f"maneuver {mv.name}: the input errors' autoregressive model comes from the quiet "
-                             f"lead-in, but no lead-in is set: give [data] input_reference_s > 0")
-        rec = mv.inputs_record if input_record else None
-        src = rec if rec is not None and channel in rec else mv.data
-        t = src["t"].to_numpy()
-        x = src[channel].to_numpy(dtype=float)[t <= t[0] + mv.input_reference_s]
+        x = _lead_in(mv, channel, input_record, "the input errors' autoregressive model comes",
+                     "give [data] input_reference_s > 0")
         if len(x) < order + 2:
             raise ValueError(f"maneuver {mv.name}: {len(x)} sample(s) in the {mv.input_reference_s} s lead-in; an "
                              f"autoregressive model of order {order} of '{channel}' needs at least {order + 2}")
@@ -207,13 +214,8 @@ def lead_in_sigma(maneuvers, channels, input_record: bool = False) -> dict:
     for ch in channels:
         ss, dof = 0.0, 0
         for mv in maneuvers:
-            if mv.input_reference_s <= 0:
-                raise ValueError(f"maneuver {mv.name}: the noise sigmas come from the quiet lead-in, but no "
-                                 f"lead-in is set: give [data] input_reference_s > 0 or [objectives.noise_sigma]")
-            rec = mv.inputs_record if input_record else None
-            src = rec if rec is not None and ch in rec else mv.data
-            t = src["t"].to_numpy()
-            x = src[ch].to_numpy(dtype=float)[t <= t[0] + mv.input_reference_s]
+            x = _lead_in(mv, ch, input_record, "the noise sigmas come",
+                         "give [data] input_reference_s > 0 or [objectives.noise_sigma]")
             if len(x) < 3:
                 raise ValueError(f"maneuver {mv.name}: only {len(x)} sample(s) in the {mv.input_reference_s} s "
                                  f"lead-in; the noise sigma of '{ch}' needs at least 3")

@@ -107,7 +107,7 @@ def replay(model: HelicopterModel, maneuver, trim: TrimPoint, substeps: int = 4,
     the integration itself fails (a non-finite state).
     """
     t = maneuver.data["t"].to_numpy(dtype=float)
-    if maneuver.inputs_record is not None and len(maneuver.inputs_record) != len(t):
+    if getattr(maneuver, "inputs_record", None) is not None and len(maneuver.inputs_record) != len(t):
         return _replay_at_input_rate(model, maneuver, trim, substeps, offsets, check, method, compiled, integrator)
     inc = {k: sampled(t, v) for k, v in maneuver_increments(maneuver, offsets).items()}
     if method == "rk4" and len(t) > 1:
@@ -212,7 +212,7 @@ def maneuver_outputs(model: HelicopterModel, maneuvers, outputs, substeps: int =
     out = {o: [] for o in outputs}
     for mv in maneuvers:
         tp = trim_float(model, mv.trim_speed)
-        if compiled and mv.inputs_record is None:
+        if compiled and getattr(mv, "inputs_record", None) is None:
             y = simulate_outputs(model, tp, mv.data["t"].to_numpy(), maneuver_increments(mv), outputs, substeps)
         else:
             df = replay(model, mv, tp, substeps=substeps, check=False)

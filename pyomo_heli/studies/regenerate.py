@@ -142,11 +142,14 @@ ENTRIES: tuple[Entry, ...] = (
         "python studies/generic_term_level.py --seeds 20261122-20261141 --resample-inputs sample "
         "--out {out}/generic_term_level",
         "python studies/generic_term_level.py --seeds 20261122-20261141 --resample-inputs record "
+        "--out {out}/generic_term_level",
+        "python studies/generic_term_level.py --seeds 20261122-20261141 --resample-inputs record --input-error-ar 2 "
         "--out {out}/generic_term_level"),
         ("summary.csv", "summary.md", "exact_inputs/summary.csv", "exact_inputs/summary.md",
          "exact_inputs_oe/summary.csv", "exact_inputs_oe/summary.md", "input_sigma_x1.7/summary.csv",
          "input_sigma_x1.7/summary.md", "inputs_sample/summary.csv", "inputs_sample/summary.md",
-         "inputs_record/summary.csv", "inputs_record/summary.md"), minutes=190),
+         "inputs_record/summary.csv", "inputs_record/summary.md", "inputs_record_input_error_ar2/summary.csv",
+         "inputs_record_input_error_ar2/summary.md"), minutes=250),
     Entry("input_path", ("python studies/input_path_check.py --seeds 1 --out {out}/input_path",
                          "python studies/input_path_check.py --effects none --seeds 5 --out {out}/input_path"),
           ("input_path.csv", "input_path.md"), minutes=20),

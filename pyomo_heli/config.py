@@ -195,6 +195,12 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
     elif obj.input_error_ar and not in_ref:
         problems.add("objectives", "field 'input_error_ar': the errors' model comes from the records' quiet lead-in; "
                                    "give [data] input_reference_s > 0")
+    if obj.input_reference_error and not in_err:
+        problems.add("objectives", "field 'input_reference_error' is an error of the input errors' reference: give "
+                                   "input_errors too")
+    elif obj.input_reference_error and not in_ref:
+        problems.add("objectives", "field 'input_reference_error': the inputs are referred to their first sample; "
+                                   "give [data] input_reference_s > 0")
     use, linear = _objectives_use(s, raw, problems)
     diagnosis = None
     if s.diagnosis is not None:
@@ -221,7 +227,8 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
         solver_options["point_rows"] = False
     problems.raise_if_any()
     nlp = NLPOptions(time_outputs=t_out, trim_outputs=r_out, covariance=obj.covariance, ncp=s.discretization.ncp,
-                     input_errors=in_err, noise_sigma=noise_sigma, input_error_ar=obj.input_error_ar)
+                     input_errors=in_err, noise_sigma=noise_sigma, input_error_ar=obj.input_error_ar,
+                     input_reference_error=obj.input_reference_error)
     par = s.pareto
     counts = par.points if isinstance(par.points, list) else [par.points]
     if not counts or not all(2 <= n <= 1000 for n in counts):

@@ -62,6 +62,11 @@ class NLPOptions:
     #: order of the autoregressive model of the input errors, fitted to the records' quiet lead-in
     #: (``objectives.lead_in_ar``); 0: independent errors from sample to sample
     input_error_ar: int = 0
+    #: the error of each record's input reference estimated too: the measured increments are referred to the mean of
+    #: the quiet lead-in (``input_reference_s``), whose noise offsets every later sample alike. The noise of a sample
+    #: is then its increment's error plus the record's reference error ``blk.u_ref``, the errors' mean over the
+    #: lead-in is zero by construction (``blk.lead_in_mean``), and the noise model applies to the sum
+    input_reference_error: bool = False
 
     def __post_init__(self):
         bad = [o for o in self.time_outputs if o not in TIME_OUTPUTS]
@@ -189,6 +194,8 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
             for v in vs:
                 v.setlb(-INPUT_ERROR_BOUND * sigma[c])
                 v.setub(INPUT_ERROR_BOUND * sigma[c])
+        if opts.input_reference_error:
+            errs = _with_reference_errors(m, data, names, opts.input_errors, sigma)
         err_sigma = dict(sigma)
         if opts.input_error_ar:
             # the errors' likelihood through their one-step prediction errors (innovations) under an AR model of
@@ -198,8 +205,7 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
                 a, ratio = lead_in_ar(data.maneuvers, c, opts.input_error_ar, input_record=True)
                 m.input_error_ar[c] = list(a)
                 err_sigma[c] = sigma[c] * ratio
-                errs[c] = [w for n in names
-                           for w in _ar_innovation([m.man[n].u_err[c, tt] for tt in m.man[n].input_samples], a)]
+                errs[c] = [w for n, e in _per_record(errs[c], m, names) for w in _ar_innovation(e, a)]
         add_known_noise_time_objective(m, residuals, list(opts.time_outputs), sigma, errs, err_sigma)
     elif data.maneuvers and opts.time_outputs:
         add_time_objective(m, residuals, list(opts.time_outputs), opts.covariance,
@@ -221,6 +227,39 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
     if opts.mutable_data:
         set_measurements(m, data)
     return m
+
+
+def _per_record(errors: list, m, names) -> list:
+    """(maneuver name, its slice of ``errors``): the flat list of every record's input samples, cut per record."""
+    out, i = [], 0
+    for n in names:
+        k = len(m.man[n].input_samples)
+        out.append((n, errors[i:i + k]))
+        i += k
+    return out
+
+
+def _with_reference_errors(m, data: IdentificationData, names, channels, sigma: dict) -> dict:
+    """Channel -> the input noise of every sample of every record, ``u_err + u_ref`` (NLPOptions.input_reference_error).
+
+    Per record: ``blk.u_ref[c]``, the noise mean over the quiet lead-in that the increments were referred to (the
+    samples with t <= t0 + ``input_reference_s``, as :meth:`~pyomo_heli.dataset.schema.Maneuver.increments` takes
+    them), and ``blk.lead_in_mean[c]``: the increments' errors sum to zero over the lead-in, as the increments do.
+    """
+    by = {mv.name: mv for mv in data.maneuvers}
+    for n in names:
+        blk, mv = m.man[n], by[n]
+        if mv.input_reference_s <= 0:
+            raise ValueError(f"maneuver {n}: input_reference_error needs the inputs referred to a quiet lead-in; "
+                             f"give [data] input_reference_s > 0")
+        t_in = list(blk.input_samples)
+        lead = [t for t in t_in if t <= t_in[0] + mv.input_reference_s]
+        blk.u_ref = pyo.Var(list(channels), initialize=0.0,
+                            bounds=lambda _, c: (-INPUT_ERROR_BOUND * sigma[c], INPUT_ERROR_BOUND * sigma[c]))
+        blk.lead_in_mean = pyo.Constraint(list(channels),
+                                          rule=lambda b, c: sum(b.u_err[c, t] for t in lead) / len(lead) == 0.0)
+    return {c: [m.man[n].u_err[c, t] + m.man[n].u_ref[c] for n in names for t in m.man[n].input_samples]
+            for c in channels}
 
 
 def _ar_innovation(errors: list, a) -> list:
@@ -248,9 +287,10 @@ def _start_maneuvers(m: pyo.ConcreteModel, data: IdentificationData, sims: dict,
     for mv in data.maneuvers:
         blk, sim = m.man[mv.name], sims[mv.name]
         initialise_from(blk, sim, states)
-        if blk.component("u_err") is not None:
-            for v in blk.u_err.values():
-                v.set_value(0.0)
+        for name in ("u_err", "u_ref"):
+            if blk.component(name) is not None:
+                for v in blk.component(name).values():
+                    v.set_value(0.0)
         for o in outputs:
             init_res[o].extend(mv.data[o].to_numpy() - sim[o].to_numpy())
     return init_res

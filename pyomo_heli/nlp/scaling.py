@@ -82,7 +82,7 @@ class IdentificationScaler(CustomScalerBase):
             return _nominal(name)
         if comp == "trim_meas":  # index (trim point, channel)
             return _nominal(idx[1])
-        if comp == "u_err":
+        if comp in ("u_err", "u_ref"):
             return v.ub / _ERROR_BOUND if v.ub is not None else None
         if comp == "V":
             return STATE_NOMINAL["u"]
@@ -123,6 +123,8 @@ class IdentificationScaler(CustomScalerBase):
             return TIME_NOMINAL / _nominal(name)
         if comp == "initial":
             return 1.0 / _nominal(name)
+        if comp == "lead_in_mean":  # the mean of a record's input errors over its lead-in, in their sigmas
+            return _ERROR_BOUND / block.u_ref[name].ub
         if comp == "output_eq":
             return 1.0 / OUTPUT_NOMINAL.get(name, 1.0)
         if comp == "V_spec":

@@ -144,6 +144,9 @@ class ObjectivesTable(Table):
     input_error_ar: int = Field(0, ge=0, le=8, description="order of the autoregressive model of the input errors, "
                                                            "fitted to the records' quiet lead-in (0: independent "
                                                            "errors)")
+    input_reference_error: bool = Field(False, description="estimate each record's input reference error too: the "
+                                                           "noise mean of the quiet lead-in the increments are "
+                                                           "referred to")
 
     messages = {"covariance": "field 'covariance' must be diagonal or full",
                 "input_error_ar": (None, "field 'input_error_ar' must be an integer 0..8")}

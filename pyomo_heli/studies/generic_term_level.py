@@ -28,7 +28,9 @@ sigmas the fit assumes times K (the lead-in's; with ``--exact-inputs`` the gener
 the assumed input noise. ``--resample-inputs sample|project|record``: the fit's ``[data] resample_inputs`` instead
 of the config's, into ``OUT/inputs_<choice>``: how the estimates move with the way the recorded inputs reach the
 NLP's grid. ``--input-error-ar P``: the fit's ``[objectives] input_error_ar`` (the input errors an AR(P) process
-fitted to the lead-in), into ``OUT/.../input_error_ar<P>``.
+fitted to the lead-in), into ``OUT/.../input_error_ar<P>``. ``--input-reference-error``: the fit's ``[objectives]
+input_reference_error = true`` (each record's lead-in reference error estimated), into
+``OUT/.../input_reference_error``.
 
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per term the seeds, the mean and standard deviation of the
 estimate, the mean and standard deviation of z, the t statistic of the mean estimate (mean over its standard error
@@ -79,10 +81,11 @@ def given_sigmas(cfg, data_config: Path | None, input_scale: float = 1.0) -> dic
 
 def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: Path,
              exact_inputs: bool = False, identification: str = "eiv", input_sigma_scale: float = 1.0,
-             resample_inputs: str | None = None, input_error_ar: int | None = None) -> dict:
+             resample_inputs: str | None = None, input_error_ar: int | None = None,
+             input_reference_error: bool = False) -> dict:
     """The NLP estimates of ``terms`` on one seed (read back from ``OUT/seed_<seed>.json`` when it holds them);
-    ``resample_inputs`` and ``input_error_ar`` override the config's ``[data] resample_inputs`` and ``[objectives]
-    input_error_ar``."""
+    ``resample_inputs``, ``input_error_ar`` and ``input_reference_error`` (if true) override the config's ``[data]
+    resample_inputs`` and ``[objectives] input_error_ar`` and ``input_reference_error``."""
     from pyomo_heli.diagnosis.discovery import nlp_screen
 
     f = out / f"seed_{seed}.json"
@@ -93,18 +96,20 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
             doc = None
         if (doc and doc.get("config") == str(config) and set(terms) <= set(doc["fits"])
                 and doc.get("input_sigma_scale", 1.0) == input_sigma_scale
-                and doc.get("resample_inputs") == resample_inputs and doc.get("input_error_ar") == input_error_ar):
+                and doc.get("resample_inputs") == resample_inputs and doc.get("input_error_ar") == input_error_ar
+                and doc.get("input_reference_error", False) == input_reference_error):
             return doc
     data = m0_noise_data(seed, data_config, out, input_noise=not exact_inputs)
     over = {"data": {"dataset": str(data), **({"resample_inputs": resample_inputs} if resample_inputs else {})}}
     if identification == "oe":
         over["objectives"] = {"input_errors": []}
-    elif input_error_ar is not None:
-        over["objectives"] = {"input_error_ar": input_error_ar}
+    else:
+        over["objectives"] = {**({"input_error_ar": input_error_ar} if input_error_ar is not None else {}),
+                              **({"input_reference_error": True} if input_reference_error else {})}
     cfg = load_identification_config(config, overrides=over)
     if cfg.nlp.input_errors and (exact_inputs or input_sigma_scale != 1.0):
-        cfg = load_identification_config(config, overrides={**over, "objectives": {"noise_sigma": given_sigmas(
-            cfg, data_config if exact_inputs else None, input_sigma_scale)}})
+        cfg = load_identification_config(config, overrides={**over, "objectives": {**over["objectives"],
+            "noise_sigma": given_sigmas(cfg, data_config if exact_inputs else None, input_sigma_scale)}})
     start = {p.name: p.initial for p in cfg.free}
     s = nlp_screen(cfg, start, list(terms), progress=lambda _: None)
     fits = {}
@@ -116,7 +121,7 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
                    "success": bool(r["success"])}
     doc = {"seed": seed, "config": str(config), "exact_inputs": exact_inputs, "identification": identification,
            "input_sigma_scale": input_sigma_scale, "resample_inputs": resample_inputs, "input_error_ar": input_error_ar,
-           "J0": float(s["J0"]), "fits": fits}
+           "input_reference_error": input_reference_error, "J0": float(s["J0"]), "fits": fits}
     f.write_text(json.dumps(doc, indent=1))
     shutil.rmtree(data, ignore_errors=True)
     return doc
@@ -166,6 +171,9 @@ def main(argv=None) -> int:
     ap.add_argument("--input-error-ar", type=nonneg_int, default=None, metavar="P",
                     help="[objectives] input_error_ar for the fit: the input errors an AR(P) process fitted to the "
                          "lead-in (default: the config's), into OUT/.../input_error_ar<P>")
+    ap.add_argument("--input-reference-error", action="store_true",
+                    help="[objectives] input_reference_error = true for the fit: each record's lead-in reference "
+                         "error estimated too, into OUT/.../input_reference_error")
     a = ap.parse_args(argv)
     try:
         seeds = seeds_of(a.seeds)
@@ -183,25 +191,29 @@ def main(argv=None) -> int:
         ap.error(str(exc))
     if not (math.isfinite(a.input_sigma_scale) and a.input_sigma_scale > 0):
         ap.error(f"--input-sigma-scale: must be a positive number, got {a.input_sigma_scale:g}")
-    if a.input_error_ar is not None and a.identification == "oe":
-        ap.error("--input-error-ar: models the input errors, which --identification oe has none of")
-    if a.input_error_ar is not None:
-        try:
-            load_identification_config(config, {"objectives": {"input_error_ar": a.input_error_ar}})
-        except ConfigError as exc:
-            ap.error(f"--input-error-ar: {exc}")
+    for flag, key, value in (("--input-error-ar", "input_error_ar", a.input_error_ar),
+                             ("--input-reference-error", "input_reference_error", a.input_reference_error or None)):
+        if value is not None and a.identification == "oe":
+            ap.error(f"{flag}: models the input errors, which --identification oe has none of")
+        if value is not None:
+            try:
+                load_identification_config(config, {"objectives": {key: value}})
+            except ConfigError as exc:
+                ap.error(f"{flag}: {exc}")
     if a.input_sigma_scale != 1.0 and a.identification == "oe":
         ap.error("--input-sigma-scale: scales the input errors' sigmas, which --identification oe has none of")
     sub = "_".join((["exact_inputs"] if a.exact_inputs else []) + (["oe"] if a.identification == "oe" else [])
                    + ([f"input_sigma_x{a.input_sigma_scale:g}"] if a.input_sigma_scale != 1.0 else [])
                    + ([f"inputs_{a.resample_inputs}"] if a.resample_inputs else [])
-                   + ([f"input_error_ar{a.input_error_ar}"] if a.input_error_ar is not None else []))
+                   + ([f"input_error_ar{a.input_error_ar}"] if a.input_error_ar is not None else [])
+                   + (["input_reference_error"] if a.input_reference_error else []))
     out = out_folder(ap, a.out) / sub
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds:
         docs.append(one_seed(s, a.terms, config.resolve(), data_config.resolve(), out, a.exact_inputs,
-                             a.identification, a.input_sigma_scale, a.resample_inputs, a.input_error_ar))
+                             a.identification, a.input_sigma_scale, a.resample_inputs, a.input_error_ar,
+                             a.input_reference_error))
         fits = docs[-1]["fits"]
         print(f"seed {s}: " + ", ".join(f"{n} c = {fits[n]['estimate']:+.4g} (z {fits[n]['z']:+.2f})" for n in a.terms),
               flush=True)
@@ -219,6 +231,7 @@ def main(argv=None) -> int:
                  + (f", their sigmas times {a.input_sigma_scale:g}" if a.input_sigma_scale != 1.0 else ""))
               + (f"; inputs resampled by {a.resample_inputs!r}" if a.resample_inputs else "")
               + (f"; input errors an AR({a.input_error_ar}) process" if a.input_error_ar is not None else "")
+              + ("; each record's input reference error estimated" if a.input_reference_error else "")
               + "; expected: mean c and mean z about 0 "
               f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, z beyond +-2 in about 4.6 % of the seeds.")
     (out / "summary.md").write_text(header + "\n\n" + markdown_table(tab, digits=3) + "\n\nPer seed:\n\n"

@@ -127,6 +127,48 @@ def test_lead_in_ar_recovers_a_known_autoregressive_noise():
         lead_in_ar([dataclasses.replace(mvs[0], input_reference_s=0.05)], "col", 2)
 
 
+def test_lead_in_ar_low_frequency_power_of_the_generators_noise():
+    """The generator's recorded noise (white at 400 Hz, the 10 Hz Butterworth forward and backward, every 8th sample)
+    has, at low frequency, 3.0 times the spectral density of white noise of its variance: sum_k rho_k over all lags
+    from the filter's impulse response (analytic: 50 Hz / (2 x 8.33 Hz), 8.33 Hz the noise bandwidth of the squared
+    filter). Yule-Walker on long seeded lead-ins: AR(8) gives that within 5 %, AR(2) and AR(4) about 57 % and 88 %
+    of it; a model that understates it lets the input noise's slow part pass for a gain. Printed: the same ratio of
+    the AR models fitted to the bundled flight test's 1.9 s lead-ins."""
+    import pandas as pd
+    from scipy import signal
+
+    from pyomo_heli.dataset.schema import Maneuver
+    from pyomo_heli.flighttest.sensors import SensorConfig
+    from pyomo_heli.nlp.objectives import lead_in_ar
+
+    cfg = SensorConfig()
+    impulse = np.zeros(8001)
+    impulse[4000] = 1.0
+    h = signal.sosfiltfilt(cfg.sos(), impulse)
+    dec = cfg.decimation
+    gamma = np.array([h[: len(h) - dec * k] @ h[dec * k:] for k in range(40)])
+    truth = (gamma[0] + 2 * gamma[1:].sum()) / gamma[0]
+    assert truth == pytest.approx(3.0, abs=0.02)
+    rng = np.random.default_rng(20261201)
+    mvs = []
+    for i in range(8):
+        x = signal.sosfiltfilt(cfg.sos(), rng.normal(0.0, 1.0, 8 * 4000))[::dec]
+        t = np.arange(len(x)) / cfg.record_rate
+        mvs.append(Maneuver(f"m{i}", "identification", 40.0, ["col"], pd.DataFrame({"t": t, "col": x}),
+                            input_reference_s=float(t[-1])))
+
+    def low_frequency(mans, order, record=False):
+        a, ratio = lead_in_ar(mans, "col", order, input_record=record)
+        return ratio**2 / (1.0 - a.sum()) ** 2
+
+    share = {p: low_frequency(mvs, p) / truth for p in (2, 4, 8)}
+    print("generator: sum rho", truth, "AR share of it", share)
+    assert share[8] == pytest.approx(1.0, abs=0.05)
+    assert share[2] == pytest.approx(0.57, abs=0.04) and share[4] == pytest.approx(0.88, abs=0.04)
+    bundled = prepare_data(load_flight_test(DATA), resample_hz=25, input_reference_s=1.9, resample_inputs="record")
+    print("bundled lead-ins, AR share:", {p: low_frequency(bundled.maneuvers, p, True) / truth for p in (2, 4, 8)})
+
+
 def test_input_error_ar_weighs_the_errors_by_their_innovations(tmp_path):
     """``input_error_ar = 2`` with the inputs at the record rate: J_input is the likelihood of the errors' one-step
     prediction errors under the AR model of the lead-in (recomputed with numpy at random error values), the

@@ -169,20 +169,22 @@ def test_lead_in_ar_low_frequency_power_of_the_generators_noise():
     print("bundled lead-ins, AR share:", {p: low_frequency(bundled.maneuvers, p, True) / truth for p in (2, 4, 8)})
 
 
-def test_input_error_ar_weighs_the_errors_by_their_innovations(tmp_path):
+@pytest.mark.parametrize("reference", [False, True])
+def test_input_error_ar_weighs_the_errors_by_their_innovations(reference):
     """``input_error_ar = 2`` with the inputs at the record rate: J_input is the likelihood of the errors' one-step
     prediction errors under the AR model of the lead-in (recomputed with numpy at random error values), the
-    innovation sigma that of the model."""
+    innovation sigma that of the model. With ``input_reference_error`` the AR model applies to ``u_err + u_ref``, and
+    the rows ``lead_in_mean`` are the errors' mean over each record's 1.9 s lead-in (t <= t0 + 1.9 s)."""
     import pyomo.environ as pyo
 
     from pyomo_heli.nlp.objectives import lead_in_ar
 
-    cfg = load_identification_config(CONFIG, {"objectives": {"input_error_ar": 2},
+    cfg = load_identification_config(CONFIG, {"objectives": {"input_error_ar": 2, "input_reference_error": reference},
                                               "data": {"resample_inputs": "record"}})
     m, data, _ = build_problem(cfg)
     rng = np.random.default_rng(1)
     for v in m.component_data_objects(pyo.Var):
-        if v.parent_component().local_name == "u_err":
+        if v.parent_component().local_name in ("u_err", "u_ref"):
             v.set_value(float(rng.normal(0.0, 3e-4)))
     sigma = lead_in_sigma(data.maneuvers, ["col", "lon"], input_record=True)
     total = 0.0
@@ -193,44 +195,17 @@ def test_input_error_ar_weighs_the_errors_by_their_innovations(tmp_path):
         s_w = sigma[c] * ratio
         for mv in data.maneuvers:
             blk = m.man[mv.name]
-            d = np.array([pyo.value(blk.u_err[c, t]) for t in blk.input_samples])
-            w = d - a[0] * np.r_[0.0, d[:-1]] - a[1] * np.r_[0.0, 0.0, d[:-2]]
-            total += np.sum(w**2) / (2 * s_w**2) + len(w) * math.log(s_w)
-    # mean_square is a variable defined by an equality: evaluate J_input from its defining sums
-    for c in ("col", "lon"):
-        m.mean_square[c].set_value(pyo.value(m.sum_square[c]) / pyo.value(m.square_count[c]))
-    assert pyo.value(m.J_input) == pytest.approx(total, rel=1e-10)
-
-
-def test_input_reference_error_weighs_the_noise_of_every_sample(tmp_path):
-    """``input_reference_error`` with AR(2) errors at the record rate: the errors of each record sum to zero over its
-    1.9 s lead-in (the rows ``lead_in_mean``, over the record's samples with t <= t0 + 1.9 s), and J_input is the AR
-    likelihood of ``u_err + u_ref`` (recomputed with numpy at random values)."""
-    import pyomo.environ as pyo
-
-    from pyomo_heli.nlp.objectives import lead_in_ar
-
-    cfg = load_identification_config(CONFIG, {"objectives": {"input_error_ar": 2, "input_reference_error": True},
-                                              "data": {"resample_inputs": "record"}})
-    m, data, _ = build_problem(cfg)
-    rng = np.random.default_rng(2)
-    for v in m.component_data_objects(pyo.Var):
-        if v.parent_component().local_name in ("u_err", "u_ref"):
-            v.set_value(float(rng.normal(0.0, 3e-4)))
-    sigma = lead_in_sigma(data.maneuvers, ["col", "lon"], input_record=True)
-    total = 0.0
-    for c in ("col", "lon"):
-        a, ratio = lead_in_ar(data.maneuvers, c, 2, input_record=True)
-        s_w = sigma[c] * ratio
-        for mv in data.maneuvers:
-            blk = m.man[mv.name]
             t = mv.inputs_record["t"].to_numpy()
             assert list(blk.input_samples) == list(t)
             d = np.array([pyo.value(blk.u_err[c, tt]) for tt in t])
-            assert pyo.value(blk.lead_in_mean[c].body) == pytest.approx(d[t <= t[0] + 1.9].mean(), rel=1e-12)
-            n = d + pyo.value(blk.u_ref[c])
-            w = n - a[0] * np.r_[0.0, n[:-1]] - a[1] * np.r_[0.0, 0.0, n[:-2]]
+            if reference:
+                assert pyo.value(blk.lead_in_mean[c].body) == pytest.approx(d[t <= t[0] + 1.9].mean(), rel=1e-12)
+                d = d + pyo.value(blk.u_ref[c])
+            else:
+                assert blk.component("u_ref") is None
+            w = d - a[0] * np.r_[0.0, d[:-1]] - a[1] * np.r_[0.0, 0.0, d[:-2]]
             total += np.sum(w**2) / (2 * s_w**2) + len(w) * math.log(s_w)
+    # mean_square is a variable defined by an equality: evaluate J_input from its defining sums
     for c in ("col", "lon"):
         m.mean_square[c].set_value(pyo.value(m.sum_square[c]) / pyo.value(m.square_count[c]))
     assert pyo.value(m.J_input) == pytest.approx(total, rel=1e-10)

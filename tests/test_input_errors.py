@@ -286,8 +286,9 @@ def test_nlp_options_refuse_unknown_input_channels():
 
 
 def test_inspect_and_multistart_know_the_input_errors():
-    """`pyomo-heli inspect` names the input errors and their sigmas; a multi-start restart zeroes the errors
-    and re-initialises the mean squares consistently (nlp.identification.initialise_at)."""
+    """`pyomo-heli inspect` names the input errors, their sigmas and their model; a multi-start restart zeroes the
+    errors (the reference errors too) and re-initialises the mean squares consistently
+    (nlp.identification.initialise_at)."""
     import pyomo.environ as pyo
 
     from pyomo_heli.nlp.identification import initialise_at
@@ -296,11 +297,15 @@ def test_inspect_and_multistart_know_the_input_errors():
     cfg = load_identification_config(CONFIG)
     text = inspect_problem(cfg, diagnostics=False)
     assert "input errors col, lon (noise sigmas from the lead-in)" in text and "noise sigmas (lead-in" in text
+    cfg = load_identification_config(CONFIG, {"objectives": {"input_error_ar": 2, "input_reference_error": True}})
+    assert ("input errors col, lon (noise sigmas from the lead-in; AR(2) errors; each record's reference error)"
+            in " ".join(inspect_problem(cfg, diagnostics=False).split()))  # the header is wrapped
     m, data, _ = build_problem(cfg)
-    for v in m.man["lon3211_80kt_a"].u_err.values():
+    blk = m.man["lon3211_80kt_a"]
+    for v in [*blk.u_err.values(), *blk.u_ref.values()]:
         v.set_value(1e-4)
     initialise_at(m, data, cfg.model, cfg.free, {f.name: f.initial for f in cfg.free})
-    assert all(v.value == 0.0 for v in m.man["lon3211_80kt_a"].u_err.values())
+    assert all(v.value == 0.0 for v in [*blk.u_err.values(), *blk.u_ref.values()])
     for c in m.mean_square:
         assert pyo.value(m.mean_square_def[c].body) == pytest.approx(0.0, abs=1e-9 * pyo.value(m.sum_square[c]))
 

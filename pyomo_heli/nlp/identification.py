@@ -205,7 +205,7 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
                 a, ratio = lead_in_ar(data.maneuvers, c, opts.input_error_ar, input_record=True)
                 m.input_error_ar[c] = list(a)
                 err_sigma[c] = sigma[c] * ratio
-                errs[c] = [w for n, e in _per_record(errs[c], m, names) for w in _ar_innovation(e, a)]
+                errs[c] = [w for e in _per_record(errs[c], m, names) for w in _ar_innovation(e, a)]
         add_known_noise_time_objective(m, residuals, list(opts.time_outputs), sigma, errs, err_sigma)
     elif data.maneuvers and opts.time_outputs:
         add_time_objective(m, residuals, list(opts.time_outputs), opts.covariance,
@@ -230,11 +230,11 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
 
 
 def _per_record(errors: list, m, names) -> list:
-    """(maneuver name, its slice of ``errors``): the flat list of every record's input samples, cut per record."""
+    """The flat list of every record's input-sample errors, cut into one list per record."""
     out, i = [], 0
     for n in names:
         k = len(m.man[n].input_samples)
-        out.append((n, errors[i:i + k]))
+        out.append(errors[i:i + k])
         i += k
     return out
 

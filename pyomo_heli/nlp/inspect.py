@@ -229,7 +229,9 @@ def _header(cfg, m, data) -> list[str]:
            f"outputs:  time {', '.join(opts.time_outputs) or '-'}; trim {', '.join(opts.trim_outputs) or '-'}; "
            + (f"covariance {opts.covariance}" if not opts.input_errors else
               f"input errors {', '.join(opts.input_errors)} (noise sigmas "
-              f"{'given' if opts.noise_sigma is not None else 'from the lead-in'})")
+              f"{'given' if opts.noise_sigma is not None else 'from the lead-in'}"
+              + (f"; AR({opts.input_error_ar}) errors" if opts.input_error_ar else "")
+              + ("; each record's reference error" if opts.input_reference_error else "") + ")")
            + f"; collocation {opts.scheme}, ncp={opts.ncp}"
            + (f"; resample {cfg.resample_hz:g} Hz" if cfg.resample_hz else "")
            + (f"; max duration {cfg.max_duration:g} s" if cfg.max_duration else ""),

@@ -190,17 +190,17 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
         if lacking:
             problems.add("objectives.noise_sigma", f"no sigma for {lacking} (every time output and every channel of "
                                                    f"input_errors needs one); keys: {', '.join(SENSOR_SIGMA_KEYS)}")
-    if obj.input_error_ar and not in_err:
-        problems.add("objectives", "field 'input_error_ar' models the input errors: give input_errors too")
-    elif obj.input_error_ar and not in_ref:
-        problems.add("objectives", "field 'input_error_ar': the errors' model comes from the records' quiet lead-in; "
-                                   "give [data] input_reference_s > 0")
-    if obj.input_reference_error and not in_err:
-        problems.add("objectives", "field 'input_reference_error' is an error of the input errors' reference: give "
-                                   "input_errors too")
-    elif obj.input_reference_error and not in_ref:
-        problems.add("objectives", "field 'input_reference_error': the inputs are referred to their first sample; "
-                                   "give [data] input_reference_s > 0")
+    # the errors-in-variables refinements: (key, what it needs input_errors for, what it needs the lead-in for)
+    for key, without_errors, without_lead_in in (
+            ("input_error_ar", "models the input errors", "the errors' model comes from the records' quiet lead-in"),
+            ("output_error_ar", "weighs the known-noise J_time of the errors in variables",
+             "the noise model comes from the records' quiet lead-in"),
+            ("input_reference_error", "is an error of the input errors' reference",
+             "the inputs are referred to their first sample")):
+        if getattr(obj, key) and not in_err:
+            problems.add("objectives", f"field '{key}' {without_errors}: give input_errors too")
+        elif getattr(obj, key) and not in_ref:
+            problems.add("objectives", f"field '{key}': {without_lead_in}; give [data] input_reference_s > 0")
     use, linear = _objectives_use(s, raw, problems)
     diagnosis = None
     if s.diagnosis is not None:
@@ -228,7 +228,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
     problems.raise_if_any()
     nlp = NLPOptions(time_outputs=t_out, trim_outputs=r_out, covariance=obj.covariance, ncp=s.discretization.ncp,
                      input_errors=in_err, noise_sigma=noise_sigma, input_error_ar=obj.input_error_ar,
-                     input_reference_error=obj.input_reference_error)
+                     input_reference_error=obj.input_reference_error, output_error_ar=obj.output_error_ar)
     par = s.pareto
     counts = par.points if isinstance(par.points, list) else [par.points]
     if not counts or not all(2 <= n <= 1000 for n in counts):

@@ -211,6 +211,34 @@ def test_input_error_ar_weighs_the_errors_by_their_innovations(reference):
     assert pyo.value(m.J_input) == pytest.approx(total, rel=1e-10)
 
 
+def test_output_error_ar_weighs_each_records_residuals_by_their_innovations():
+    """``output_error_ar = 2``: J_output is the likelihood of each record's output residuals' one-step prediction
+    errors under the AR model of that output's lead-in (recomputed with numpy at the start point), the innovation
+    sigma that of the model; the residuals of the 25 Hz outputs are correlated too (ratio below 1)."""
+    import pyomo.environ as pyo
+
+    from pyomo_heli.nlp.objectives import lead_in_ar
+
+    cfg = load_identification_config(CONFIG, {"objectives": {"output_error_ar": 2}})
+    m, data, _ = build_problem(cfg)
+    outputs = list(cfg.nlp.time_outputs)
+    sigma = lead_in_sigma(data.maneuvers, outputs)
+    total = 0.0
+    for o in outputs:
+        a, ratio = lead_in_ar(data.maneuvers, o, 2)
+        print(o, "AR(2) coefficients", a, "innovation / noise sigma", ratio)
+        assert list(a) == m.output_error_ar[o] and 0.3 < ratio < 1.0
+        s_w = sigma[o] * ratio
+        for mv in data.maneuvers:
+            blk = m.man[mv.name]
+            r = mv.data[o].to_numpy() - np.array([pyo.value(blk.y[o, t]) for t in blk.samples])
+            w = r - a[0] * np.r_[0.0, r[:-1]] - a[1] * np.r_[0.0, 0.0, r[:-2]]
+            total += np.sum(w**2) / (2 * s_w**2) + len(w) * math.log(s_w)
+    for o in outputs:
+        m.mean_square[o].set_value(pyo.value(m.sum_square[o]) / pyo.value(m.square_count[o]))
+    assert pyo.value(m.J_output) == pytest.approx(total, rel=1e-10)
+
+
 def test_input_reference_error_takes_up_a_lead_in_offset(tmp_path):
     """A known reference error: M0's noise-free 80 kt 3211 with its recorded lon raised by delta = 0.04 deg (2 sigma)
     over the 1.9 s lead-in only. Referred to the lead-in mean, every later increment is then delta too low: the
@@ -257,6 +285,9 @@ def test_input_reference_error_takes_up_a_lead_in_offset(tmp_path):
     ('input_error_ar = 2', "'input_error_ar' models the input errors: give input_errors too"),
     ('input_reference_error = true', "'input_reference_error' is an error of the input errors' reference: give "
                                      "input_errors too"),
+    ('output_error_ar = 2', "'output_error_ar' weighs the known-noise J_time of the errors in variables: give "
+                            "input_errors too"),
+    ('input_errors = ["col"]\noutput_error_ar = 9', "'output_error_ar' must be an integer 0..8"),
     ('input_errors = ["col"]\ninput_reference_error = 1', "'input_reference_error' must be bool"),
     ('input_errors = ["col", "ped"]', "unknown input channel.*'ped'"),
     ('input_errors = ["col"]\nnoise_sigma = { nz_gee = 0.01 }', "unknown key 'nz_gee'"),

@@ -67,6 +67,10 @@ class NLPOptions:
     #: is then its increment's error plus the record's reference error ``blk.u_ref``, the errors' mean over the
     #: lead-in is zero by construction (``blk.lead_in_mean``), and the noise model applies to the sum
     input_reference_error: bool = False
+    #: order of the autoregressive model of the output noise, fitted to the records' quiet lead-in like the input
+    #: errors' (``objectives.lead_in_ar``); J_output then weighs each record's residuals by their one-step prediction
+    #: errors. 0: independent residuals. Needs ``input_errors`` (the known-noise J_time)
+    output_error_ar: int = 0
 
     def __post_init__(self):
         bad = [o for o in self.time_outputs if o not in TIME_OUTPUTS]
@@ -81,8 +85,12 @@ class NLPOptions:
         bad = [c for c in self.input_errors if c not in INPUTS]
         if bad:
             raise ValueError(f"unknown input channel(s) {bad} in input_errors; choose from {', '.join(INPUTS)}")
-        if not (isinstance(self.input_error_ar, int) and 0 <= self.input_error_ar <= MAX_INPUT_ERROR_AR):
-            raise ValueError(f"input_error_ar = {self.input_error_ar!r}: an integer from 0 to {MAX_INPUT_ERROR_AR}")
+        for name in ("input_error_ar", "output_error_ar"):
+            order = getattr(self, name)
+            if not (isinstance(order, int) and 0 <= order <= MAX_INPUT_ERROR_AR):
+                raise ValueError(f"{name} = {order!r}: an integer from 0 to {MAX_INPUT_ERROR_AR}")
+        if self.output_error_ar and not self.input_errors:
+            raise ValueError("output_error_ar weighs the known-noise J_time: give input_errors too")
         if self.noise_sigma is not None:
             bad = [k for k, v in self.noise_sigma.items() if not (isinstance(v, (int, float)) and v > 0)]
             if bad:
@@ -205,8 +213,19 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
                 a, ratio = lead_in_ar(data.maneuvers, c, opts.input_error_ar, input_record=True)
                 m.input_error_ar[c] = list(a)
                 err_sigma[c] = sigma[c] * ratio
-                errs[c] = [w for e in _per_record(errs[c], m, names) for w in _ar_innovation(e, a)]
-        add_known_noise_time_objective(m, residuals, list(opts.time_outputs), sigma, errs, err_sigma)
+                errs[c] = [w for e in _cut(errs[c], [len(m.man[n].input_samples) for n in names])
+                           for w in _ar_innovation(e, a)]
+        out_sigma = dict(sigma)
+        if opts.output_error_ar:
+            # the same for the output noise, on each record's residuals at its samples
+            m.output_error_ar = {}
+            counts = [len(m.man[n].samples) for n in names]
+            for o in opts.time_outputs:
+                a, ratio = lead_in_ar(data.maneuvers, o, opts.output_error_ar)
+                m.output_error_ar[o] = list(a)
+                out_sigma[o] = sigma[o] * ratio
+                residuals[o] = [w for e in _cut(residuals[o], counts) for w in _ar_innovation(e, a)]
+        add_known_noise_time_objective(m, residuals, list(opts.time_outputs), out_sigma, errs, err_sigma)
     elif data.maneuvers and opts.time_outputs:
         add_time_objective(m, residuals, list(opts.time_outputs), opts.covariance,
                            {o: np.array(v) for o, v in init_res.items()})
@@ -229,12 +248,11 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
     return m
 
 
-def _per_record(errors: list, m, names) -> list:
-    """The flat list of every record's input-sample errors, cut into one list per record."""
+def _cut(flat: list, counts: list) -> list:
+    """A flat list of every record's entries, cut into one list per record (``counts``: each record's length)."""
     out, i = [], 0
-    for n in names:
-        k = len(m.man[n].input_samples)
-        out.append(errors[i:i + k])
+    for k in counts:
+        out.append(flat[i:i + k])
         i += k
     return out
 

@@ -231,7 +231,8 @@ def _header(cfg, m, data) -> list[str]:
               f"input errors {', '.join(opts.input_errors)} (noise sigmas "
               f"{'given' if opts.noise_sigma is not None else 'from the lead-in'}"
               + (f"; AR({opts.input_error_ar}) errors" if opts.input_error_ar else "")
-              + ("; each record's reference error" if opts.input_reference_error else "") + ")")
+              + ("; each record's reference error" if opts.input_reference_error else "")
+              + (f"; AR({opts.output_error_ar}) output noise" if opts.output_error_ar else "") + ")")
            + f"; collocation {opts.scheme}, ncp={opts.ncp}"
            + (f"; resample {cfg.resample_hz:g} Hz" if cfg.resample_hz else "")
            + (f"; max duration {cfg.max_duration:g} s" if cfg.max_duration else ""),

@@ -144,12 +144,16 @@ class ObjectivesTable(Table):
     input_error_ar: int = Field(0, ge=0, le=8, description="order of the autoregressive model of the input errors, "
                                                            "fitted to the records' quiet lead-in (0: independent "
                                                            "errors)")
+    output_error_ar: int = Field(0, ge=0, le=8, description="order of the autoregressive model of the output noise, "
+                                                             "fitted to the records' quiet lead-in (0: independent "
+                                                             "residuals); with input_errors")
     input_reference_error: bool = Field(False, description="estimate each record's input reference error too: the "
                                                            "noise mean of the quiet lead-in the increments are "
                                                            "referred to")
 
     messages = {"covariance": "field 'covariance' must be diagonal or full",
-                "input_error_ar": (None, "field 'input_error_ar' must be an integer 0..8")}
+                "input_error_ar": (None, "field 'input_error_ar' must be an integer 0..8"),
+                "output_error_ar": (None, "field 'output_error_ar' must be an integer 0..8")}
 
 
 class DiscretizationTable(Table):

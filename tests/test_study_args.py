@@ -57,6 +57,8 @@ ROOT = Path(__file__).resolve().parent.parent
      "--input-error-ar: models the input errors, which --identification oe has none of"),
     (["generic_term_level.py", "--seeds", "1", "--input-reference-error", "--identification", "oe", "--out", "OUT"],
      "--input-reference-error: models the input errors, which --identification oe has none of"),
+    (["generic_term_level.py", "--seeds", "1", "--output-error-ar", "9", "--out", "OUT"],
+     "[objectives]: field 'output_error_ar' must be an integer 0..8"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path, monkeypatch, capsys):

@@ -30,7 +30,8 @@ of the config's, into ``OUT/inputs_<choice>``: how the estimates move with the w
 NLP's grid. ``--input-error-ar P``: the fit's ``[objectives] input_error_ar`` (the input errors an AR(P) process
 fitted to the lead-in), into ``OUT/.../input_error_ar<P>``. ``--input-reference-error``: the fit's ``[objectives]
 input_reference_error = true`` (each record's lead-in reference error estimated), into
-``OUT/.../input_reference_error``.
+``OUT/.../input_reference_error``. ``--output-error-ar P``: the fit's ``[objectives] output_error_ar`` (the output
+noise an AR(P) process fitted to the lead-in), into ``OUT/.../output_error_ar<P>``.
 
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per term the seeds, the mean and standard deviation of the
 estimate, the mean and standard deviation of z, the t statistic of the mean estimate (mean over its standard error
@@ -82,10 +83,11 @@ def given_sigmas(cfg, data_config: Path | None, input_scale: float = 1.0) -> dic
 def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: Path,
              exact_inputs: bool = False, identification: str = "eiv", input_sigma_scale: float = 1.0,
              resample_inputs: str | None = None, input_error_ar: int | None = None,
-             input_reference_error: bool = False) -> dict:
+             input_reference_error: bool = False, output_error_ar: int | None = None) -> dict:
     """The NLP estimates of ``terms`` on one seed (read back from ``OUT/seed_<seed>.json`` when it holds them);
-    ``resample_inputs``, ``input_error_ar`` and ``input_reference_error`` (if true) override the config's ``[data]
-    resample_inputs`` and ``[objectives] input_error_ar`` and ``input_reference_error``."""
+    ``resample_inputs``, ``input_error_ar``, ``input_reference_error`` (if true) and ``output_error_ar`` override the
+    config's ``[data] resample_inputs`` and ``[objectives] input_error_ar``, ``input_reference_error`` and
+    ``output_error_ar``."""
     from pyomo_heli.diagnosis.discovery import nlp_screen
 
     f = out / f"seed_{seed}.json"
@@ -97,7 +99,8 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
         if (doc and doc.get("config") == str(config) and set(terms) <= set(doc["fits"])
                 and doc.get("input_sigma_scale", 1.0) == input_sigma_scale
                 and doc.get("resample_inputs") == resample_inputs and doc.get("input_error_ar") == input_error_ar
-                and doc.get("input_reference_error", False) == input_reference_error):
+                and doc.get("input_reference_error", False) == input_reference_error
+                and doc.get("output_error_ar") == output_error_ar):
             return doc
     data = m0_noise_data(seed, data_config, out, input_noise=not exact_inputs)
     over = {"data": {"dataset": str(data), **({"resample_inputs": resample_inputs} if resample_inputs else {})}}
@@ -105,7 +108,8 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
         over["objectives"] = {"input_errors": []}
     else:
         over["objectives"] = {**({"input_error_ar": input_error_ar} if input_error_ar is not None else {}),
-                              **({"input_reference_error": True} if input_reference_error else {})}
+                              **({"input_reference_error": True} if input_reference_error else {}),
+                              **({"output_error_ar": output_error_ar} if output_error_ar is not None else {})}
     cfg = load_identification_config(config, overrides=over)
     if cfg.nlp.input_errors and (exact_inputs or input_sigma_scale != 1.0):
         cfg = load_identification_config(config, overrides={**over, "objectives": {**over["objectives"],
@@ -121,7 +125,8 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
                    "success": bool(r["success"])}
     doc = {"seed": seed, "config": str(config), "exact_inputs": exact_inputs, "identification": identification,
            "input_sigma_scale": input_sigma_scale, "resample_inputs": resample_inputs, "input_error_ar": input_error_ar,
-           "input_reference_error": input_reference_error, "J0": float(s["J0"]), "fits": fits}
+           "input_reference_error": input_reference_error, "output_error_ar": output_error_ar, "J0": float(s["J0"]),
+           "fits": fits}
     f.write_text(json.dumps(doc, indent=1))
     shutil.rmtree(data, ignore_errors=True)
     return doc
@@ -174,6 +179,9 @@ def main(argv=None) -> int:
     ap.add_argument("--input-reference-error", action="store_true",
                     help="[objectives] input_reference_error = true for the fit: each record's lead-in reference "
                          "error estimated too, into OUT/.../input_reference_error")
+    ap.add_argument("--output-error-ar", type=nonneg_int, default=None, metavar="P",
+                    help="[objectives] output_error_ar for the fit: the output noise an AR(P) process fitted to the "
+                         "lead-in (default: the config's), into OUT/.../output_error_ar<P>")
     a = ap.parse_args(argv)
     try:
         seeds = seeds_of(a.seeds)
@@ -191,10 +199,13 @@ def main(argv=None) -> int:
         ap.error(str(exc))
     if not (math.isfinite(a.input_sigma_scale) and a.input_sigma_scale > 0):
         ap.error(f"--input-sigma-scale: must be a positive number, got {a.input_sigma_scale:g}")
-    for flag, key, value in (("--input-error-ar", "input_error_ar", a.input_error_ar),
-                             ("--input-reference-error", "input_reference_error", a.input_reference_error or None)):
+    for flag, key, value, what in (
+            ("--input-error-ar", "input_error_ar", a.input_error_ar, "models the input errors"),
+            ("--input-reference-error", "input_reference_error", a.input_reference_error or None,
+             "models the input errors"),
+            ("--output-error-ar", "output_error_ar", a.output_error_ar, "weighs the errors-in-variables J_time")):
         if value is not None and a.identification == "oe":
-            ap.error(f"{flag}: models the input errors, which --identification oe has none of")
+            ap.error(f"{flag}: {what}, which --identification oe has none of")
         if value is not None:
             try:
                 load_identification_config(config, {"objectives": {key: value}})
@@ -206,14 +217,15 @@ def main(argv=None) -> int:
                    + ([f"input_sigma_x{a.input_sigma_scale:g}"] if a.input_sigma_scale != 1.0 else [])
                    + ([f"inputs_{a.resample_inputs}"] if a.resample_inputs else [])
                    + ([f"input_error_ar{a.input_error_ar}"] if a.input_error_ar is not None else [])
-                   + (["input_reference_error"] if a.input_reference_error else []))
+                   + (["input_reference_error"] if a.input_reference_error else [])
+                   + ([f"output_error_ar{a.output_error_ar}"] if a.output_error_ar is not None else []))
     out = out_folder(ap, a.out) / sub
     out.mkdir(parents=True, exist_ok=True)
     docs = []
     for s in seeds:
         docs.append(one_seed(s, a.terms, config.resolve(), data_config.resolve(), out, a.exact_inputs,
                              a.identification, a.input_sigma_scale, a.resample_inputs, a.input_error_ar,
-                             a.input_reference_error))
+                             a.input_reference_error, a.output_error_ar))
         fits = docs[-1]["fits"]
         print(f"seed {s}: " + ", ".join(f"{n} c = {fits[n]['estimate']:+.4g} (z {fits[n]['z']:+.2f})" for n in a.terms),
               flush=True)
@@ -232,6 +244,7 @@ def main(argv=None) -> int:
               + (f"; inputs resampled by {a.resample_inputs!r}" if a.resample_inputs else "")
               + (f"; input errors an AR({a.input_error_ar}) process" if a.input_error_ar is not None else "")
               + ("; each record's input reference error estimated" if a.input_reference_error else "")
+              + (f"; output noise an AR({a.output_error_ar}) process" if a.output_error_ar is not None else "")
               + "; expected: mean c and mean z about 0 "
               f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, z beyond +-2 in about 4.6 % of the seeds.")
     (out / "summary.md").write_text(header + "\n\n" + markdown_table(tab, digits=3) + "\n\nPer seed:\n\n"

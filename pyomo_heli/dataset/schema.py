@@ -303,10 +303,16 @@ class Maneuver:
         return src["t"].to_numpy(dtype=float), _increments(src, channels, self.input_reference_s)
 
 
+def lead_in(t, reference_s: float) -> np.ndarray:
+    """Mask of the samples of times ``t`` [s] in a record's quiet lead-in: t <= t[0] + ``reference_s``."""
+    t = np.asarray(t, dtype=float)
+    return t <= t[0] + reference_s
+
+
 def _increments(df: pd.DataFrame, channels, reference_s: float) -> dict[str, np.ndarray]:
     """Channel -> the column of ``df`` minus its first value, or its mean over t <= t[0] + ``reference_s``."""
     t = df["t"].to_numpy(dtype=float)
-    lead = t <= t[0] + reference_s if reference_s > 0 else slice(0, 1)
+    lead = lead_in(t, reference_s) if reference_s > 0 else slice(0, 1)
     out = {}
     for ch in channels:
         x = df[ch].to_numpy(dtype=float)

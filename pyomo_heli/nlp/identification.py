@@ -23,6 +23,7 @@ import pyomo.environ as pyo
 from pyomo.common.gc_manager import PauseGC
 
 from ..channels import INPUTS, OUTPUTS, TRIM_CHANNELS
+from ..dataset.schema import lead_in
 from ..physics.model import FLAPPING, HelicopterModel
 from ..simulation.replay import replay
 from ..simulation.trim import trim_sweep
@@ -271,7 +272,7 @@ def _with_reference_errors(m, data: IdentificationData, names, channels, sigma: 
             raise ValueError(f"maneuver {n}: input_reference_error needs the inputs referred to a quiet lead-in; "
                              f"give [data] input_reference_s > 0")
         t_in = list(blk.input_samples)
-        lead = [t for t in t_in if t <= t_in[0] + mv.input_reference_s]
+        lead = [t for t, inside in zip(t_in, lead_in(t_in, mv.input_reference_s)) if inside]
         blk.u_ref = pyo.Var(list(channels), initialize=0.0,
                             bounds=lambda _, c: (-INPUT_ERROR_BOUND * sigma[c], INPUT_ERROR_BOUND * sigma[c]))
         blk.lead_in_mean = pyo.Constraint(list(channels),

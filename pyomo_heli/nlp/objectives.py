@@ -40,6 +40,7 @@ import math
 import numpy as np
 import pyomo.environ as pyo
 
+from ..dataset.schema import lead_in
 from ..units import DEG
 
 #: resolution floor of each output in the likelihood [SI units]
@@ -166,8 +167,7 @@ def _lead_in(mv, channel: str, input_record: bool, what: str, remedy: str) -> np
         raise ValueError(f"maneuver {mv.name}: {what} from the quiet lead-in, but no lead-in is set: {remedy}")
     rec = mv.inputs_record if input_record else None
     src = rec if rec is not None and channel in rec else mv.data
-    t = src["t"].to_numpy()
-    return src[channel].to_numpy(dtype=float)[t <= t[0] + mv.input_reference_s]
+    return src[channel].to_numpy(dtype=float)[lead_in(src["t"], mv.input_reference_s)]
 
 
 def lead_in_ar(maneuvers, channel: str, order: int, input_record: bool = False) -> tuple[np.ndarray, float]:

@@ -63,11 +63,13 @@ class DiagnosisSettings:
     the sensitivities stay the NLP's); ``"fit"``, the replay driven by the inputs as the NLP takes them (``[data]
     resample_hz``, ``resample_inputs``), which differ from the recorded ones and leave a deterministic residual
     that the input path reads as an input error. Without resampling the two are the same. docs/diagnosis.md,
-    step 7.
+    step 7. ``input_path_family``: the input path's dictionary, ``"standard"`` or ``"extended"`` (each input's free
+    play and dead zone too; :mod:`pyomo_heli.diagnosis.input_path`).
     """
     input_noise: tuple = ()
     noise_sigma: dict | None = None
     replay: str = "record"
+    input_path_family: str = "standard"
 
 
 def unit_factor(spec, unit: str | None) -> float:
@@ -207,7 +209,7 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
         chans, sigma = _input_errors(s.diagnosis, problems, in_ref, "diagnosis", "input_noise")
         if "input_noise" not in (raw.get("diagnosis") or {}) and s.diagnosis.noise_sigma is None:
             chans, sigma = in_err, noise_sigma  # a [diagnosis] table of other settings: the identification's model
-        diagnosis = DiagnosisSettings(chans, sigma, s.diagnosis.replay)
+        diagnosis = DiagnosisSettings(chans, sigma, s.diagnosis.replay, s.diagnosis.input_path_family)
 
     # ---- the solver and the front
     sol = s.solver

@@ -94,13 +94,20 @@ def data_config(template: str, effect: str, seed: int, strengths: dict | None = 
     return text
 
 
+class StudyFolderError(ValueError):
+    """A case folder holds another study's files (the folder given is at fault, not the code)."""
+
+
 def generate_case(case: Path, template: str, effect: str, seed: int) -> Path:
     """The flight test of ``effect`` and ``seed`` in ``case/data`` (generated unless it is there): its generator
     config ``case/gen.toml`` is ``template`` with the truth effect and seed replaced (:func:`data_config`)."""
-    data = case / "data"
+    data, wanted = case / "data", data_config(template, effect, seed)
+    if (data / "truth.json").is_file() and (case / "gen.toml").is_file() and (case / "gen.toml").read_text() != wanted:
+        raise StudyFolderError(f"{case}: its flight test was generated from another generator config "
+                               f"({case / 'gen.toml'}); give this study another folder")
     if not (data / "truth.json").is_file():
         case.mkdir(parents=True, exist_ok=True)
-        (case / "gen.toml").write_text(data_config(template, effect, seed))
+        (case / "gen.toml").write_text(wanted)
         run_command(["generate-data", "--config", str(case / "gen.toml"), "--out", str(data)])
     return data
 
@@ -708,13 +715,17 @@ def truth_input_error(effect: str, setup: SignatureSetup) -> dict:
 
 def input_path_history(terms: list, setup: SignatureSetup) -> dict:
     """The input error the residual analysis reports, sum of estimate x signal (:mod:`pyomo_heli.diagnosis.input_path`),
-    along the validation records of M0 at the truth parameters {maneuver: {"col": array, "lon": array}} [rad]."""
-    from pyomo_heli.diagnosis.input_path import input_error, signal_values
+    along the validation records of M0 at the truth parameters {maneuver: {"col": array, "lon": array}} [rad]. The play
+    signals' widths from the records' lead-in, as the analysis takes them."""
+    from pyomo_heli.diagnosis.input_path import input_error, play_widths, signal_values
+    from pyomo_heli.nlp.objectives import noise_sigmas
 
     out = {}
+    widths = play_widths(noise_sigmas(setup.maneuvers, ("col", "lon")))
     for mv in setup.maneuvers:
         df, t = setup.base.maneuvers[mv.name], mv.data["t"].to_numpy(dtype=float)
-        sig = signal_values(t, mv.increments(), {o: df[o].to_numpy(dtype=float) for o in ("q", "theta", "TAS")})
+        sig = signal_values(t, mv.increments(), {o: df[o].to_numpy(dtype=float) for o in ("q", "theta", "TAS")},
+                            widths)
         out[mv.name] = input_error(terms, sig, len(t))
     return out
 
@@ -977,9 +988,11 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
         # what of the config the analysis depends on: another resampling or replay is another analysis
         noise = cfg.diagnosis_settings
         made_with = {"resample_hz": cfg.resample_hz, "resample_inputs": cfg.resample_inputs,
-                     "input_noise": list(noise.input_noise), "replay": noise.replay}
-        if (fr.get("analysis") != RESIDUAL_ANALYSIS or fr.get("parameters") != pars
-                or fr.get("made_with", {**made_with, "replay": "fit"}) != made_with):
+                     "input_noise": list(noise.input_noise), "replay": noise.replay,
+                     "input_path_family": noise.input_path_family}
+        # a cache made before a setting was recorded was made with its default then
+        old = {"input_path_family": "standard", **fr.get("made_with", {**made_with, "replay": "fit"})}
+        if fr.get("analysis") != RESIDUAL_ANALYSIS or fr.get("parameters") != pars or old != made_with:
             v = residual_verdict(cfg, pars, progress=lambda s: None)
             fr = {"analysis": RESIDUAL_ANALYSIS, "status": v["status"], "findings": v.get("findings", []),
                   "record_biases": v.get("record_biases") or {}, "input_path": v.get("input_path") or {},
@@ -1107,6 +1120,9 @@ def main(argv=None) -> int:
     ap.add_argument("--generic-family", choices=["standard", "extended"],
                     help="set the config's [loop] generic_family (the config is copied, with it, to "
                          "OUT/loop_<family>.toml); extended: + speed products and input scale factors")
+    ap.add_argument("--input-path-family", choices=["standard", "extended"],
+                    help="set the config's [diagnosis] input_path_family (copied to OUT/input_path_<family>.toml): the "
+                         "residual analysis's input-path dictionary; extended: + each input's free play and dead zone")
     ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
     ap.add_argument("--out", required=True)
     ap.add_argument("--bundled", action="store_true",
@@ -1161,6 +1177,8 @@ def main(argv=None) -> int:
     config = in_file(ap, a.config, "--config")
     if a.generic_family:
         config = with_generic_family(config, a.generic_family, out)
+    if a.input_path_family:
+        config = with_input_path_family(config, a.input_path_family, out)
     if a.rescore:
         if not (out / "held_out.csv").is_file():
             ap.error(f"--rescore: {out / 'held_out.csv'} not found")
@@ -1176,7 +1194,10 @@ def main(argv=None) -> int:
         if free != sorted(PARAMETERS):
             ap.error(f"--config {config}: --reanalyse rebuilds the kept parameters {', '.join(PARAMETERS)} from the "
                      f"table; this config frees {', '.join(free)}")
-        reanalyse(out, Path(a.reanalyse), config, in_file(ap, a.data_config, "--data-config").read_text())
+        try:
+            reanalyse(out, Path(a.reanalyse), config, in_file(ap, a.data_config, "--data-config").read_text())
+        except StudyFolderError as exc:
+            ap.error(f"--reanalyse: {exc}")
         print((out / "held_out.md").read_text())
         return 0
     if a.evaluate_only:
@@ -1219,12 +1240,25 @@ def main(argv=None) -> int:
 
 def with_generic_family(config: Path, family: str, out: Path) -> Path:
     """``OUT/loop_<family>.toml``: CONFIG with ``[loop] generic_family = family`` and its dataset path made absolute."""
-    text = re.sub(r"(?m)^generic_family\s*=.*\n", "", config.read_text())
-    text = text.replace("\n[loop]\n", f'\n[loop]\ngeneric_family = "{family}"\n', 1)
+    return with_setting(config, "loop", "generic_family", family, out / f"loop_{family}.toml")
+
+
+def with_input_path_family(config: Path, family: str, out: Path) -> Path:
+    """``OUT/input_path_<family>.toml``: CONFIG with ``[diagnosis] input_path_family = family``."""
+    return with_setting(config, "diagnosis", "input_path_family", family, out / f"input_path_{family}.toml")
+
+
+def with_setting(config: Path, table: str, key: str, value: str, path: Path) -> Path:
+    """``path``: CONFIG with ``[table] key = "value"`` (the table added if CONFIG has none) and its dataset path
+    made absolute."""
+    text = re.sub(rf"(?m)^{key}\s*=.*\n", "", config.read_text())
+    if f"\n[{table}]\n" in text:
+        text = text.replace(f"\n[{table}]\n", f'\n[{table}]\n{key} = "{value}"\n', 1)
+    else:
+        text = text.rstrip("\n") + f'\n\n[{table}]\n{key} = "{value}"\n'
     text = re.sub(r'(?m)^dataset\s*=\s*"([^"]*)"',
                   lambda m: f'dataset = "{(config.parent / m.group(1)).resolve().as_posix()}"', text, count=1)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / f"loop_{family}.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
     return path
 

@@ -727,6 +727,36 @@ def test_the_study_runs_the_extended_family_through_a_copy_of_the_config(tmp_pat
     assert base.generic_family == "standard"
 
 
+def test_the_study_sets_the_input_path_family_through_a_copy_of_the_config(tmp_path):
+    """--input-path-family writes OUT/input_path_<family>.toml: the config with [diagnosis] input_path_family set
+    (a config without a [diagnosis] table gets one)."""
+    from pyomo_heli.config import load_identification_config
+
+    study = _study()
+    path = study.with_input_path_family(study.CONFIG, "extended", tmp_path / "out")
+    assert path == tmp_path / "out" / "input_path_extended.toml"
+    assert load_identification_config(path).diagnosis_settings.input_path_family == "extended"
+    bare = tmp_path / "bare.toml"
+    bare.write_text("\n".join(line for line in study.CONFIG.read_text().splitlines()
+                               if line != "[diagnosis]" and not line.startswith("replay ="))
+                    .replace('dataset = "../', f'dataset = "{ROOT.as_posix()}/'))
+    cfg = load_identification_config(study.with_input_path_family(bare, "extended", tmp_path / "b"))
+    assert cfg.diagnosis_settings.input_path_family == "extended"
+    assert load_identification_config(study.CONFIG).diagnosis_settings.input_path_family == "standard"
+
+
+def test_a_case_folder_of_another_generator_config_is_refused(tmp_path):
+    """The small and the full-size study generate the same effect and seed from other templates: a scratch folder
+    that holds one is never taken for the other."""
+    study = _study()
+    case = tmp_path / "tail_stall_20261122"
+    (case / "data").mkdir(parents=True)
+    (case / "data" / "truth.json").write_text("{}")
+    (case / "gen.toml").write_text("seed = 1\n")
+    with pytest.raises(study.StudyFolderError, match="generated from another generator config"):
+        study.generate_case(case, (ROOT / "data" / "bo105_synthetic.toml").read_text(), "tail_stall", 20261122)
+
+
 def test_the_third_blind_set_moves_what_its_equations_say():
     """H14-H16 at their nominal strengths, against the equations of their docstrings evaluated here by hand: the
     skewed wake's inflow gradient adds -gamma kappa_x lambda_i / 8 to the cosine row of M0's flap equation (the

@@ -17,7 +17,7 @@ import pytest
 
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.diagnosis.analysis import Diagnosis, diagnose
-from pyomo_heli.diagnosis.input_path import SIGNALS, InputPathTest, input_path_test
+from pyomo_heli.diagnosis.input_path import SIGNALS, InputPathTest, input_path_test, play, play_signal, zone_signal
 from pyomo_heli.diagnosis.residuals import compute_residuals
 from pyomo_heli.flighttest.generate import truth_model_of
 
@@ -111,17 +111,22 @@ def test_record_block_corrected_least_squares_gives_standard_normal_z_on_an_exac
     assert plain["col x col"] < -2.0 and plain["lon x lon"] < -2.0, plain
 
 
-def _residuals(dataset: Path):
-    cfg = load_identification_config(EIV, overrides={"data": {"dataset": str(dataset)}})
+def _residuals(dataset: Path, family: str = "standard"):
+    cfg = load_identification_config(EIV, overrides={"data": {"dataset": str(dataset)},
+                                                     "diagnosis": {"input_path_family": family}})
     model = truth_model_of(dataset)
     cfg = dataclasses.replace(cfg, maneuvers=list(MANEUVERS), validation=[], model=model)
     return compute_residuals(cfg, model.parameters.to_dict(), label="truth", trim_sensitivities=False)
 
 
-def test_the_exact_model_leaves_the_input_errors_white():
-    d = diagnose(_residuals(ROOT / "data" / "bo105_synthetic"))
+@pytest.mark.parametrize("family, signals", [("standard", 7), ("extended", 11)])
+def test_the_exact_model_leaves_the_input_errors_white(family, signals):
+    """Either dictionary: the standard one (7 signals per input channel) or the extended one (each input's free
+    play and dead zone too)."""
+    d = diagnose(_residuals(ROOT / "data" / "bo105_synthetic", family))
     assert d.input_path["consistent"] and d.verdict["input_path_consistent"], d.input_path
-    assert d.input_path["records"] == len(MANEUVERS) and len(d.input_path["screen"]) == 14
+    assert d.input_path["records"] == len(MANEUVERS) and len(d.input_path["screen"]) == 2 * signals
+    assert len(SIGNALS) == 11 and bool(d.input_path["play_widths"]) == (family == "extended")
     assert not any(f.startswith("input path") for f in d.findings)
 
 
@@ -307,3 +312,81 @@ def test_diagnosis_replay_is_checked_and_keeps_the_input_noise_model():
     plain = load_identification_config(EIV)
     assert cfg.diagnosis_settings.replay == "fit" and plain.diagnosis_settings.replay == "record"
     assert cfg.diagnosis_settings.input_noise == plain.diagnosis_settings.input_noise != ()
+
+
+def test_the_play_operator_follows_a_known_sequence():
+    """Analytic: width 1, the follower starts on the input, moves only when pushed half the width away and keeps
+    its side when the input reverses within the play."""
+    p, j = play(np.array([0.0, 1.0, 2.0, 1.9, 1.5, 0.0, 0.5]), 1.0)
+    assert p.tolist() == [0.0, 0.5, 1.5, 1.5, 1.5, 0.5, 0.5] and j.tolist() == [0, 1, 2, 2, 2, 5, 5]
+
+
+@pytest.mark.parametrize("signal", [play_signal, zone_signal])
+def test_the_play_and_dead_zone_noise_maps_are_their_exact_linearisation(signal):
+    """The map of the input's sample errors into the signal (what corrected least squares takes out) against
+    central differences of the signal itself, on ramps and holds whose switching a small change does not move."""
+    t = np.arange(0.0, 8.0, 0.04)
+    u = np.radians(np.interp(t, [0, 2, 2.3, 4, 4.6, 6, 6.2, 8], [0, 0, 1, 1, -1, -1, -0.05, -0.05]))
+    w = np.radians(0.12)
+    x, A = signal(t, u, w)
+    rng = np.random.default_rng(5)
+    du = rng.normal(0, 1e-7, len(t))
+    fd = (signal(t, u + du, w)[0] - signal(t, u - du, w)[0]) / 2
+    assert np.abs(x).max() == pytest.approx(w / 2) and np.allclose(fd, A @ du, atol=1e-12), np.abs(fd - A @ du).max()
+
+
+def _records_with(tmp_path_factory, stick_minus_rotor):
+    """The bundled flight test whose recorded cyclic is the pilot's stick where the rotor flew the recorded one:
+    ``stick_minus_rotor(r)`` of the rotor's cyclic increment r (the recorded one smoothed: the pilot's input, not
+    the noise) [deg], added to the record; nothing else changed."""
+    ds = tmp_path_factory.mktemp("data") / "bo105_synthetic"
+    shutil.copytree(ROOT / "data" / "bo105_synthetic", ds)
+    for name in MANEUVERS:
+        f = ds / "maneuvers" / f"{name}.csv"
+        df = pd.read_csv(f)
+        r = df["lon_deg"].rolling(11, center=True, min_periods=1).mean().to_numpy()
+        df["lon_deg"] += stick_minus_rotor(r - r[:50].mean())
+        df.to_csv(f, index=False)
+    return _residuals(ds, "extended")
+
+
+#: half the play or dead band the tests write into the control path [deg]: the stick moves this much before the
+#: rotor follows
+H_DEG = 0.05
+
+
+#: how far the rotor's input must move before the tests' pilot is taken to move the stick [deg] (the smoothed
+#: recorded noise is 0.006 deg)
+MOVE_DEG = 0.05
+
+
+def _dead_zone_stick(r):
+    """The stick of a dead band of half-width H_DEG about the trim: beyond MOVE_DEG from it the stick leads the
+    rotor by H_DEG away from the trim; closer, the pilot holds the trim and the rotor's input is its noise."""
+    return H_DEG * np.sign(r) * (np.abs(r) > MOVE_DEG)
+
+
+def _free_play_stick(r):
+    """The stick of a free play of H_DEG either side: it leads the rotor by H_DEG in the direction the rotor's input
+    last moved (by MOVE_DEG from its extreme since the last turn), and crosses the play at once on a turn."""
+    d, ext, out = 0.0, r[0], np.zeros_like(r)
+    for k in range(len(r)):
+        if d >= 0 and r[k] < ext - MOVE_DEG or d <= 0 and r[k] > ext + MOVE_DEG:
+            d, ext = (-1.0 if r[k] < ext else 1.0), r[k]
+        ext = max(ext, r[k]) if d > 0 else min(ext, r[k]) if d < 0 else ext
+        out[k] = H_DEG * d
+    return out
+
+
+@pytest.mark.parametrize("stick, signal", [(_dead_zone_stick, "lon_zone"), (_free_play_stick, "lon_play")])
+def test_a_control_path_nonlinearity_the_recorder_misses_is_found(tmp_path_factory, stick, signal):
+    """Known truth: a dead band or a free play in the cyclic's path, written into the records (the rotor flew the
+    bundled inputs, the recorder saw the stick). The input path selects its own signal first, with the play's
+    size: the error is -H_DEG in the direction of the stick's lead, the signal -(w / 2) there (w: its operator's
+    width), so the estimate is about 2 H_DEG / w."""
+    d = diagnose(_records_with(tmp_path_factory, stick))
+    first = d.input_path["terms"][0]
+    assert (first["channel"], first["signal"]) == ("lon", signal), d.input_path["terms"]
+    expected = 2 * np.radians(H_DEG) / d.input_path["play_widths"]["lon"]
+    print(signal, first, "expected about", expected)
+    assert first["z"] > 5 and abs(first["estimate"] / expected - 1) < 0.1, (first, expected)

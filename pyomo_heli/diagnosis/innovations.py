@@ -40,8 +40,8 @@ from ..nlp.objectives import noise_sigmas
 from ..physics.model import HelicopterModel
 from ..simulation.compiled import input_sensitivities, simulate_outputs
 from ..simulation.trim import trim_float
-from .input_path import (expected_inputs, histories, input_path_test, parameter_columns, record_block,
-                         signals_of)
+from .input_path import (expected_inputs, histories, input_path_test, parameter_columns, play_widths,
+                         record_block, signals_of)
 from .timeseries import decimation
 
 
@@ -88,7 +88,7 @@ def record_rate_outputs(model: HelicopterModel, mv, record, outputs, substeps: i
 
 def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigma: dict, test_rate_hz: float,
                          substeps: int = 2, path: list | None = None, nuisance_parameters=(),
-                         record=None) -> tuple[pd.DataFrame, dict]:
+                         record=None, widths: dict | None = None) -> tuple[pd.DataFrame, dict]:
     """Innovations of one prepared maneuver at its test-rate samples (columns ``t`` and ``inn_<o>``), and the
     maneuver's output biases: ``{"bias_<o>": SI, "se_bias_<o>": SI}``, the generalised least-squares estimates
     of the nuisance with their standard errors under the same covariance, scaled by each output's innovation RMS in
@@ -100,7 +100,8 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     (:func:`.input_path.record_block`), with the output sensitivities to ``nuisance_parameters`` (the identified
     parameters) among its nuisance. ``record``: the same maneuver at the record's own rate; given, the residual is
     taken against the replay its recorded inputs drive (at ``mv``'s samples; :func:`record_rate_outputs`), the
-    input-noise model and the sensitivities stay ``mv``'s.
+    input-noise model and the sensitivities stay ``mv``'s. ``widths``: the play and dead-zone signals' widths of the
+    input-path dictionary (:func:`.input_path.play_widths`; None: the standard dictionary, without them).
     """
     t = mv.data["t"].to_numpy(dtype=float)
     n = len(t)
@@ -127,8 +128,8 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
         var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
         quiet = dataclasses.replace(mv, data=mv.data.assign(**expected_inputs(mv, ew, Su, L, var_u, input_errors)))
         P = parameter_columns(model, quiet, outputs, keep, nuisance_parameters, substeps)
-        block = record_block(-e, Su, np.column_stack([N, P]), L, signals_of(model, mv, y, input_errors, substeps),
-                             input_errors, var_u, t, mv.name)
+        signals = signals_of(model, mv, y, input_errors, substeps, widths)
+        block = record_block(-e, Su, np.column_stack([N, P]), L, signals, input_errors, var_u, t, mv.name)
     cov = np.linalg.pinv(Nw.T @ Nw)  # the estimates' covariance if the whitened rows have unit variance
     ew = ew.reshape(m, n_out)
     # each output's noise scale in this record: the RMS of its innovations (1 when the sigmas are right; a record
@@ -144,7 +145,8 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
 
 def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_errors, noise_sigma: dict | None,
                 test_rate_hz: float, substeps: int = 2, problems: list | None = None,
-                parameters=(), records: dict | None = None) -> tuple[pd.DataFrame, dict]:
+                parameters=(), records: dict | None = None,
+                input_path_family: str = "standard") -> tuple[pd.DataFrame, dict]:
     """Innovations of every maneuver: ``maneuvers`` is a list of (role, prepared maneuver).
 
     ``sigma_from``: the maneuvers whose lead-in gives the sigmas when ``noise_sigma`` is None (the
@@ -156,6 +158,7 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     regression of the input errors on the generic dictionary (:mod:`.input_path`), a shift of ``parameters`` (the
     identified ones) allowed. ``records``: maneuver name -> the same maneuver at the record's rate, whose recorded
     inputs drive the replay the residuals are taken against (``[diagnosis] replay = "record"``).
+    ``input_path_family``: "extended" adds each input's free play and dead zone to the input path's dictionary.
     """
     problems = problems if problems is not None else []
     input_errors = list(input_errors)
@@ -170,10 +173,11 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
         except ValueError as exc:
             problems.append(f"innovations: output {o} left out ({exc})")
     frames, biases, path = [], [], []
+    widths = play_widths(sigma) if input_path_family == "extended" else None
     for role, mv in maneuvers:
         try:
             df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps, path, parameters,
-                                         (records or {}).get(mv.name))
+                                         (records or {}).get(mv.name), widths)
         except Exception as exc:  # noqa: BLE001 - the raw residual tests stay available
             why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             problems.append(f"maneuver {mv.name}: innovations failed ({why})")
@@ -188,6 +192,7 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
                 "sigma": {c: float(v) for c, v in sigma.items()}, "record_biases": biases}
     if input_errors and path:
         test = input_path_test(path)
+        test.play_widths = dict(widths or {})
         test.histories = histories(test, path, input_errors)
         settings["input_path"] = test.to_dict()
     return table, settings

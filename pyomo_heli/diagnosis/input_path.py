@@ -44,18 +44,100 @@ SIGNALS = {
     "TAS": ("model true airspeed", "m/s"),
     "col_rate": ("rate of the measured collective", "rad/s"),
     "lon_rate": ("rate of the measured longitudinal cyclic", "rad/s"),
+    "col_play": ("free play of the measured collective: the side of its play, times half its width", "rad"),
+    "lon_play": ("free play of the measured longitudinal cyclic: the side of its play, times half its width", "rad"),
+    "col_zone": ("dead zone of the measured collective about its reference: dz(col) - col, smoothed", "rad"),
+    "lon_zone": ("dead zone of the measured longitudinal cyclic about its reference: dz(lon) - lon, smoothed", "rad"),
 }
+#: the width of the play operator of the ``*_play`` signals, in input noise sigmas: the narrowest play that the
+#: recorded input's noise alone (within +-3 sigma) does not move
+PLAY_WIDTH_SIGMAS = 6.0
+#: the centred moving average [s] the measured input gets before its play or dead zone is taken (the rigid-body
+#: band: the noise is no movement of the stick)
+PLAY_SMOOTH_S = 0.2
 #: most terms the selection takes
 MAX_TERMS = 3
 
 
-def signal_values(t: np.ndarray, increments: dict, y: dict) -> dict:
+def play_widths(sigma: dict) -> dict:
+    """Input channel -> the width [rad] of its ``*_play`` signal's play operator, from the input noise ``sigma``
+    [rad] (PLAY_WIDTH_SIGMAS); a channel ``sigma`` does not hold has no play signal."""
+    return {c: PLAY_WIDTH_SIGMAS * float(sigma[c]) for c in ("col", "lon") if c in sigma}
+
+
+def play(u: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """The play (backlash) operator of ``width`` [rad] on the input ``u``: a follower that starts at ``u[0]`` and
+    moves only when ``u`` pushes it, staying within ``width / 2`` of it. Returns ``(p, j)``: the follower, and for
+    each sample the index of the input sample it rests on (``p[k] = u[j[k]] +- width / 2``, or ``u[0]`` before
+    the first push): the exact linear map of a small change of ``u`` into ``p``.
+
+    ``p - u`` is the control error of a free play in the linkage (the follower lags the input by half the play
+    on every movement and keeps its side when the input reverses within the play): a control-path nonlinearity
+    that no linear signal of the dictionary describes."""
+    u = np.asarray(u, float)
+    p, j = np.empty_like(u), np.zeros(len(u), dtype=int)
+    if not len(u):
+        return p, j
+    h = 0.5 * width
+    p[0] = u[0]
+    for k in range(1, len(u)):
+        if u[k] - h > p[k - 1]:
+            p[k], j[k] = u[k] - h, k
+        elif u[k] + h < p[k - 1]:
+            p[k], j[k] = u[k] + h, k
+        else:
+            p[k], j[k] = p[k - 1], j[k - 1]
+    return p, j
+
+
+def smoothing(t: np.ndarray, span_s: float = PLAY_SMOOTH_S) -> np.ndarray:
+    """The (n x n) matrix of the centred moving average over ``span_s`` [s] at the samples ``t`` (an odd number of
+    samples; shorter, still centred, at the ends)."""
+    n = len(t)
+    half = int(round(span_s / float(np.median(np.diff(t))) / 2)) if n > 1 else 0
+    S = np.zeros((n, n))
+    for k in range(n):
+        r = min(half, k, n - 1 - k)
+        S[k, k - r:k + r + 1] = 1.0 / (2 * r + 1)
+    return S
+
+
+def play_signal(t: np.ndarray, u: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """The free-play signal of one input: ``-(width / 2) x side``, the side the play operator's follower was last
+    pushed from (+1 from below, -1 from above, 0 before the first push; :func:`play` of the input smoothed over
+    PLAY_SMOOTH_S, :func:`smoothing`): the control error ``play(u) - u`` of a free play of ``width`` where the stick
+    moves more than the play, without its traverse. The input's noise does not enter it (its map is zero): the side
+    turns only when the input comes back the whole width, which its smoothed noise does not; within a hold the
+    noise ratchets the follower (its rest sample is picked by the noise, so ``play(u) - u`` itself is not linear in
+    it), never across."""
+    us = smoothing(t) @ np.asarray(u, float)
+    p, j = play(us, width)
+    side = np.sign(np.round((us[j] - p) / (0.5 * width))) if width > 0 else np.zeros_like(us)
+    return -0.5 * width * side, np.zeros((len(us), len(us)))
+
+
+def zone_signal(t: np.ndarray, u: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """The dead-zone signal of one input increment: ``dz(u_s) - u_s = -clip(u_s, -width / 2, width / 2)`` of the
+    increment smoothed over PLAY_SMOOTH_S (a linkage that passes nothing within ``width / 2`` of the reference and
+    the rest less that), and its linear map of the input's sample errors, ``-diag(inside) S``."""
+    S = smoothing(t)
+    us = S @ np.asarray(u, float)
+    h = 0.5 * width
+    inside = (np.abs(us) < h).astype(float)
+    return -np.clip(us, -h, h), -inside[:, None] * S
+
+
+def signal_values(t: np.ndarray, increments: dict, y: dict, widths: dict | None = None) -> dict:
     """The dictionary's signals of one record at its samples ``t`` [s] (SI): the measured input ``increments``, the
-    model outputs ``y`` (q, theta, TAS; one ``y`` does not carry is left out) and the inputs' rates."""
+    model outputs ``y`` (q, theta, TAS; one ``y`` does not carry is left out), the inputs' rates and, for each
+    channel in ``widths`` (:func:`play_widths`), its free play."""
     out = {c: np.asarray(increments[c], float) for c in ("col", "lon")}
     out.update({o: np.asarray(y[o], float) for o in ("q", "theta", "TAS") if o in y})
     for c in ("col", "lon"):
         out[f"{c}_rate"] = np.gradient(out[c], t) if len(t) > 1 else np.zeros_like(out[c])
+    for c, w in (widths or {}).items():
+        out[f"{c}_play"] = play_signal(t, out[c], w)[0]
+        out[f"{c}_zone"] = zone_signal(t, out[c], w)[0]
     return {k: out[k] for k in SIGNALS if k in out}
 
 
@@ -67,29 +149,34 @@ def input_error(terms: list, signals: dict, n: int) -> dict:
     return out
 
 
-def signals_of(model, mv, y: dict, channels, substeps: int = 2) -> dict:
+def signals_of(model, mv, y: dict, channels, substeps: int = 2, widths: dict | None = None) -> dict:
     """The dictionary's signals of one prepared record at its samples, each with the linear map of the input noise
     into it: ``{name: (x, A)}``, x the signal (SI) and A (n x len(channels) n) its part due to the measured inputs'
     errors (the columns of every input sample, channel blocks in ``channels`` order). The measured inputs carry their
     own noise, the replay's outputs that noise through the dynamics (their exact sensitivities); the regression takes
     it out (corrected least squares), or a channel the pilot held still would be found to follow its own noise.
-    ``y``: the replay's outputs at every sample; a model output it does not carry is left out."""
+    ``y``: the replay's outputs at every sample; a model output it does not carry is left out. ``widths``: the play
+    signals' widths (:func:`play_widths`; none without)."""
     from ..simulation.compiled import input_sensitivities
     from ..simulation.trim import trim_float
 
     t = mv.data["t"].to_numpy(dtype=float)
     n, inc = len(t), mv.increments()
-    values = signal_values(t, inc, y)
+    values = signal_values(t, inc, y, widths)
     block = {c: slice(i * n, (i + 1) * n) for i, c in enumerate(channels)}
     grad = np.gradient(np.eye(n), t, axis=0) if n > 1 else np.zeros((n, n))
     noise = {}
     for c in ("col", "lon"):
         A = np.zeros((n, len(channels) * n))
         R = np.zeros_like(A)
+        F, Z = np.zeros_like(A), np.zeros_like(A)
         if c in block:
             A[:, block[c]] = np.eye(n)
             R[:, block[c]] = grad
-        noise[c], noise[f"{c}_rate"] = A, R
+            if c in (widths or {}):
+                F[:, block[c]] = play_signal(t, inc[c], widths[c])[1]
+                Z[:, block[c]] = zone_signal(t, inc[c], widths[c])[1]
+        noise[c], noise[f"{c}_rate"], noise[f"{c}_play"], noise[f"{c}_zone"] = A, R, F, Z
     model_outs = [o for o in ("q", "theta", "TAS") if o in values]
     if model_outs:
         _, S = input_sensitivities(model, trim_float(model, mv.trim_speed), t, inc, model_outs, list(channels),
@@ -209,6 +296,7 @@ class InputPathTest:
     records: int = 0
     problems: list = field(default_factory=list)
     histories: list = field(default_factory=list)  # a few records: t, input error asked for and fitted (rad)
+    play_widths: dict = field(default_factory=dict)  # channel -> width of the play signals' operator (rad)
 
     @property
     def consistent(self) -> bool:

@@ -293,7 +293,8 @@ class LinearTable(Table):
 class DiagnosisTable(Table):
     """``[diagnosis]``: the input-noise model of the residual analysis (docs/diagnosis.md)."""
 
-    messages = {"replay": "field 'replay' must be \"fit\" or \"record\", got {v!r}"}
+    messages = {"replay": "field 'replay' must be \"fit\" or \"record\", got {v!r}",
+                "input_path_family": "field 'input_path_family' must be \"standard\" or \"extended\", got {v!r}"}
 
     input_noise: InputChannels("input_noise") = Field(
         default_factory=list, description="input channels whose measurement noise the whiteness test takes out "
@@ -303,6 +304,9 @@ class DiagnosisTable(Table):
     replay: Literal["fit", "record"] = Field(
         "record", description="the replay the innovations compare with the records: \"fit\" (the inputs as the NLP "
                            "takes them) or \"record\" (the recorded inputs at the record's rate)")
+    input_path_family: Literal["standard", "extended"] = Field(
+        "standard", description="the input path's dictionary: \"standard\" (the inputs, q, theta, TAS and the inputs' "
+                                "rates) or \"extended\" (also each input's free play and dead zone)")
 
 
 NON_EMPTY = "field '{field}' must be a non-empty list of names"

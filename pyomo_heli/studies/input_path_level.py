@@ -2,7 +2,7 @@
 
     python studies/input_path_level.py --seeds 20261122-20261161 --out results/input_path_level \
         [--config studies/held_out_discovery.toml] [--data-config data/bo105_synthetic.toml] \
-        [--resample-inputs sample|project|record] [--replay fit|record]
+        [--resample-inputs sample|project|record] [--replay fit|record] [--input-path-family standard|extended]
 
 Every seed generates the bundled flight test (``--data-config``: same maneuvers, trims and noise levels) from
 **M0 with sensor noise only** (its truth effects removed, its seed replaced) into ``OUT/data/<seed>``. The
@@ -89,7 +89,8 @@ def summarise(docs: list) -> tuple[pd.DataFrame, str]:
 
 def main(argv=None) -> int:
     return seeded_study_main(__doc__.splitlines()[0], argv, one_seed, summarise, "20261122-20261161",
-                             needs_innovations("the input path"), data_overrides=True)
+                             needs_innovations("the input path"), data_overrides=True,
+                             input_path_family=True)
 
 
 if __name__ == "__main__":

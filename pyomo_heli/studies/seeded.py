@@ -23,14 +23,16 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
                       summarise: Callable[[list], tuple], seeds_example: str = "20261122-20261147",
-                      check_config: Callable | None = None, data_overrides: bool = False) -> int:
+                      check_config: Callable | None = None, data_overrides: bool = False,
+                      input_path_family: bool = False) -> int:
     """Parse ``--seeds --config --data-config --out`` (both configs checked before any work), run ``one_seed(seed,
     config, data_config, out)`` for every seed (printing each as it ends); ``summarise(docs)`` gives the summary
     table and the sentence above it: ``OUT/summary.csv``, ``OUT/summary.md``, printed. ``OUT/data`` is removed when
     the seeds left it empty (another run into the same OUT may still be using it). ``check_config(cfg)``: what the
     study needs of the loop config, a ValueError naming ``--config`` otherwise. ``data_overrides``: the study also
     takes ``--resample-inputs`` and ``--replay`` (replace the config's ``[data] resample_inputs`` and ``[diagnosis]
-    replay``) and passes ``one_seed`` the config's overrides as a fifth argument (a dict, empty without them)."""
+    replay``; with ``input_path_family`` also ``--input-path-family``, its ``[diagnosis] input_path_family``) and
+    passes ``one_seed`` the config's overrides as a fifth argument (a dict, empty without them)."""
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--seeds", required=True, help=f"e.g. {seeds_example}")
     ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
@@ -45,12 +47,18 @@ def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
         ap.add_argument("--replay", choices=("fit", "record"),
                         help="[diagnosis] replay of the config replaced: the residuals against the replay of the "
                              "inputs as the NLP takes them or as recorded (default: the config's)")
+    if data_overrides and input_path_family:
+        ap.add_argument("--input-path-family", choices=("standard", "extended"),
+                        help="[diagnosis] input_path_family of the config replaced: the input path's dictionary, "
+                             "extended with each input's free play and dead zone (default: the config's)")
     a = ap.parse_args(argv)
     overrides = {}
     if data_overrides and a.resample_inputs:
         overrides["data"] = {"resample_inputs": a.resample_inputs}
     if data_overrides and a.replay:
         overrides["diagnosis"] = {"replay": a.replay}
+    if getattr(a, "input_path_family", None):
+        overrides.setdefault("diagnosis", {})["input_path_family"] = a.input_path_family
     try:
         seeds = seeds_of(a.seeds)
     except ValueError as exc:
@@ -132,8 +140,10 @@ def overrides_note(docs: list) -> str:
     """The summary's words for the config overrides the seeds were made with ("" without any)."""
     o = docs[0].get("overrides") or {}
     ri, rp = o.get("data", {}).get("resample_inputs"), o.get("diagnosis", {}).get("replay")
+    fam = o.get("diagnosis", {}).get("input_path_family")
     return ((f"; inputs resampled by {ri!r} (--resample-inputs)" if ri else "")
-            + (f"; residuals against the replay {rp!r} (--replay)" if rp else ""))
+            + (f"; residuals against the replay {rp!r} (--replay)" if rp else "")
+            + (f"; the input path's {fam} dictionary (--input-path-family)" if fam else ""))
 
 
 def needs_innovations(test: str) -> Callable:

@@ -46,8 +46,10 @@ SIGNALS = {
     "lon_rate": ("rate of the measured longitudinal cyclic", "rad/s"),
     "col_play": ("free play of the measured collective: the side of its play, times half its width", "rad"),
     "lon_play": ("free play of the measured longitudinal cyclic: the side of its play, times half its width", "rad"),
-    "col_zone": ("dead zone of the measured collective about its reference: dz(col) - col, smoothed", "rad"),
-    "lon_zone": ("dead zone of the measured longitudinal cyclic about its reference: dz(lon) - lon, smoothed", "rad"),
+    "col_zone": ("dead zone of the measured collective about its reference: its side beyond the zone, times half its "
+                 "width", "rad"),
+    "lon_zone": ("dead zone of the measured longitudinal cyclic about its reference: its side beyond the zone, times "
+                 "half its width", "rad"),
 }
 #: the width of the play operator of the ``*_play`` signals, in input noise sigmas: the narrowest play that the
 #: recorded input's noise alone (within +-3 sigma) does not move
@@ -117,14 +119,18 @@ def play_signal(t: np.ndarray, u: np.ndarray, width: float) -> tuple[np.ndarray,
 
 
 def zone_signal(t: np.ndarray, u: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
-    """The dead-zone signal of one input increment: ``dz(u_s) - u_s = -clip(u_s, -width / 2, width / 2)`` of the
-    increment smoothed over PLAY_SMOOTH_S (a linkage that passes nothing within ``width / 2`` of the reference and
-    the rest less that), and its linear map of the input's sample errors, ``-diag(inside) S``."""
+    """The dead-zone signal of one input increment: ``-(width / 2) x sign(u_s)`` where the increment smoothed over
+    PLAY_SMOOTH_S is beyond ``width / 2`` from the reference, 0 within: the control error of a linkage that passes
+    nothing within ``width / 2`` of the reference and the rest less that (``dz(u) - u``) where the stick is beyond
+    the zone. Within it that error is ``-u``, the input's own noise in the quiet parts: left out, the signal does not
+    carry the noise (its map is zero; the smoothed noise does not reach the zone's edge). Taken with the noise in,
+    corrected least squares under independent errors under-subtracts the share a smoothed signal has of the
+    filtered input noise, and the exact model's input errors follow their own channel's zone (mean z +1.0 to +1.9
+    over 20 seeds of M0 + noise)."""
     S = smoothing(t)
     us = S @ np.asarray(u, float)
     h = 0.5 * width
-    inside = (np.abs(us) < h).astype(float)
-    return -np.clip(us, -h, h), -inside[:, None] * S
+    return -h * np.sign(us) * (np.abs(us) > h), np.zeros_like(S)
 
 
 def signal_values(t: np.ndarray, increments: dict, y: dict, widths: dict | None = None) -> dict:

@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 from scipy.linalg import cholesky, solve_triangular
 
-from ..nlp.objectives import noise_sigmas
+from ..nlp.objectives import input_error_covariance, input_error_models, noise_sigmas, times_covariance
 from ..physics.model import HelicopterModel
 from ..simulation.compiled import input_sensitivities, simulate_outputs
 from ..simulation.trim import trim_float
@@ -46,14 +46,16 @@ from .timeseries import decimation
 
 
 def input_noise_factor(model: HelicopterModel, mv, outputs, input_errors, sigma: dict, substeps: int = 2,
-                       keep=None) -> tuple[dict, np.ndarray, np.ndarray]:
+                       keep=None, models: dict | None = None) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
     """The covariance the measured inputs' noise gives one maneuver's outputs, factored.
 
     Rows in time order (every output of kept sample 0, then of kept sample 1, ...; ``keep``: sample
     indices, default all). Returns ``(y, Su, L)``: the model outputs at every sample, the stacked
-    sensitivities of the kept rows to every input sample (:func:`input_sensitivities`), and the lower
+    sensitivities of the kept rows to every input sample (:func:`input_sensitivities`), the lower
     Cholesky factor of ``V = R + Su Sigma_u Su^T`` (``sigma``: noise sigma [SI] of every output and
-    input channel). Shared by the innovations here and the score test's whitening (attribution).
+    input channel) and Sigma_u (:func:`~pyomo_heli.nlp.objectives.input_error_covariance`: the errors independent,
+    or with ``models`` the AR processes the NLP's ``[objectives] input_error_ar`` takes them for). Shared by the
+    innovations here and the score test's whitening (attribution).
     """
     t = mv.data["t"].to_numpy(dtype=float)
     n = len(t)
@@ -64,10 +66,10 @@ def input_noise_factor(model: HelicopterModel, mv, outputs, input_errors, sigma:
     Su = np.empty((len(keep) * n_out, len(input_errors) * n))
     for j, o in enumerate(outputs):
         Su[j::n_out] = S_u[o]
-    var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
-    V = (Su * var_u) @ Su.T
+    cov_u = input_error_covariance(n, list(input_errors), sigma, models)
+    V = times_covariance(Su, cov_u) @ Su.T
     V[np.diag_indices_from(V)] += np.tile([float(sigma[o]) ** 2 for o in outputs], len(keep))
-    return y, Su, cholesky(V, lower=True)
+    return y, Su, cholesky(V, lower=True), cov_u
 
 
 def record_rate_outputs(model: HelicopterModel, mv, record, outputs, substeps: int = 2) -> dict:
@@ -88,7 +90,8 @@ def record_rate_outputs(model: HelicopterModel, mv, record, outputs, substeps: i
 
 def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigma: dict, test_rate_hz: float,
                          substeps: int = 2, path: list | None = None, nuisance_parameters=(),
-                         record=None, widths: dict | None = None) -> tuple[pd.DataFrame, dict]:
+                         record=None, widths: dict | None = None,
+                         models: dict | None = None) -> tuple[pd.DataFrame, dict]:
     """Innovations of one prepared maneuver at its test-rate samples (columns ``t`` and ``inn_<o>``), and the
     maneuver's output biases: ``{"bias_<o>": SI, "se_bias_<o>": SI}``, the generalised least-squares estimates
     of the nuisance with their standard errors under the same covariance, scaled by each output's innovation RMS in
@@ -102,12 +105,14 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     taken against the replay its recorded inputs drive (at ``mv``'s samples; :func:`record_rate_outputs`), the
     input-noise model and the sensitivities stay ``mv``'s. ``widths``: the play and dead-zone signals' widths of the
     input-path dictionary (:func:`.input_path.play_widths`; None: the standard dictionary, without them).
+    ``models``: the input errors' AR models (:func:`~pyomo_heli.nlp.objectives.input_error_models`; None:
+    independent errors).
     """
     t = mv.data["t"].to_numpy(dtype=float)
     n = len(t)
     k = decimation(t, test_rate_hz)
     keep = np.arange(0, n, k)
-    y, Su, L = input_noise_factor(model, mv, outputs, input_errors, sigma, substeps, keep)
+    y, Su, L, cov_u = input_noise_factor(model, mv, outputs, input_errors, sigma, substeps, keep, models)
     if record is not None:
         y = record_rate_outputs(model, mv, record, outputs, substeps)
     n_out, m = len(outputs), len(keep)
@@ -125,11 +130,10 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     ew = ew - Nw @ coef  # the innovations: whitened, the nuisance projected out
     block = None
     if path is not None:  # the input-path regression also allows a shift of the identified parameters
-        var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
-        quiet = dataclasses.replace(mv, data=mv.data.assign(**expected_inputs(mv, ew, Su, L, var_u, input_errors)))
+        quiet = dataclasses.replace(mv, data=mv.data.assign(**expected_inputs(mv, ew, Su, L, cov_u, input_errors)))
         P = parameter_columns(model, quiet, outputs, keep, nuisance_parameters, substeps)
         signals = signals_of(model, mv, y, input_errors, substeps, widths)
-        block = record_block(-e, Su, np.column_stack([N, P]), L, signals, input_errors, var_u, t, mv.name)
+        block = record_block(-e, Su, np.column_stack([N, P]), L, signals, input_errors, cov_u, t, mv.name)
     cov = np.linalg.pinv(Nw.T @ Nw)  # the estimates' covariance if the whitened rows have unit variance
     ew = ew.reshape(m, n_out)
     # each output's noise scale in this record: the RMS of its innovations (1 when the sigmas are right; a record
@@ -146,7 +150,7 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
 def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_errors, noise_sigma: dict | None,
                 test_rate_hz: float, substeps: int = 2, problems: list | None = None,
                 parameters=(), records: dict | None = None,
-                input_path_family: str = "standard") -> tuple[pd.DataFrame, dict]:
+                input_path_family: str = "standard", input_error_ar: int = 0) -> tuple[pd.DataFrame, dict]:
     """Innovations of every maneuver: ``maneuvers`` is a list of (role, prepared maneuver).
 
     ``sigma_from``: the maneuvers whose lead-in gives the sigmas when ``noise_sigma`` is None (the
@@ -159,6 +163,8 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     identified ones) allowed. ``records``: maneuver name -> the same maneuver at the record's rate, whose recorded
     inputs drive the replay the residuals are taken against (``[diagnosis] replay = "record"``).
     ``input_path_family``: "extended" adds each input's free play and dead zone to the input path's dictionary.
+    ``input_error_ar``: the order of the AR model of the input errors (the NLP's ``[objectives] input_error_ar``),
+    fitted to the lead-ins of ``sigma_from`` at their samples; 0: independent errors.
     """
     problems = problems if problems is not None else []
     input_errors = list(input_errors)
@@ -174,10 +180,11 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
             problems.append(f"innovations: output {o} left out ({exc})")
     frames, biases, path = [], [], []
     widths = play_widths(sigma) if input_path_family == "extended" else None
+    models = input_error_models(sigma_from, input_errors, input_error_ar)
     for role, mv in maneuvers:
         try:
             df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps, path, parameters,
-                                         (records or {}).get(mv.name), widths)
+                                         (records or {}).get(mv.name), widths, models)
         except Exception as exc:  # noqa: BLE001 - the raw residual tests stay available
             why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             problems.append(f"maneuver {mv.name}: innovations failed ({why})")
@@ -188,6 +195,7 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
         biases.append({"maneuver": mv.name, "role": role, "trim_speed": float(mv.trim_speed), **b})
     table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["maneuver", "role", "t"])
     settings = {"outputs": outs, "input_errors": input_errors, "test_rate_hz": float(test_rate_hz),
+                "input_error_ar": {c: [float(x) for x in a] for c, (a, _) in models.items()},
                 "replay": "record" if records else "fit",
                 "sigma": {c: float(v) for c, v in sigma.items()}, "record_biases": biases}
     if input_errors and path:

@@ -35,6 +35,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy import stats
 
+from ..nlp.objectives import times_covariance
+
 #: the dictionary's signals: name -> (how it is taken, SI unit)
 SIGNALS = {
     "col": ("measured collective (increment)", "rad"),
@@ -185,11 +187,12 @@ def signals_of(model, mv, y: dict, channels, substeps: int = 2, widths: dict | N
     return {k: (x, noise[k]) for k, x in values.items()}
 
 
-def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, var_u: np.ndarray, channels) -> dict:
+def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, cov_u: np.ndarray, channels) -> dict:
     """The record's inputs with the part of their noise the residual reveals taken out: the measured input minus
     the conditional mean of its error given the residual, ``E[du | e] = Sigma_u Su^T V^-1 e`` (``rw``: the whitened
     residual ``L^-1 e``, e = model - data at the kept rows, with the record's nuisance projected out; ``V = L L^T``;
-    ``var_u``: the variance of every input sample's error, channel blocks in ``channels`` order). Channel -> values
+    ``cov_u``: the covariance of the input samples' errors, channel blocks in ``channels`` order, or the vector of
+    their variances when independent; :func:`~pyomo_heli.nlp.objectives.input_error_covariance`). Channel -> values
     at the record's samples [rad].
 
     Why: the parameter columns (:func:`parameter_columns`) are differences of replays driven by the inputs. Driven
@@ -201,7 +204,7 @@ def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, var_u: np
     (``tests/test_input_path.py``)."""
     from scipy.linalg import solve_triangular
 
-    du = var_u * (Su.T @ solve_triangular(L.T, rw, lower=False))
+    du = times_covariance(solve_triangular(L.T, rw, lower=False) @ Su, cov_u)
     n = Su.shape[1] // len(channels)
     return {c: mv.data[c].to_numpy(dtype=float) - du[i * n:(i + 1) * n] for i, c in enumerate(channels)}
 
@@ -223,13 +226,13 @@ def parameter_columns(model, mv, outputs, keep, names, substeps: int = 2) -> np.
 
 
 def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, signals: dict, channels,
-                 var_u: np.ndarray, t: np.ndarray, maneuver: str = "") -> dict:
+                 cov_u: np.ndarray, t: np.ndarray, maneuver: str = "") -> dict:
     """One record's sums for the regression, in whitened rows with its nuisance projected out (Frisch-Waugh).
 
     ``e``: data - model at the kept rows (time order, every output of a row together); ``Su``: their sensitivities
     to every input sample (channel blocks in ``channels`` order, :func:`.innovations.input_noise_factor`); ``N``:
     the nuisance columns; ``L``: the lower Cholesky factor of the rows' covariance; ``signals``:
-    :func:`signals_of`; ``var_u``: the variance of every input sample's error.
+    :func:`signals_of`; ``cov_u``: the covariance of the input samples' errors (:func:`expected_inputs`).
 
     Returns ``DtD``, ``Dte``, ``ete`` (the least-squares sums), ``B`` and ``b``: their expectation due to the
     input noise in the regressors (what corrected least squares subtracts), ``rows``, ``nuisance`` and ``labels``;
@@ -254,9 +257,9 @@ def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, si
             noise.append(Zc @ A)
             labels.append((c, s))
     D = np.column_stack(cols)
-    Zs = Z * var_u
+    Zs = times_covariance(Z, cov_u)
     b = -np.array([np.sum(U * Zs) for U in noise])  # E[d_j . e] from the noise both share (e = data - model)
-    Us = [U * var_u for U in noise]
+    Us = [times_covariance(U, cov_u) for U in noise]
     B = np.array([[np.sum(U * V) for V in Us] for U in noise])
     return {"DtD": D.T @ D, "Dte": D.T @ ew, "ete": float(ew @ ew), "B": B, "b": b, "rows": len(ew),
             "nuisance": N.shape[1], "labels": labels, "asked": asked_errors(Z, ew, t, channels),

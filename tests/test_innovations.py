@@ -238,3 +238,42 @@ def test_the_diagnosis_score_test_and_bounds_take_the_nlps_input_error_ar():
           for k in (0, 2)}
     assert lm[0] != pytest.approx(lm[2], rel=1e-3), lm
     assert all(1.1 * se[0][n] < se[2][n] < 1.5 * se[0][n] for n in names), se
+
+
+def test_with_record_rate_inputs_the_analysis_takes_the_nlps_input_samples():
+    """``resample_inputs = "record"`` with AR(4) errors: the input errors sit on the 50 Hz recorded samples, as the
+    NLP's (every other one is an output sample: ``Maneuver.input_grid``), with the record-rate lead-in's sigma and AR
+    model; the exact model's innovations on the bundled 3211s are white with about unit variance, the input path
+    selects nothing, the Cramer-Rao bounds eliminate the 50 Hz errors and the score test finds nothing missing."""
+    from pyomo_heli.dataset import load_flight_test
+    from pyomo_heli.nlp.identification import identification_data
+    from pyomo_heli.nlp.objectives import lead_in_sigma
+    from pyomo_heli.uncertainty.cramer_rao import cramer_rao, point_information
+
+    cfg = load_identification_config(EIV, overrides={"data": {"resample_inputs": "record"},
+                                                     "objectives": {"input_error_ar": 4}})
+    model = truth_model_of(cfg.dataset)
+    cfg = dataclasses.replace(cfg, maneuvers=list(FAST), validation=[], diagnosis=None, model=model)
+    data = identification_data(cfg, load_flight_test(cfg.dataset))
+    mv = data.maneuvers[0]
+    t_in, inc, idx = mv.input_grid()
+    assert len(t_in) == 2 * len(mv.data) - 1 and np.array_equal(t_in[idx], mv.t) and np.array_equal(idx[:3], [0, 2, 4])
+    res = compute_residuals(cfg, model.parameters.to_dict(), label="truth", trim_sensitivities=False)
+    info = res.info["innovations"]
+    rec = lead_in_sigma(data.maneuvers, ["col", "lon"], input_record=True)
+    assert info["sigma"]["col"] == pytest.approx(rec["col"]) and rec["col"] != pytest.approx(
+        lead_in_sigma(data.maneuvers, ["col"])["col"], rel=1e-3)
+    assert len(info["input_error_ar"]["lon"]) == 4
+    d = diagnose(res)
+    assert all(w["white"] for w in d.whiteness) and d.input_path["consistent"], (d.whiteness, d.input_path)
+    for o in ("q", "theta", "n_x", "n_z"):
+        assert 0.85 < float(np.std(res.innovations[f"inn_{o}"])) < 1.15, o
+    pi = point_information(model, cfg.free, model.parameters.to_dict(), data.maneuvers, None, cfg.nlp.time_outputs,
+                           (), input_errors=("col", "lon"), input_error_ar=4)
+    assert next(iter(pi.S_input[0][1].values())).shape == (len(mv.data), 2 * len(t_in))
+    assert all(np.isfinite(v) and v > 0 for v in cramer_rao(pi, cfg.free, kind="A").se.values())
+    from pyomo_heli.diagnosis.attribution import attribute
+
+    sc = attribute(model, [f.name for f in cfg.free], data, cfg.nlp.time_outputs, (), candidates=["nx_bias"],
+                   input_errors=("col", "lon"), input_error_ar=4).scores.set_index("name")
+    assert np.isfinite(sc.loc["nx_bias", "LM"]) and sc.loc["nx_bias", "p_value"] > 0.01  # the exact model

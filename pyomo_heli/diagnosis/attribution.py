@@ -222,8 +222,8 @@ def _input_error_whitening(model: HelicopterModel, data, time_outputs, w, seg, i
     every stacked vector or column block, and each whitened row's segment. ``input_error_ar``: Sigma_u of the
     NLP's AR model of the input errors (``[objectives] input_error_ar``; 0: independent errors).
     """
-    sigma = noise_sigmas(data.maneuvers, (*time_outputs, *input_errors), noise_sigma)
-    models = input_error_models(data.maneuvers, input_errors, input_error_ar)
+    sigma = noise_sigmas(data.maneuvers, (*time_outputs, *input_errors), noise_sigma, input_record=True)
+    models = input_error_models(data.maneuvers, input_errors, input_error_ar, input_record=True)
     n_out = len(time_outputs)
     n_per = [len(mv.data) for mv in data.maneuvers]
     n_time = sum(n_per)

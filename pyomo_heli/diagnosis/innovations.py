@@ -50,18 +50,21 @@ def input_noise_factor(model: HelicopterModel, mv, outputs, input_errors, sigma:
     """The covariance the measured inputs' noise gives one maneuver's outputs, factored.
 
     Rows in time order (every output of kept sample 0, then of kept sample 1, ...; ``keep``: sample
-    indices, default all). Returns ``(y, Su, L)``: the model outputs at every sample, the stacked
-    sensitivities of the kept rows to every input sample (:func:`input_sensitivities`), the lower
+    indices, default all). The input samples are the NLP's (``Maneuver.input_grid``: the recorded-rate ones with
+    ``resample_inputs = "record"``). Returns ``(y, Su, L, Sigma_u)``: the model outputs at every sample (the
+    replay driven by those inputs), the stacked sensitivities of the kept rows to every input sample
+    (:func:`input_sensitivities`), the lower
     Cholesky factor of ``V = R + Su Sigma_u Su^T`` (``sigma``: noise sigma [SI] of every output and
     input channel) and Sigma_u (:func:`~pyomo_heli.nlp.objectives.input_error_covariance`: the errors independent,
     or with ``models`` the AR processes the NLP's ``[objectives] input_error_ar`` takes them for). Shared by the
     innovations here and the score test's whitening (attribution).
     """
-    t = mv.data["t"].to_numpy(dtype=float)
-    n = len(t)
-    keep = np.arange(n) if keep is None else np.asarray(keep, dtype=int)
-    y, S_u = input_sensitivities(model, trim_float(model, mv.trim_speed), t, mv.increments(), outputs,
-                                 input_errors, substeps, keep=keep)
+    t_in, inc, idx = mv.input_grid()
+    n = len(t_in)
+    keep = np.arange(len(idx)) if keep is None else np.asarray(keep, dtype=int)
+    y, S_u = input_sensitivities(model, trim_float(model, mv.trim_speed), t_in, inc, outputs, input_errors,
+                                 substeps, keep=idx[keep])
+    y = {o: np.asarray(v, dtype=float)[idx] for o, v in y.items()}
     n_out = len(outputs)
     Su = np.empty((len(keep) * n_out, len(input_errors) * n))
     for j, o in enumerate(outputs):
@@ -123,17 +126,19 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     N = np.zeros((m * n_out, n_out + len(input_errors)))
     for j in range(n_out):
         N[j::n_out, j] = 1.0
+    n_in = Su.shape[1] // len(input_errors)
     for c in range(len(input_errors)):
-        N[:, n_out + c] = Su[:, c * n:(c + 1) * n].sum(axis=1)
+        N[:, n_out + c] = Su[:, c * n_in:(c + 1) * n_in].sum(axis=1)
     ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)
     coef, *_ = np.linalg.lstsq(Nw, ew, rcond=None)
     ew = ew - Nw @ coef  # the innovations: whitened, the nuisance projected out
     block = None
     if path is not None:  # the input-path regression also allows a shift of the identified parameters
-        quiet = dataclasses.replace(mv, data=mv.data.assign(**expected_inputs(mv, ew, Su, L, cov_u, input_errors)))
+        quiet = expected_inputs(mv, ew, Su, L, cov_u, input_errors)
         P = parameter_columns(model, quiet, outputs, keep, nuisance_parameters, substeps)
         signals = signals_of(model, mv, y, input_errors, substeps, widths)
-        block = record_block(-e, Su, np.column_stack([N, P]), L, signals, input_errors, cov_u, t, mv.name)
+        block = record_block(-e, Su, np.column_stack([N, P]), L, signals, input_errors, cov_u, mv.input_grid()[0],
+                             mv.name)
     cov = np.linalg.pinv(Nw.T @ Nw)  # the estimates' covariance if the whitened rows have unit variance
     ew = ew.reshape(m, n_out)
     # each output's noise scale in this record: the RMS of its innovations (1 when the sigmas are right; a record
@@ -168,7 +173,7 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     """
     problems = problems if problems is not None else []
     input_errors = list(input_errors)
-    sigma = noise_sigmas(sigma_from, input_errors, noise_sigma)
+    sigma = noise_sigmas(sigma_from, input_errors, noise_sigma, input_record=True)
     outs = []
     for o in outputs:
         if not all(o in mv.data for _, mv in maneuvers):
@@ -180,7 +185,7 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
             problems.append(f"innovations: output {o} left out ({exc})")
     frames, biases, path = [], [], []
     widths = play_widths(sigma) if input_path_family == "extended" else None
-    models = input_error_models(sigma_from, input_errors, input_error_ar)
+    models = input_error_models(sigma_from, input_errors, input_error_ar, input_record=True)
     for role, mv in maneuvers:
         try:
             df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps, path, parameters,

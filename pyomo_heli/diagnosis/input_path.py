@@ -158,13 +158,22 @@ def signals_of(model, mv, y: dict, channels, substeps: int = 2, widths: dict | N
     own noise, the replay's outputs that noise through the dynamics (their exact sensitivities); the regression takes
     it out (corrected least squares), or a channel the pilot held still would be found to follow its own noise.
     ``y``: the replay's outputs at every sample; a model output it does not carry is left out. ``widths``: the play
-    signals' widths (:func:`play_widths`; none without)."""
+    signals' widths (:func:`play_widths`; none without). The signals are taken at the input samples (``input_grid``:
+    an input error is one of each); where those are the recorded-rate ones, the model outputs are the replay's there.
+    """
     from ..simulation.compiled import input_sensitivities
     from ..simulation.trim import trim_float
 
-    t = mv.data["t"].to_numpy(dtype=float)
-    n, inc = len(t), mv.increments()
-    values = signal_values(t, inc, y, widths)
+    t, inc, idx = mv.input_grid()
+    n = len(t)
+    model_outs = [o for o in ("q", "theta", "TAS") if o in y]
+    S, y_in = {}, y
+    if model_outs:
+        y_in, S = input_sensitivities(model, trim_float(model, mv.trim_speed), t, inc, model_outs, list(channels),
+                                      substeps)
+        if len(idx) == n:  # the maneuver's own samples: the outputs as given (e.g. the record-rate replay's)
+            y_in = y
+    values = signal_values(t, inc, y_in, widths)
     block = {c: slice(i * n, (i + 1) * n) for i, c in enumerate(channels)}
     grad = np.gradient(np.eye(n), t, axis=0) if n > 1 else np.zeros((n, n))
     noise = {}
@@ -179,21 +188,17 @@ def signals_of(model, mv, y: dict, channels, substeps: int = 2, widths: dict | N
                 F[:, block[c]] = play_signal(t, inc[c], widths[c])[1]
                 Z[:, block[c]] = zone_signal(t, inc[c], widths[c])[1]
         noise[c], noise[f"{c}_rate"], noise[f"{c}_play"], noise[f"{c}_zone"] = A, R, F, Z
-    model_outs = [o for o in ("q", "theta", "TAS") if o in values]
-    if model_outs:
-        _, S = input_sensitivities(model, trim_float(model, mv.trim_speed), t, inc, model_outs, list(channels),
-                                   substeps)
-        noise.update({o: S[o] for o in model_outs})
+    noise.update({o: S[o] for o in model_outs})
     return {k: (x, noise[k]) for k, x in values.items()}
 
 
-def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, cov_u: np.ndarray, channels) -> dict:
+def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, cov_u: np.ndarray, channels):
     """The record's inputs with the part of their noise the residual reveals taken out: the measured input minus
     the conditional mean of its error given the residual, ``E[du | e] = Sigma_u Su^T V^-1 e`` (``rw``: the whitened
     residual ``L^-1 e``, e = model - data at the kept rows, with the record's nuisance projected out; ``V = L L^T``;
     ``cov_u``: the covariance of the input samples' errors, channel blocks in ``channels`` order, or the vector of
-    their variances when independent; :func:`~pyomo_heli.nlp.objectives.input_error_covariance`). Channel -> values
-    at the record's samples [rad].
+    their variances when independent; :func:`~pyomo_heli.nlp.objectives.input_error_covariance`). Returns the
+    maneuver with those inputs at its input samples (``Maneuver.input_grid``: ``inputs_record`` where it has them).
 
     Why: the parameter columns (:func:`parameter_columns`) are differences of replays driven by the inputs. Driven
     by the measured ones they carry the input noise's response scaled by the parameter, ``d(S_u du)/dtheta``, which
@@ -205,8 +210,13 @@ def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, cov_u: np
     from scipy.linalg import solve_triangular
 
     du = times_covariance(solve_triangular(L.T, rw, lower=False) @ Su, cov_u)
+    import dataclasses
+
     n = Su.shape[1] // len(channels)
-    return {c: mv.data[c].to_numpy(dtype=float) - du[i * n:(i + 1) * n] for i, c in enumerate(channels)}
+    src = "data" if mv.inputs_record is None else "inputs_record"  # where the input samples are
+    df = getattr(mv, src)
+    quiet = df.assign(**{c: df[c].to_numpy(dtype=float) - du[i * n:(i + 1) * n] for i, c in enumerate(channels)})
+    return dataclasses.replace(mv, **{src: quiet})
 
 
 def parameter_columns(model, mv, outputs, keep, names, substeps: int = 2) -> np.ndarray:

@@ -212,16 +212,17 @@ def point_information(model, free, values: dict, maneuvers, trims, time_outputs,
                             scale=np.array([f.scale for f in free]))
     input_errors = tuple(input_errors)
     if input_errors and s.time:
-        sigma = noise_sigmas(maneuvers, (*s.time, *input_errors), noise_sigma)
+        # at the NLP's input samples (the recorded-rate ones with resample_inputs = "record")
+        sigma = noise_sigmas(maneuvers, (*s.time, *input_errors), noise_sigma, input_record=True)
         info.input_sigma = {c: float(sigma[c]) for c in input_errors}
-        info.input_models = input_error_models(maneuvers, input_errors, input_error_ar)
+        info.input_models = input_error_models(maneuvers, input_errors, input_error_ar, input_record=True)
         start = 0
         for mv in maneuvers:
-            t = mv.data["t"].to_numpy()
-            _, S_e = input_sensitivities(mdl, trim_float(mdl, mv.trim_speed), t, mv.increments(), list(s.time),
-                                         input_errors)
-            info.S_input.append(((start, start + len(t)), S_e))
-            start += len(t)
+            t_in, inc, idx = mv.input_grid()
+            _, S_e = input_sensitivities(mdl, trim_float(mdl, mv.trim_speed), t_in, inc, list(s.time),
+                                         input_errors, keep=idx)
+            info.S_input.append(((start, start + len(idx)), S_e))
+            start += len(idx)
     for o in s.time:
         meas = np.concatenate([mv.data[o].to_numpy() for mv in maneuvers])
         e = meas - s.y_time[o]

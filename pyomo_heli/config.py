@@ -45,7 +45,8 @@ class IdentificationConfig:
     @property
     def diagnosis_settings(self) -> "DiagnosisSettings":
         """The residual analysis's input-noise model: ``[diagnosis]``, else the identification's own."""
-        return self.diagnosis or DiagnosisSettings(tuple(self.nlp.input_errors), self.nlp.noise_sigma)
+        return self.diagnosis or DiagnosisSettings(tuple(self.nlp.input_errors), self.nlp.noise_sigma,
+                                                   input_error_ar=self.nlp.input_error_ar)
 
 
 @dataclass(frozen=True)
@@ -64,12 +65,15 @@ class DiagnosisSettings:
     resample_hz``, ``resample_inputs``), which differ from the recorded ones and leave a deterministic residual
     that the input path reads as an input error. Without resampling the two are the same. docs/diagnosis.md,
     step 7. ``input_path_family``: the input path's dictionary, ``"standard"`` or ``"extended"`` (each input's free
-    play and dead zone too; :mod:`pyomo_heli.diagnosis.input_path`).
+    play and dead zone too; :mod:`pyomo_heli.diagnosis.input_path`). ``input_error_ar``: the order of the AR model
+    of the input errors (the identification's ``[objectives] input_error_ar`` where the analysis takes its input
+    model; 0, independent errors, with ``[diagnosis] input_noise``).
     """
     input_noise: tuple = ()
     noise_sigma: dict | None = None
     replay: str = "record"
     input_path_family: str = "standard"
+    input_error_ar: int = 0
 
 
 def unit_factor(spec, unit: str | None) -> float:
@@ -207,9 +211,11 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
     diagnosis = None
     if s.diagnosis is not None:
         chans, sigma = _input_errors(s.diagnosis, problems, in_ref, "diagnosis", "input_noise")
+        ar = 0
         if "input_noise" not in (raw.get("diagnosis") or {}) and s.diagnosis.noise_sigma is None:
-            chans, sigma = in_err, noise_sigma  # a [diagnosis] table of other settings: the identification's model
-        diagnosis = DiagnosisSettings(chans, sigma, s.diagnosis.replay, s.diagnosis.input_path_family)
+            # a [diagnosis] table of other settings: the identification's model
+            chans, sigma, ar = in_err, noise_sigma, obj.input_error_ar
+        diagnosis = DiagnosisSettings(chans, sigma, s.diagnosis.replay, s.diagnosis.input_path_family, ar)
 
     # ---- the solver and the front
     sol = s.solver

@@ -302,6 +302,18 @@ class Maneuver:
         src = self.data if self.inputs_record is None else self.inputs_record
         return src["t"].to_numpy(dtype=float), _increments(src, channels, self.input_reference_s)
 
+    def input_grid(self, channels=INPUT_CHANNELS) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
+        """:meth:`input_series` and, for each of ``data``'s samples, its index among the input samples: where an
+        errors-in-variables fit has its input errors (one per input sample) and where its outputs are."""
+        t = self.t
+        t_in, inc = self.input_series(channels)
+        if len(t_in) == len(t):
+            return t_in, inc, np.arange(len(t))
+        idx = np.clip(np.searchsorted(t_in, t - 1e-9), 0, len(t_in) - 1)
+        if not np.allclose(t_in[idx], t, atol=1e-9):
+            raise ValueError(f"maneuver {self.name}: its samples are not samples of its recorded inputs")
+        return t_in, inc, idx
+
 
 def lead_in(t, reference_s: float) -> np.ndarray:
     """Mask of the samples of times ``t`` [s] in a record's quiet lead-in: t <= t[0] + ``reference_s``."""

@@ -57,7 +57,7 @@ from scipy import stats
 from scipy.linalg import solve_triangular
 
 from ..physics.model import HelicopterModel
-from ..nlp.objectives import noise_sigmas
+from ..nlp.objectives import input_error_models, noise_sigmas
 from ..simulation.compiled import simulate_outputs
 from ..simulation.sensitivity import sensitivities
 from ..simulation.trim import trim_float
@@ -209,7 +209,7 @@ def segment_ids(data, time_outputs, n_trims: int, trim_outputs, segment_s: float
 
 
 def _input_error_whitening(model: HelicopterModel, data, time_outputs, w, seg, input_errors, noise_sigma,
-                           substeps: int):
+                           substeps: int, input_error_ar: int = 0):
     """Whitening of the stacked rows when the measured inputs are noisy (errors in variables).
 
     The NLP estimates one error per input sample with known sigmas; to first order, eliminating those
@@ -219,9 +219,11 @@ def _input_error_whitening(model: HelicopterModel, data, time_outputs, w, seg, i
     factor with the rows in time order (all outputs of sample k before sample k+1) whitens them as
     innovations: whitened row k depends on samples up to k only, so the batch means over time segments
     stay local. Trim rows keep their weights ``w``. Returns ``(whiten, seg)``: the function applied to
-    every stacked vector or column block, and each whitened row's segment.
+    every stacked vector or column block, and each whitened row's segment. ``input_error_ar``: Sigma_u of the
+    NLP's AR model of the input errors (``[objectives] input_error_ar``; 0: independent errors).
     """
-    sigma = noise_sigmas(data.maneuvers, (*time_outputs, *input_errors), noise_sigma)
+    sigma = noise_sigmas(data.maneuvers, (*time_outputs, *input_errors), noise_sigma, input_record=True)
+    models = input_error_models(data.maneuvers, input_errors, input_error_ar, input_record=True)
     n_out = len(time_outputs)
     n_per = [len(mv.data) for mv in data.maneuvers]
     n_time = sum(n_per)
@@ -231,7 +233,8 @@ def _input_error_whitening(model: HelicopterModel, data, time_outputs, w, seg, i
         n = len(mv.data)
         # stacked row of (sample k, output j), time order
         idx = (np.arange(n_out)[None, :] * n_time + starts[i] + np.arange(n)[:, None]).ravel()
-        blocks.append((idx, input_noise_factor(model, mv, time_outputs, input_errors, sigma, substeps)[2]))
+        blocks.append((idx, input_noise_factor(model, mv, time_outputs, input_errors, sigma, substeps,
+                                               models=models)[2]))
         seg[idx] = seg[starts[i] + np.arange(n)].repeat(n_out)
     time_rows = n_out * n_time
     sw_trim = np.sqrt(w[time_rows:])
@@ -324,7 +327,7 @@ def decide(names, evidence, significant, projected: dict, ratio: float = RATIO,
 def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outputs, candidates=None,
               alpha: float = ALPHA, ratio: float = RATIO, confound_corr: float = CONFOUND_CORR,
               substeps: int = 2, robust: bool = True, segment_s: float = SEGMENT_S, input_errors=(),
-              noise_sigma: dict | None = None, variance: str = "batch") -> Attribution:
+              noise_sigma: dict | None = None, variance: str = "batch", input_error_ar: int = 0) -> Attribution:
     """Score every candidate (default: the whole library minus those already in ``model``): library names or
     extension objects (:func:`~.candidates.as_candidate`).
 
@@ -338,7 +341,7 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
     ``input_errors``, ``noise_sigma``: the NLP's errors-in-variables settings (``NLPOptions``). With input
     errors the time residuals are weighted by the covariance the measured inputs' noise gives them,
     ``V_m = R + S_u,m Sigma_u S_u,m^T`` per maneuver (the input errors eliminated, module docstring),
-    instead of by their mean squares.
+    instead of by their mean squares; ``input_error_ar``: Sigma_u of the NLP's AR model of the input errors.
     """
     if variance not in ("batch", "white"):
         raise ValueError(f"variance = {variance!r}: choose 'batch' or 'white'")
@@ -370,7 +373,7 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
         S_proj = S
     if tuple(input_errors) and time_outputs:
         whiten, seg = _input_error_whitening(full, data, time_outputs, w, seg, tuple(input_errors), noise_sigma,
-                                             substeps)
+                                             substeps, input_error_ar)
     else:
         sw = np.sqrt(w)
 

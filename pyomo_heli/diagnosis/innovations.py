@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 from scipy.linalg import cholesky, solve_triangular
 
-from ..nlp.objectives import noise_sigmas
+from ..nlp.objectives import input_error_covariance, input_error_models, noise_sigmas, times_covariance
 from ..physics.model import HelicopterModel
 from ..simulation.compiled import input_sensitivities, simulate_outputs
 from ..simulation.trim import trim_float
@@ -46,28 +46,33 @@ from .timeseries import decimation
 
 
 def input_noise_factor(model: HelicopterModel, mv, outputs, input_errors, sigma: dict, substeps: int = 2,
-                       keep=None) -> tuple[dict, np.ndarray, np.ndarray]:
+                       keep=None, models: dict | None = None) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
     """The covariance the measured inputs' noise gives one maneuver's outputs, factored.
 
     Rows in time order (every output of kept sample 0, then of kept sample 1, ...; ``keep``: sample
-    indices, default all). Returns ``(y, Su, L)``: the model outputs at every sample, the stacked
-    sensitivities of the kept rows to every input sample (:func:`input_sensitivities`), and the lower
+    indices, default all). The input samples are the NLP's (``Maneuver.input_grid``: the recorded-rate ones with
+    ``resample_inputs = "record"``). Returns ``(y, Su, L, Sigma_u)``: the model outputs at every sample (the
+    replay driven by those inputs), the stacked sensitivities of the kept rows to every input sample
+    (:func:`input_sensitivities`), the lower
     Cholesky factor of ``V = R + Su Sigma_u Su^T`` (``sigma``: noise sigma [SI] of every output and
-    input channel). Shared by the innovations here and the score test's whitening (attribution).
+    input channel) and Sigma_u (:func:`~pyomo_heli.nlp.objectives.input_error_covariance`: the errors independent,
+    or with ``models`` the AR processes the NLP's ``[objectives] input_error_ar`` takes them for). Shared by the
+    innovations here and the score test's whitening (attribution).
     """
-    t = mv.data["t"].to_numpy(dtype=float)
-    n = len(t)
-    keep = np.arange(n) if keep is None else np.asarray(keep, dtype=int)
-    y, S_u = input_sensitivities(model, trim_float(model, mv.trim_speed), t, mv.increments(), outputs,
-                                 input_errors, substeps, keep=keep)
+    t_in, inc, idx = mv.input_grid()
+    n = len(t_in)
+    keep = np.arange(len(idx)) if keep is None else np.asarray(keep, dtype=int)
+    y, S_u = input_sensitivities(model, trim_float(model, mv.trim_speed), t_in, inc, outputs, input_errors,
+                                 substeps, keep=idx[keep])
+    y = {o: np.asarray(v, dtype=float)[idx] for o, v in y.items()}
     n_out = len(outputs)
     Su = np.empty((len(keep) * n_out, len(input_errors) * n))
     for j, o in enumerate(outputs):
         Su[j::n_out] = S_u[o]
-    var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
-    V = (Su * var_u) @ Su.T
+    cov_u = input_error_covariance(n, list(input_errors), sigma, models)
+    V = times_covariance(Su, cov_u) @ Su.T
     V[np.diag_indices_from(V)] += np.tile([float(sigma[o]) ** 2 for o in outputs], len(keep))
-    return y, Su, cholesky(V, lower=True)
+    return y, Su, cholesky(V, lower=True), cov_u
 
 
 def record_rate_outputs(model: HelicopterModel, mv, record, outputs, substeps: int = 2) -> dict:
@@ -88,7 +93,8 @@ def record_rate_outputs(model: HelicopterModel, mv, record, outputs, substeps: i
 
 def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigma: dict, test_rate_hz: float,
                          substeps: int = 2, path: list | None = None, nuisance_parameters=(),
-                         record=None, widths: dict | None = None) -> tuple[pd.DataFrame, dict]:
+                         record=None, widths: dict | None = None,
+                         models: dict | None = None) -> tuple[pd.DataFrame, dict]:
     """Innovations of one prepared maneuver at its test-rate samples (columns ``t`` and ``inn_<o>``), and the
     maneuver's output biases: ``{"bias_<o>": SI, "se_bias_<o>": SI}``, the generalised least-squares estimates
     of the nuisance with their standard errors under the same covariance, scaled by each output's innovation RMS in
@@ -102,12 +108,14 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     taken against the replay its recorded inputs drive (at ``mv``'s samples; :func:`record_rate_outputs`), the
     input-noise model and the sensitivities stay ``mv``'s. ``widths``: the play and dead-zone signals' widths of the
     input-path dictionary (:func:`.input_path.play_widths`; None: the standard dictionary, without them).
+    ``models``: the input errors' AR models (:func:`~pyomo_heli.nlp.objectives.input_error_models`; None:
+    independent errors).
     """
     t = mv.data["t"].to_numpy(dtype=float)
     n = len(t)
     k = decimation(t, test_rate_hz)
     keep = np.arange(0, n, k)
-    y, Su, L = input_noise_factor(model, mv, outputs, input_errors, sigma, substeps, keep)
+    y, Su, L, cov_u = input_noise_factor(model, mv, outputs, input_errors, sigma, substeps, keep, models)
     if record is not None:
         y = record_rate_outputs(model, mv, record, outputs, substeps)
     n_out, m = len(outputs), len(keep)
@@ -118,18 +126,19 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
     N = np.zeros((m * n_out, n_out + len(input_errors)))
     for j in range(n_out):
         N[j::n_out, j] = 1.0
+    n_in = Su.shape[1] // len(input_errors)
     for c in range(len(input_errors)):
-        N[:, n_out + c] = Su[:, c * n:(c + 1) * n].sum(axis=1)
+        N[:, n_out + c] = Su[:, c * n_in:(c + 1) * n_in].sum(axis=1)
     ew, Nw = solve_triangular(L, e, lower=True), solve_triangular(L, N, lower=True)
     coef, *_ = np.linalg.lstsq(Nw, ew, rcond=None)
     ew = ew - Nw @ coef  # the innovations: whitened, the nuisance projected out
     block = None
     if path is not None:  # the input-path regression also allows a shift of the identified parameters
-        var_u = np.repeat([float(sigma[c]) ** 2 for c in input_errors], n)
-        quiet = dataclasses.replace(mv, data=mv.data.assign(**expected_inputs(mv, ew, Su, L, var_u, input_errors)))
+        quiet = expected_inputs(mv, ew, Su, L, cov_u, input_errors)
         P = parameter_columns(model, quiet, outputs, keep, nuisance_parameters, substeps)
         signals = signals_of(model, mv, y, input_errors, substeps, widths)
-        block = record_block(-e, Su, np.column_stack([N, P]), L, signals, input_errors, var_u, t, mv.name)
+        block = record_block(-e, Su, np.column_stack([N, P]), L, signals, input_errors, cov_u, mv.input_grid()[0],
+                             mv.name)
     cov = np.linalg.pinv(Nw.T @ Nw)  # the estimates' covariance if the whitened rows have unit variance
     ew = ew.reshape(m, n_out)
     # each output's noise scale in this record: the RMS of its innovations (1 when the sigmas are right; a record
@@ -146,7 +155,7 @@ def maneuver_innovations(model: HelicopterModel, mv, outputs, input_errors, sigm
 def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_errors, noise_sigma: dict | None,
                 test_rate_hz: float, substeps: int = 2, problems: list | None = None,
                 parameters=(), records: dict | None = None,
-                input_path_family: str = "standard") -> tuple[pd.DataFrame, dict]:
+                input_path_family: str = "standard", input_error_ar: int = 0) -> tuple[pd.DataFrame, dict]:
     """Innovations of every maneuver: ``maneuvers`` is a list of (role, prepared maneuver).
 
     ``sigma_from``: the maneuvers whose lead-in gives the sigmas when ``noise_sigma`` is None (the
@@ -159,10 +168,12 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     identified ones) allowed. ``records``: maneuver name -> the same maneuver at the record's rate, whose recorded
     inputs drive the replay the residuals are taken against (``[diagnosis] replay = "record"``).
     ``input_path_family``: "extended" adds each input's free play and dead zone to the input path's dictionary.
+    ``input_error_ar``: the order of the AR model of the input errors (the NLP's ``[objectives] input_error_ar``),
+    fitted to the lead-ins of ``sigma_from`` at their samples; 0: independent errors.
     """
     problems = problems if problems is not None else []
     input_errors = list(input_errors)
-    sigma = noise_sigmas(sigma_from, input_errors, noise_sigma)
+    sigma = noise_sigmas(sigma_from, input_errors, noise_sigma, input_record=True)
     outs = []
     for o in outputs:
         if not all(o in mv.data for _, mv in maneuvers):
@@ -174,10 +185,11 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
             problems.append(f"innovations: output {o} left out ({exc})")
     frames, biases, path = [], [], []
     widths = play_widths(sigma) if input_path_family == "extended" else None
+    models = input_error_models(sigma_from, input_errors, input_error_ar, input_record=True)
     for role, mv in maneuvers:
         try:
             df, b = maneuver_innovations(model, mv, outs, input_errors, sigma, test_rate_hz, substeps, path, parameters,
-                                         (records or {}).get(mv.name), widths)
+                                         (records or {}).get(mv.name), widths, models)
         except Exception as exc:  # noqa: BLE001 - the raw residual tests stay available
             why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             problems.append(f"maneuver {mv.name}: innovations failed ({why})")
@@ -188,6 +200,7 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
         biases.append({"maneuver": mv.name, "role": role, "trim_speed": float(mv.trim_speed), **b})
     table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["maneuver", "role", "t"])
     settings = {"outputs": outs, "input_errors": input_errors, "test_rate_hz": float(test_rate_hz),
+                "input_error_ar": {c: [float(x) for x in a] for c, (a, _) in models.items()},
                 "replay": "record" if records else "fit",
                 "sigma": {c: float(v) for c, v in sigma.items()}, "record_biases": biases}
     if input_errors and path:

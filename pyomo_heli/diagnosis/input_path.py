@@ -35,6 +35,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy import stats
 
+from ..nlp.objectives import times_covariance
+
 #: the dictionary's signals: name -> (how it is taken, SI unit)
 SIGNALS = {
     "col": ("measured collective (increment)", "rad"),
@@ -162,13 +164,22 @@ def signals_of(model, mv, y: dict, channels, substeps: int = 2, widths: dict | N
     own noise, the replay's outputs that noise through the dynamics (their exact sensitivities); the regression takes
     it out (corrected least squares), or a channel the pilot held still would be found to follow its own noise.
     ``y``: the replay's outputs at every sample; a model output it does not carry is left out. ``widths``: the play
-    signals' widths (:func:`play_widths`; none without)."""
+    signals' widths (:func:`play_widths`; none without). The signals are taken at the input samples (``input_grid``:
+    an input error is one of each); where those are the recorded-rate ones, the model outputs are the replay's there.
+    """
     from ..simulation.compiled import input_sensitivities
     from ..simulation.trim import trim_float
 
-    t = mv.data["t"].to_numpy(dtype=float)
-    n, inc = len(t), mv.increments()
-    values = signal_values(t, inc, y, widths)
+    t, inc, idx = mv.input_grid()
+    n = len(t)
+    model_outs = [o for o in ("q", "theta", "TAS") if o in y]
+    S, y_in = {}, y
+    if model_outs:
+        y_in, S = input_sensitivities(model, trim_float(model, mv.trim_speed), t, inc, model_outs, list(channels),
+                                      substeps)
+        if len(idx) == n:  # the maneuver's own samples: the outputs as given (e.g. the record-rate replay's)
+            y_in = y
+    values = signal_values(t, inc, y_in, widths)
     block = {c: slice(i * n, (i + 1) * n) for i, c in enumerate(channels)}
     grad = np.gradient(np.eye(n), t, axis=0) if n > 1 else np.zeros((n, n))
     noise = {}
@@ -183,20 +194,17 @@ def signals_of(model, mv, y: dict, channels, substeps: int = 2, widths: dict | N
                 F[:, block[c]] = play_signal(t, inc[c], widths[c])[1]
                 Z[:, block[c]] = zone_signal(t, inc[c], widths[c])[1]
         noise[c], noise[f"{c}_rate"], noise[f"{c}_play"], noise[f"{c}_zone"] = A, R, F, Z
-    model_outs = [o for o in ("q", "theta", "TAS") if o in values]
-    if model_outs:
-        _, S = input_sensitivities(model, trim_float(model, mv.trim_speed), t, inc, model_outs, list(channels),
-                                   substeps)
-        noise.update({o: S[o] for o in model_outs})
+    noise.update({o: S[o] for o in model_outs})
     return {k: (x, noise[k]) for k, x in values.items()}
 
 
-def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, var_u: np.ndarray, channels) -> dict:
+def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, cov_u: np.ndarray, channels):
     """The record's inputs with the part of their noise the residual reveals taken out: the measured input minus
     the conditional mean of its error given the residual, ``E[du | e] = Sigma_u Su^T V^-1 e`` (``rw``: the whitened
     residual ``L^-1 e``, e = model - data at the kept rows, with the record's nuisance projected out; ``V = L L^T``;
-    ``var_u``: the variance of every input sample's error, channel blocks in ``channels`` order). Channel -> values
-    at the record's samples [rad].
+    ``cov_u``: the covariance of the input samples' errors, channel blocks in ``channels`` order, or the vector of
+    their variances when independent; :func:`~pyomo_heli.nlp.objectives.input_error_covariance`). Returns the
+    maneuver with those inputs at its input samples (``Maneuver.input_grid``: ``inputs_record`` where it has them).
 
     Why: the parameter columns (:func:`parameter_columns`) are differences of replays driven by the inputs. Driven
     by the measured ones they carry the input noise's response scaled by the parameter, ``d(S_u du)/dtheta``, which
@@ -207,9 +215,14 @@ def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, var_u: np
     (``tests/test_input_path.py``)."""
     from scipy.linalg import solve_triangular
 
-    du = var_u * (Su.T @ solve_triangular(L.T, rw, lower=False))
+    du = times_covariance(solve_triangular(L.T, rw, lower=False) @ Su, cov_u)
+    import dataclasses
+
     n = Su.shape[1] // len(channels)
-    return {c: mv.data[c].to_numpy(dtype=float) - du[i * n:(i + 1) * n] for i, c in enumerate(channels)}
+    src = "data" if mv.inputs_record is None else "inputs_record"  # where the input samples are
+    df = getattr(mv, src)
+    quiet = df.assign(**{c: df[c].to_numpy(dtype=float) - du[i * n:(i + 1) * n] for i, c in enumerate(channels)})
+    return dataclasses.replace(mv, **{src: quiet})
 
 
 def parameter_columns(model, mv, outputs, keep, names, substeps: int = 2) -> np.ndarray:
@@ -229,13 +242,13 @@ def parameter_columns(model, mv, outputs, keep, names, substeps: int = 2) -> np.
 
 
 def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, signals: dict, channels,
-                 var_u: np.ndarray, t: np.ndarray, maneuver: str = "") -> dict:
+                 cov_u: np.ndarray, t: np.ndarray, maneuver: str = "") -> dict:
     """One record's sums for the regression, in whitened rows with its nuisance projected out (Frisch-Waugh).
 
     ``e``: data - model at the kept rows (time order, every output of a row together); ``Su``: their sensitivities
     to every input sample (channel blocks in ``channels`` order, :func:`.innovations.input_noise_factor`); ``N``:
     the nuisance columns; ``L``: the lower Cholesky factor of the rows' covariance; ``signals``:
-    :func:`signals_of`; ``var_u``: the variance of every input sample's error.
+    :func:`signals_of`; ``cov_u``: the covariance of the input samples' errors (:func:`expected_inputs`).
 
     Returns ``DtD``, ``Dte``, ``ete`` (the least-squares sums), ``B`` and ``b``: their expectation due to the
     input noise in the regressors (what corrected least squares subtracts), ``rows``, ``nuisance`` and ``labels``;
@@ -260,9 +273,9 @@ def record_block(e: np.ndarray, Su: np.ndarray, N: np.ndarray, L: np.ndarray, si
             noise.append(Zc @ A)
             labels.append((c, s))
     D = np.column_stack(cols)
-    Zs = Z * var_u
+    Zs = times_covariance(Z, cov_u)
     b = -np.array([np.sum(U * Zs) for U in noise])  # E[d_j . e] from the noise both share (e = data - model)
-    Us = [U * var_u for U in noise]
+    Us = [times_covariance(U, cov_u) for U in noise]
     B = np.array([[np.sum(U * V) for V in Us] for U in noise])
     return {"DtD": D.T @ D, "Dte": D.T @ ew, "ete": float(ew @ ew), "B": B, "b": b, "rows": len(ew),
             "nuisance": N.shape[1], "labels": labels, "asked": asked_errors(Z, ew, t, channels),

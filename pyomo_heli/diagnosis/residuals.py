@@ -349,7 +349,8 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
             inn, inn_info = innovations(model, inn_mans, id_mans or [mv for _, mv in inn_mans], outputs,
                                         noise.input_noise, noise.noise_sigma, test_rate_hz, problems=problems,
                                         parameters=[p.name for p in cfg.free], records=records,
-                                        input_path_family=noise.input_path_family)
+                                        input_path_family=noise.input_path_family,
+                                        input_error_ar=noise.input_error_ar)
         except ValueError as exc:  # e.g. no input sigma: the raw residual tests stay
             problems.append(f"innovations not computed: {exc}")
     return Residuals(label=label, parameters={k: float(v) for k, v in (parameters or {}).items()}, time=time,

@@ -201,6 +201,49 @@ def lead_in_ar(maneuvers, channel: str, order: int, input_record: bool = False) 
     return a, math.sqrt(max(float(r[0] - a @ r[1:]), 0.0) / r[0])
 
 
+def ar_precision(n: int, a, sigma_w: float) -> np.ndarray:
+    """The precision (inverse covariance) of ``n`` errors of one record under an autoregressive model: coefficients
+    ``a`` (:func:`lead_in_ar`), innovation sigma ``sigma_w``, the errors before the record's first taken as zero.
+    ``A^T A / sigma_w^2``, A the lower-triangular map of the errors to their innovations (1 on the diagonal, -a_j
+    on the (j+1)-th subdiagonal), so that ``e^T P e / 2`` is the NLP's J_input of those errors (less its constant)."""
+    A = np.eye(n)
+    for j, aj in enumerate(np.asarray(a, float)):
+        A -= aj * np.eye(n, k=-(j + 1))
+    return A.T @ A / sigma_w**2
+
+
+def input_error_models(maneuvers, channels, order: int, input_record: bool = False) -> dict:
+    """Channel -> (coefficients, innovation over noise sigma) of the AR(``order``) model of each input channel's
+    errors from the records' lead-ins (:func:`lead_in_ar`), as the NLP takes them with ``[objectives]
+    input_error_ar``; {} for order 0 (independent errors)."""
+    return {c: lead_in_ar(maneuvers, c, order, input_record) for c in channels} if order else {}
+
+
+def input_error_covariance(n: int, channels, sigma: dict, models: dict | None = None) -> np.ndarray:
+    """The covariance of one record's input errors, ``n`` samples of each channel (channel blocks in ``channels``
+    order; ``sigma``: each channel's noise sigma [SI]; ``models``: :func:`input_error_models`). Independent errors:
+    the vector of their variances (the diagonal); AR errors: the block-diagonal matrix, each block the inverse of
+    :func:`ar_precision` with innovation sigma ``sigma x ratio``."""
+    models = models or {}
+    if not any(c in models for c in channels):
+        return np.repeat([float(sigma[c]) ** 2 for c in channels], n)
+    out = np.zeros((len(channels) * n, len(channels) * n))
+    for i, c in enumerate(channels):
+        blk = slice(i * n, (i + 1) * n)
+        if c in models:
+            a, ratio = models[c]
+            out[blk, blk] = np.linalg.inv(ar_precision(n, a, float(sigma[c]) * ratio))
+        else:
+            out[blk, blk] = np.eye(n) * float(sigma[c]) ** 2
+    return out
+
+
+def times_covariance(X: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """``X @ Sigma`` for a covariance given as :func:`input_error_covariance` returns it (a vector of variances or
+    a symmetric matrix)."""
+    return X * cov if cov.ndim == 1 else X @ cov
+
+
 def lead_in_sigma(maneuvers, channels, input_record: bool = False) -> dict:
     """Noise sigma of each channel from the quiet lead-in of the records (no model involved).
 

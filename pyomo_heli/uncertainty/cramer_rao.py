@@ -56,7 +56,7 @@ import numpy as np
 import pandas as pd
 from scipy.linalg import cho_factor, cho_solve
 
-from ..nlp.objectives import R_FLOOR, noise_sigmas
+from ..nlp.objectives import R_FLOOR, ar_precision, input_error_models, noise_sigmas
 from ..simulation.compiled import input_sensitivities
 from ..simulation.sensitivity import sensitivities
 from ..simulation.trim import trim_float
@@ -108,6 +108,8 @@ class PointInformation:
     S_input: list = field(default_factory=list)
     #: noise sigma [SI] of each input channel whose errors are estimated (order of S_input's columns)
     input_sigma: dict = field(default_factory=dict)
+    #: the input errors' AR models, channel -> (coefficients, innovation over noise sigma); {}: independent errors
+    input_models: dict = field(default_factory=dict)
 
     @property
     def n_trims(self) -> int:
@@ -121,8 +123,15 @@ class PointInformation:
         for (a, b), S_e in self.S_input:
             n_e = next(iter(S_e.values())).shape[1]
             per = n_e // len(self.input_sigma)
-            prior = np.repeat([1.0 / s**2 for s in self.input_sigma.values()], per)
-            F_ee, F_te, b_e = np.diag(prior), np.zeros((n, n_e)), np.zeros(n_e)
+            F_ee = np.zeros((n_e, n_e))  # the errors' prior information (the inverse of their covariance)
+            for i, (c, s) in enumerate(self.input_sigma.items()):
+                blk = slice(i * per, (i + 1) * per)
+                if c in self.input_models:
+                    coef, ratio = self.input_models[c]
+                    F_ee[blk, blk] = ar_precision(per, coef, s * ratio)
+                else:
+                    F_ee[blk, blk] = np.eye(per) / s**2
+            F_te, b_e = np.zeros((n, n_e)), np.zeros(n_e)
             for o, Se in S_e.items():
                 w = 1.0 / self.R_time[o]
                 F_ee += w * Se.T @ Se
@@ -180,7 +189,8 @@ class PointInformation:
 
 
 def point_information(model, free, values: dict, maneuvers, trims, time_outputs, trim_outputs,
-                      rel_step: float = 1e-5, input_errors=(), noise_sigma: dict | None = None) -> PointInformation:
+                      rel_step: float = 1e-5, input_errors=(), noise_sigma: dict | None = None,
+                      input_error_ar: int = 0) -> PointInformation:
     """Sensitivities and estimated residual covariances at ``values`` (free parameter values, SI).
 
     maneuvers: dataset Maneuver objects (as in the NLP: resampled, cropped);
@@ -188,7 +198,8 @@ def point_information(model, free, values: dict, maneuvers, trims, time_outputs,
     input_errors, noise_sigma: the NLP's errors-in-variables settings (``NLPOptions``); with input
     errors the time outputs get the known noise sigmas of the NLP (given, or from the records'
     lead-in as the NLP takes them) instead of the residuals' variance, and the input errors are
-    eliminated from the information (module docstring).
+    eliminated from the information (module docstring); ``input_error_ar``: their prior is the NLP's AR model of
+    that order (fitted to the maneuvers' lead-ins at their samples), not independent errors.
     """
     names = [f.name for f in free]
     mdl = model.with_parameters(**{n: float(values[n]) for n in names})
@@ -201,15 +212,17 @@ def point_information(model, free, values: dict, maneuvers, trims, time_outputs,
                             scale=np.array([f.scale for f in free]))
     input_errors = tuple(input_errors)
     if input_errors and s.time:
-        sigma = noise_sigmas(maneuvers, (*s.time, *input_errors), noise_sigma)
+        # at the NLP's input samples (the recorded-rate ones with resample_inputs = "record")
+        sigma = noise_sigmas(maneuvers, (*s.time, *input_errors), noise_sigma, input_record=True)
         info.input_sigma = {c: float(sigma[c]) for c in input_errors}
+        info.input_models = input_error_models(maneuvers, input_errors, input_error_ar, input_record=True)
         start = 0
         for mv in maneuvers:
-            t = mv.data["t"].to_numpy()
-            _, S_e = input_sensitivities(mdl, trim_float(mdl, mv.trim_speed), t, mv.increments(), list(s.time),
-                                         input_errors)
-            info.S_input.append(((start, start + len(t)), S_e))
-            start += len(t)
+            t_in, inc, idx = mv.input_grid()
+            _, S_e = input_sensitivities(mdl, trim_float(mdl, mv.trim_speed), t_in, inc, list(s.time),
+                                         input_errors, keep=idx)
+            info.S_input.append(((start, start + len(idx)), S_e))
+            start += len(idx)
     for o in s.time:
         meas = np.concatenate([mv.data[o].to_numpy() for mv in maneuvers])
         e = meas - s.y_time[o]

@@ -21,7 +21,8 @@ from .identifiability import identifiability
 
 def _information(cfg, data, parameters):
     return point_information(cfg.model, cfg.free, parameters, data.maneuvers, data.trims, cfg.nlp.time_outputs,
-                             cfg.nlp.trim_outputs, input_errors=cfg.nlp.input_errors, noise_sigma=cfg.nlp.noise_sigma)
+                             cfg.nlp.trim_outputs, input_errors=cfg.nlp.input_errors, noise_sigma=cfg.nlp.noise_sigma,
+                             input_error_ar=cfg.nlp.input_error_ar)
 
 
 def point_standard_errors(cfg, data, parameters: dict, kind: str = "eps") -> dict:

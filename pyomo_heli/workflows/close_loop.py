@@ -228,11 +228,12 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
 
 
 def score_test_inputs(cfg: IdentificationConfig, settings: LoopSettings) -> dict:
-    """The score test's errors-in-variables arguments: the NLP's input errors and sigmas, unless the loop
+    """The score test's errors-in-variables arguments: the NLP's input errors, sigmas and AR order, unless the loop
     takes the measured inputs as exact (``[loop] score_inputs = "measured"``) or there are none."""
     if settings.score_inputs == "measured" or not cfg.nlp.input_errors:
         return {}
-    return {"input_errors": cfg.nlp.input_errors, "noise_sigma": cfg.nlp.noise_sigma}
+    return {"input_errors": cfg.nlp.input_errors, "noise_sigma": cfg.nlp.noise_sigma,
+            **({"input_error_ar": cfg.nlp.input_error_ar} if cfg.nlp.input_error_ar else {})}
 
 
 def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = None, progress=info,

@@ -2,7 +2,8 @@
 
     python studies/held_out_effects.py --seeds 3 --out results/held_out \
         [--effects fuselage_download drag_rise ...] [--config studies/held_out_discovery.toml] \
-        [--data-config data/bo105_synthetic.toml] [--generic-family extended]
+        [--data-config data/bo105_synthetic.toml] [--generic-family extended] [--input-path-family extended] \
+        [--set TABLE.KEY=VALUE ...]
 
 For every held-out effect (pyomo_heli/flighttest/held_out_effects.py, at its nominal strength) and every seed
 (20261122 + k, k = FIRST..FIRST+SEEDS-1): the bundled flight test's generator config with its truth effect
@@ -16,7 +17,9 @@ nothing and re-evaluates every finished loop in OUT (rows and table); ``--rescor
 ``OUT/held_out.csv`` alone (shape columns and criterion, from the terms the table reports); ``--merge FOLDER...`` runs
 nothing and puts the rows of FOLDER/held_out.csv in place of OUT's rows of the same truth and seed;
 ``--summary FOLDER...`` runs nothing and writes the tallies of several studies' tables as one table to
-``OUT/summary.md``.
+``OUT/summary.md``. ``--generic-family``, ``--input-path-family`` and ``--set`` run the loop (or ``--reanalyse``)
+with a copy of CONFIG in OUT that sets ``[loop] generic_family``, ``[diagnosis] input_path_family`` or any field
+(e.g. ``--set data.resample_inputs=record objectives.input_error_ar=4``).
 
 Written after every case: ``OUT/held_out.csv`` and ``OUT/held_out.md``, one row per effect and seed of every
 ``OUT/*/row.json`` (also rows of earlier runs into the same OUT): truth, verdict, what was added,
@@ -1123,6 +1126,9 @@ def main(argv=None) -> int:
     ap.add_argument("--input-path-family", choices=["standard", "extended"],
                     help="set the config's [diagnosis] input_path_family (copied to OUT/input_path_<family>.toml): the "
                          "residual analysis's input-path dictionary; extended: + each input's free play and dead zone")
+    ap.add_argument("--set", nargs="+", metavar="TABLE.KEY=VALUE", default=[],
+                    help="set these fields of the config (copied, with them, to OUT/config_set.toml), e.g. "
+                         "data.resample_inputs=record objectives.input_error_ar=4")
     ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
     ap.add_argument("--out", required=True)
     ap.add_argument("--bundled", action="store_true",
@@ -1179,6 +1185,18 @@ def main(argv=None) -> int:
         config = with_generic_family(config, a.generic_family, out)
     if a.input_path_family:
         config = with_input_path_family(config, a.input_path_family, out)
+    if a.set:
+        from pyomo_heli.config import ConfigError, load_identification_config
+
+        try:
+            sets = [parse_set(s) for s in a.set]
+        except ValueError as exc:
+            ap.error(f"--set: {exc}")
+        config = with_settings(config, sets, out / "config_set.toml")
+        try:
+            load_identification_config(config)
+        except ConfigError as exc:
+            ap.error(f"--set: {exc}")
     if a.rescore:
         if not (out / "held_out.csv").is_file():
             ap.error(f"--rescore: {out / 'held_out.csv'} not found")
@@ -1249,18 +1267,45 @@ def with_input_path_family(config: Path, family: str, out: Path) -> Path:
 
 
 def with_setting(config: Path, table: str, key: str, value: str, path: Path) -> Path:
-    """``path``: CONFIG with ``[table] key = "value"`` (the table added if CONFIG has none) and its dataset path
-    made absolute."""
-    text = re.sub(rf"(?m)^{key}\s*=.*\n", "", config.read_text())
-    if f"\n[{table}]\n" in text:
-        text = text.replace(f"\n[{table}]\n", f'\n[{table}]\n{key} = "{value}"\n', 1)
-    else:
-        text = text.rstrip("\n") + f'\n\n[{table}]\n{key} = "{value}"\n'
+    """``path``: CONFIG with ``[table] key = "value"`` (a string; :func:`with_settings`)."""
+    return with_settings(config, [(table, key, json.dumps(value))], path)
+
+
+def with_settings(config: Path, settings, path: Path) -> Path:
+    """``path``: CONFIG with each ``(table, key, literal)`` of ``settings`` set, ``literal`` a TOML value (the key
+    replaced in that table, the table added if CONFIG has none), and its dataset path made absolute."""
+    lines = config.read_text().splitlines()
+    for table, key, literal in settings:
+        head = f"[{table}]"
+        if head not in (ln.strip() for ln in lines):
+            lines += ["", head]
+        start = next(i for i, ln in enumerate(lines) if ln.strip() == head)
+        end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
+        body = [ln for ln in lines[start + 1:end] if not re.match(rf"\s*{re.escape(key)}\s*=", ln)]
+        lines = lines[:start + 1] + [f"{key} = {literal}"] + body + lines[end:]
+    text = "\n".join(lines) + "\n"
     text = re.sub(r'(?m)^dataset\s*=\s*"([^"]*)"',
                   lambda m: f'dataset = "{(config.parent / m.group(1)).resolve().as_posix()}"', text, count=1)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
     return path
+
+
+def parse_set(text: str) -> tuple[str, str, str]:
+    """``TABLE.KEY=VALUE`` of ``--set`` as (table, key, TOML literal): VALUE as TOML (4, true, "record", [...]), or,
+    when it is none, as a string. ValueError naming what is wrong."""
+    import tomllib
+
+    name, sep, value = text.partition("=")
+    table, dot, key = name.strip().rpartition(".")
+    if not (sep and dot and table and key):
+        raise ValueError(f"{text!r}: expected TABLE.KEY=VALUE, e.g. objectives.input_error_ar=4")
+    value = value.strip()
+    try:
+        tomllib.loads(f"v = {value}")
+    except tomllib.TOMLDecodeError:
+        value = json.dumps(value)
+    return table, key.strip(), value
 
 
 def case_task(task: tuple) -> tuple[dict | None, int]:

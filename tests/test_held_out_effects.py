@@ -745,6 +745,24 @@ def test_the_study_sets_the_input_path_family_through_a_copy_of_the_config(tmp_p
     assert load_identification_config(study.CONFIG).diagnosis_settings.input_path_family == "standard"
 
 
+def test_the_study_sets_config_fields_through_a_copy(tmp_path):
+    """--set TABLE.KEY=VALUE: each field set in its own table of a config copy (a bare word is a string), the
+    other tables' keys of the same name left alone; a malformed or unknown setting is one usage error."""
+    from pyomo_heli.config import load_identification_config
+
+    study = _study()
+    sets = [study.parse_set(s) for s in ("data.resample_inputs=record", "objectives.input_error_ar=4",
+                                         "objectives.input_reference_error=true", "diagnosis.replay=record")]
+    assert sets[0] == ("data", "resample_inputs", '"record"') and sets[1] == ("objectives", "input_error_ar", "4")
+    cfg = load_identification_config(study.with_settings(study.CONFIG, sets, tmp_path / "c.toml"))
+    assert cfg.resample_inputs == "record" and cfg.nlp.input_error_ar == 4 and cfg.nlp.input_reference_error
+    assert cfg.diagnosis_settings.replay == "record" and cfg.nlp.input_errors == ("col", "lon")
+    with pytest.raises(ValueError, match="expected TABLE.KEY=VALUE"):
+        study.parse_set("input_error_ar=4")
+    with pytest.raises(SystemExit):
+        study.main(["--set", "objectives.input_error_ar=99", "--effects", "none", "--out", str(tmp_path / "o")])
+
+
 def test_a_case_folder_of_another_generator_config_is_refused(tmp_path):
     """The small and the full-size study generate the same effect and seed from other templates: a scratch folder
     that holds one is never taken for the other."""

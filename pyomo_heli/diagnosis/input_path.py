@@ -24,8 +24,10 @@ step); a term already in that is no longer below the level leaves. The residual 
 whitened rows (F-type scale), so a noise level off by a constant factor does not make terms significant.
 
 The dictionary is generic: each input channel against the measured inputs, the model's pitch rate, attitude and
-airspeed (the replay's, not the measurements, whose noise is in the residual), and the inputs' rates. It names no
-effect; the held-out truth effects of the discovery study are never imported here.
+airspeed (the replay's, not the measurements, whose noise is in the residual), and the inputs' rates; the extended
+dictionary (``[diagnosis] input_path_family = "extended"``) adds each input's free play and dead zone, the
+control-path nonlinearities no linear signal describes. It names no effect; the held-out truth effects of the
+discovery study are never imported here.
 """
 from __future__ import annotations
 
@@ -127,8 +129,7 @@ def zone_signal(t: np.ndarray, u: np.ndarray, width: float) -> tuple[np.ndarray,
     the zone. Within it that error is ``-u``, the input's own noise in the quiet parts: left out, the signal does not
     carry the noise (its map is zero; the smoothed noise does not reach the zone's edge). Taken with the noise in,
     corrected least squares under independent errors under-subtracts the share a smoothed signal has of the
-    filtered input noise, and the exact model's input errors follow their own channel's zone (mean z +1.0 to +1.9
-    over 20 seeds of M0 + noise)."""
+    filtered input noise, and on M0 + noise the exact model's input errors follow their own channel's zone."""
     S = smoothing(t)
     us = S @ np.asarray(u, float)
     h = 0.5 * width
@@ -138,7 +139,7 @@ def zone_signal(t: np.ndarray, u: np.ndarray, width: float) -> tuple[np.ndarray,
 def signal_values(t: np.ndarray, increments: dict, y: dict, widths: dict | None = None) -> dict:
     """The dictionary's signals of one record at its samples ``t`` [s] (SI): the measured input ``increments``, the
     model outputs ``y`` (q, theta, TAS; one ``y`` does not carry is left out), the inputs' rates and, for each
-    channel in ``widths`` (:func:`play_widths`), its free play."""
+    channel in ``widths`` (:func:`play_widths`), its free play and dead zone."""
     out = {c: np.asarray(increments[c], float) for c in ("col", "lon")}
     out.update({o: np.asarray(y[o], float) for o in ("q", "theta", "TAS") if o in y})
     for c in ("col", "lon"):

@@ -38,7 +38,8 @@ reports (a discovered term the validation rule rejected, else the last step's be
 matches. The residual analysis of the kept model (:func:`final_residual`): its verdict, where an output's
 records disagree on its bias whether that shape matches the truth's (:func:`record_bias_match`), and the input
 error it reports with whether that follows the truth's control error (:func:`input_path_match`). ``--reanalyse``
-makes that analysis again for rows whose loops are gone and whose kept model the table holds (:func:`reanalyse`).
+makes that analysis again for rows whose loops are gone and whose kept model the table holds (:func:`reanalyse`;
+``--rows CSV`` starts OUT's table from another study's, which stays as it is).
 The criterion (:func:`criterion_met`) counts a kept discovered term as a reported shape: the loop reports
 it "not explained by any library effect; discovered ...". The tallies also read the criterion with the trim cut
 measured above the noise floor (:func:`criterion_met_above_floor`), beside the issue's reading. The trim RMS of
@@ -59,6 +60,7 @@ import functools
 import json
 import math
 import re
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -1152,6 +1154,9 @@ def main(argv=None) -> int:
                     help="run no loop: the residual analysis of the kept model, made with the current analysis, for "
                          "OUT's rows whose loop kept M0 (their loops gone), the flight tests generated again into "
                          "SCRATCH; rewrites the table")
+    ap.add_argument("--rows", metavar="CSV",
+                    help="with --reanalyse: start OUT/held_out.csv from this table (another study's, e.g. "
+                         "docs/results/held_out/held_out.csv), so that the reanalysis leaves it as it is")
     ap.add_argument("--merge", nargs="+", metavar="FOLDER",
                     help="run nothing: replace (or add) the rows of OUT/held_out.csv by the rows of the same truth "
                          "and seed in these folders' held_out.csv (rows rerun elsewhere); the others stay as they are")
@@ -1203,7 +1208,14 @@ def main(argv=None) -> int:
         rescore(out)
         print((out / "held_out.md").read_text())
         return 0
+    if a.rows and not a.reanalyse:
+        ap.error("--rows: only with --reanalyse")
     if a.reanalyse:
+        if a.rows:
+            rows = in_file(ap, a.rows, "--rows")
+            out.mkdir(parents=True, exist_ok=True)
+            if rows.resolve() != (out / "held_out.csv").resolve():
+                shutil.copyfile(rows, out / "held_out.csv")
         if not (out / "held_out.csv").is_file():
             ap.error(f"--reanalyse: {out / 'held_out.csv'} not found")
         from pyomo_heli.config import load_identification_config

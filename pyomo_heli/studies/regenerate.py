@@ -130,7 +130,9 @@ ENTRIES: tuple[Entry, ...] = (
     *(Entry(f"input_path_level{suffix}", (f"python studies/input_path_level.py --seeds 20261122-20261161{flag} "
                                           f"--out {{out}}/input_path_level{suffix}",),
             ("summary.csv", "summary.md"), minutes=40)
-      for suffix, flag in (("", ""), ("_sample", " --resample-inputs sample"), ("_record", " --replay record"))),
+      for suffix, flag in (("", ""), ("_sample", " --resample-inputs sample"), ("_record", " --replay record"),
+                           ("_extended", " --input-path-family extended"),
+                           ("_extended_record", " --input-path-family extended --replay record"))),
     # the input scale factors' NLP estimates when nothing is missing (the held-out rows' col_scale)
     Entry("generic_term_level", (
         "python studies/generic_term_level.py --seeds 20261122-20261141 --out {out}/generic_term_level",
@@ -201,6 +203,13 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("held_out_blind4", (f"python studies/held_out_effects.py --seeds 3 --effects {H17_H19} --workers 2 "
                               "--out {out}/held_out_blind4",),
           ("held_out.csv", "held_out.md"), minutes=200),
+    # the input path's extended dictionary on the kept models of the standard family's full-size rows, reanalysed
+    Entry("input_path_extended", tuple(
+        f"python studies/held_out_effects.py --reanalyse {{out}}/input_path_extended/scratch --rows "
+        f"{{out}}/{t}/held_out.csv --input-path-family extended --out {{out}}/input_path_extended/{t}"
+        for t in ("held_out", "held_out_blind3", "noise_only")),
+        tuple(f"{t}/held_out.{x}" for t in ("held_out", "held_out_blind3", "noise_only") for x in ("csv", "md")),
+        needs=("held_out", "held_out_blind3", "noise_only"), minutes=70),
     Entry("held_out_summary", ("python studies/held_out_effects.py --summary " + " ".join(
         f"{{out}}/{f}" for f in HELD_OUT_TABLES) + " --out {out}/held_out_summary",),
           ("summary.md",), needs=HELD_OUT_TABLES, minutes=0.1),

@@ -393,7 +393,8 @@ def test_reanalyse_rebuilds_a_kept_m0_from_the_table_and_runs_the_loops_own_resi
     assert gear["final residual"] == "noise only" and gear["input path"] == "" and gear["criterion met"] in (False,
                                                                                                           "False")
     # a second run reads the case's cache, not the analysis again
-    study.reanalyse(out, tmp_path / "scratch", ROOT / "studies" / "held_out_small.toml", "")
+    study.reanalyse(out, tmp_path / "scratch", ROOT / "studies" / "held_out_small.toml",
+                    (ROOT / "studies" / "held_out_small_gen.toml").read_text())
     assert len(calls) == 2
 
 

@@ -726,7 +726,7 @@ def input_path_history(terms: list, setup: SignatureSetup) -> dict:
     from pyomo_heli.nlp.objectives import noise_sigmas
 
     out = {}
-    widths = play_widths(noise_sigmas(setup.maneuvers, ("col", "lon")))
+    widths = play_widths(noise_sigmas(setup.maneuvers, ("col", "lon"), input_record=True))
     for mv in setup.maneuvers:
         df, t = setup.base.maneuvers[mv.name], mv.data["t"].to_numpy(dtype=float)
         sig = signal_values(t, mv.increments(), {o: df[o].to_numpy(dtype=float) for o in ("q", "theta", "TAS")},
@@ -1329,6 +1329,9 @@ def case_task(task: tuple) -> tuple[dict | None, int]:
         loop = run_case(effect, seed, out, config, template)
     except SystemExit as exc:
         return None, int(exc.code) if isinstance(exc.code, int) else 1
+    except StudyFolderError as exc:  # the --out folder given is at fault: one line, the other cases go on
+        print(f"held_out_effects.py: error: {exc}", file=sys.stderr, flush=True)
+        return None, 2
     row = evaluate(effect, seed, loop, config)
     save_row(loop.parent, row)
     return row, 0

@@ -774,6 +774,10 @@ def test_a_case_folder_of_another_generator_config_is_refused(tmp_path):
     (case / "gen.toml").write_text("seed = 1\n")
     with pytest.raises(study.StudyFolderError, match="generated from another generator config"):
         study.generate_case(case, (ROOT / "data" / "bo105_synthetic.toml").read_text(), "tail_stall", 20261122)
+    # in a study run: one line, that case failed, no traceback
+    task = ("tail_stall", 20261122, tmp_path, ROOT / "studies" / "held_out_discovery.toml",
+            (ROOT / "data" / "bo105_synthetic.toml").read_text())
+    assert study.case_task(task) == (None, 2)
 
 
 def test_the_third_blind_set_moves_what_its_equations_say():

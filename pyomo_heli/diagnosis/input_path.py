@@ -31,6 +31,7 @@ discovery study are never imported here.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
 
@@ -217,8 +218,6 @@ def expected_inputs(mv, rw: np.ndarray, Su: np.ndarray, L: np.ndarray, cov_u: np
     from scipy.linalg import solve_triangular
 
     du = times_covariance(solve_triangular(L.T, rw, lower=False) @ Su, cov_u)
-    import dataclasses
-
     n = Su.shape[1] // len(channels)
     src = "data" if mv.inputs_record is None else "inputs_record"  # where the input samples are
     df = getattr(mv, src)

@@ -546,6 +546,38 @@ def test_a_rejected_generic_term_is_not_added_again_but_a_physical_candidate_mus
     assert named["decision"] == "named" and named["added"] == "lon_rigging"
 
 
+def test_a_physical_candidate_equivalent_to_a_rejected_term_is_taken_and_the_message_says_the_term_was_rejected(
+        monkeypatch):
+    """A physical candidate (lon_rigging) equivalent on these data to a generic term the validation rule rejected
+    (lon_delay: neither adds to the other, LR 0.5 each way), no generic term that may be added significant: the
+    library takes it (the validation rule then judges its model), and the message says that the significant term it
+    is equivalent to was rejected earlier, not that no generic term is significant."""
+    from scipy.stats import chi2
+
+    J0 = -117175.06
+
+    def fit(name, generic, lr, estimate, formula):
+        return {"name": name, "generic": generic, "success": True, "LR": lr, "J": J0 - lr / 2, "estimate": estimate,
+                "formula": formula, "shape": {}, "p": float(chi2.sf(lr, 1))}
+
+    fits = {"col_delay": fit("col_delay", True, 6.0, 0.0016, "c d(col_d)/dt = col - col_d"),
+            "lon_rigging": fit("lon_rigging", False, 80.0, -0.0022, "lon offset"),
+            "lon_delay": fit("lon_delay", True, 80.0, 0.03, "c d(lon_d)/dt = lon - lon_d")}
+
+    def screen(pairs):
+        wanted = pairs(fits)
+        return {"J0": J0, "fits": fits, "pairs": {f"{a}+{b}": {"success": True, "J": fits[a]["J"] - 0.25}
+                                                  for a, b in wanted}}
+
+    out = _stubbed_step(monkeypatch, [1e-12, 0.01, 1e-12], [80.0, 6.0, 80.0], screen, rejected=["lon_delay"])
+    assert out["decision"] == "accepted" and out["added"] == "lon_rigging"
+    row, = out["encompassing"]
+    assert row["equivalent"] and not row["encompasses"]
+    assert out["generic_significant"]
+    assert "no generic term that may be added is (the best, lon_delay, rejected earlier, p = " in out["message"]
+    assert "is equivalent to it on these data): taken by the library" in out["message"]
+
+
 def test_a_failed_base_solve_leaves_the_decision_to_the_score_test_and_says_so(monkeypatch):
     """The NLP screen's base solve failed (twice): no likelihood ratio exists (LR nan). With input errors the step
     would refer the LR; instead the score test's own p decides (lon_rigging p = 1e-6 < 0.01/2 significant,

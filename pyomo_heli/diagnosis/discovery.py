@@ -435,9 +435,12 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
             best = min(p_sig, key=_lowest_J)
             out.update(decision="accepted", added=best["name"], initial=float(best["estimate"]),
                        message=f"{best['name']} significant (LR {best['LR']:.3g}, p = {best['p']:.2g} < {level:.2g}); "
-                               "no generic term is"
-                               + (f" (the best, {G['name']}, p = {G['p']:.2g}, is equivalent to it "
-                                                       "on these data)" if G else "") + ": taken by the library")
+                               + ("no generic term that may be added is" if G and G["name"] in rejected_generic
+                                  else "no generic term is")
+                               + (f" (the best, {G['name']}" + (", rejected earlier" if G["name"] in rejected_generic
+                                                                 else "")
+                                  + f", p = {G['p']:.2g}, is equivalent to it on these data)" if G else "")
+                               + ": taken by the library")
             return out
         out.update(decision="ambiguous", best_generic=G,
                    message="physical candidates significant (" + ", ".join(f["name"] for f in p_sig)

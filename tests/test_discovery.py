@@ -451,6 +451,18 @@ def test_the_report_adds_the_kept_discovered_terms_together(tmp_path):
     assert not (tmp_path / "one" / "loop_discovered_total.png").exists()
 
 
+#: the J of the stubbed NLP screens' base
+J0 = -117175.06
+
+
+def _fit(name, generic, lr, estimate, formula):
+    """An NLP screen's fit of one term with likelihood ratio ``lr`` against the base J0."""
+    from scipy.stats import chi2
+
+    return {"name": name, "generic": generic, "success": True, "LR": lr, "J": J0 - lr / 2, "estimate": estimate,
+            "formula": formula, "shape": {}, "p": float(chi2.sf(lr, 1))}
+
+
 def _stubbed_step(monkeypatch, p_values, LM, screen, rejected=()):
     """discovery_step on lon_rigging (physical) and col_delay (generic), and the generic terms ``rejected`` by
     earlier steps, with the score test (``p_values``, ``LM`` in that order, white = robust, df infinite) and the
@@ -483,16 +495,8 @@ def test_an_ambiguous_step_says_what_the_generic_term_left_looks_like(monkeypatc
     (LR 24.4), the best generic term not significant over the library (LR 6) but adding to the physical one (LR 7.5
     given it, p = 0.006 < 0.01): nothing is added ("ambiguous"), and the record and message carry the generic
     term's formula and estimate, so the report says what the missing effect looks like."""
-    from scipy.stats import chi2
-
-    J0 = -117175.06
-
-    def fit(name, generic, lr, estimate, formula):
-        return {"name": name, "generic": generic, "success": True, "LR": lr, "J": J0 - lr / 2, "estimate": estimate,
-                "formula": formula, "shape": {}, "p": float(chi2.sf(lr, 1))}
-
-    fits = {"col_delay": fit("col_delay", True, 6.0, 0.0016, "c d(col_d)/dt = col - col_d"),
-            "lon_rigging": fit("lon_rigging", False, 24.37, -0.0022, "lon offset")}
+    fits = {"col_delay": _fit("col_delay", True, 6.0, 0.0016, "c d(col_d)/dt = col - col_d"),
+            "lon_rigging": _fit("lon_rigging", False, 24.37, -0.0022, "lon offset")}
 
     def screen(pairs):
         assert pairs(fits) == [("lon_rigging", "col_delay")]
@@ -513,17 +517,9 @@ def test_a_rejected_generic_term_is_not_added_again_but_a_physical_candidate_mus
     physical candidate is named only if it leaves that term nothing too. Here lon_rigging encompasses the best
     term that may be added (col_delay adds LR 0.5 to it) and not the rejected one (lon_delay adds LR 40): nothing is
     named, nothing added ("ambiguous"). Without the rejected term in the screen the same fits name lon_rigging."""
-    from scipy.stats import chi2
-
-    J0 = -117175.06
-
-    def fit(name, generic, lr, estimate, formula):
-        return {"name": name, "generic": generic, "success": True, "LR": lr, "J": J0 - lr / 2, "estimate": estimate,
-                "formula": formula, "shape": {}, "p": float(chi2.sf(lr, 1))}
-
-    fits = {"col_delay": fit("col_delay", True, 6.0, 0.0016, "c d(col_d)/dt = col - col_d"),
-            "lon_rigging": fit("lon_rigging", False, 60.0, -0.0022, "lon offset"),
-            "lon_delay": fit("lon_delay", True, 80.0, 0.03, "c d(lon_d)/dt = lon - lon_d")}
+    fits = {"col_delay": _fit("col_delay", True, 6.0, 0.0016, "c d(col_d)/dt = col - col_d"),
+            "lon_rigging": _fit("lon_rigging", False, 60.0, -0.0022, "lon offset"),
+            "lon_delay": _fit("lon_delay", True, 80.0, 0.03, "c d(lon_d)/dt = lon - lon_d")}
     pair_J = {"lon_rigging+col_delay": fits["lon_rigging"]["J"] - 0.25,
               "lon_rigging+lon_delay": fits["lon_rigging"]["J"] - 20.0}
 
@@ -552,17 +548,9 @@ def test_a_physical_candidate_equivalent_to_a_rejected_term_is_taken_and_the_mes
     (lon_delay: neither adds to the other, LR 0.5 each way), no generic term that may be added significant: the
     library takes it (the validation rule then judges its model), and the message says that the significant term it
     is equivalent to was rejected earlier, not that no generic term is significant."""
-    from scipy.stats import chi2
-
-    J0 = -117175.06
-
-    def fit(name, generic, lr, estimate, formula):
-        return {"name": name, "generic": generic, "success": True, "LR": lr, "J": J0 - lr / 2, "estimate": estimate,
-                "formula": formula, "shape": {}, "p": float(chi2.sf(lr, 1))}
-
-    fits = {"col_delay": fit("col_delay", True, 6.0, 0.0016, "c d(col_d)/dt = col - col_d"),
-            "lon_rigging": fit("lon_rigging", False, 80.0, -0.0022, "lon offset"),
-            "lon_delay": fit("lon_delay", True, 80.0, 0.03, "c d(lon_d)/dt = lon - lon_d")}
+    fits = {"col_delay": _fit("col_delay", True, 6.0, 0.0016, "c d(col_d)/dt = col - col_d"),
+            "lon_rigging": _fit("lon_rigging", False, 80.0, -0.0022, "lon offset"),
+            "lon_delay": _fit("lon_delay", True, 80.0, 0.03, "c d(lon_d)/dt = lon - lon_d")}
 
     def screen(pairs):
         wanted = pairs(fits)

@@ -59,3 +59,30 @@ def test_one_sided_difference_at_a_lower_bound_matches_a_secant():
               - s.y_trim["lon"]) / h
     assert s.trim["lon"][0, 0] == pytest.approx(secant[0], rel=1e-2)
     assert m is not None
+
+
+def test_trims_from_the_nominal_trim_match_the_continuation_from_hover(monkeypatch):
+    """The sensitivities trim a model a difference step away from the nominal trims (trim_near: fixed-Jacobian
+    Newton steps, no continuation from hover). At each speed the point is the continuation's (trim_sweep, the
+    second route) to rounding, for a difference step and for 30 % less twist; from starts far from the root (the
+    hover trim at every speed) the fallback to the root finder gives the same points."""
+    import pyomo_heli.simulation.trim as trim
+
+    m = HelicopterModel()
+    speeds = [0.0, 10.0, 30.0, 61.7]
+    nominal = trim.trim_sweep(m, speeds)
+
+    def same(want, got):
+        for a, b in zip(want, got, strict=True):
+            assert b.V == a.V
+            assert [b.col, b.lon, b.theta, b.lambda_i] == pytest.approx([a.col, a.lon, a.theta, a.lambda_i],
+                                                                        rel=1e-12, abs=1e-14), a.V
+
+    for name, factor in (("theta_twist", 1 + 1e-5), ("CL_alpha_HT", 1 - 1e-5), ("theta_twist", 0.7)):
+        near = m.with_parameters(**{name: m.parameters[name] * factor})
+        same(trim.trim_sweep(near, speeds), trim.trim_near(near, nominal, trim.trim_jacobians(m, nominal)))
+    fell_back, root_finder = [], trim.trim_float
+    monkeypatch.setattr(trim, "trim_float", lambda model, V, *a, **k: fell_back.append(V) or root_finder(model, V, *a,
+                                                                                                          **k))
+    same(nominal, trim.trim_near(m, [dataclasses.replace(nominal[0], V=v) for v in speeds]))
+    assert fell_back == speeds[1:]

@@ -25,15 +25,17 @@ import numpy as np
 
 from ..physics.model import HelicopterModel
 from .replay import maneuver_outputs
-from .trim import trim_sweep
+from .trim import trim_jacobians, trim_near, trim_sweep
 
 
-def trim_outputs(model: HelicopterModel, speeds, outputs) -> dict[str, np.ndarray]:
-    """Model trim values (col, lon, theta, ... in rad) at each speed [m/s], in the order given."""
+def trim_outputs(model: HelicopterModel, speeds, outputs, near: tuple | None = None) -> dict[str, np.ndarray]:
+    """Model trim values (col, lon, theta, ... in rad) at each speed [m/s], in the order given: by continuation
+    from hover, or with ``near`` = (trim points at those speeds of a model next to this one, their Jacobians) each
+    from its point (:func:`~.trim.trim_near`)."""
     speeds = [float(v) for v in speeds]
     if not speeds:
         return {o: np.zeros(0) for o in outputs}
-    tps = trim_sweep(model, speeds)
+    tps = trim_near(model, *near) if near is not None else trim_sweep(model, speeds)
     return {o: np.array([getattr(tp, o) for tp in tps]) for o in outputs}
 
 
@@ -79,7 +81,8 @@ def sensitivities(model: HelicopterModel, names, maneuvers=(), time_outputs=(), 
 
     ``model`` carries the values (``model.with_parameters(...)`` first);
     ``names`` may include extension strengths (declared by the model's
-    extensions). Costs 2 n simulations of every maneuver and 2 n trim sweeps.
+    extensions). Costs 2 n simulations of every maneuver and 2 n trims at each speed (each started from the
+    nominal trim there, :func:`~.trim.trim_near`).
     """
     names = list(names)
     model.parameters.check_names(names)
@@ -87,12 +90,17 @@ def sensitivities(model: HelicopterModel, names, maneuvers=(), time_outputs=(), 
     time_outputs, trim_out = list(time_outputs), list(trim_out)
     speeds = list(trim_speeds)
 
+    # the nominal trims; a model a difference step away is trimmed from them (no continuation from hover)
+    nominal = trim_sweep(model, [float(v) for v in speeds]) if (speeds and trim_out) else None
+    nominal = (nominal, trim_jacobians(model, nominal)) if nominal else None
+
     def run(mdl):
         yt = maneuver_outputs(mdl, maneuvers, time_outputs, substeps) if (maneuvers and time_outputs) else {}
-        yr = trim_outputs(mdl, speeds, trim_out) if (speeds and trim_out) else {}
+        yr = trim_outputs(mdl, speeds, trim_out, near=nominal) if (speeds and trim_out) else {}
         return yt, yr
 
-    y_time, y_trim = run(model)
+    y_time = maneuver_outputs(model, maneuvers, time_outputs, substeps) if (maneuvers and time_outputs) else {}
+    y_trim = {o: np.array([getattr(tp, o) for tp in nominal[0]]) for o in trim_out} if nominal else {}
     S_time = {o: np.zeros((len(y_time[o]), len(names))) for o in y_time}
     S_trim = {o: np.zeros((len(y_trim[o]), len(names))) for o in y_trim}
     for j, n in enumerate(names):

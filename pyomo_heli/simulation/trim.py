@@ -81,11 +81,7 @@ def trim_float(model: HelicopterModel, V: float, gamma_fp: float = 0.0, guess: d
     names = model.state_names
     z0 = [g["col"], g["lon"], g["theta"], g["lambda_i"]] + [g.get(n, 0.0) for n in names[5:]]
 
-    def residual(z):
-        x, u = _unpack(model, V, gamma_fp, z)
-        r = model.rates(x, u)
-        return np.array([r["u"], r["w"], r["q"] * 10.0, r["lambda_i"] * 0.1] + [r[n] for n in names[5:]])
-
+    residual = _residual(model, V, gamma_fp)
     sol = root(residual, np.array(z0, dtype=float), method="hybr", tol=tol)
     # hybr may report 'no good progress' once it sits at machine precision: judge by the residual.
     # Its own message judges only its step size ('The solution converged.' can come with equations far from
@@ -101,12 +97,33 @@ def trim_float(model: HelicopterModel, V: float, gamma_fp: float = 0.0, guess: d
                         f"finder's end point (largest residual {eqs[k]} = {res[k]:.3g}, tolerance 1e-09; scipy "
                         f"hybr stopped with status {sol.status}: {sol.message.strip()!r}); check the model "
                         f"parameters (e.g. an implausible mass, inertia or rotor constant)")
-    x, u = _unpack(model, V, gamma_fp, sol.x)
+    return _trim_point(model, V, gamma_fp, sol.x)
+
+
+def _residual(model: HelicopterModel, V: float, gamma_fp: float):
+    """The trim equations at ``V``, ``gamma_fp`` as a function of the unknowns z = (col, lon, theta, lambda_i,
+    extension states): du/dt, dw/dt, 10 dq/dt, 0.1 dlambda_i/dt and the extension states' rates."""
+    names = model.state_names
+
+    def residual(z):
+        x, u = _unpack(model, V, gamma_fp, z)
+        r = model.rates(x, u)
+        return np.array([r["u"], r["w"], r["q"] * 10.0, r["lambda_i"] * 0.1] + [r[n] for n in names[5:]])
+
+    return residual
+
+
+def _unknowns(tp: TrimPoint) -> np.ndarray:
+    return np.array([tp.col, tp.lon, tp.theta, tp.lambda_i, *tp.extra_states.values()], dtype=float)
+
+
+def _trim_point(model: HelicopterModel, V: float, gamma_fp: float, z) -> TrimPoint:
+    x, u = _unpack(model, V, gamma_fp, z)
     ctx = model.evaluate(x, u)
     b0, b1c, b1s = (float(b) for b in ctx.beta)
-    return TrimPoint(V=V, gamma_fp=gamma_fp, col=float(sol.x[0]), lon=float(sol.x[1]), theta=float(sol.x[2]),
-                     lambda_i=float(sol.x[3]), beta_0=b0, beta_1c=b1c, beta_1s=b1s, u=x["u"], w=x["w"],
-                     extra_states={n: float(v) for n, v in zip(names[5:], sol.x[4:])})
+    return TrimPoint(V=V, gamma_fp=gamma_fp, col=float(z[0]), lon=float(z[1]), theta=float(z[2]),
+                     lambda_i=float(z[3]), beta_0=b0, beta_1c=b1c, beta_1s=b1s, u=x["u"], w=x["w"],
+                     extra_states={n: float(v) for n, v in zip(model.state_names[5:], z[4:])})
 
 
 def trim_sweep(model: HelicopterModel, speeds, gamma_fp: float = 0.0, step: float = 2.5) -> list[TrimPoint]:
@@ -126,3 +143,52 @@ def trim_sweep(model: HelicopterModel, speeds, gamma_fp: float = 0.0, step: floa
         results[target] = tp
         v_cur = target
     return [results[v] for v in speeds]
+
+
+def trim_jacobians(model: HelicopterModel, points: list[TrimPoint], rel_step: float = 1e-7) -> list[np.ndarray]:
+    """The trim equations' Jacobian with respect to the unknowns at each of ``points`` (a trim of ``model``), by
+    central differences: the fixed Jacobian of :func:`trim_near`'s Newton steps."""
+    out = []
+    for tp in points:
+        residual, z = _residual(model, tp.V, tp.gamma_fp), _unknowns(tp)
+        J = np.empty((len(z), len(z)))
+        for j in range(len(z)):
+            h = rel_step * max(abs(z[j]), 1e-2)
+            e = np.zeros(len(z))
+            e[j] = h
+            J[:, j] = (residual(z + e) - residual(z - e)) / (2 * h)
+        out.append(J)
+    return out
+
+
+#: trim_near's Newton steps: at most this many, until a step moves no unknown by more than NEAR_STEP_TOL [rad]
+NEAR_MAX_STEPS, NEAR_STEP_TOL = 8, 1e-14
+
+
+def trim_near(model: HelicopterModel, points: list[TrimPoint], jacobians: list[np.ndarray] | None = None
+              ) -> list[TrimPoint]:
+    """Trim ``model`` at the speed and flight-path angle of each of ``points``, each started from that point: the
+    trims of a model next to the one that gave ``points`` (a parameter a difference step away), with no
+    continuation from hover. Newton steps with the fixed Jacobian ``jacobians`` (:func:`trim_jacobians` at
+    ``points``; computed here when not given), which converge in two or three steps that close to the root; where
+    they do not, the point is trimmed by :func:`trim_float` from its start, then by continuation (:func:`trim_sweep`).
+    """
+    jacobians = trim_jacobians(model, points) if jacobians is None else jacobians
+    out = []
+    for tp, J in zip(points, jacobians):
+        residual, z = _residual(model, tp.V, tp.gamma_fp), _unknowns(tp)
+        for _ in range(NEAR_MAX_STEPS):
+            dz = np.linalg.solve(J, residual(z))
+            z = z - dz
+            if not np.all(np.isfinite(z)) or np.max(np.abs(dz)) <= NEAR_STEP_TOL:
+                break
+        r = residual(z)
+        if np.all(np.isfinite(z)) and np.max(np.abs(dz)) <= NEAR_STEP_TOL and np.max(np.abs(r)) <= 1e-9:
+            out.append(_trim_point(model, tp.V, tp.gamma_fp, z))
+            continue
+        guess = {"col": tp.col, "lon": tp.lon, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}
+        try:
+            out.append(trim_float(model, tp.V, tp.gamma_fp, guess))
+        except TrimError:
+            out.append(trim_sweep(model, [tp.V], tp.gamma_fp)[0])
+    return out

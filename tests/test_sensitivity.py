@@ -86,3 +86,11 @@ def test_trims_from_the_nominal_trim_match_the_continuation_from_hover(monkeypat
                                                                                                           **k))
     same(nominal, trim.trim_near(m, [dataclasses.replace(nominal[0], V=v) for v in speeds]))
     assert fell_back == speeds[1:]
+    # a lag state that exists only at a non-zero time constant: the points lack it, the model is trimmed anew
+    from pyomo_heli.physics.discrepancy import generic_term
+
+    lag = generic_term("lon_delay")
+    zero = HelicopterModel(extensions=[lag])
+    at = zero.with_parameters(**{lag.strength: 0.02})
+    assert len(at.state_names) == len(zero.state_names) + 1
+    same(trim.trim_sweep(at, speeds), trim.trim_near(at, trim.trim_sweep(zero, speeds)))

@@ -172,7 +172,13 @@ def trim_near(model: HelicopterModel, points: list[TrimPoint], jacobians: list[n
     continuation from hover. Newton steps with the fixed Jacobian ``jacobians`` (:func:`trim_jacobians` at
     ``points``; computed here when not given), which converge in two or three steps that close to the root; where
     they do not, the point is trimmed by :func:`trim_float` from its start, then by continuation (:func:`trim_sweep`).
+    A model whose states differ from the points' (an extension's lag state exists only at a non-zero time constant)
+    is trimmed by continuation at every speed.
     """
+    if any(tuple(tp.extra_states) != model.state_names[5:] for tp in points):
+        if len({tp.gamma_fp for tp in points}) == 1:
+            return trim_sweep(model, [tp.V for tp in points], points[0].gamma_fp)
+        return [trim_sweep(model, [tp.V], tp.gamma_fp)[0] for tp in points]
     jacobians = trim_jacobians(model, points) if jacobians is None else jacobians
     out = []
     for tp, J in zip(points, jacobians):

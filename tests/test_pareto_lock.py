@@ -134,3 +134,19 @@ def test_internal_error_is_exit_1_with_the_traceback_hint(monkeypatch, capsys, e
     assert "Traceback (most recent call last)" in err and "in broken" in err
     monkeypatch.setenv("PYOMO_HELI_TRACEBACK", "1")
     assert main(["check-data", data]) == 1 and "in broken" in capsys.readouterr().err
+
+
+def test_a_lookup_that_fails_inside_the_package_is_an_internal_error_not_bad_input(monkeypatch, capsys):
+    """A KeyError or ValueError counts as bad input only when a ``raise`` of the package names the input at fault.
+    One from an operation of the package's own code (here a dict lookup in the command's call; before, a candidate's
+    missing lag state in the sensitivities ended as "error: b1c_lag", exit 2) is an internal error, exit 1."""
+    import pyomo_heli.dataset.cli as dataset_cli
+    from pyomo_heli.physics.discrepancy import generic_term
+
+    data = str(ROOT / "data" / "bo105_synthetic")
+    monkeypatch.setattr(dataset_cli, "check_data", {}.__getitem__)
+    assert main(["check-data", data]) == 1
+    assert capsys.readouterr().err.startswith(f"pyomo-heli check-data: internal error: KeyError: {data!r}; rerun")
+    monkeypatch.setattr(dataset_cli, "check_data", generic_term)  # raises KeyError naming the unknown term
+    assert main(["check-data", data]) == 2
+    assert capsys.readouterr().err.startswith(f"pyomo-heli check-data: error: unknown discrepancy term {data!r}")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 from .data_commands import cmd_check_data, cmd_generate_data, cmd_schema
 from .folders import (_check_copy_out, _check_diagnosis_out, _check_out_dir, _check_out_file,  # noqa: F401
@@ -280,6 +281,24 @@ class _Stdout:
 
 
 TRACEBACK_HINT = "rerun with --traceback (or PYOMO_HELI_TRACEBACK=1) to see where"
+PACKAGE_DIR = Path(__file__).resolve().parents[1]
+
+
+def _failed_inside(exc: BaseException) -> bool:
+    """Did a KeyError or ValueError come from an operation of the package's own code (a dict lookup, a
+    conversion) rather than from a ``raise`` statement that names the bad input? The innermost frame of its
+    traceback is in the package and its line is no ``raise``: an internal error, never reported as bad input."""
+    import linecache
+
+    tb = exc.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    path = Path(tb.tb_frame.f_code.co_filename).resolve()
+    if PACKAGE_DIR not in path.parents:
+        return False
+    return not linecache.getline(str(path), tb.tb_lineno).lstrip().startswith("raise")
 
 
 def main(argv=None) -> int:
@@ -341,7 +360,8 @@ def main(argv=None) -> int:
             print(f"pyomo-heli {cmd}: I/O error: {path}: {exc.strerror or exc}"
                   + ("" if show_traceback else f"; {TRACEBACK_HINT}"), file=sys.stderr)
             return 1
-        internal = isinstance(exc, SolverError) and not isinstance(exc, SolverUnavailableError)
+        internal = ((isinstance(exc, SolverError) and not isinstance(exc, SolverUnavailableError))
+                    or (isinstance(exc, (KeyError, ValueError)) and _failed_inside(exc)))
         if not internal and (isinstance(exc, bad_input) or isinstance(exc, OSError)):
             msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
             for line in str(msg).splitlines() or [""]:  # a settings file: one line per error

@@ -182,14 +182,17 @@ def trim_near(model: HelicopterModel, points: list[TrimPoint], jacobians: list[n
     jacobians = trim_jacobians(model, points) if jacobians is None else jacobians
     out = []
     for tp, J in zip(points, jacobians):
-        residual, z = _residual(model, tp.V, tp.gamma_fp), _unknowns(tp)
-        for _ in range(NEAR_MAX_STEPS):
-            dz = np.linalg.solve(J, residual(z))
-            z = z - dz
-            if not np.all(np.isfinite(z)) or np.max(np.abs(dz)) <= NEAR_STEP_TOL:
-                break
-        r = residual(z)
-        if np.all(np.isfinite(z)) and np.max(np.abs(dz)) <= NEAR_STEP_TOL and np.max(np.abs(r)) <= 1e-9:
+        residual, z, dz = _residual(model, tp.V, tp.gamma_fp), _unknowns(tp), np.array([np.inf])
+        try:
+            for _ in range(NEAR_MAX_STEPS):
+                dz = np.linalg.solve(J, residual(z))
+                z = z - dz
+                if not np.all(np.isfinite(z)) or np.max(np.abs(dz)) <= NEAR_STEP_TOL:
+                    break
+        except np.linalg.LinAlgError:  # a singular Jacobian: the root finder below
+            dz = np.array([np.inf])
+        if (np.all(np.isfinite(z)) and np.max(np.abs(dz)) <= NEAR_STEP_TOL
+                and np.max(np.abs(residual(z))) <= 1e-9):
             out.append(_trim_point(model, tp.V, tp.gamma_fp, z))
             continue
         guess = {"col": tp.col, "lon": tp.lon, "theta": tp.theta, "lambda_i": tp.lambda_i, **tp.extra_states}

@@ -138,8 +138,10 @@ def test_internal_error_is_exit_1_with_the_traceback_hint(monkeypatch, capsys, e
 
 def test_a_lookup_that_fails_inside_the_package_is_an_internal_error_not_bad_input(monkeypatch, capsys):
     """A KeyError or ValueError counts as bad input only when a ``raise`` of the package names the input at fault.
-    One from an operation of the package's own code (here a dict lookup in the command's call; before, a candidate's
-    missing lag state in the sensitivities ended as "error: b1c_lag", exit 2) is an internal error, exit 1."""
+    One from an operation of the package's own code (a dict lookup, a library call; before, a candidate's missing lag
+    state in the sensitivities ended as "error: b1c_lag", exit 2) is an internal error, exit 1."""
+    import numpy as np
+
     import pyomo_heli.dataset.cli as dataset_cli
     from pyomo_heli.physics.discrepancy import generic_term
 
@@ -147,6 +149,10 @@ def test_a_lookup_that_fails_inside_the_package_is_an_internal_error_not_bad_inp
     monkeypatch.setattr(dataset_cli, "check_data", {}.__getitem__)
     assert main(["check-data", data]) == 1
     assert capsys.readouterr().err.startswith(f"pyomo-heli check-data: internal error: KeyError: {data!r}; rerun")
+    # a library's ValueError on the package's call (a singular linear solve) is internal too
+    monkeypatch.setattr(dataset_cli, "check_data", lambda d: np.linalg.solve(np.zeros((2, 2)), np.ones(2)))
+    assert main(["check-data", data]) == 1
+    assert capsys.readouterr().err.startswith("pyomo-heli check-data: internal error: LinAlgError: Singular matrix")
     monkeypatch.setattr(dataset_cli, "check_data", generic_term)  # raises KeyError naming the unknown term
     assert main(["check-data", data]) == 2
     assert capsys.readouterr().err.startswith(f"pyomo-heli check-data: error: unknown discrepancy term {data!r}")

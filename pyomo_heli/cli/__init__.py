@@ -286,19 +286,20 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]
 
 def _failed_inside(exc: BaseException) -> bool:
     """Did a KeyError or ValueError come from an operation of the package's own code (a dict lookup, a
-    conversion) rather than from a ``raise`` statement that names the bad input? The innermost frame of its
-    traceback is in the package and its line is no ``raise``: an internal error, never reported as bad input."""
+    conversion, a library call such as a linear solve) rather than from a ``raise`` statement that names the bad
+    input? The innermost frame of its traceback in the package is at a line that is no ``raise``: an internal
+    error, never reported as bad input."""
     import linecache
 
-    tb = exc.__traceback__
-    if tb is None:
-        return False
-    while tb.tb_next is not None:
+    tb, inside = exc.__traceback__, None
+    while tb is not None:
+        if PACKAGE_DIR in Path(tb.tb_frame.f_code.co_filename).resolve().parents:
+            inside = tb
         tb = tb.tb_next
-    path = Path(tb.tb_frame.f_code.co_filename).resolve()
-    if PACKAGE_DIR not in path.parents:
+    if inside is None:
         return False
-    return not linecache.getline(str(path), tb.tb_lineno).lstrip().startswith("raise")
+    line = linecache.getline(inside.tb_frame.f_code.co_filename, inside.tb_lineno)
+    return not line.lstrip().startswith("raise")
 
 
 def main(argv=None) -> int:

@@ -91,16 +91,16 @@ def sensitivities(model: HelicopterModel, names, maneuvers=(), time_outputs=(), 
     speeds = list(trim_speeds)
 
     # the nominal trims; a model a difference step away is trimmed from them (no continuation from hover)
-    nominal = trim_sweep(model, [float(v) for v in speeds]) if (speeds and trim_out) else None
-    nominal = (nominal, trim_jacobians(model, nominal)) if nominal else None
+    trims = trim_sweep(model, [float(v) for v in speeds]) if (speeds and trim_out) else []
+    near = (trims, trim_jacobians(model, trims)) if trims else None
 
     def run(mdl):
         yt = maneuver_outputs(mdl, maneuvers, time_outputs, substeps) if (maneuvers and time_outputs) else {}
-        yr = trim_outputs(mdl, speeds, trim_out, near=nominal) if (speeds and trim_out) else {}
+        yr = trim_outputs(mdl, speeds, trim_out, near=near) if near else {}
         return yt, yr
 
     y_time = maneuver_outputs(model, maneuvers, time_outputs, substeps) if (maneuvers and time_outputs) else {}
-    y_trim = {o: np.array([getattr(tp, o) for tp in nominal[0]]) for o in trim_out} if nominal else {}
+    y_trim = {o: np.array([getattr(tp, o) for tp in trims]) for o in trim_out} if trims else {}
     S_time = {o: np.zeros((len(y_time[o]), len(names))) for o in y_time}
     S_trim = {o: np.zeros((len(y_trim[o]), len(names))) for o in y_trim}
     for j, n in enumerate(names):

@@ -90,20 +90,31 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
     assert "Diebold-Mariano" in report and "Shape of rotor_wake_on_tail" in report
     assert (tmp_path / "loop" / "loop_trim_vs_speed.png").is_file()
     assert (tmp_path / "loop" / "loop_validation.png").is_file()
-    # a rerun on the same folder reuses both finished identifications and the shape decision, same numbers
+    # a rerun on the same folder reuses both finished identifications and the shape decision, same numbers; with
+    # --figure-format none it writes the report's text and tables and no figure
+    first = (tmp_path / "loop" / "loop_report.md").read_text()
+    figures = sorted(f.name for f in (tmp_path / "loop").glob("loop_*.png"))
+    assert "loop_trim_forces.png" in figures
+    for f in figures:
+        (tmp_path / "loop" / f).unlink()
     capsys.readouterr()
-    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
+    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop"), "--figure-format", "none"]) == 0
     out = capsys.readouterr().out
     assert out.count("reusing the finished identification") == 2 and "shape of rotor_wake_on_tail: reusing" in out
     again = json.loads((tmp_path / "loop" / "loop.json").read_text())
     assert again["iterations"][-1]["parameters"] == it1["parameters"]
-    # the report alone, rewritten from loop.json with no solve (`report-loop`): the same report, its validation
-    # tables (per output, joint, by speed) included
-    first = (tmp_path / "loop" / "loop_report.md").read_text()
-    (tmp_path / "loop" / "loop_report.md").unlink()
+    bare = (tmp_path / "loop" / "loop_report.md").read_text()
+    assert not list((tmp_path / "loop").glob("loop_*.png")) and "![" not in bare
+    assert f"`pyomo-heli report-loop {tmp_path / 'loop'}` draws them" in bare
+    # the text is the full report's without its figure lines (blank lines aside)
+    assert [ln for ln in bare.splitlines() if ln and not ln.startswith("- figures:")] == \
+        [ln for ln in first.splitlines() if ln and not ln.startswith("![")]
+    # the report alone, rewritten from loop.json with no solve (`report-loop`): the same report and figures, its
+    # validation tables (per output, joint, by speed) included
     assert main(["report-loop", str(tmp_path / "loop")]) == 0
     assert "solve" not in capsys.readouterr().out
     assert (tmp_path / "loop" / "loop_report.md").read_text() == first
+    assert sorted(f.name for f in (tmp_path / "loop").glob("loop_*.png")) == figures
     assert JOINT in first and "by trim speed" in first
     # another setting (the inputs resampled the other way) is not taken for the finished front: refused, named
     text = cfg.path.read_text()
@@ -137,7 +148,8 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
     cfg.path.write_text(text.replace("resample_hz = 25\n", f'resample_hz = 25\nresample_inputs = "{other}"\n')
                         .replace("max_iterations = 1\n", "max_iterations = 0\n"))
     capsys.readouterr()
-    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop"), "--restart"]) == 0
+    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop"), "--restart",
+                 "--figure-format", "none"]) == 0
     out = capsys.readouterr().out
     assert "reusing" not in out
     fresh = json.loads((tmp_path / "loop" / "loop.json").read_text())

@@ -26,13 +26,16 @@ GENERIC = ["dM_one", "dM_mu2", "dM_bump00", "dM_bump05", "dM_bump10", "dX_mu4", 
 
 
 def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iterations: int = 0, generic=GENERIC,
-          uncertainty: str = "none"):
+          uncertainty: str = "none", figures: bool = False):
+    """One loop through the command line; its report's figures only with ``figures`` (CI time: drawing them takes
+    about 5 s a loop, and tests/test_close_loop_wake.py checks them)."""
     loop = ('\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\ndiscovery = true\n'
             f'uncertainty = "{uncertainty}"\nmax_iterations = {max_iterations}\n'
             f"generic = {json.dumps(list(generic))}\n{extra}")
     cfg = make_case(tmp_path, effect_table, seed=seed, points=2, loop=loop, maneuvers=WAKE_MANEUVERS,
                     input_reference_s=1.9)
-    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
+    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop"),
+                 *([] if figures else ["--figure-format", "none"])]) == 0
     return cfg, json.loads((tmp_path / "loop" / "loop.json").read_text())
 
 
@@ -62,7 +65,7 @@ def test_noise_only_nothing_is_accepted(tmp_path, monkeypatch):
         raise AssertionError("a finished structure step was done again")
 
     monkeypatch.setattr(disc, "discovery_step", no_step)
-    assert main(["close-loop", str(_cfg.path), "--out", str(tmp_path / "loop")]) == 0
+    assert main(["close-loop", str(_cfg.path), "--out", str(tmp_path / "loop"), "--figure-format", "none"]) == 0
     rerun = json.loads((tmp_path / "loop" / "loop.json").read_text())
     assert rerun["iterations"][0]["discovery"] == its[0]["discovery"] and rerun["stopped"] == doc["stopped"]
 
@@ -100,7 +103,8 @@ def test_held_out_fuselage_download_is_discovered_with_its_shape(tmp_path, itera
     generic term must have the truth's sign and speed shape: a nose-up moment or a download that is largest at low
     speed and gone by 60 kt. With one more iteration (slow) the term is added, re-identified, checked by the
     validation rule and drawn in the report."""
-    _cfg, doc = _loop(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, max_iterations=iterations)
+    _cfg, doc = _loop(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, max_iterations=iterations,
+                      figures=bool(iterations))
     its = doc["iterations"]
     d = its[0]["discovery"]
     print(d["message"])

@@ -61,10 +61,10 @@ def test_level_study_writes_each_seed_and_resumes(tmp_path):
 def test_exact_inputs_keep_every_other_draw_and_give_the_generator_sigmas(tmp_path):
     """--exact-inputs: the flight test of the same seed with the recorded inputs' noise removed: inputs constant over
     the lead-in, every output and trim exactly as in the noisy flight test (the same draws); the fit's sigmas are the
-    generator's for the inputs and the lead-in's for the outputs; one seed runs and is stored under exact_inputs/."""
+    generator's for the inputs and the lead-in's for the outputs."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.dataset import load_flight_test
-    from pyomo_heli.studies.generic_term_level import given_sigmas, main
+    from pyomo_heli.studies.generic_term_level import given_sigmas
     from pyomo_heli.studies.seeded import m0_noise_data
 
     gen = ROOT / "studies" / "held_out_small_gen.toml"
@@ -82,6 +82,16 @@ def test_exact_inputs_keep_every_other_draw_and_give_the_generator_sigmas(tmp_pa
     sig = given_sigmas(cfg, gen)
     assert sig["col_deg"] == pytest.approx(0.02) and sig["lon_deg"] == pytest.approx(0.02)
     assert sig["q_deg_s"] > 0.1 and sig["nz_g"] > 0.005  # the lead-in's noise (and vibration) of the outputs
+
+
+# slow (20-30 s each; CI time): each option's seed run; the default run has the study's own seed run and resume
+# (test_level_study_writes_each_seed_and_resumes) and each option's data and sigmas (the tests above)
+@pytest.mark.slow
+def test_exact_inputs_run_one_seed_into_their_own_folder(tmp_path):
+    """--exact-inputs: one seed runs and is stored under exact_inputs/, every fit about its true zero."""
+    from pyomo_heli.studies.generic_term_level import main
+
+    gen = ROOT / "studies" / "held_out_small_gen.toml"
     argv = ["--seeds", "7", "--config", str(ROOT / "studies" / "held_out_small.toml"), "--data-config", str(gen),
             "--out", str(tmp_path / "c"), "--exact-inputs"]
     assert main(argv) == 0
@@ -91,11 +101,10 @@ def test_exact_inputs_keep_every_other_draw_and_give_the_generator_sigmas(tmp_pa
 
 def test_input_sigma_scale_multiplies_the_lead_in_sigmas_of_the_inputs_only(tmp_path):
     """--input-sigma-scale K: the fit's input-error sigmas are K times the records' lead-in sigmas (computed here
-    from the records), the outputs' stay the lead-in's; one small seed runs into input_sigma_x2/, records its K, and
-    a doc of another K is not taken for it."""
+    from the records), the outputs' stay the lead-in's."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.nlp.identification import identification_data
-    from pyomo_heli.studies.generic_term_level import given_sigmas, main
+    from pyomo_heli.studies.generic_term_level import given_sigmas
     from pyomo_heli.studies.seeded import m0_noise_data
 
     gen = ROOT / "studies" / "held_out_small_gen.toml"
@@ -116,6 +125,15 @@ def test_input_sigma_scale_multiplies_the_lead_in_sigmas_of_the_inputs_only(tmp_
         assert one[key] == pytest.approx(pooled_deg(ch), rel=1e-9) and two[key] == pytest.approx(2 * one[key])
     assert {k: v for k, v in two.items() if k not in ("col_deg", "lon_deg")} == \
         {k: v for k, v in one.items() if k not in ("col_deg", "lon_deg")}
+
+
+@pytest.mark.slow
+def test_input_sigma_scale_runs_one_seed_into_its_own_folder(tmp_path):
+    """--input-sigma-scale 2: one seed runs into input_sigma_x2/ and records its K; a doc of another K is not taken
+    for it."""
+    from pyomo_heli.studies.generic_term_level import main
+
+    gen = ROOT / "studies" / "held_out_small_gen.toml"
     argv = ["--seeds", "7", "--config", str(ROOT / "studies" / "held_out_small.toml"), "--data-config", str(gen),
             "--out", str(tmp_path / "c"), "--input-sigma-scale", "2"]
     assert main(argv) == 0
@@ -128,15 +146,12 @@ def test_input_sigma_scale_multiplies_the_lead_in_sigmas_of_the_inputs_only(tmp_
     assert json.loads(f.read_text())["input_sigma_scale"] == 2.0
 
 
-def test_resample_inputs_sample_fits_the_picked_inputs_into_its_own_folder(tmp_path):
+def test_resample_inputs_picks_the_recorded_samples_it_names(tmp_path):
     """--resample-inputs sample: the fit's [data] resample_inputs overridden (the NLP's inputs are then the recorded
-    samples at its grid's times, checked here against the record; with ``record`` every recorded sample), one small
-    seed runs into inputs_sample/ and records the choice; a stored seed of the config's own resampling is not taken
-    for it."""
+    samples at its grid's times, checked here against the record; with ``record`` every recorded sample)."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.dataset import load_flight_test
     from pyomo_heli.nlp.identification import identification_data
-    from pyomo_heli.studies.generic_term_level import main
     from pyomo_heli.studies.seeded import m0_noise_data
 
     gen, small = ROOT / "studies" / "held_out_small_gen.toml", ROOT / "studies" / "held_out_small.toml"
@@ -154,6 +169,15 @@ def test_resample_inputs_sample_fits_the_picked_inputs_into_its_own_folder(tmp_p
         if how == "record":
             kept = raw.loc[raw.index <= mv.data["t"].iloc[-1] + 1e-9, "col"].to_numpy()
             np.testing.assert_array_equal(mv.inputs_record["col"].to_numpy(), kept)
+
+
+@pytest.mark.slow
+def test_resample_inputs_sample_runs_one_seed_into_its_own_folder(tmp_path):
+    """--resample-inputs sample: one seed runs into inputs_sample/ and records the choice; a stored seed of the
+    config's own resampling is not taken for it."""
+    from pyomo_heli.studies.generic_term_level import main
+
+    gen, small = ROOT / "studies" / "held_out_small_gen.toml", ROOT / "studies" / "held_out_small.toml"
     argv = ["--seeds", "7", "--config", str(small), "--data-config", str(gen), "--out", str(tmp_path / "c"),
             "--resample-inputs", "sample"]
     assert main(argv) == 0

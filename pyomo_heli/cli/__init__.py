@@ -45,7 +45,12 @@ def _placement_flag(parser) -> None:
                              "normalised arc length refined around the Eq. 11 choice ([pareto] max_solves)")
 
 
-def _figure_flag(parser) -> None:
+def _figure_flag(parser, none: bool = False) -> None:
+    if none:
+        parser.add_argument("--figure-format", choices=(*FIGURE_FORMATS, "none"), default="png",
+                            help="file format of the report's figures (default png); none: the report's text and "
+                                 "tables only (batch runs), report-loop draws the figures later")
+        return
     parser.add_argument("--figure-format", choices=FIGURE_FORMATS, default="png",
                         help="file format of the report's figures (default png)")
 
@@ -131,7 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
     cl.add_argument("--restart", action="store_true",
                     help="identify every iteration afresh (finished points and shape decisions in --out are "
                          "discarded) instead of resuming")
-    _figure_flag(cl)
+    _figure_flag(cl, none=True)
     cl.set_defaults(func=cmd_close_loop)
 
     rp = sub.add_parser("report-loop", help="rewrite loop_report.md and the figures of a finished close-loop "

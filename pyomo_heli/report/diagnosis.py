@@ -222,8 +222,9 @@ def record_bias_shapes(record_biases: dict) -> list[str]:
     return L
 
 
-def implied_forces_section(forces: ImpliedForces | dict, figure: str) -> list[str]:
-    """The report section of the steady force and moment the trims ask for (one model, or label -> model)."""
+def implied_forces_section(forces: ImpliedForces | dict, figure: str | None) -> list[str]:
+    """The report section of the steady force and moment the trims ask for (one model, or label -> model); the
+    figure's file name, or None where no figure was drawn."""
     many = forces if isinstance(forces, dict) else {forces.label: forces}
     first = next(iter(many.values()))
     L = ["## Steady force and moment the trims ask for", "",
@@ -234,8 +235,9 @@ def implied_forces_section(forces: ImpliedForces | dict, figure: str) -> list[st
          + "); `pyomo_heli/diagnosis/trim_forces.py`, docs/diagnosis.md. chi2 = sum (value / SE)^2 over the "
          "points; `beyond parameters`: after the least-squares fit of a shift of the identified parameters (what "
          "the trade-off of the Pareto choice leaves without any missing physics). The parameters were fitted to "
-         "the same trims, so these p are pointers.", "",
-         f"![steady force and moment the trims ask for]({figure})", ""]
+         "the same trims, so these p are pointers.", ""]
+    if figure is not None:
+        L += [f"![steady force and moment the trims ask for]({figure})", ""]
     for lab, f in many.items():
         L += [f"{lab}:", "", markdown_table(f.summary(), digits=4), ""]
     return L

@@ -225,9 +225,16 @@ def truth_replay_errors(cfg, doc: dict, val_mans) -> tuple[list[dict], dict] | N
 WIDE = 4
 
 
+#: ``figure_format`` of :func:`write_loop_report` that draws no figure (batch runs; ``report-loop`` draws them later)
+NO_FIGURES = "none"
+
+
 def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
-    """Figures and ``loop_report.md`` of the loop in ``out`` (``cfg``: the loop's identification config)."""
+    """Figures and ``loop_report.md`` of the loop in ``out`` (``cfg``: the loop's identification config).
+    ``figure_format = "none"`` writes the report's text and tables only; ``pyomo-heli report-loop`` draws the
+    figures later from loop.json."""
     out = Path(out)
+    draw = figure_format != NO_FIGURES
     doc = load_loop(out)
     ft = load_flight_test(cfg.dataset)
     trims = ft.trims.reset_index(drop=True)
@@ -235,10 +242,11 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
     its = doc["iterations"]
     preds = {label(it): predict(label(it), iteration_model(cfg.model, it), it["parameters"],
                                 list(CURVE_SPEEDS) + list(trims["V"]), val_mans) for it in its}
-    fig = plots.plot_trim_vs_speed(trims, {lab: p.trim_table(CURVE_SPEEDS) for lab, p in preds.items()},
-                                   title="Trim vs speed, before and after")
-    _save(fig, out / f"loop_trim_vs_speed.{figure_format}")
-    if val_mans:
+    if draw:
+        fig = plots.plot_trim_vs_speed(trims, {lab: p.trim_table(CURVE_SPEEDS) for lab, p in preds.items()},
+                                       title="Trim vs speed, before and after")
+        _save(fig, out / f"loop_trim_vs_speed.{figure_format}")
+    if val_mans and draw:
         fig = plots.plot_validation({mv.name: mv.data for mv in val_mans},
                                     {lab: p.shown_runs() for lab, p in preds.items()}, VALIDATION_OUTPUTS,
                                     inputs={mv.name: mv.inputs for mv in val_mans},
@@ -252,7 +260,10 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
             fig.savefig(out / f"loop_validation.{figure_format}", dpi=72)
 
     L = ["# Closed-loop report", "", f"- config: `{doc['config']}`", f"- dataset: `{doc['dataset']}`",
-         f"- settings: {doc['settings']}", f"- stopped: {doc['stopped']}", ""]
+         f"- settings: {doc['settings']}", f"- stopped: {doc['stopped']}"]
+    if not draw:
+        L += [f"- figures: not drawn (`--figure-format {NO_FIGURES}`); `pyomo-heli report-loop {out}` draws them"]
+    L += [""]
     L += ["## Error before and after", "",
           "RMS of data minus model (float-model replay of each iteration's diagnosed point, `[loop] point`); "
           "trim over all trim points, `id` = identification maneuvers, `val` = validation maneuvers.", "",
@@ -274,16 +285,18 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
               "Where it sits: the change of each output's validation RMS by trim speed, and the joint test on that "
               "speed's records alone (one or two records each, so a p here locates a change rather than proves it):",
               "", markdown_table(validation_change_by_speed(first, last, val_mans), digits=3), ""]
-    L += [f"![Trim vs speed before and after](loop_trim_vs_speed.{figure_format})", ""]
-    L += discovery_summary(doc, cfg, out)
+    if draw:
+        L += [f"![Trim vs speed before and after](loop_trim_vs_speed.{figure_format})", ""]
+    L += discovery_summary(doc, cfg, out, figures=draw)
     shown = [its[0]] + ([kept] if kept is not its[0] else [])
     forces = {label(it): implied_forces(iteration_model(cfg.model, it).with_parameters(**it["parameters"]), trims,
                                         ft.conventions, label=label(it), free=list(it["parameters"])) for it in shown}
     if all(len(f.table) for f in forces.values()):  # trim points with all three channels recorded
-        _save(plots.plot_implied_forces({k: f.table for k, f in forces.items()}),
-              out / f"loop_trim_forces.{figure_format}")
-        L += implied_forces_section(forces, f"loop_trim_forces.{figure_format}")
-    if val_mans:
+        if draw:
+            _save(plots.plot_implied_forces({k: f.table for k, f in forces.items()}),
+                  out / f"loop_trim_forces.{figure_format}")
+        L += implied_forces_section(forces, f"loop_trim_forces.{figure_format}" if draw else None)
+    if val_mans and draw:
         L += [f"![Validation before and after](loop_validation.{figure_format})", ""]
     truth = read_truth(cfg.dataset)
     if truth is not None:
@@ -497,9 +510,10 @@ STATE_OF = {"alpha": "alpha [deg]", "w": "w [m/s]", "lam": "lambda_i", "col": "c
 STATE_OF.update({f"{r}mu": c for r, c in STATE_OF.items() if f"{r}mu" in REGRESSORS})  # speed products
 
 
-def discovery_summary(doc: dict, cfg, out) -> list[str]:
+def discovery_summary(doc: dict, cfg, out, figures: bool = True) -> list[str]:
     """What the loop discovered: the statement, and a figure of the force or moment vs airspeed and vs the state it
-    depends on (``loop_discovered_<term>.png``), for every term it kept and for a term whose step was rejected."""
+    depends on (``loop_discovered_<term>.png``; not drawn with ``figures = False``, the table is written either way),
+    for every term it kept and for a term whose step was rejected."""
     found = discovered_terms(doc)
     rejected = rejected_discoveries(doc)
     L = []
@@ -511,29 +525,34 @@ def discovery_summary(doc: dict, cfg, out) -> list[str]:
             c, se = term_estimate(kept, fit)
             L += [f"- iteration {it['iteration']}: not explained by any library effect; discovered {fit['formula']}, "
                   f"c = {c:.4g} +- {se:.2g} (the kept model's estimate and standard error)", ""]
-            L += _discovered_figure(model, kept["parameters"], fit, c, se, out)
-        L += _total_figure(model, kept["parameters"], [fit for _, fit in found], out)
+            L += _discovered_figure(model, kept["parameters"], fit, c, se, out, figures)
+        L += _total_figure(model, kept["parameters"], [fit for _, fit in found], out, figures)
     if rejected:
         L += ["## Discovered, not kept (validation rule): the residual stays unexplained", ""]
         for it, fit in rejected:
             c, se = term_estimate(it, fit)
             L += [f"- {unexplained_statement(it, fit)}; rejected because adding it {it['rejected']}", ""]
-            L += _discovered_figure(iteration_model(cfg.model, it), it["parameters"], fit, c, se, out)
+            L += _discovered_figure(iteration_model(cfg.model, it), it["parameters"], fit, c, se, out, figures)
     if found or rejected:
         L += ["To test an effect you suspect behind it (an extension whose strength has bounds): "
               f"`pyomo-heli check-effect {out} --effect FILE.py:CLASS --iteration K` (docs/discovery.md).", ""]
     return L
 
 
-def _total_figure(model: HelicopterModel, params: dict, fits: list, out) -> list[str]:
+def _total_figure(model: HelicopterModel, params: dict, fits: list, out, figures: bool = True) -> list[str]:
     """``loop_discovered_total.png`` and its table: what the kept discovered force and moment terms add together
     along the level trims, one panel per channel; only where two or more of them are kept."""
     names = [f["name"] for f in fits if is_force_term(f["name"])]
     if len(names) < 2:
         return []
+    tab = discovered_total(model, params, names, list(range(0, 121, 10)))
+    text = ["The kept discovered terms together (" + ", ".join(names) + "), per channel: the discrepancy the kept "
+            "model adds along its level trims. Their estimates are correlated, so a band from the standard errors "
+            "alone would mislead; none is drawn.", ""]
+    if not figures:
+        return [*text, markdown_table(tab, digits=4), ""]
     from matplotlib.figure import Figure
 
-    tab = discovered_total(model, params, names, list(range(0, 121, 10)))
     cols = [c for c in tab.columns if c != "V [kt]"]
     fig = Figure(figsize=(3.6 * len(cols) + 1, 3.4))
     for ax, col in zip(fig.subplots(1, len(cols), squeeze=False)[0], cols):
@@ -545,21 +564,21 @@ def _total_figure(model: HelicopterModel, params: dict, fits: list, out) -> list
     fig.suptitle("The kept discovered terms together along the level trims (" + " + ".join(names) + ")")
     fig.tight_layout()
     fig.savefig(Path(out) / "loop_discovered_total.png", dpi=90)
-    return ["The kept discovered terms together (" + ", ".join(names) + "), per channel: the discrepancy the kept "
-            "model adds along its level trims. Their estimates are correlated, so a band from the standard errors "
-            "alone would mislead; none is drawn.", "",
-            "![the kept discovered terms together vs airspeed](loop_discovered_total.png)", "",
+    return [*text, "![the kept discovered terms together vs airspeed](loop_discovered_total.png)", "",
             markdown_table(tab, digits=4), ""]
 
 
-def _discovered_figure(model: HelicopterModel, params: dict, fit: dict, c: float, se: float, out) -> list[str]:
+def _discovered_figure(model: HelicopterModel, params: dict, fit: dict, c: float, se: float, out,
+                       figures: bool = True) -> list[str]:
     """``loop_discovered_<term>.png`` and its table: the term's force or moment along the level trims."""
     if not is_force_term(fit["name"]):
         return []
+    tab = discovered_curve(model, params, fit["name"], list(range(0, 121, 10)))
+    if not figures:
+        return [markdown_table(tab, digits=4), ""]
     from matplotlib.figure import Figure
 
     unit = "N m" if fit["name"].startswith("dM") else "N"
-    tab = discovered_curve(model, params, fit["name"], list(range(0, 121, 10)))
     reg = fit["name"][3:]
     xcol = STATE_OF.get(reg, "mu")
     fig = Figure(figsize=(9, 3.6))

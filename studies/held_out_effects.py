@@ -2,7 +2,7 @@
 
     python studies/held_out_effects.py --seeds 3 --out results/held_out \
         [--effects fuselage_download drag_rise ...] [--config studies/held_out_discovery.toml] \
-        [--data-config data/bo105_synthetic.toml] [--generic-family extended] [--input-path-family extended] \
+        [--data-config data/bo105_synthetic.toml] [--generic-family extended|control] [--input-path-family extended] \
         [--set TABLE.KEY=VALUE ...]
 
 For every held-out effect (pyomo_heli/flighttest/held_out_effects.py, at its nominal strength) and every seed
@@ -73,7 +73,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a check
 from pyomo_heli.studies.commands import exit_status, run_command  # noqa: E402
 from pyomo_heli.cli.options import nonneg_int  # noqa: E402
 from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS  # noqa: E402
-from pyomo_heli.physics.discrepancy import is_force_term  # noqa: E402
+from pyomo_heli.physics.discrepancy import FAMILIES, is_force_term  # noqa: E402
 from pyomo_heli.studies.args import in_file, out_folder, positive_int  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -1122,9 +1122,10 @@ def main(argv=None) -> int:
     ap.add_argument("--effects", nargs="+", default=list(HELD_OUT_EFFECTS),
                     help=f"held-out effects (or none): {', '.join(HELD_OUT_EFFECTS)}")
     ap.add_argument("--config", default=str(CONFIG))
-    ap.add_argument("--generic-family", choices=["standard", "extended"],
+    ap.add_argument("--generic-family", choices=list(FAMILIES),
                     help="set the config's [loop] generic_family (the config is copied, with it, to "
-                         "OUT/loop_<family>.toml); extended: + speed products and input scale factors")
+                         "OUT/loop_<family>.toml); extended: + speed products and input scale factors; control: "
+                         "extended + control-path feedback")
     ap.add_argument("--input-path-family", choices=["standard", "extended"],
                     help="set the config's [diagnosis] input_path_family (copied to OUT/input_path_<family>.toml): the "
                          "residual analysis's input-path dictionary; extended: + each input's free play and dead zone")

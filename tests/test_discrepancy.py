@@ -231,6 +231,56 @@ def test_a_maneuver_flown_with_an_input_scale_factor_is_m0_flown_with_the_scaled
     assert sb["lon"].to_numpy()[0] == pytest.approx(a.lon / 1.05, rel=1e-9)  # the record holds the measured control
 
 
+def test_the_control_family_adds_the_control_path_feedback_terms_to_the_extended_one():
+    """generic_names("control") is the extended family (unchanged) and four feedback terms; a config chooses it."""
+    from pyomo_heli.settings.identification import LoopTable
+
+    ext, ctl = generic_names("extended"), generic_names("control")
+    assert ctl[:len(ext)] == ext and ctl[len(ext):] == ["lon_q", "lon_theta", "col_q", "col_theta"]
+    assert LoopTable(generic_family="control").generic_family == "control"
+    assert LoopTable(generic=["lon_q"]).generic == ["lon_q"]
+    t = generic_term("lon_q")
+    assert t.on_input and t.value(None) == 0.0 and "lon + c (0.05 rad) q/(0.2 rad/s)" in t.formula()
+
+
+def test_an_attitude_feedback_trims_with_the_rotor_seeing_m0s_control():
+    """lon_theta: the rotor sees lon + c 0.05 theta/0.1. At trim the aircraft is M0's (same attitude, same
+    collective) and the recorded lon is M0's minus the feedback; the float trim and the Pyomo trim block agree."""
+    c, V = 0.3, 50 * KT
+    m = HelicopterModel(extensions=[generic_term("lon_theta")]).with_parameters(c_lon_theta=c)
+    a, b = trim_float(HelicopterModel(), V), trim_float(m, V)
+    assert (b.col, b.theta) == pytest.approx((a.col, a.theta), abs=1e-10)
+    assert b.lon + c * 0.05 * b.theta / 0.1 == pytest.approx(a.lon, abs=1e-10)
+    assert abs(b.lon - a.lon) > 0.01 * DEG  # it acts
+    py = trim_table(m, [V]).iloc[0]
+    for k in ("col", "lon", "theta"):
+        assert py[k] == pytest.approx(getattr(b, k), abs=1e-8), k
+
+
+def test_a_pitch_rate_feedback_is_m0_flown_with_the_fed_back_control():
+    """lon_q in closed loop equals M0 flown open loop with the control the rotor saw (the recorded lon plus
+    c 0.05 q/0.2, from the closed loop's own q); the compiled RK4 replay agrees with the float simulator."""
+    from pyomo_heli.simulation.compiled import simulate_outputs
+    from pyomo_heli.simulation.inputs import InputSignal
+    from pyomo_heli.simulation.integrate import sampled, simulate
+
+    c = -0.4  # a damper: lon against q
+    t_ = np.linspace(0.0, 3.0, 601)
+    m = HelicopterModel(extensions=[generic_term("lon_q")]).with_parameters(c_lon_q=c)
+    a, b = trim_float(HelicopterModel(), 60 * KT), trim_float(m, 60 * KT)
+    assert b.lon == pytest.approx(a.lon, abs=1e-12)  # q = 0 at trim
+    dlon = InputSignal("lon", "3211", 0.5 * DEG, 0.4, t_start=0.3, ramp=0.1)(t_)
+    closed = simulate(m, b, t_, {"lon": sampled(t_, dlon)}, max_step=0.002)
+    q = closed["q"].to_numpy()
+    seen = dlon + c * 0.05 * q / 0.2
+    opened = simulate(HelicopterModel(), a, t_, {"lon": sampled(t_, seen)}, max_step=0.002)
+    free = simulate(HelicopterModel(), a, t_, {"lon": sampled(t_, dlon)}, max_step=0.002)["q"].to_numpy()
+    assert np.ptp(q) < 0.7 * np.ptp(free)  # it damps (0.48 here)
+    assert np.max(np.abs(opened["q"].to_numpy() - q)) < 5e-4 * np.ptp(q)
+    comp = simulate_outputs(m, b, t_, {"lon": dlon}, ["q"], substeps=2)["q"]
+    assert np.max(np.abs(comp - q)) < 1e-5 * np.ptp(q)
+
+
 def test_a_config_chooses_the_extended_family_and_a_bad_family_is_a_one_line_error(tmp_path):
     from pyomo_heli.settings.identification import LoopTable
 

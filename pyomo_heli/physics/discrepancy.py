@@ -36,14 +36,21 @@ Sensor side (data compatibility of flight-path reconstruction), per channel:
       TAS_delay,     (first order, the same lag state; y before any other sensor effect, which
       beta0_delay    then acts on y_d)
 
+Control family only (``generic_names("control")``: extended + these), feedback in the control path
+between the recorded control and the rotor, e.g. a damper or an attitude hold the model lacks:
+
+    lon_q, lon_theta   the rotor sees lon + c (0.05 rad) q/(0.2 rad/s), or + c (0.05 rad) theta/(0.1 rad)
+    col_q, col_theta   the rotor sees col + c (0.2 rad) q/(0.2 rad/s), or + c (0.2 rad) theta/(0.1 rad)
+
 (No n_x / n_z bias: the candidate library already holds those as named sensor effects. No time shift
 of q or theta: they are states as well as outputs, and the float simulator's frame holds one column
 for each, the state; :func:`pyomo_heli.simulation.integrate.simulate` refuses a sensor effect on them.)
 
 A term's name is ``d<channel>_<regressor>`` (e.g. ``dM_bump05``), its coefficient
 ``c_<channel>_<regressor>``; :func:`generic_term` builds one, :func:`generic_names` lists a
-family: ``"standard"`` (the default library of the discovery loop) or ``"extended"`` (standard +
-the speed products + the input scale factors, ``[loop] generic_family``). In an identification
+family: ``"standard"`` (the default library of the discovery loop), ``"extended"`` (standard +
+the speed products + the input scale factors) or ``"control"`` (extended + the control-path
+feedback terms), ``[loop] generic_family``. In an identification
 every coefficient is an ordinary parameter: fixed at zero until the structure determination frees
 it (:mod:`pyomo_heli.diagnosis.discovery`).
 """
@@ -105,15 +112,20 @@ SENSOR_TERMS = {
 }
 #: terms only in the extended family
 EXTENDED_ONLY = (*(f"d{ch}_{r}" for ch in FORCE_CHANNELS for r in EXTENDED_REGRESSORS), "lon_scale", "col_scale")
-FAMILIES = ("standard", "extended")
+#: the control path's feedback terms (control family only): name -> (control, state, state's normalisation)
+CONTROL_NORM = {"lon": 0.05, "col": 0.2}  # [rad], as the "lon" and "col" regressors
+FEED_STATES = {"q": ("q/(0.2 rad/s)", 0.2), "theta": ("theta/(0.1 rad)", 0.1)}
+FEED_TERMS = {f"{u}_{x}": (u, x) for u in CONTROL_NORM for x in FEED_STATES}
+FAMILIES = ("standard", "extended", "control")
 #: coefficient bounds and scale: force (X, Z: fraction of W), moment (fraction of W R), sensor
 BOUNDS = {"X": (-0.2, 0.2, 0.005), "Z": (-0.2, 0.2, 0.005), "M": (-0.02, 0.02, 0.001),
-          "scale": (-0.2, 0.2, 0.01), "bias": (-0.05, 0.05, 0.005), "delay": (0.0, 0.3, 0.05)}
+          "scale": (-0.2, 0.2, 0.01), "bias": (-0.05, 0.05, 0.005), "delay": (0.0, 0.3, 0.05),
+          "feed": (-1.0, 1.0, 0.05)}
 
 
 class GenericTerm(Extension):
-    """One term of the generic discrepancy family (module docstring): dX, dZ or dM = c x norm x phi, or a
-    data-compatibility term."""
+    """One term of the generic discrepancy family (module docstring): dX, dZ or dM = c x norm x phi, a
+    data-compatibility term, or a control-path feedback term."""
 
     score_step = None
     one_sided = False
@@ -126,6 +138,11 @@ class GenericTerm(Extension):
                 raise KeyError(f"unknown regressor {regressor!r}; choose from {', '.join(REGRESSORS)}")
             self.name = f"d{channel}_{regressor}"
             self.kind = channel
+        elif channel == "control":
+            if regressor not in FEED_TERMS:
+                raise KeyError(f"unknown control-path term {regressor!r}; choose from {', '.join(FEED_TERMS)}")
+            self.name = regressor
+            self.kind = "feed"
         elif channel == "sensor":
             if regressor not in SENSOR_TERMS:
                 raise KeyError(f"unknown sensor term {regressor!r}; choose from {', '.join(SENSOR_TERMS)}")
@@ -136,7 +153,7 @@ class GenericTerm(Extension):
                 self.one_sided = True
                 self.score_step = 0.02
         else:
-            raise KeyError(f"unknown discrepancy channel {channel!r}; choose from X, Z, M, sensor")
+            raise KeyError(f"unknown discrepancy channel {channel!r}; choose from X, Z, M, sensor, control")
         self.channel, self.regressor = channel, regressor
         self.strength = f"c_{self.name}"
         self.signature = self.formula()
@@ -145,6 +162,9 @@ class GenericTerm(Extension):
         """The term as an equation with the coefficient written c."""
         if self.channel == "sensor":
             return SENSOR_TERMS[self.regressor][2]
+        if self.channel == "control":
+            u, x = FEED_TERMS[self.regressor]
+            return f"the rotor sees {u} + c ({CONTROL_NORM[u]:g} rad) {FEED_STATES[x][0]} (control-path feedback)"
         norm = "m g R" if self.channel == "M" else "m g"
         return f"d{self.channel} = c {norm} {REGRESSORS[self.regressor][0]}"
 
@@ -158,22 +178,22 @@ class GenericTerm(Extension):
                               "discrepancy family", (lo, hi), scale)]
 
     def value(self, ctx):
-        """The force [N] or moment [N m] this term adds at ``ctx`` (0 for a sensor term)."""
-        if self.channel == "sensor":
+        """The force [N] or moment [N m] this term adds at ``ctx`` (0 for a sensor or control-path term)."""
+        if self.channel not in FORCE_CHANNELS:
             return 0.0
         p = ctx.p
         return p[self.strength] * force_scale(p, self.channel) * REGRESSORS[self.regressor][1](ctx)
 
     def extra_forces(self, ctx):
-        if self.channel == "sensor":
+        if self.channel not in FORCE_CHANNELS:
             return 0.0, 0.0, 0.0
         d = self.value(ctx)
         return (d, 0.0, 0.0) if self.channel == "X" else (0.0, d, 0.0) if self.channel == "Z" else (0.0, 0.0, d)
 
     @property
     def on_input(self) -> bool:
-        """A data-compatibility term of a control channel (the rotor sees a changed control)."""
-        return self.channel == "sensor" and SENSOR_TERMS[self.regressor][0] in INPUTS
+        """A data-compatibility or control-path term of a control channel (the rotor sees a changed control)."""
+        return self.channel == "control" or (self.channel == "sensor" and SENSOR_TERMS[self.regressor][0] in INPUTS)
 
     @property
     def delays_input(self) -> bool:
@@ -181,6 +201,10 @@ class GenericTerm(Extension):
 
     def adjust_controls(self, ctx):
         if not self.on_input:
+            return
+        if self.kind == "feed":
+            u, x = FEED_TERMS[self.regressor]
+            setattr(ctx, u, getattr(ctx, u) + ctx.p[self.strength] * CONTROL_NORM[u] * ctx.x[x] / FEED_STATES[x][1])
             return
         inp = SENSOR_TERMS[self.regressor][0]
         if self.kind == "scale":
@@ -208,16 +232,19 @@ class GenericTerm(Extension):
 
 
 def generic_names(family: str = "standard") -> list[str]:
-    """Every term of a family: the force and moment terms, then the sensor terms. ``"standard"`` leaves out the
-    terms of :data:`EXTENDED_ONLY`; ``"extended"`` has them all."""
+    """Every term of a family: the force and moment terms, then the sensor terms (then, in ``"control"``, the
+    control-path terms). ``"standard"`` leaves out the terms of :data:`EXTENDED_ONLY`; ``"extended"`` has them;
+    ``"control"`` adds :data:`FEED_TERMS`."""
     if family not in FAMILIES:
         raise ValueError(f"unknown discrepancy family {family!r}; choose from {', '.join(FAMILIES)}")
     names = [f"d{ch}_{r}" for ch in FORCE_CHANNELS for r in REGRESSORS] + list(SENSOR_TERMS)
-    return names if family == "extended" else [n for n in names if n not in EXTENDED_ONLY]
+    if family == "standard":
+        return [n for n in names if n not in EXTENDED_ONLY]
+    return names + (list(FEED_TERMS) if family == "control" else [])
 
 
 def is_generic(name: str) -> bool:
-    return name in set(generic_names("extended"))
+    return name in set(generic_names("control"))
 
 
 def is_force_term(name: str) -> bool:
@@ -234,6 +261,8 @@ def generic_term(name: str) -> GenericTerm:
     """The term called ``name`` (``dM_bump05``, ``TAS_scale``...); KeyError naming the family otherwise."""
     if name in SENSOR_TERMS:
         return GenericTerm("sensor", name)
+    if name in FEED_TERMS:
+        return GenericTerm("control", name)
     if len(name) > 3 and name[0] == "d" and name[1] in FORCE_CHANNELS and name[2] == "_" and name[3:] in REGRESSORS:
         return GenericTerm(name[1], name[3:])
-    raise KeyError(f"unknown discrepancy term {name!r}; the family is {', '.join(generic_names('extended'))}")
+    raise KeyError(f"unknown discrepancy term {name!r}; the family is {', '.join(generic_names('control'))}")

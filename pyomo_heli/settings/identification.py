@@ -311,11 +311,12 @@ class DiagnosisTable(Table):
 
 NON_EMPTY = "field '{field}' must be a non-empty list of names"
 #: the generic discrepancy family and terms offered with discovery: one declaration for every [loop] table
-GenericFamily = Literal["standard", "extended"]
-GenericTerms = Optional[Names(generic_names("extended"), empty=NON_EMPTY,
+GenericFamily = Literal["standard", "extended", "control"]
+GenericTerms = Optional[Names(generic_names("control"), empty=NON_EMPTY,
                               unknown="field 'generic': unknown discrepancy term {one!r}; choose from {choices}")]
 GENERIC_MESSAGES = {"generic": ("field 'generic' must be a non-empty list of names", None),
-                    "generic_family": "field 'generic_family' must be \"standard\" or \"extended\", got {v!r}"}
+                    "generic_family": "field 'generic_family' must be \"standard\", \"extended\" or \"control\", "
+                                      "got {v!r}"}
 
 
 class LoopTable(Table):
@@ -357,7 +358,8 @@ class LoopTable(Table):
                                                "discrepancy family (docs/discovery.md)")
     generic_family: GenericFamily = Field(
         "standard", description="the generic family offered with discovery when no 'generic' list is given: "
-                                "standard, or extended (+ speed products and input scale factors; docs/discovery.md)")
+                                "standard, extended (+ speed products and input scale factors) or control "
+                                "(extended + control-path feedback terms; docs/discovery.md)")
     generic: GenericTerms = Field(
         None, description="the generic terms offered with discovery (default the whole family named by "
                           "'generic_family', pyomo_heli.physics.discrepancy.generic_names(generic_family))")

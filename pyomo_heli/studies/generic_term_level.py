@@ -187,7 +187,7 @@ def main(argv=None) -> int:
         seeds = seeds_of(a.seeds)
     except ValueError as exc:
         ap.error(f"--seeds: {exc}")
-    known = generic_names("extended")
+    known = generic_names("control")
     bad = [n for n in a.terms if n not in known]
     if bad:
         ap.error(f"--terms: {', '.join(bad)} not in the generic family (e.g. {', '.join(known[-6:])})")

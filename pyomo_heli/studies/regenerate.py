@@ -200,6 +200,13 @@ ENTRIES: tuple[Entry, ...] = (
         "drag_rise pitot_downwash fuselage_download rotor_speed_droop static_port_error actuator_lag rotor_pylon_mode "
         "cyclic_free_play --generic-family extended --out {out}/held_out_extended --workers 2"),
         ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=990),
+    # the control family (extended + control-path feedback) on pitch_rate_damper; written after those rows failed
+    Entry("held_out_control", (
+        "python studies/held_out_effects.py --seeds 2 --effects pitch_rate_damper --generic-family control "
+        "--out {out}/held_out_control --workers 2",
+        "python studies/held_out_effects.py --seeds 1 --effects none --generic-family control "
+        "--out {out}/held_out_control"),
+        ("held_out.csv", "held_out.md"), minutes=60),
     Entry("held_out_blind3", (f"python studies/held_out_effects.py --seeds 3 --effects {H14_H16} --workers 2 "
                               "--out {out}/held_out_blind3",),
           ("held_out.csv", "held_out.md"), minutes=200),

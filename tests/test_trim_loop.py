@@ -201,8 +201,8 @@ def test_trim_loop_config_errors(tmp_path):
     out = subprocess.run([sys.executable, "-m", "pyomo_heli.cli", "trim-loop", str(cfg), "--out", str(tmp_path / "o")],
                          capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 2 and "field 'holdout_every'" in out.stderr and len(out.stderr.strip().splitlines()) == 1
-    for loop, message in (('generic_family = "big"', "[loop]: field 'generic_family' must be \"standard\" or "
-                                                     "\"extended\", got 'big'"),
+    for loop, message in (('generic_family = "big"', "[loop]: field 'generic_family' must be \"standard\", "
+                                                     "\"extended\" or \"control\", got 'big'"),
                           ('generic = ["dM_bump99"]', "[loop]: field 'generic': unknown discrepancy term 'dM_bump99'")):
         cfg.write_text(f'[data]\ndataset = "{BUNDLED}"\n[parameters.f_e]\n[loop]\ndiscovery = true\n{loop}\n')
         with pytest.raises(TrimLoopError) as err:

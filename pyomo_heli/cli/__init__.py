@@ -46,13 +46,10 @@ def _placement_flag(parser) -> None:
 
 
 def _figure_flag(parser, none: bool = False) -> None:
-    if none:
-        parser.add_argument("--figure-format", choices=(*FIGURE_FORMATS, "none"), default="png",
-                            help="file format of the report's figures (default png); none: the report's text and "
-                                 "tables only (batch runs), report-loop draws the figures later")
-        return
-    parser.add_argument("--figure-format", choices=FIGURE_FORMATS, default="png",
-                        help="file format of the report's figures (default png)")
+    parser.add_argument("--figure-format", choices=(*FIGURE_FORMATS, *(("none",) if none else ())), default="png",
+                        help="file format of the report's figures (default png)"
+                             + ("; none: the report's text and tables only (batch runs), report-loop draws the "
+                                "figures later" if none else ""))
 
 
 def _dask_flags(parser, what: str) -> None:

@@ -170,7 +170,8 @@ SHAPE_MANEUVERS = WAKE_MANEUVERS.replace('"lon3211_80kt"', '"lon3211_50kt"').rep
     "speed_kt = 80\nchannel = \"lon\"\nshape = \"3211\"", "speed_kt = 50\nchannel = \"lon\"\nshape = \"3211\"")
 
 
-@pytest.mark.parametrize("n_true, fitted", [(3.0, True), (6.0, False)])
+# the default profile kept (6.0) is slow (30 s; CI time); the default run has the profile order found (3.0)
+@pytest.mark.parametrize("n_true, fitted", [(3.0, True), pytest.param(6.0, False, marks=pytest.mark.slow)])
 def test_shape_rule_finds_a_known_profile_order_and_keeps_a_right_default(tmp_path, monkeypatch, n_true, fitted):
     """The shape rule (close_loop.select_shape) on data whose truth is the wake candidate itself, n_wt known.
 

@@ -746,6 +746,9 @@ def test_the_backward_check_removes_at_the_level_the_terms_entered_at():
     assert backward_check(cfg, record, [], 0.01)[0]["significant"]  # at alpha itself it would have stayed
 
 
+# slow (108 s; CI time): four identifications and three screens. The default run has the check's levels and
+# decisions (test_the_backward_check_removes_at_the_level_the_terms_entered_at above)
+@pytest.mark.slow
 def test_a_term_the_backward_check_rejects_is_removed_past_the_iteration_limit(tmp_path, monkeypatch):
     """M0 + noise, the first two steps made to add dM_one and then dZ_one (the test's stand-in; each step itself
     runs). At the iteration limit (2) the backward check finds dM_one not significant at the level the terms

@@ -31,14 +31,19 @@ def test_summary_gives_the_estimates_and_z_moments_over_the_seeds():
     assert list(per_seed(docs, ["col_scale"])["col_scale z"]) == [-3.4, 0.5, -2.1, 9.0]
 
 
+def _seed_7(out) -> list:
+    """The study's arguments for seed 7 of the small held-out flight test into ``out``."""
+    return ["--seeds", "7", "--config", str(ROOT / "studies" / "held_out_small.toml"),
+            "--data-config", str(ROOT / "studies" / "held_out_small_gen.toml"), "--out", str(out)]
+
+
 def test_level_study_writes_each_seed_and_resumes(tmp_path):
     """One seed of the small held-out flight test (three records), M0 + noise: both input scale factors estimated
     about their true zero (|c| well inside the family's +-0.2 bounds, |z| < 4), z = sign(c) sqrt(LR), the seed's data
     removed once done, and a rerun reads the seed back instead of solving again."""
     from pyomo_heli.studies.generic_term_level import main
 
-    argv = ["--seeds", "7", "--config", str(ROOT / "studies" / "held_out_small.toml"),
-            "--data-config", str(ROOT / "studies" / "held_out_small_gen.toml"), "--out", str(tmp_path)]
+    argv = _seed_7(tmp_path)
     assert main(argv) == 0
     doc = json.loads((tmp_path / "seed_7.json").read_text())
     for n in ("col_scale", "lon_scale"):
@@ -51,7 +56,17 @@ def test_level_study_writes_each_seed_and_resumes(tmp_path):
     (tmp_path / "seed_7.json").write_text(json.dumps(doc))
     assert main(argv) == 0
     assert pd.read_csv(tmp_path / "summary.csv").set_index("term").loc["col_scale", "mean c"] == 0.123
-    # --identification oe: the measured inputs taken as exact, a fit of its own (another J) into OUT/oe
+
+
+# slow (15 s; CI time): a second identification and screen
+@pytest.mark.slow
+def test_level_study_with_the_measured_inputs_taken_as_exact_fits_again(tmp_path):
+    """--identification oe: the measured inputs taken as exact, a fit of its own (another J) into OUT/oe."""
+    from pyomo_heli.studies.generic_term_level import main
+
+    argv = _seed_7(tmp_path)
+    assert main(argv) == 0
+    doc = json.loads((tmp_path / "seed_7.json").read_text())
     assert main([*argv, "--identification", "oe"]) == 0
     oe = json.loads((tmp_path / "oe" / "seed_7.json").read_text())
     assert oe["identification"] == "oe" and oe["J0"] != pytest.approx(doc["J0"], rel=1e-3)

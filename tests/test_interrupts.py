@@ -151,6 +151,9 @@ def test_sigterm_during_anchor_b_keeps_a_and_resumes_identically(logged, referen
     _same_results(out, reference)
 
 
+# slow (41 s; CI time): three multistart runs. The default run has SIGINT and SIGTERM in the anchors and in the
+# loop, and the multistart share and its resume (tests/test_pareto_resume.py)
+@pytest.mark.slow
 def test_sigint_in_multistart_keeps_the_counts(logged, tmp_path):
     """An interrupted start is not a failed start: not stored, not counted; the rerun's share is the whole run's."""
     cfg, log = logged

@@ -20,3 +20,14 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture(scope="session")
+def flight_test_cache(tmp_path_factory):
+    """A folder of the small flight tests this session generated (studies.small_instances.generate_cached), shared by
+    the xdist workers: a test whose generator text another test used copies that flight test instead of simulating
+    it again."""
+    base = tmp_path_factory.getbasetemp()
+    cache = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "flight_tests"
+    cache.mkdir(exist_ok=True)
+    return cache

@@ -24,9 +24,10 @@ TRIMS = ["col", "lon", "theta"]
 
 
 @pytest.fixture(scope="module")
-def instance(tmp_path_factory):
+def instance(tmp_path_factory, flight_test_cache):
     root = tmp_path_factory.mktemp("attr")
-    cfg = make_case(root, seed=21, free=("theta_twist",), points=2, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+    cfg = make_case(root, seed=21, free=("theta_twist",), points=2, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9,
+                    data_cache=flight_test_cache)
     # 3 s of each record (2 s lead-in, 1 s of the input) keep the dense matrices small
     data = prepare_data(load_flight_test(cfg.dataset), cfg.maneuvers, 25, 3.0, 1.9)
     return cfg, data

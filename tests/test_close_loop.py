@@ -40,14 +40,14 @@ def test_m0_with_noise_accepts_nothing(tmp_path):
 
 @pytest.mark.parametrize("seed", [21, pytest.param(31, marks=pytest.mark.slow),
                                   pytest.param(41, marks=pytest.mark.slow)])
-def test_m0_with_noise_accepts_nothing_with_input_errors(tmp_path, seed):
+def test_m0_with_noise_accepts_nothing_with_input_errors(tmp_path, seed, flight_test_cache):
     """The false-positive control with the measured inputs' errors estimated ([objectives] input_errors,
     sigmas from the records' quiet lead-in): on M0 data with noise only, still no candidate is accepted.
     One noise realisation (seed 21) in the default run, three with --runslow; the score test's level over many
     seeds is test_score_test_keeps_its_level_on_m0_seeds (slow)."""
     loop = '\n[objectives]\ninput_errors = ["col", "lon"]\n'
     cfg = make_case(tmp_path, seed=seed, free=("theta_twist", "CL_alpha_HT"), points=2, loop=loop,
-                    maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+                    maneuvers=WAKE_MANEUVERS, input_reference_s=1.9, data_cache=flight_test_cache)
     assert cfg.nlp.input_errors == ("col", "lon")
     att = identify_and_attribute(cfg, tmp_path / "out")
     print(att)

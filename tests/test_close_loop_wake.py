@@ -23,10 +23,11 @@ def _truth_replay_errors(cfg, doc):
     return truth_replay_errors(cfg, doc, val)
 
 
-def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, request):
+def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, request, flight_test_cache):
     """The acceptance of issue 5 on a small instance of the synthetic flight test (truth: M0 + wake on tail)."""
     cfg = make_case(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
-                    loop="\n[loop]\nmax_iterations = 1\n", maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+                    loop="\n[loop]\nmax_iterations = 1\n", maneuvers=WAKE_MANEUVERS, input_reference_s=1.9,
+                    data_cache=flight_test_cache)
     assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
     doc = json.loads((tmp_path / "loop" / "loop.json").read_text())
     it0, it1 = doc["iterations"][0], doc["iterations"][-1]
@@ -159,7 +160,7 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
 
 
 @pytest.mark.slow
-def test_wake_loop_with_input_errors(tmp_path):
+def test_wake_loop_with_input_errors(tmp_path, flight_test_cache):
     """The same small wake instance with the measured inputs' errors estimated ([objectives] input_errors):
     the loop runs with the known-noise likelihood, picks the wake first, and the trim error, the parameter
     errors against truth and the model's validation error against the truth replay all fall.
@@ -168,7 +169,7 @@ def test_wake_loop_with_input_errors(tmp_path):
     tests/test_close_loop.py (M0 + noise), and the innovations' whiteness in tests/test_innovations.py."""
     loop = '\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\nmax_iterations = 1\n'
     cfg = make_case(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
-                    loop=loop, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+                    loop=loop, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9, data_cache=flight_test_cache)
     assert cfg.nlp.input_errors == ("col", "lon")
     assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop")]) == 0
     doc = json.loads((tmp_path / "loop" / "loop.json").read_text())

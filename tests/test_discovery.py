@@ -26,23 +26,23 @@ GENERIC = ["dM_one", "dM_mu2", "dM_bump00", "dM_bump05", "dM_bump10", "dX_mu4", 
 
 
 def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iterations: int = 0, generic=GENERIC,
-          uncertainty: str = "none", figures: bool = False):
+          uncertainty: str = "none", figures: bool = False, data_cache=None):
     """One loop through the command line; its report's figures only with ``figures`` (CI time: drawing them takes
     about 5 s a loop, and tests/test_close_loop_wake.py checks them)."""
     loop = ('\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\ndiscovery = true\n'
             f'uncertainty = "{uncertainty}"\nmax_iterations = {max_iterations}\n'
             f"generic = {json.dumps(list(generic))}\n{extra}")
     cfg = make_case(tmp_path, effect_table, seed=seed, points=2, loop=loop, maneuvers=WAKE_MANEUVERS,
-                    input_reference_s=1.9)
+                    input_reference_s=1.9, data_cache=data_cache)
     assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop"),
                  *([] if figures else ["--figure-format", "none"])]) == 0
     return cfg, json.loads((tmp_path / "loop" / "loop.json").read_text())
 
 
-def test_noise_only_nothing_is_accepted(tmp_path, monkeypatch):
+def test_noise_only_nothing_is_accepted(tmp_path, monkeypatch, flight_test_cache):
     """M0 plus sensor noise: no term of the library (10 physical + 9 generic) is significant, nothing is added.
     A rerun into the same folder reads the finished step back (the screen's solves are not done again)."""
-    _cfg, doc = _loop(tmp_path, "", seed=21)
+    _cfg, doc = _loop(tmp_path, "", seed=21, data_cache=flight_test_cache)
     its = doc["iterations"]
     print(its[0]["discovery"]["message"])
     assert len(its) == 1 and its[0]["extensions"] == []
@@ -97,14 +97,14 @@ def test_a_finished_structure_step_is_read_back_not_redone(tmp_path):
 
 
 @pytest.mark.parametrize("iterations", [0, pytest.param(1, marks=pytest.mark.slow)])
-def test_held_out_fuselage_download_is_discovered_with_its_shape(tmp_path, iterations):
+def test_held_out_fuselage_download_is_discovered_with_its_shape(tmp_path, iterations, flight_test_cache):
     """Truth: M0 + a download on the fuselage at low speed (held out). No physical candidate may be named (cg_offset
     is significant on its own here, and must not be); the discovered (or, if not significant, the described)
     generic term must have the truth's sign and speed shape: a nose-up moment or a download that is largest at low
     speed and gone by 60 kt. With one more iteration (slow) the term is added, re-identified, checked by the
     validation rule and drawn in the report."""
     _cfg, doc = _loop(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, max_iterations=iterations,
-                      figures=bool(iterations))
+                      figures=bool(iterations), data_cache=flight_test_cache)
     its = doc["iterations"]
     d = its[0]["discovery"]
     print(d["message"])
@@ -127,13 +127,14 @@ def test_held_out_fuselage_download_is_discovered_with_its_shape(tmp_path, itera
         assert (tmp_path / "loop" / f"loop_discovered_{fit['name']}.png").is_file()
 
 
-def test_held_out_accelerometer_filter_is_discovered_as_an_output_time_shift(tmp_path):
+def test_held_out_accelerometer_filter_is_discovered_as_an_output_time_shift(tmp_path, flight_test_cache):
     """Truth: the n_z record passed through a first-order filter, tau 0.08 s (held out). Offered the output and
     input time shifts with the short library, the step discovers nz_delay (not the input shift col_delay, which the
     full-size loops took for it before the family had output shifts), not explained by any library effect, with
     the truth's time constant within three standard errors."""
     _cfg, doc = _loop(tmp_path, "[truth.effects.accelerometer_filter]\ntau_nz = 0.08\n", seed=5,
-                      generic=[*GENERIC, "nz_delay", "nx_delay", "col_delay", "lon_delay"])
+                      generic=[*GENERIC, "nz_delay", "nx_delay", "col_delay", "lon_delay"],
+                      data_cache=flight_test_cache)
     d = doc["iterations"][0]["discovery"]
     print(d["message"])
     assert d["decision"] == "discovered" and d["discovered"]["name"] == "nz_delay", d["message"]
@@ -146,14 +147,15 @@ def test_held_out_accelerometer_filter_is_discovered_as_an_output_time_shift(tmp
     ("fuselage_pitch_damping", "k_fq = 1.0", "dM_qmu", -1),
 ])
 def test_the_extended_family_describes_two_held_out_effects_the_standard_one_cannot(tmp_path, effect, truth, term,
-                                                                                     sign):
+                                                                                     sign, flight_test_cache):
     """Truths the standard family has no term for: a cyclic gearing error (theta_1s = 1.05 lon) and a fuselage pitch
     damping that grows with speed (dM ~ -q V). Offered the short library plus their neighbours of the extended family
     (input scale factors, q and q x speed), the step's discovered or described term is the one of the truth's form,
     with the truth's sign and size within three standard errors. The damping's equivalent coefficient, taking
     V = mu Omega R: dM = -0.25 rho V (12 m^2)(4 m)^2 q = c m g R (q/0.2)(mu/0.3)."""
     _cfg, doc = _loop(tmp_path, f"[truth.effects.{effect}]\n{truth}\n", seed=5,
-                      generic=[*GENERIC, "lon_scale", "col_scale", "dM_q", "dM_qmu", "dM_lon"])
+                      generic=[*GENERIC, "lon_scale", "col_scale", "dM_q", "dM_qmu", "dM_lon"],
+                      data_cache=flight_test_cache)
     d = doc["iterations"][0]["discovery"]
     print(d["message"])
     kept = doc["iterations"][doc["final_iteration"]]
@@ -167,7 +169,7 @@ def test_the_extended_family_describes_two_held_out_effects_the_standard_one_can
     assert abs(fit["estimate"] - c_true) < 3 * fit["se"], (fit, c_true)
 
 
-def test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model(tmp_path, monkeypatch):
+def test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model(tmp_path, monkeypatch, flight_test_cache):
     """The small wake instance of tests/test_close_loop.py with discovery. Iteration 0 names the wake candidate,
     because with it fitted the best generic term adds nothing (encompassing). The validation rule is then made to
     reject the step that adds it (the test's stand-in for a real rise; the paired test itself runs): the loop goes
@@ -188,7 +190,7 @@ def test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model(tm
 
     monkeypatch.setattr(cl, "validation_check", check)
     _cfg, doc = _loop(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
-                      max_iterations=2)
+                      max_iterations=2, data_cache=flight_test_cache)
     its = doc["iterations"]
     print([(it["extensions"], (it.get("discovery") or {}).get("message")) for it in its])
     d = its[0]["discovery"]
@@ -213,7 +215,8 @@ def test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model(tm
 # slow (90 s; CI time): the default run has the trim loop's name check (tests/test_trim_loop.py) and this
 # loop's way back to a kept model (test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model)
 @pytest.mark.slow
-def test_a_named_candidate_that_leaves_a_generic_term_significant_is_withdrawn(tmp_path, monkeypatch):
+def test_a_named_candidate_that_leaves_a_generic_term_significant_is_withdrawn(tmp_path, monkeypatch,
+                                                                               flight_test_cache):
     """The name check. The wake instance: the wake is named at iteration 0; at iteration 1 (M0 + wake) the real
     step finds no generic term significant, so on these data the name would stand. The test's stand-in then marks
     the best generic term of that step significant (the step itself runs): the loop withdraws the wake, goes back
@@ -231,7 +234,7 @@ def test_a_named_candidate_that_leaves_a_generic_term_significant_is_withdrawn(t
 
     monkeypatch.setattr(disc, "discovery_step", step)
     _cfg, doc = _loop(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
-                      max_iterations=1)
+                      max_iterations=1, data_cache=flight_test_cache)
     its = doc["iterations"]
     print([(it["extensions"], (it.get("discovery") or {}).get("message")) for it in its])
     assert its[0]["discovery"]["decision"] == "named" and its[0]["discovery"]["added"] == "rotor_wake_on_tail"
@@ -248,9 +251,9 @@ def test_a_named_candidate_that_leaves_a_generic_term_significant_is_withdrawn(t
            in report
 
 @pytest.mark.slow
-def test_held_out_drag_rise_gives_no_wrong_acceptance(tmp_path):
+def test_held_out_drag_rise_gives_no_wrong_acceptance(tmp_path, flight_test_cache):
     """Truth: M0 + a drag rise above 80 kt (held out): whatever the loop decides, no library effect is kept."""
-    _cfg, doc = _loop(tmp_path, "[truth.effects.drag_rise]\nk_dr = 0.15\n", seed=6)
+    _cfg, doc = _loop(tmp_path, "[truth.effects.drag_rise]\nk_dr = 0.15\n", seed=6, data_cache=flight_test_cache)
     kept = doc["iterations"][doc["final_iteration"]]
     print([it.get("discovery", {}).get("message") for it in doc["iterations"]])
     assert not [n for n in kept["extensions"] if n in CANDIDATES], kept["extensions"]
@@ -603,12 +606,12 @@ SCREEN_TERMS, SCREEN_PAIRS = ["dM_bump00", "cg_offset"], [("cg_offset", "dM_bump
 
 
 @pytest.fixture(scope="module")
-def screen_case(tmp_path_factory):
+def screen_case(tmp_path_factory, flight_test_cache):
     """The held-out fuselage download instance and its NLP screen with a normal base."""
     from pyomo_heli.diagnosis.discovery import nlp_screen
 
     cfg = make_case(tmp_path_factory.mktemp("screen"), "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5,
-                    points=2, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+                    points=2, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9, data_cache=flight_test_cache)
     start = {f.name: f.initial for f in cfg.free}
     normal = nlp_screen(cfg, start, SCREEN_TERMS, pairs=SCREEN_PAIRS, progress=lambda s: None)
     assert normal["base_refined"] is None and normal["base_success"]
@@ -702,14 +705,15 @@ def test_a_joint_base_that_fails_twice_is_replaced_by_one_nlp_per_term_and_pair(
 
 # slow (28 s; CI time): a check of the warm start's speed-up, not of a result
 @pytest.mark.slow
-def test_the_screen_warm_start_from_the_base_multipliers_gives_the_primal_warm_starts_estimates(tmp_path):
+def test_the_screen_warm_start_from_the_base_multipliers_gives_the_primal_warm_starts_estimates(tmp_path,
+                                                                                                 flight_test_cache):
     """nlp_screen frees each term from the base solution: warm from its multipliers with a small barrier parameter
     (the fronts' continuation) it reaches the estimate and LR that the primal-only warm start reaches, in fewer
     Ipopt iterations."""
     from pyomo_heli.diagnosis.discovery import nlp_screen
 
     cfg = make_case(tmp_path, "[truth.effects.fuselage_download]\nk_fd = 0.03\n", seed=5, points=2,
-                    maneuvers=WAKE_MANEUVERS, input_reference_s=1.9)
+                    maneuvers=WAKE_MANEUVERS, input_reference_s=1.9, data_cache=flight_test_cache)
     start = {f.name: f.initial for f in cfg.free}
     terms = ["dM_bump00", "dZ_one"]
     got = {ws: nlp_screen(cfg, start, terms, progress=lambda s: None, warm_start=ws)
@@ -749,7 +753,8 @@ def test_the_backward_check_removes_at_the_level_the_terms_entered_at():
 # slow (108 s; CI time): four identifications and three screens. The default run has the check's levels and
 # decisions (test_the_backward_check_removes_at_the_level_the_terms_entered_at above)
 @pytest.mark.slow
-def test_a_term_the_backward_check_rejects_is_removed_past_the_iteration_limit(tmp_path, monkeypatch):
+def test_a_term_the_backward_check_rejects_is_removed_past_the_iteration_limit(tmp_path, monkeypatch,
+                                                                               flight_test_cache):
     """M0 + noise, the first two steps made to add dM_one and then dZ_one (the test's stand-in; each step itself
     runs). At the iteration limit (2) the backward check finds dM_one not significant at the level the terms
     entered at: it is removed all the same, the model re-identified, and the next step does not offer it again."""
@@ -767,7 +772,8 @@ def test_a_term_the_backward_check_rejects_is_removed_past_the_iteration_limit(t
 
     monkeypatch.setattr(disc, "discovery_step", step)
     _cfg, doc = _loop(tmp_path, "", seed=21, max_iterations=2, generic=["dM_one", "dZ_one", "dM_mu2"],
-                      extra='candidates = ["nx_bias"]\nvalidation_rule = false\n', uncertainty="chosen")
+                      extra='candidates = ["nx_bias"]\nvalidation_rule = false\n', uncertainty="chosen",
+                      data_cache=flight_test_cache)
     its = doc["iterations"]
     print([(it["extensions"], it.get("backward_check"), (it.get("decision") or {}).get("message")) for it in its])
     assert [it["extensions"] for it in its] == [[], ["dM_one"], ["dM_one", "dZ_one"], ["dZ_one"]]

@@ -7,10 +7,15 @@ identification config beside it. Speeds in knots and angles in degrees appear on
 """
 from __future__ import annotations
 
+import hashlib
+import os
+import shutil
 import textwrap
+from pathlib import Path
 
 from ..config import load_identification_config
-from ..flighttest.generate import generate_from_file
+from ..flighttest.generate import check_output_folder, generate_from_file
+from ..provenance import source_sha256
 
 MANEUVERS = """
 [[maneuvers]]
@@ -56,21 +61,46 @@ FREE = {
 
 def make_case(root, effect: str = "", seed: int = 11, free=("theta_twist", "CL_alpha_HT", "Iyy"), points: int = 3,
               loop: str = "", maneuvers: str = MANEUVERS, input_reference_s: float = 0.0,
-              resample_inputs: str | None = None):
+              resample_inputs: str | None = None, data_cache: Path | None = None):
     """Generate a small dataset with ``effect`` (a [truth.effects.*] table) and write its identification config
-    (``resample_inputs``: written into [data] when given, else the config default applies)."""
+    (``resample_inputs``: written into [data] when given, else the config default applies). ``data_cache``: a
+    folder of flight tests already generated (:func:`generate_cached`)."""
     root.mkdir(parents=True, exist_ok=True)
     gen = (f'[dataset]\nname = "small"\naircraft = "Bo-105 (small test)"\nseed = {seed}\n\n[truth]\nparameters = {{}}\n'
            f"{textwrap.dedent(effect)}\n[sensors]\nnoise = true\n\n[trims]\n"
            "speeds_kt = [10, 15, 20, 25, 30, 40, 50, 60, 80, 100, 120]\n" + maneuvers)
     (root / "gen.toml").write_text(gen)
-    generate_from_file(root / "gen.toml", root / "data")
+    generate_cached(root / "gen.toml", root / "data", data_cache)
     params = "".join(f"\n[parameters.{n}]\n{FREE[n]}\n" for n in free)
     res_in = f'resample_inputs = "{resample_inputs}"\n' if resample_inputs else ""
     ident = (f'[data]\ndataset = "data"\nresample_hz = 25\n{res_in}input_reference_s = {input_reference_s}\n{params}\n'
              f'[pareto]\npoints = {points}\n\n[solver]\nname = "casadi-ipopt"\n{loop}')
     (root / "ident.toml").write_text(ident)
     return load_identification_config(root / "ident.toml")
+
+
+def generate_cached(config: Path, out: Path, cache: Path | None = None) -> None:
+    """``generate_from_file(config, out)``, or a copy of the flight test that the same generator text and the same
+    package sources made before into ``cache`` (the generator is deterministic: every draw is seeded, and the data
+    name no path). Several processes may share ``cache``: each flight test is written under a temporary name and
+    renamed into place."""
+    if cache is None:
+        generate_from_file(config, out)
+        return
+    key = hashlib.sha256((source_sha256() + Path(config).read_text(encoding="utf-8")).encode()).hexdigest()[:20]
+    done = Path(cache) / key
+    if not done.is_dir():
+        generate_from_file(config, out)
+        tmp = Path(cache) / f".{key}.{os.getpid()}"
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.copytree(out, tmp)
+        try:
+            os.rename(tmp, done)
+        except OSError:  # another process stored the same flight test first
+            shutil.rmtree(tmp, ignore_errors=True)
+        return
+    check_output_folder(out, False)
+    shutil.copytree(done, out, dirs_exist_ok=True)
 
 
 # The wake instance: 2 s of quiet lead-in before each input (the generator's default), 6 s records, and the

@@ -154,6 +154,8 @@ ENTRIES: tuple[Entry, ...] = (
         "python studies/generic_term_level.py --seeds 20261122-20261141 --input-reference-error "
         "--out {out}/generic_term_level",
         "python studies/generic_term_level.py --seeds 20261122-20261141 --input-error-ar 4 --input-reference-error "
+        "--out {out}/generic_term_level",
+        "python studies/generic_term_level.py --seeds 20261122-20261141 --output-error-ar 2 "
         "--out {out}/generic_term_level"),
         ("summary.csv", "summary.md", "exact_inputs/summary.csv", "exact_inputs/summary.md",
          "exact_inputs_oe/summary.csv", "exact_inputs_oe/summary.md", "input_sigma_x1.7/summary.csv",
@@ -163,7 +165,8 @@ ENTRIES: tuple[Entry, ...] = (
          "inputs_record_input_error_ar4/summary.md", "inputs_record_input_error_ar4_input_reference_error/summary.csv",
          "inputs_record_input_error_ar4_input_reference_error/summary.md", "input_reference_error/summary.csv",
          "input_reference_error/summary.md", "input_error_ar4_input_reference_error/summary.csv",
-         "input_error_ar4_input_reference_error/summary.md"), minutes=440),
+         "input_error_ar4_input_reference_error/summary.md", "output_error_ar2/summary.csv",
+         "output_error_ar2/summary.md"), minutes=540),
     Entry("input_path", ("python studies/input_path_check.py --seeds 1 --out {out}/input_path",
                          "python studies/input_path_check.py --effects none --seeds 5 --out {out}/input_path"),
           ("input_path.csv", "input_path.md"), minutes=20),

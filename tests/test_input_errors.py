@@ -221,6 +221,7 @@ def test_output_error_ar_weighs_each_records_residuals_by_their_innovations():
 
     cfg = load_identification_config(CONFIG, {"objectives": {"output_error_ar": 2}})
     m, data, _ = build_problem(cfg)
+    assert m.ipopt_defaults == {"mumps_pivtol": 1e-4}  # the AR-weighed rows' pivot tolerance (nlp/identification.py)
     outputs = list(cfg.nlp.time_outputs)
     sigma = lead_in_sigma(data.maneuvers, outputs)
     total = 0.0
@@ -243,8 +244,8 @@ def test_output_error_ar_weighs_each_records_residuals_by_their_innovations():
 def test_output_error_ar_solves_at_full_size_to_a_lower_likelihood_than_the_white_noise_fit():
     """The full-size AR(2) output model (the bundled set's ten identification records, point A of
     studies/held_out_discovery.toml; about 3 min). At MUMPS' pivot tolerance 1e-6 this solve was regularised on every
-    iteration once mu was small and still creeping at iteration 60; with the adapter's 1e-4 Ipopt ends optimal. Checked
-    independently: the white-noise fit's optimum is a point of the same NLP (same rows and variables), so the AR
+    iteration once mu was small and still creeping at iteration 60; at the 1e-4 the NLP asks for, Ipopt ends optimal.
+    Checked independently: the white-noise fit's optimum is a point of the same NLP (same rows and variables), so the AR
     objective there must not be lower than at the AR optimum."""
     import pyomo.environ as pyo
 

@@ -303,13 +303,10 @@ class CasadiIpoptSolver(DerivativeFunctions):
         # re-solve repeats; QAMD 0.3 s, same 26 iterations, 10.9 s in all (Case 1, 106k variables,
         # one run; docs/performance.md).
         ipopt.setdefault("mumps_pivot_order", 6)
-        # MUMPS' pivot tolerance 1e-4 instead of 1e-6: with the outputs' AR noise model (output_error_ar) the
-        # residual rows couple neighbouring samples, and at 1e-6 MUMPS reported a wrong inertia on every iteration
-        # once mu was small; the regularised steps then crept (point A, the bundled set's ten records, AR(2): still
-        # creeping at iteration 60, and after 150 on a regenerated set; at 1e-4: optimal in 34 iterations, 51 s).
-        # Same iterations and estimates to 1e-13 on the demo (Case 1 front) and on point A without the AR model
-        # (docs/performance.md).
-        ipopt.setdefault("mumps_pivtol", 1e-4)
+        # Ipopt options the NLP itself asks for (``model.ipopt_defaults``, e.g. the AR-weighed J_time's pivot
+        # tolerance, nlp/identification.py), below the caller's
+        for key, value in getattr(self.model, "ipopt_defaults", {}).items():
+            ipopt.setdefault(key, value)
         ipopt.setdefault("print_level", 5 if verbose else 0)
         if not verbose:
             ipopt.setdefault("sb", "yes")

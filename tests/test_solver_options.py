@@ -89,7 +89,7 @@ def test_casadi_ipopt_accepts_the_options_the_package_uses(capfd):
     from pyomo_heli.pareto.front import FRONT_STEP_OPTIONS, LEAVE_ANCHOR_OPTIONS
     from pyomo_heli.solvers.casadi_ipopt import DEFAULT_OPTIONS, WARM_START_OPTIONS
 
-    # what CasadiIpoptSolver._solver_for adds, plus our own keys
+    # what CasadiIpoptSolver._solver_for adds (the AR output model's ipopt_defaults included), plus our own keys
     adapter = {"linear_solver": "mumps", "mumps_permuting_scaling": 0, "mumps_pivot_order": 6, "mumps_pivtol": 1e-4,
                "print_level": 0, "sb": "yes", "point_rows": False, "verbose": True}
     for opts in (DEFAULT_OPTIONS, WARM_START_OPTIONS, FRONT_STEP_OPTIONS, LEAVE_ANCHOR_OPTIONS, adapter):

@@ -228,9 +228,9 @@ def _build(data: IdentificationData, model: HelicopterModel, free: list[FreePara
                 residuals[o] = [w for e in _cut(residuals[o], counts) for w in _ar_innovation(e, a)]
             # MUMPS' pivot tolerance 1e-4 instead of its 1e-6 for these rows, which couple neighbouring samples: at
             # 1e-6 MUMPS reported a wrong inertia on every iteration once mu was small, and the regularised steps
-            # crept (point A, the bundled set's ten records, AR(2): still creeping at iteration 60, and after 150 on
-            # a regenerated set; at 1e-4 optimal in 34 iterations, 51 s). Not a default for every NLP: the noise-free
-            # Case 2 exactness fit took 107 s at 1e-4 against 74 s (docs/performance.md).
+            # crept (point A, the bundled set's ten records, AR(2): still creeping at iteration 60; at 1e-4 optimal
+            # in 34 iterations, 51 s). Not a default for every NLP: the noise-free Case 2 exactness fit took 107 s
+            # at 1e-4 against 74 s (docs/performance.md).
             m.ipopt_defaults = {"mumps_pivtol": 1e-4}
         add_known_noise_time_objective(m, residuals, list(opts.time_outputs), out_sigma, errs, err_sigma)
     elif data.maneuvers and opts.time_outputs:

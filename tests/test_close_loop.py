@@ -30,6 +30,9 @@ def identify_and_attribute(cfg, out, **kw):
     return attribute(model, [f.name for f in cfg.free], data, cfg.nlp.time_outputs, cfg.nlp.trim_outputs, **kw)
 
 
+# slow (CI time): the default run has the same false-positive control with the input errors estimated (seed 21,
+# below) and the structure determination's (tests/test_discovery.py::test_noise_only_nothing_is_accepted)
+@pytest.mark.slow
 def test_m0_with_noise_accepts_nothing(tmp_path):
     cfg = make_case(tmp_path, seed=21, free=("theta_twist", "CL_alpha_HT"), points=2)
     att = identify_and_attribute(cfg, tmp_path / "out")

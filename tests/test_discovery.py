@@ -169,6 +169,10 @@ def test_the_extended_family_describes_two_held_out_effects_the_standard_one_can
     assert abs(fit["estimate"] - c_true) < 3 * fit["se"], (fit, c_true)
 
 
+# slow (80 s; CI time): the default run has the trim loop's way back to a kept model (its own code:
+# tests/test_trim_loop.py::test_trim_loop_name_check_withdraws_a_named_candidate_that_leaves_a_generic_term) and the
+# study's reading of a loop that went back (tests/test_held_out_effects.py)
+@pytest.mark.slow
 def test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model(tmp_path, monkeypatch, flight_test_cache):
     """The small wake instance of tests/test_close_loop.py with discovery. Iteration 0 names the wake candidate,
     because with it fitted the best generic term adds nothing (encompassing). The validation rule is then made to
@@ -212,8 +216,7 @@ def test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model(tm
            "rotor_wake_on_tail" in report
 
 
-# slow (90 s; CI time): the default run has the trim loop's name check (tests/test_trim_loop.py) and this
-# loop's way back to a kept model (test_after_a_rejected_step_the_loop_tries_the_next_term_at_the_kept_model)
+# slow (90 s; CI time): the default run has the trim loop's name check (tests/test_trim_loop.py)
 @pytest.mark.slow
 def test_a_named_candidate_that_leaves_a_generic_term_significant_is_withdrawn(tmp_path, monkeypatch,
                                                                                flight_test_cache):

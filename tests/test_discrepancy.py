@@ -78,7 +78,9 @@ def test_input_time_shift_lags_the_response_and_leaves_the_trim():
     assert abs(q1[k]) < 0.8 * abs(q0[k]) and np.sign(q1[k]) == np.sign(q0[k])
 
 
-@pytest.mark.parametrize("name,out", [("nz_delay", "n_z"), ("TAS_delay", "TAS"), ("beta0_delay", "beta_0")])
+# CI time: one output in the default run (the lag is written once for every output), all three with --runslow
+@pytest.mark.parametrize("name,out", [("nz_delay", "n_z"), pytest.param("TAS_delay", "TAS", marks=pytest.mark.slow),
+                                      pytest.param("beta0_delay", "beta_0", marks=pytest.mark.slow)])
 def test_output_time_shift_is_a_first_order_lag_of_the_output(name, out):
     """c d(y_d)/dt = y - y_d, the record holds y_d: the trim is M0's, and the recorded output is M0's output passed
     through 1/(c s + 1) (scipy.signal.lsim: a second method); the states are M0's. The float simulator and the

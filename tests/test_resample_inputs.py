@@ -104,7 +104,8 @@ def filtered_noise_free(tmp_path_factory):
     return generate(load_config(CONFIGS / "m0_filtered_noise_free_gen.toml"), root / "data", force=True)
 
 
-@pytest.mark.parametrize("maneuver", ["lon3211_80kt_a", "col3211_80kt_a"])
+# CI time: the cyclic record in the default run, the collective one with --runslow
+@pytest.mark.parametrize("maneuver", ["lon3211_80kt_a", pytest.param("col3211_80kt_a", marks=pytest.mark.slow)])
 def test_noise_free_filtered_records_fit_either_way(filtered_noise_free, maneuver):
     """On records that went through the anti-alias filter the inputs are smooth at the 25 Hz samples: M0 fitted to
     M0's noise-free records returns CL_alpha_HT and Iyy within 0.15 % with the inputs picked and within 0.06 %

@@ -131,8 +131,8 @@ def test_the_exact_model_leaves_the_input_errors_white(family, signals):
     assert not any(f.startswith("input path") for f in d.findings)
 
 
-# slow (52 s; CI time): the default run has the exact model's input path on the bundled records (above) and the
-# corrected sums' N(0, 1) on an exact linear model (below)
+# slow (52 s; CI time): the default run has the exact model's input path on the bundled records and the
+# corrected sums' N(0, 1) on an exact linear model (both above)
 @pytest.mark.slow
 def test_the_parameter_shift_leaves_the_corrected_sums_unbiased_on_the_exact_model():
     """Analytic truth: with the model exact and the noise model holding (data = the replay of the clean inputs plus

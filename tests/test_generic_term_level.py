@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from scipy import stats
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -50,6 +51,13 @@ def test_level_study_writes_each_seed_and_resumes(tmp_path):
         f = doc["fits"][n]
         assert f["success"] and abs(f["estimate"]) < 0.05 and abs(f["z"]) < 4.0, (n, f)
         assert f["z"] == pytest.approx(math.copysign(math.sqrt(max(f["LR"], 0.0)), f["estimate"]))
+        # the deciding test of a structure step: the LR corrected by the robust score test (never upwards), referred
+        # to F(1, df); z_p is its p as a normal deviate with the estimate's sign
+        assert f["criterion"] == "likelihood ratio" and 0.0 <= f["LR_robust"] <= f["LR"] * (1 + 1e-12)
+        p = stats.f(1, f["df"]).sf(f["LR_robust"]) if math.isfinite(f["df"]) else stats.chi2(1).sf(f["LR_robust"])
+        assert f["p"] == pytest.approx(p, rel=1e-9)
+        assert 2 * stats.norm.sf(abs(f["z_p"])) == pytest.approx(p, rel=1e-9)
+        assert math.copysign(1.0, f["z_p"]) == math.copysign(1.0, f["estimate"]) and abs(f["z_p"]) <= abs(f["z"])
     assert not (tmp_path / "data").exists()
     assert list(pd.read_csv(tmp_path / "summary.csv")["term"]) == ["col_scale", "lon_scale"]
     doc["fits"]["col_scale"]["estimate"] = 0.123  # a rerun reads the stored seed

@@ -89,6 +89,7 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
     config's ``[data] resample_inputs`` and ``[objectives] input_error_ar``, ``input_reference_error`` and
     ``output_error_ar``."""
     from pyomo_heli.diagnosis.discovery import nlp_screen
+    from pyomo_heli.nlp.identification import identification_data
 
     f = out / f"seed_{seed}.json"
     if f.is_file():
@@ -97,6 +98,7 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
         except ValueError:
             doc = None
         if (doc and doc.get("config") == str(config) and set(terms) <= set(doc["fits"])
+                and all("z_p" in doc["fits"][n] for n in terms)
                 and doc.get("input_sigma_scale", 1.0) == input_sigma_scale
                 and doc.get("resample_inputs") == resample_inputs and doc.get("input_error_ar") == input_error_ar
                 and doc.get("input_reference_error", False) == input_reference_error
@@ -116,13 +118,14 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
             "noise_sigma": given_sigmas(cfg, data_config if exact_inputs else None, input_sigma_scale)}})
     start = {p.name: p.initial for p in cfg.free}
     s = nlp_screen(cfg, start, list(terms), progress=lambda _: None)
+    deciding = deciding_tests(cfg, s, list(terms), identification_data(cfg))
     fits = {}
     for n, r in s["fits"].items():
         lr = float(r["LR"]) if r["success"] else float("nan")
         fits[n] = {"estimate": float(r["estimate"]), "LR": lr,
                    "z": math.copysign(math.sqrt(max(lr, 0.0)), r["estimate"]) if r["success"] else float("nan"),
                    "LR_time": float(r.get("LR_time", float("nan"))), "LR_trim": float(r.get("LR_trim", float("nan"))),
-                   "success": bool(r["success"])}
+                   "success": bool(r["success"]), **deciding[n]}
     doc = {"seed": seed, "config": str(config), "exact_inputs": exact_inputs, "identification": identification,
            "input_sigma_scale": input_sigma_scale, "resample_inputs": resample_inputs, "input_error_ar": input_error_ar,
            "input_reference_error": input_reference_error, "output_error_ar": output_error_ar, "J0": float(s["J0"]),
@@ -130,6 +133,43 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
     f.write_text(json.dumps(doc, indent=1))
     shutil.rmtree(data, ignore_errors=True)
     return doc
+
+
+def deciding_tests(cfg, screen: dict, terms: list[str], data) -> dict:
+    """Per term, the test a structure-determination step decides on (:func:`pyomo_heli.diagnosis.discovery.judge`),
+    at the screen's base: the robust score test of the loop's settings (``[loop]``, the config's) over ``terms`` at
+    the base estimate, the LR corrected by it (``LR_robust``, ``df``) and its p (``p``); with input errors that is
+    the corrected LR's p, in output error the score test's own. ``z_p``: that p as a normal deviate with the
+    estimate's sign, sign(c) Phi^-1(1 - p / 2) (a one-sided term's p: Phi^-1(1 - p)), N(0, 1) when the deciding
+    test keeps its level."""
+    from scipy import stats
+
+    from pyomo_heli.diagnosis.attribution import attribute
+    from pyomo_heli.diagnosis.candidates import as_candidate
+    from pyomo_heli.diagnosis.discovery import judge
+    from pyomo_heli.workflows.close_loop import loop_settings, score_test_inputs
+
+    settings = loop_settings(cfg)
+    model = cfg.model.with_parameters(**{f.name: float(screen["base"][f.name]) for f in cfg.free})
+    att = attribute(model, [f.name for f in cfg.free], data, cfg.nlp.time_outputs, cfg.nlp.trim_outputs,
+                    candidates=terms, alpha=settings.alpha, ratio=settings.ratio, confound_corr=settings.confound_corr,
+                    robust=settings.robust, **score_test_inputs(cfg, settings))
+    rows = att.scores.set_index("name")
+    criterion = ("likelihood ratio" if cfg.nlp.input_errors and screen.get("base_success", True) is not False
+                 else "score test")
+    out = {}
+    for n in terms:
+        f = dict(screen["fits"][n])
+        if not f["success"]:
+            f["LR"] = float("nan")
+        one_sided = bool(getattr(as_candidate(n), "one_sided", False))
+        judge(f, rows.loc[n], one_sided, criterion)
+        p = float(f["p"])
+        z = (math.copysign(float(stats.norm.isf(p if one_sided else p / 2)), f["estimate"]) if math.isfinite(p)
+             else float("nan"))
+        out[n] = {"LR_robust": float(f["LR_robust"]), "df": float(f["df"]), "p": p, "z_p": z,
+                  "criterion": criterion}
+    return out
 
 
 def summary(docs: list[dict], terms: list[str]) -> pd.DataFrame:
@@ -140,19 +180,24 @@ def summary(docs: list[dict], terms: list[str]) -> pd.DataFrame:
         ok = [d["fits"][n] for d in docs if d["fits"][n]["success"]]
         c = np.array([r["estimate"] for r in ok])
         z = np.array([r["z"] for r in ok])
+        zp = np.array([r.get("z_p", float("nan")) for r in ok])
         sd_c = float(np.std(c, ddof=1)) if len(c) > 1 else float("nan")
         rows.append({"term": n, "seeds": len(ok), "mean c": float(np.mean(c)), "sd c": sd_c,
                      "t of mean c": float(np.mean(c) / (sd_c / np.sqrt(len(c)))) if len(c) > 1 else float("nan"),
                      "mean z": float(np.mean(z)), "sd z": float(np.std(z, ddof=1)) if len(z) > 1 else float("nan"),
                      "z beyond +-2 [%]": 100.0 * float(np.mean(np.abs(z) > 2)),
-                     "z beyond +-3 [%]": 100.0 * float(np.mean(np.abs(z) > 3))})
+                     "z beyond +-3 [%]": 100.0 * float(np.mean(np.abs(z) > 3)),
+                     "mean z_p": float(np.mean(zp)),
+                     "sd z_p": float(np.std(zp, ddof=1)) if len(zp) > 1 else float("nan"),
+                     "z_p beyond +-2 [%]": 100.0 * float(np.mean(np.abs(zp) > 2))})
     return pd.DataFrame(rows)
 
 
 def per_seed(docs: list[dict], terms: list[str]) -> pd.DataFrame:
     """One row per seed: each term's estimate and z."""
     return pd.DataFrame([{"seed": str(d["seed"]),
-                          **{f"{n} {k}": d["fits"][n][k] for n in terms for k in ("estimate", "z")}} for d in docs])
+                          **{f"{n} {k}": d["fits"][n].get(k, float("nan")) for n in terms
+                             for k in ("estimate", "z", "z_p")}} for d in docs])
 
 
 def main(argv=None) -> int:
@@ -227,7 +272,8 @@ def main(argv=None) -> int:
                              a.identification, a.input_sigma_scale, a.resample_inputs, a.input_error_ar,
                              a.input_reference_error, a.output_error_ar))
         fits = docs[-1]["fits"]
-        print(f"seed {s}: " + ", ".join(f"{n} c = {fits[n]['estimate']:+.4g} (z {fits[n]['z']:+.2f})" for n in a.terms),
+        print(f"seed {s}: " + ", ".join(f"{n} c = {fits[n]['estimate']:+.4g} (z {fits[n]['z']:+.2f}, z_p "
+                                        f"{fits[n]['z_p']:+.2f})" for n in a.terms),
               flush=True)
     try:
         (out / "data").rmdir()
@@ -246,7 +292,10 @@ def main(argv=None) -> int:
               + ("; each record's input reference error estimated" if a.input_reference_error else "")
               + (f"; output noise an AR({a.output_error_ar}) process" if a.output_error_ar is not None else "")
               + "; expected: mean c and mean z about 0 "
-              f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, z beyond +-2 in about 4.6 % of the seeds.")
+              f"(mean z +- {2 / np.sqrt(len(docs)):.2g}), sd z about 1, z beyond +-2 in about 4.6 % of the seeds. "
+              "z = sign(c) sqrt(LR); z_p = sign(c) Phi^-1(1 - p / 2) with p the deciding test's (the LR corrected "
+              "by the robust score test with input errors, the score test's own in output error), the same "
+              "expectations.")
     (out / "summary.md").write_text(header + "\n\n" + markdown_table(tab, digits=3) + "\n\nPer seed:\n\n"
                                     + markdown_table(seeds_tab, digits=3) + "\n")
     print(tab.to_string(index=False))

@@ -35,8 +35,9 @@ noise an AR(P) process fitted to the lead-in), into ``OUT/.../output_error_ar<P>
 
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per term the seeds, the mean and standard deviation of the
 estimate, the mean and standard deviation of z, the t statistic of the mean estimate (mean over its standard error
-over the seeds) and the share of seeds with |z| above 2 and 3 (4.6 % and 0.3 % for N(0, 1)); and the per-seed
-estimates.
+over the seeds) and the share of seeds with |z| above 2 and 3 (4.6 % and 0.3 % for N(0, 1)); the same for ``z_p``, the
+p of the test a structure-determination step decides on (the LR corrected by the loop's robust score test, referred
+to F(1, df); :func:`deciding_tests`) as a normal deviate; and the per-seed estimates.
 """
 from __future__ import annotations
 

@@ -174,8 +174,9 @@ def deciding_tests(cfg, screen: dict, terms: list[str], data) -> dict:
 
 
 def summary(docs: list[dict], terms: list[str]) -> pd.DataFrame:
-    """Per term: the estimate's and z's mean and standard deviation over the seeds, the mean's t statistic, and the
-    share of seeds with |z| above 2 and 3 (failed fits left out)."""
+    """Per term: the estimate's and z's mean and standard deviation over the seeds, the mean's t statistic, the
+    share of seeds with |z| above 2 and 3, and z_p's mean, standard deviation and share above 2 (failed fits left
+    out; z_p NaN for seeds stored without it)."""
     rows = []
     for n in terms:
         ok = [d["fits"][n] for d in docs if d["fits"][n]["success"]]
@@ -195,7 +196,7 @@ def summary(docs: list[dict], terms: list[str]) -> pd.DataFrame:
 
 
 def per_seed(docs: list[dict], terms: list[str]) -> pd.DataFrame:
-    """One row per seed: each term's estimate and z."""
+    """One row per seed: each term's estimate, z and z_p."""
     return pd.DataFrame([{"seed": str(d["seed"]),
                           **{f"{n} {k}": d["fits"][n].get(k, float("nan")) for n in terms
                              for k in ("estimate", "z", "z_p")}} for d in docs])

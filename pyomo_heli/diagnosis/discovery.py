@@ -385,7 +385,7 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
     # in output error the score test's own p (docs/discovery.md, "Which test decides")
     # a base solve that failed leaves no likelihood ratio: the score test decides, and the message says so
     base_failed = screen.get("base_success", True) is False
-    criterion = "likelihood ratio" if cfg.nlp.input_errors and not base_failed else "score test"
+    criterion = deciding_criterion(cfg, screen)
     out["criterion"] = criterion
     if base_failed:
         out["base_failed"] = screen.get("base_status")
@@ -519,6 +519,14 @@ def shapes_sentence(rows: list[dict]) -> str:
                                                      f"{r[f'{k} kappa_hat']:.2g}, p = {r[f'{k} p']:.2g})"
                                                      for k in kinds))
     return " | ".join(parts)
+
+
+def deciding_criterion(cfg, screen: dict) -> str:
+    """What a step decides on (docs/discovery.md, "Which test decides"): "likelihood ratio" (corrected,
+    :func:`robust_p`) when the likelihood models the measured inputs' noise and the NLP screen's base solved, else
+    "score test" (the robust score test's own p)."""
+    base_failed = screen.get("base_success", True) is False
+    return "likelihood ratio" if cfg.nlp.input_errors and not base_failed else "score test"
 
 
 def robust_p(lr: float, row, one_sided: bool = False) -> tuple[float, float, float]:

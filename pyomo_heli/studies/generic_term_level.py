@@ -147,7 +147,7 @@ def deciding_tests(cfg, screen: dict, terms: list[str], data) -> dict:
 
     from pyomo_heli.diagnosis.attribution import attribute
     from pyomo_heli.diagnosis.candidates import as_candidate
-    from pyomo_heli.diagnosis.discovery import judge
+    from pyomo_heli.diagnosis.discovery import deciding_criterion, judge
     from pyomo_heli.workflows.close_loop import loop_settings, score_test_inputs
 
     settings = loop_settings(cfg)
@@ -156,13 +156,10 @@ def deciding_tests(cfg, screen: dict, terms: list[str], data) -> dict:
                     candidates=terms, alpha=settings.alpha, ratio=settings.ratio, confound_corr=settings.confound_corr,
                     robust=settings.robust, **score_test_inputs(cfg, settings))
     rows = att.scores.set_index("name")
-    criterion = ("likelihood ratio" if cfg.nlp.input_errors and screen.get("base_success", True) is not False
-                 else "score test")
+    criterion = deciding_criterion(cfg, screen)
     out = {}
     for n in terms:
         f = dict(screen["fits"][n])
-        if not f["success"]:
-            f["LR"] = float("nan")
         one_sided = bool(getattr(as_candidate(n), "one_sided", False))
         judge(f, rows.loc[n], one_sided, criterion)
         p = float(f["p"])

@@ -800,7 +800,8 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     last_disc = next((it.get("discovery") for it in reversed(its) if it.get("discovery")), None) or {}
     if last_disc.get("decision") == "ambiguous" and "best_generic" not in last_disc:
         # loops run before the ambiguous record carried it: the generic term its message names (largest LR)
-        last_disc = {**last_disc, "best_generic": best_fit((last_disc.get("screen") or {}).get("fits", {}), True)}
+        last_disc = {**last_disc, "best_generic": best_fit((last_disc.get("screen") or {}).get("fits", {}), True,
+                                                           "likelihood_ratio")}
     # each step's decision and the term it added (or the term the backward check dropped), "(rejected)" where the
     # validation rule rejected that term's step (or the model without the dropped term)
     def step_words(it):

@@ -315,6 +315,7 @@ def test_validation_rule_rejects_a_joint_rise_only_when_told(monkeypatch):
     ("validation_rule = 1", "[loop]: field 'validation_rule' must be true or false"),
     ('validation_joint = "no"', "[loop]: field 'validation_joint' must be true or false"),
     ('after_rejection = "retry"', "[loop]: field 'after_rejection' must be \"next\" or \"stop\", got 'retry'"),
+    ('generic_rank = "LR"', "[loop]: field 'generic_rank' must be \"p\" or \"likelihood_ratio\", got 'LR'"),
 ])
 def test_bad_discovery_fields_are_one_line_exit_2(tmp_path, capsys, loop, message):
     from pathlib import Path
@@ -474,18 +475,20 @@ def _fit(name, generic, lr, estimate, formula):
             "formula": formula, "shape": {}, "p": float(chi2.sf(lr, 1))}
 
 
-def _stubbed_step(monkeypatch, p_values, LM, screen, rejected=()):
-    """discovery_step on lon_rigging (physical) and col_delay (generic), and the generic terms ``rejected`` by
-    earlier steps, with the score test (``p_values``, ``LM`` in that order, white = robust, df infinite) and the
-    NLP screen (``screen``) stubbed; input errors on."""
+def _stubbed_step(monkeypatch, p_values, LM, screen, rejected=(), generic=("col_delay",), LM_white=None, **kw):
+    """discovery_step on lon_rigging (physical) and ``generic`` (default col_delay), and the generic terms
+    ``rejected`` by earlier steps, with the score test (``p_values``, ``LM`` in that order, ``LM_white`` default
+    LM: white = robust, df infinite) and the NLP screen (``screen``) stubbed; input errors on. ``kw`` go to
+    discovery_step."""
     from types import SimpleNamespace
 
     import pandas as pd
 
     from pyomo_heli.diagnosis import discovery
 
-    names = ["lon_rigging", "col_delay", *rejected]
-    scores = pd.DataFrame({"name": names, "p_value": p_values, "LM": LM, "LM_white": LM, "df": [np.inf] * len(names)})
+    names = ["lon_rigging", *generic, *rejected]
+    scores = pd.DataFrame({"name": names, "p_value": p_values, "LM": LM,
+                           "LM_white": LM if LM_white is None else LM_white, "df": [np.inf] * len(names)})
     monkeypatch.setattr(discovery.attr, "attribute",
                         lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
 
@@ -497,8 +500,61 @@ def _stubbed_step(monkeypatch, p_values, LM, screen, rejected=()):
     cfg = SimpleNamespace(free=[SimpleNamespace(name="Iyy")],
                           nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=True))
     model = SimpleNamespace(extensions=(), parameters={"Omega": 44.4, "R": 4.91})
-    return discovery.discovery_step(cfg, model, {}, None, physical=["lon_rigging"], generic=["col_delay"],
-                                    rejected_generic=list(rejected), progress=lambda s: None)
+    return discovery.discovery_step(cfg, model, {}, None, physical=["lon_rigging"], generic=list(generic),
+                                    rejected_generic=list(rejected), progress=lambda s: None, **kw)
+
+
+def test_best_fit_ranks_by_the_deciding_p_and_breaks_ties_by_the_corrected_lr():
+    """M0 + noise seed 37 (docs/results/generic_term_level): col_scale has the larger raw LR (14.7, z -3.83) but its
+    corrected test the larger p (z_p -2.48, p = 0.0131); lon_scale LR 8.94 (z -2.99), z_p -2.61 (p = 0.0091). By
+    the deciding p lon_scale is the best; by raw LR col_scale. p that underflow to 0 are ordered by the corrected
+    LR; a term without a p comes last; an unknown rank is an error naming it."""
+    from scipy.stats import norm
+
+    from pyomo_heli.diagnosis.discovery import best_fit
+
+    def fit(name, lr, z_p, lr_robust=None):
+        return {"name": name, "generic": True, "success": True, "LR": lr, "J": J0 - lr / 2,
+                "p": float(2 * norm.sf(abs(z_p))), "LR_robust": lr if lr_robust is None else lr_robust}
+
+    fits = {"col_scale": fit("col_scale", 14.7, -2.48), "lon_scale": fit("lon_scale", 8.94, -2.61),
+            "dM_one": {**fit("dM_one", 30.0, 0.0), "p": float("nan")}}
+    assert fits["col_scale"]["p"] == pytest.approx(0.0131, abs=1e-4)
+    assert fits["lon_scale"]["p"] == pytest.approx(0.0091, abs=1e-4)
+    assert best_fit(fits, True)["name"] == "lon_scale"
+    assert best_fit(fits, True, "likelihood_ratio")["name"] == "dM_one"
+    del fits["dM_one"]
+    assert best_fit(fits, True, "likelihood_ratio")["name"] == "col_scale"
+    ties = {"a": fit("a", 900.0, 40.0, lr_robust=500.0), "b": fit("b", 800.0, 40.0, lr_robust=700.0)}
+    assert ties["a"]["p"] == ties["b"]["p"] == 0.0
+    assert best_fit(ties, True)["name"] == "b"
+    assert best_fit(ties, False) is None
+    with pytest.raises(ValueError, match="rank must be one of .*'lr'"):
+        best_fit(ties, True, "lr")
+
+
+def test_a_step_asks_the_significance_of_the_generic_term_of_smallest_deciding_p(monkeypatch):
+    """Two generic terms whose orders by raw LR and by the deciding p differ: col_delay LR 30 on coloured residuals
+    (the score test's robust LM a fifth of its white one: corrected LR 6, one-sided p = 0.0072) and lon_delay LR 20
+    on white ones (one-sided p = 3.9e-6); Bonferroni level 0.01 / 3. Ranked by p (the default) the step discovers
+    lon_delay; ranked by raw LR it asks only col_delay, not significant, and says nothing is, while lon_delay is."""
+    fits = {"col_delay": _fit("col_delay", True, 30.0, 0.0016, "c d(col_d)/dt = col - col_d"),
+            "lon_delay": _fit("lon_delay", True, 20.0, 0.03, "c d(lon_d)/dt = lon - lon_d"),
+            "lon_rigging": _fit("lon_rigging", False, 2.0, -0.0022, "lon offset")}
+
+    def screen(pairs):
+        offered = {n: dict(f) for n, f in fits.items()}
+        assert pairs(offered) == []  # lon_rigging is not significant: no pair
+        return {"J0": J0, "fits": offered, "pairs": {}}
+
+    args = ([0.16, 2e-3, 8e-6], [2.0, 10.0, 20.0], screen)
+    kw = dict(generic=("col_delay", "lon_delay"), LM_white=[2.0, 50.0, 20.0])
+    by_p = _stubbed_step(monkeypatch, *args, **kw)
+    assert by_p["decision"] == "discovered" and by_p["added"] == "lon_delay"
+    assert by_p["discovered"]["p"] == pytest.approx(3.87e-6, rel=1e-2)
+    by_lr = _stubbed_step(monkeypatch, *args, rank="likelihood_ratio", **kw)
+    assert by_lr["decision"] == "none" and by_lr["best_generic"]["name"] == "col_delay"
+    assert by_lr["best_generic"]["p"] == pytest.approx(0.00715, rel=1e-2) and not by_lr["generic_significant"]
 
 
 def test_an_ambiguous_step_says_what_the_generic_term_left_looks_like(monkeypatch):

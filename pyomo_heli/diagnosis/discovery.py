@@ -322,7 +322,8 @@ def describe_fit(fit: dict) -> str:
 def discovery_step(cfg, model, start: dict, data, **kw) -> dict:
     """One structure-determination step (module docstring). ``model``: the current model at its estimate;
     ``start``: the free parameters' values; keywords ``physical``, ``generic``, ``alpha``, ``ratio``,
-    ``confound_corr``, ``robust``, ``score_kw``, ``progress``. Returns a plain dict: ``decision`` (named |
+    ``confound_corr``, ``robust``, ``score_kw``, ``rank`` (how the generic terms are ranked, :func:`best_fit`),
+    ``progress``. Returns a plain dict: ``decision`` (named |
     discovered | accepted | ambiguous | none), ``added`` (name or None), ``initial`` (its strength's start value),
     ``attribution`` (the score table over the whole library, used to rank), ``screen`` (NLP estimates and
     likelihood ratios), ``encompassing`` (one row per physical candidate tested), ``level`` (alpha / library
@@ -336,7 +337,8 @@ def discovery_step(cfg, model, start: dict, data, **kw) -> dict:
 
 
 def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejected_generic=(), alpha=attr.ALPHA,
-          ratio=attr.RATIO, confound_corr=attr.CONFOUND_CORR, robust=True, score_kw=None, progress=print) -> dict:
+          ratio=attr.RATIO, confound_corr=attr.CONFOUND_CORR, robust=True, score_kw=None, rank="p",
+          progress=print) -> dict:
     score_kw = dict(score_kw or {})
     identified = [f.name for f in cfg.free]
     # generic terms an earlier step added and the validation rule rejected: never added again, but still the
@@ -365,13 +367,11 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
 
     def pairs_of(fits):
         """(P, G) for every significant physical candidate and the best generic term, when that one is significant."""
-        g = best_fit(fits, True)
         for n, f in fits.items():  # the deciding p-values (the pairs are asked for before they are set below)
             f.setdefault("p_LR", f["p"])
-            f["p"] = (robust_p(f["LR"], sc.set_index("name").loc[n], getattr(make_candidate(n), "one_sided", False))[0]
-                      if cfg.nlp.input_errors and not math.isnan(f["LR"])
-                      else float(sc.set_index("name").loc[n, "p_value"]))
-        g = best_fit(fits, True)
+            judge(f, sc.set_index("name").loc[n], getattr(make_candidate(n), "one_sided", False),
+                  "likelihood ratio" if cfg.nlp.input_errors and not math.isnan(f["LR"]) else "score test")
+        g = best_fit(fits, True, rank)
         if g is None:
             return []
         # every significant physical candidate against the best generic term (significant or not)
@@ -391,8 +391,8 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
         out["base_failed"] = screen.get("base_status")
     for n, f in fits.items():
         judge(f, rows_by.loc[n], getattr(make_candidate(n), "one_sided", False), criterion)
-    G = best_fit(fits, True)  # the competitor a physical candidate must encompass (a rejected term included)
-    A = best_fit({n: f for n, f in fits.items() if n not in rejected_generic}, True)  # the best that may be added
+    G = best_fit(fits, True, rank)  # the competitor a physical candidate must encompass (a rejected term included)
+    A = best_fit({n: f for n, f in fits.items() if n not in rejected_generic}, True, rank)  # the best that may be added
     g_sig = A is not None and A["p"] < level
     p_sig = [f for f in fits.values() if not f["generic"] and f["success"] and f["p"] < level]
     # the family's best term at this model and whether it is significant, whatever is decided (the loop's check of
@@ -615,8 +615,27 @@ def _lowest_J(fit: dict, key: str = "J") -> float:
     return fit[key] - fit.get("J0", 0.0)
 
 
-def best_fit(fits: dict, generic: bool):
-    """The fit of largest likelihood ratio (lowest J: the same order, and defined when the base solve failed) among
-    the solved generic (or physical) terms of an NLP screen, or None."""
+#: how a step ranks the screened generic terms (``[loop] generic_rank``): by the p it decides on, or by raw LR
+GENERIC_RANKS = ("p", "likelihood_ratio")
+
+
+def _nan_last(x: float) -> float:
+    return math.inf if math.isnan(x) else x
+
+
+def best_fit(fits: dict, generic: bool, rank: str = "p"):
+    """The best of the solved generic (or physical) terms of an NLP screen, or None.
+
+    ``rank="p"``: the smallest deciding ``p`` (the test the step decides on, set by :func:`judge`), ties (a p that
+    underflows to 0) broken by the larger corrected LR, then the lower J; so the term whose significance the step
+    asks is the most significant one. ``rank="likelihood_ratio"``: the largest raw likelihood ratio (lowest J: the
+    same order, and defined when the base solve failed), which can differ from the order of p when the terms'
+    colour corrections or degrees of freedom differ."""
+    if rank not in GENERIC_RANKS:
+        raise ValueError(f"rank must be one of {GENERIC_RANKS}, got {rank!r}")
     ok = [f for f in fits.values() if f["generic"] == generic and f["success"] and not math.isnan(f["J"])]
-    return min(ok, key=_lowest_J) if ok else None
+    if not ok:
+        return None
+    if rank == "likelihood_ratio":
+        return min(ok, key=_lowest_J)
+    return min(ok, key=lambda f: (_nan_last(f["p"]), _nan_last(-f.get("LR_robust", math.nan)), _lowest_J(f)))

@@ -336,6 +336,7 @@ class LoopTable(Table):
         "score_inputs": "field 'score_inputs' must be \"eliminated\" or \"measured\", got {v!r}",
         **GENERIC_MESSAGES,
         "after_rejection": "field 'after_rejection' must be \"next\" or \"stop\", got {v!r}",
+        "generic_rank": "field 'generic_rank' must be \"p\" or \"likelihood_ratio\", got {v!r}",
     }
 
     max_iterations: int = Field(3, ge=0, description="most loop iterations after the first identification (a "
@@ -371,6 +372,11 @@ class LoopTable(Table):
     after_rejection: Literal["next", "stop"] = Field(
         "next", description="after a step the validation rule rejected: back to the kept model and the next "
                             "significant term, the rejected ones left out (next), or stop there (stop)")
+    generic_rank: Literal["p", "likelihood_ratio"] = Field(
+        "p", description="which screened generic term a step takes as the best (the one it asks the significance "
+                         "of, the competitor a physical candidate must encompass, the description of what is "
+                         "left): the smallest deciding p (p) or the largest raw likelihood ratio "
+                         "(likelihood_ratio, the loops before 2026-12-02)")
 
 
 class IdentificationFile(Table):

@@ -110,6 +110,9 @@ class LoopSettings:
     #: after a rejected step: back to the kept model and its next significant term, the rejected terms left out for
     #: the rest of the loop ("next"), or stop with the kept model ("stop", the loops before 2026-11-27)
     after_rejection: str = "next"
+    #: how a structure step ranks the screened generic terms: by the p it decides on ("p") or by the raw likelihood
+    #: ratio ("likelihood_ratio", the loops before 2026-12-02; pyomo_heli.diagnosis.discovery.best_fit)
+    generic_rank: str = "p"
 
 
 def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
@@ -421,7 +424,8 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                     cfg, model, chosen, id_data, physical=left, generic=generic,
                     rejected_generic=rejected_generic, alpha=settings.alpha,
                     ratio=settings.ratio, confound_corr=settings.confound_corr, robust=settings.robust,
-                    score_kw=score_test_inputs(cfg, settings), progress=progress), restart, progress)
+                    score_kw=score_test_inputs(cfg, settings), rank=settings.generic_rank, progress=progress),
+                    restart, progress)
 
             step = structure_step(cfg, model, chosen, left)
             if added in CANDIDATES and not record.get("rejected") and step.get("generic_significant"):

@@ -660,6 +660,31 @@ def test_a_failed_base_solve_leaves_the_decision_to_the_score_test_and_says_so(m
     assert "base solve failed: Maximum_Iterations_Exceeded" in out["message"]
 
 
+def test_a_hypothesis_checked_where_the_base_solve_failed_is_decided_by_the_score_test(monkeypatch):
+    """check_term with input errors and the NLP screen's base failed (no likelihood ratio, LR nan): the score test's
+    p decides (1e-6 < level 1e-3: significant), as in a structure step, instead of a nan p read as "not
+    significant"."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from pyomo_heli.diagnosis import discovery
+
+    scores = pd.DataFrame({"name": ["lon_rigging"], "p_value": [1e-6], "LM": [24.0], "LM_white": [24.0],
+                           "df": [np.inf]})
+    monkeypatch.setattr(discovery.attr, "attribute",
+                        lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
+    fit = {"name": "lon_rigging", "generic": False, "success": True, "LR": float("nan"), "p": float("nan"),
+           "J": J0, "estimate": -0.002, "formula": "lon offset", "shape": {}}
+    monkeypatch.setattr(discovery, "nlp_screen", lambda *a, **k: {"J0": float("nan"), "base_success": False,
+                                                                  "fits": {"lon_rigging": fit}, "pairs": {}})
+    cfg = SimpleNamespace(free=[SimpleNamespace(name="Iyy")],
+                          nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=True))
+    out = discovery.check_term(cfg, SimpleNamespace(extensions=()), {}, None, "lon_rigging", level=1e-3,
+                               progress=lambda s: None)
+    assert out["criterion"] == "score test" and out["significant"] and out["term"]["p"] == 1e-6
+
+
 #: the screen instance of the base-failure tests: a physical candidate and a generic term, and the two together
 SCREEN_TERMS, SCREEN_PAIRS = ["dM_bump00", "cg_offset"], [("cg_offset", "dM_bump00")]
 

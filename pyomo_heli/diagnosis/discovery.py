@@ -597,7 +597,7 @@ def check_term(cfg, model, start: dict, data, term, *, level: float, against: st
                          candidates=terms, alpha=alpha, robust=robust, **dict(score_kw or {}))
     rows = att.scores.set_index("name")
     screen = nlp_screen(cfg, start, terms, pairs=[(t.name, against)] if against else (), progress=progress)
-    criterion = "likelihood ratio" if cfg.nlp.input_errors else "score test"
+    criterion = deciding_criterion(cfg, screen)
     fit = judge(screen["fits"][t.name], rows.loc[t.name], getattr(t, "one_sided", False), criterion)
     out = {"term": fit, "score": {"LM": float(rows.loc[t.name, "LM"]), "p": float(rows.loc[t.name, "p_value"])},
            "level": level, "significant": bool(fit["p"] < level), "criterion": criterion}

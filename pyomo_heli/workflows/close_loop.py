@@ -111,7 +111,7 @@ class LoopSettings:
     #: the rest of the loop ("next"), or stop with the kept model ("stop", the loops before 2026-11-27)
     after_rejection: str = "next"
     #: how a structure step ranks the screened generic terms: by the p it decides on ("p") or by the raw likelihood
-    #: ratio ("likelihood_ratio", the loops before 2026-12-02; pyomo_heli.diagnosis.discovery.best_fit)
+    #: ratio ("likelihood_ratio"; pyomo_heli.diagnosis.discovery.best_fit)
     generic_rank: str = "p"
 
 

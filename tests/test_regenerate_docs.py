@@ -46,6 +46,30 @@ def test_commands_map_to_this_interpreter():
         R.argv_of("make all", "R")
 
 
+def test_held_out_tables_end_reanalysed_and_rescored_with_their_runs_flags():
+    """Every held-out table is made as the committed ones were: its runs, then the residual analysis made again on
+    the kept models (``--reanalyse``, with the runs' config, data config and family) and the re-scoring."""
+    import shlex
+
+    def flags(command):  # the options that choose the config the loop (and so its analysis) was run with
+        args = shlex.split(command)
+        return {a: args[i + 1] for i, a in enumerate(args) if a in ("--config", "--data-config", "--generic-family")}
+
+    tables = [e for e in R.ENTRIES if e.commands[0].startswith(R.HELD_OUT)
+              and not any(x in e.commands[0] for x in ("--reanalyse", "--summary"))]
+    assert {e.folder for e in tables} == set(R.HELD_OUT_TABLES) | {"held_out_control"}
+    for e in tables:
+        *runs, again, score = e.commands
+        assert shlex.split(score) == ["python", "studies/held_out_effects.py", "--rescore", "--out",
+                                      f"{{out}}/{e.folder}"], e.folder
+        args = shlex.split(again)
+        assert args[2:4] == ["--reanalyse", f"{{out}}/{e.folder}/scratch"] and args[-2:] == ["--out",
+                                                                                              f"{{out}}/{e.folder}"]
+        studies = [c for c in runs if "--bundled" not in c]
+        assert studies and all(f"--out {{out}}/{e.folder}" in c for c in runs), e.folder
+        assert all(flags(c) == flags(again) for c in studies), e.folder
+
+
 def test_unknown_folder_is_one_line_exit_2(capsys):
     with pytest.raises(SystemExit) as exc:
         R.main(["--run", "case9"])

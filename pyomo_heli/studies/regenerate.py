@@ -49,6 +49,18 @@ BENCH = "python studies/benchmark.py"
 #: the held-out studies' tables, in the order of docs/discovery_results.md (``held_out_summary`` tallies them)
 HELD_OUT_TABLES = ("held_out_small", "held_out_small_blind4", "noise_only", "held_out", "held_out_blind3",
                    "held_out_blind4", "held_out_extended")
+HELD_OUT = "python studies/held_out_effects.py"
+SMALL = "--config studies/held_out_small.toml --data-config studies/held_out_small_gen.toml"
+
+
+def reanalysed(folder: str, flags: str = "") -> tuple[str, str]:
+    """The two commands that follow a held-out study's runs, as the committed tables were made: the residual
+    analysis of the kept model made again where the table holds it (``--reanalyse``, with the runs' ``flags``:
+    config, data config, family; docs/discovery_results.md, "The input path on the kept models"), then the shape
+    columns and criterion re-scored from the terms the table prints (``--rescore``)."""
+    flags = f" {flags}" if flags else ""
+    return (f"{HELD_OUT} --reanalyse {{out}}/{folder}/scratch{flags} --out {{out}}/{folder}",
+            f"{HELD_OUT} --rescore --out {{out}}/{folder}")
 
 
 @dataclass(frozen=True)
@@ -180,17 +192,19 @@ ENTRIES: tuple[Entry, ...] = (
           ("multistart.json", "starts.csv"), minutes=20),
     Entry("held_out_small", (f"python studies/held_out_effects.py --seeds 1 --effects {H1_H13} {H14_H16} none "
                              "--config studies/held_out_small.toml --data-config studies/held_out_small_gen.toml "
-                             "--workers 2 --out {out}/held_out_small",),
+                             "--workers 2 --out {out}/held_out_small", *reanalysed("held_out_small", SMALL)),
           ("held_out.csv", "held_out.md"), minutes=40),
     Entry("held_out_small_blind4", (f"python studies/held_out_effects.py --seeds 1 --effects {H17_H19} "
                                     "--config studies/held_out_small.toml "
                                     "--data-config studies/held_out_small_gen.toml "
-                                    "--out {out}/held_out_small_blind4",),
+                                    "--out {out}/held_out_small_blind4",
+                                    *reanalysed("held_out_small_blind4", SMALL)),
           ("held_out.csv", "held_out.md"), minutes=8),
-    Entry("noise_only", ("python studies/held_out_effects.py --effects none --seeds 5 --out {out}/noise_only",),
+    Entry("noise_only", ("python studies/held_out_effects.py --effects none --seeds 5 --out {out}/noise_only",
+                         *reanalysed("noise_only")),
           ("held_out.csv", "held_out.md"), minutes=140),
     Entry("held_out", (f"python studies/held_out_effects.py --seeds 3 --effects {H1_H13} --out {{out}}/held_out",
-                       "python studies/held_out_effects.py --bundled --out {out}/held_out"),
+                       "python studies/held_out_effects.py --bundled --out {out}/held_out", *reanalysed("held_out")),
           ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=800),
     Entry("held_out_extended", (
         "python studies/held_out_effects.py --seeds 3 --effects fuselage_pitch_damping cyclic_gearing "
@@ -201,20 +215,21 @@ ENTRIES: tuple[Entry, ...] = (
         "python studies/held_out_effects.py --seeds 3 --effects pitch_rate_damper fuselage_wake_incidence tail_stall "
         "vertical_drag accelerometer_filter skewed_inflow_gradient canted_tail_rotor advancing_blade_compressibility "
         "drag_rise pitot_downwash fuselage_download rotor_speed_droop static_port_error actuator_lag rotor_pylon_mode "
-        "cyclic_free_play --generic-family extended --out {out}/held_out_extended --workers 2"),
+        "cyclic_free_play --generic-family extended --out {out}/held_out_extended --workers 2",
+        *reanalysed("held_out_extended", "--generic-family extended")),
         ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=990),
     # the control family (extended + control-path feedback) on pitch_rate_damper; written after those rows failed
     Entry("held_out_control", (
         "python studies/held_out_effects.py --seeds 2 --effects pitch_rate_damper --generic-family control "
         "--out {out}/held_out_control --workers 2",
         "python studies/held_out_effects.py --seeds 1 --effects none --generic-family control "
-        "--out {out}/held_out_control"),
+        "--out {out}/held_out_control", *reanalysed("held_out_control", "--generic-family control")),
         ("held_out.csv", "held_out.md"), minutes=60),
     Entry("held_out_blind3", (f"python studies/held_out_effects.py --seeds 3 --effects {H14_H16} --workers 2 "
-                              "--out {out}/held_out_blind3",),
+                              "--out {out}/held_out_blind3", *reanalysed("held_out_blind3")),
           ("held_out.csv", "held_out.md"), minutes=200),
     Entry("held_out_blind4", (f"python studies/held_out_effects.py --seeds 3 --effects {H17_H19} --workers 2 "
-                              "--out {out}/held_out_blind4",),
+                              "--out {out}/held_out_blind4", *reanalysed("held_out_blind4")),
           ("held_out.csv", "held_out.md"), minutes=200),
     # the input path's extended dictionary on the kept models of the standard family's full-size rows, reanalysed
     Entry("input_path_extended", tuple(

@@ -190,29 +190,26 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("multistart_case1_eps", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "
                                    "--epsilon 0.2008495658274336 --out {out}/multistart_case1_eps --restart",),
           ("multistart.json", "starts.csv"), minutes=20),
-    Entry("held_out_small", (f"python studies/held_out_effects.py --seeds 1 --effects {H1_H13} {H14_H16} none "
-                             "--config studies/held_out_small.toml --data-config studies/held_out_small_gen.toml "
+    Entry("held_out_small", (f"{HELD_OUT} --seeds 1 --effects {H1_H13} {H14_H16} none {SMALL} "
                              "--workers 2 --out {out}/held_out_small", *reanalysed("held_out_small", SMALL)),
           ("held_out.csv", "held_out.md"), minutes=40),
-    Entry("held_out_small_blind4", (f"python studies/held_out_effects.py --seeds 1 --effects {H17_H19} "
-                                    "--config studies/held_out_small.toml "
-                                    "--data-config studies/held_out_small_gen.toml "
+    Entry("held_out_small_blind4", (f"{HELD_OUT} --seeds 1 --effects {H17_H19} {SMALL} "
                                     "--out {out}/held_out_small_blind4",
                                     *reanalysed("held_out_small_blind4", SMALL)),
           ("held_out.csv", "held_out.md"), minutes=8),
-    Entry("noise_only", ("python studies/held_out_effects.py --effects none --seeds 5 --out {out}/noise_only",
+    Entry("noise_only", (f"{HELD_OUT} --effects none --seeds 5 --out {{out}}/noise_only",
                          *reanalysed("noise_only")),
           ("held_out.csv", "held_out.md"), minutes=140),
-    Entry("held_out", (f"python studies/held_out_effects.py --seeds 3 --effects {H1_H13} --out {{out}}/held_out",
-                       "python studies/held_out_effects.py --bundled --out {out}/held_out", *reanalysed("held_out")),
+    Entry("held_out", (f"{HELD_OUT} --seeds 3 --effects {H1_H13} --out {{out}}/held_out",
+                       f"{HELD_OUT} --bundled --out {{out}}/held_out", *reanalysed("held_out")),
           ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=800),
     Entry("held_out_extended", (
-        "python studies/held_out_effects.py --seeds 3 --effects fuselage_pitch_damping cyclic_gearing "
+        f"{HELD_OUT} --seeds 3 --effects fuselage_pitch_damping cyclic_gearing "
         "control_mixing --generic-family extended --out {out}/held_out_extended --workers 2",
-        "python studies/held_out_effects.py --effects none --seeds 5 --generic-family extended "
+        f"{HELD_OUT} --effects none --seeds 5 --generic-family extended "
         "--out {out}/held_out_extended --workers 2",
-        "python studies/held_out_effects.py --bundled --generic-family extended --out {out}/held_out_extended",
-        "python studies/held_out_effects.py --seeds 3 --effects pitch_rate_damper fuselage_wake_incidence tail_stall "
+        f"{HELD_OUT} --bundled --generic-family extended --out {{out}}/held_out_extended",
+        f"{HELD_OUT} --seeds 3 --effects pitch_rate_damper fuselage_wake_incidence tail_stall "
         "vertical_drag accelerometer_filter skewed_inflow_gradient canted_tail_rotor advancing_blade_compressibility "
         "drag_rise pitot_downwash fuselage_download rotor_speed_droop static_port_error actuator_lag rotor_pylon_mode "
         "cyclic_free_play --generic-family extended --out {out}/held_out_extended --workers 2",
@@ -220,25 +217,25 @@ ENTRIES: tuple[Entry, ...] = (
         ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=990),
     # the control family (extended + control-path feedback) on pitch_rate_damper; written after those rows failed
     Entry("held_out_control", (
-        "python studies/held_out_effects.py --seeds 2 --effects pitch_rate_damper --generic-family control "
+        f"{HELD_OUT} --seeds 2 --effects pitch_rate_damper --generic-family control "
         "--out {out}/held_out_control --workers 2",
-        "python studies/held_out_effects.py --seeds 1 --effects none --generic-family control "
+        f"{HELD_OUT} --seeds 1 --effects none --generic-family control "
         "--out {out}/held_out_control", *reanalysed("held_out_control", "--generic-family control")),
         ("held_out.csv", "held_out.md"), minutes=60),
-    Entry("held_out_blind3", (f"python studies/held_out_effects.py --seeds 3 --effects {H14_H16} --workers 2 "
+    Entry("held_out_blind3", (f"{HELD_OUT} --seeds 3 --effects {H14_H16} --workers 2 "
                               "--out {out}/held_out_blind3", *reanalysed("held_out_blind3")),
           ("held_out.csv", "held_out.md"), minutes=200),
-    Entry("held_out_blind4", (f"python studies/held_out_effects.py --seeds 3 --effects {H17_H19} --workers 2 "
+    Entry("held_out_blind4", (f"{HELD_OUT} --seeds 3 --effects {H17_H19} --workers 2 "
                               "--out {out}/held_out_blind4", *reanalysed("held_out_blind4")),
           ("held_out.csv", "held_out.md"), minutes=200),
     # the input path's extended dictionary on the kept models of the standard family's full-size rows, reanalysed
     Entry("input_path_extended", tuple(
-        f"python studies/held_out_effects.py --reanalyse {{out}}/input_path_extended/scratch --rows "
+        f"{HELD_OUT} --reanalyse {{out}}/input_path_extended/scratch --rows "
         f"{{out}}/{t}/held_out.csv --input-path-family extended --out {{out}}/input_path_extended/{t}"
         for t in ("held_out", "held_out_blind3", "noise_only")),
         tuple(f"{t}/held_out.{x}" for t in ("held_out", "held_out_blind3", "noise_only") for x in ("csv", "md")),
         needs=("held_out", "held_out_blind3", "noise_only"), minutes=70),
-    Entry("held_out_summary", ("python studies/held_out_effects.py --summary " + " ".join(
+    Entry("held_out_summary", (f"{HELD_OUT} --summary " + " ".join(
         f"{{out}}/{f}" for f in HELD_OUT_TABLES) + " --out {out}/held_out_summary",),
           ("summary.md",), needs=HELD_OUT_TABLES, minutes=0.1),
     Entry("bo105_flight_trims", ("pyomo-heli trim-loop studies/bo105_flight_trims.toml "

@@ -226,7 +226,7 @@ ENTRIES: tuple[Entry, ...] = (
     # has the others
     Entry("held_out_blind3", (f"{HELD_OUT} --seeds 3 --effects {H14_H16} --set loop.generic_rank=p --workers 2 "
                               "--out {out}/held_out_blind3", *reanalysed("held_out_blind3")),
-          ("held_out.csv", "held_out.md"), minutes=200),
+          ("held_out.csv", "held_out.md"), minutes=90),
     Entry("held_out_blind4", (f"{HELD_OUT} --seeds 3 --effects {H17_H19} --set loop.generic_rank=p --workers 2 "
                               "--out {out}/held_out_blind4", *reanalysed("held_out_blind4")),
           ("held_out.csv", "held_out.md"), minutes=140),

@@ -33,11 +33,12 @@ speed dependence of its derivative along the trims, for a force or moment term (
 control-path and sensor effects, and a sensor term against a damping, its trim and time signature against M0 on
 the validation records (:func:`signature_match`). A kept model of several discovered terms is also scored as a
 whole ("kept terms" at the kept model's estimates, "kept model matches truth", :func:`model_match`): what its terms
-add together, in every channel they touch. With an "unexplained" verdict, the shape it
-reports (a discovered term the validation rule rejected, else the last step's best generic term) and whether that
-matches. The residual analysis of the kept model (:func:`final_residual`): its verdict, where an output's
-records disagree on its bias whether that shape matches the truth's (:func:`record_bias_match`), and the input
-error it reports with whether that follows the truth's control error (:func:`input_path_match`). ``--reanalyse``
+add together, in every channel they touch. With an "unexplained" verdict, the shape it reports (a discovered term
+the validation rule rejected, else the last step's best generic term: at the iteration limit the significant term
+the loop would add next) and whether that matches. The residual analysis of the kept model (:func:`final_residual`):
+its verdict, where an output's records disagree on its bias whether that shape matches the truth's
+(:func:`record_bias_match`), and the input error it reports with whether that follows the truth's control error
+(:func:`input_path_match`). ``--reanalyse``
 makes that analysis again for rows whose loops are gone and whose kept model the table holds (:func:`reanalyse`;
 ``--rows CSV`` starts OUT's table from another study's, which stays as it is).
 The criterion (:func:`criterion_met`) counts a kept discovered term as a reported shape: the loop reports
@@ -876,11 +877,14 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     # "unexplained": the step said so (best generic term significant on its own), the residual analysis did, or the
     # discovered term's step was rejected by the validation rule (the loop stops with its shape reported)
     alpha = doc["settings"].get("alpha", 0.01)
-    best = last_disc.get("best_generic") or {}
+    # at the iteration limit the last step's discovered term is not added: the loop reports it as what is left
+    at_limit = str(doc.get("stopped", "")).startswith("iteration limit") and last_disc.get("decision") == "discovered"
+    best = last_disc.get("best_generic") or (last_disc.get("discovered") if at_limit else None) or {}
     row["unexplained verdict"] = (bool(last_disc.get("unexplained")) or best.get("p", 1.0) < alpha
                                   or row["final residual"] == "unexplained residual" or not_kept is not None)
     # the shape the final "unexplained" verdict reports: the rejected discovered term, else the last step's best
-    # generic term (after a kept discovered term this is what is left, not the kept term)
+    # generic term, at the iteration limit the term it would add next (after a kept discovered term this is what is
+    # left, not the kept term)
     left = (not_kept[1] if not_kept else best) if row["unexplained verdict"] else None
     row["unexplained shape"] = (f"{left['name']}: c = {left['estimate']:.3g} +- {left['se']:.2g}" if left else "-")
     row["unexplained shape matches truth"] = match(effect, left) if left else "-"

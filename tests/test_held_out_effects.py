@@ -220,6 +220,32 @@ def test_the_study_reads_the_shape_an_unexplained_verdict_reports(tmp_path, stud
 
 
 
+def test_at_the_iteration_limit_the_term_the_loop_would_add_next_is_the_shape_left(tmp_path, study):
+    """A loop that kept a discovered nose-up hover bump and stopped at its iteration limit with dX_mu4 (a drag
+    growing with speed) significant and not added: that term is the unexplained verdict's shape, read against the
+    drag-rise truth it matches; a loop that stopped otherwise after the same step reports no such shape."""
+    import json
+
+    mu4 = {"name": "dX_mu4", "formula": "dX = c m g (mu/0.3)^4", "strength": "c_dX_mu4", "estimate": -0.0148,
+           "se": 0.001, "p": 1e-9}
+    bump = {"name": "dM_bump00", "formula": "dM = c m g R bump", "strength": "c_dM_bump00", "estimate": 0.004,
+            "se": 0.001, "p": 1e-6}
+    loop = _loop_doc(tmp_path, [
+        {"iteration": 0, "extensions": [], "discovery": {"decision": "discovered", "added": "dM_bump00",
+                                                         "discovered": bump}},
+        {"iteration": 1, "extensions": ["dM_bump00"], "discovery": {"decision": "discovered", "added": "dX_mu4",
+                                                                    "discovered": mu4}}], 1)
+    doc = json.loads((loop / "loop.json").read_text())
+    (loop / "loop.json").write_text(json.dumps({**doc, "stopped": "iteration limit 1 reached; dX_mu4 would be "
+                                                                   "added next"}))
+    row = study.evaluate("drag_rise", 20261122, loop)
+    assert row["kept discovered term"] == "dM_bump00" and row["unexplained verdict"]
+    assert row["unexplained shape"].startswith("dX_mu4") and row["unexplained shape matches truth"] == "yes"
+    (loop / "loop.json").write_text(json.dumps(doc))  # stopped for another reason ("x"): no shape from that step
+    row = study.evaluate("drag_rise", 20261122, loop)
+    assert row["unexplained shape"] == "-" and not row["unexplained verdict"]
+
+
 def test_the_study_reads_a_loop_that_went_on_after_a_rejected_step(tmp_path, study):
     """A loop that discovered dX_mu4 at iteration 0, had that step rejected, went back to iteration 0's model,
     discovered dX_mu2 there and kept it: the kept discovered term is dX_mu2 (not the rejected one), the verdict

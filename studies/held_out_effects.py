@@ -38,9 +38,9 @@ the validation rule rejected, else the last step's best generic term: at the ite
 the loop would add next) and whether that matches. The residual analysis of the kept model (:func:`final_residual`):
 its verdict, where an output's records disagree on its bias whether that shape matches the truth's
 (:func:`record_bias_match`), and the input error it reports with whether that follows the truth's control error
-(:func:`input_path_match`). ``--reanalyse``
-makes that analysis again for rows whose loops are gone and whose kept model the table holds (:func:`reanalyse`;
-``--rows CSV`` starts OUT's table from another study's, which stays as it is).
+(:func:`input_path_match`). ``--reanalyse`` makes that analysis again for rows whose loops are gone and whose kept
+model the table holds (:func:`reanalyse`; ``--rows CSV`` starts OUT's table from another study's, which stays as it
+is).
 The criterion (:func:`criterion_met`) counts a kept discovered term as a reported shape: the loop reports
 it "not explained by any library effect; discovered ...". The tallies also read the criterion with the trim cut
 measured above the noise floor (:func:`criterion_met_above_floor`), beside the issue's reading. The trim RMS of

@@ -433,16 +433,16 @@ def test_at_the_iteration_limit_the_stop_message_reports_the_term_left_unexplain
     """The loop stops at its iteration limit after a step that discovered dX_mu4: the stop message says the residual
     stays unexplained and gives that term's formula, estimate, standard error and p against the step's level; after
     a step that named a physical candidate (or decided nothing) it adds nothing."""
-    from pyomo_heli.workflows.close_loop import _left_at_limit
+    from pyomo_heli.report.loop import limit_statement
 
     fit = {"name": "dX_mu4", "formula": "dX = c m g (mu/0.3)^4", "estimate": -0.0148, "se": 0.00095, "LR": 93.6,
            "p": 6.2e-08}
-    line = _left_at_limit({"discovery": {"decision": "discovered", "added": "dX_mu4", "discovered": fit,
+    line = limit_statement({"discovery": {"decision": "discovered", "added": "dX_mu4", "discovered": fit,
                                          "level": 0.00013}})
     assert line.startswith("; the residual stays unexplained: not explained by any library effect")
     assert "dX = c m g (mu/0.3)^4, c = -0.0148 +- 0.00095" in line and "p = 6.2e-08 < 0.00013" in line
-    assert _left_at_limit({"discovery": {"decision": "named", "added": "wake_tail"}}) == ""
-    assert _left_at_limit({"attribution": {}}) == ""
+    assert limit_statement({"discovery": {"decision": "named", "added": "wake_tail"}}) == ""
+    assert limit_statement({"attribution": {}}) == ""
 
 
 def test_the_report_adds_the_kept_discovered_terms_together(tmp_path):

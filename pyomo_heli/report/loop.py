@@ -506,6 +506,17 @@ def unexplained_statement(rejected: dict, fit: dict) -> str:
             f"c = {c:.4g} +- {se:.2g} (estimate of the rejected iteration {rejected['iteration']}), not kept")
 
 
+def limit_statement(record: dict) -> str:
+    """At the iteration limit, what the residual left looks like when the step of ``record`` discovered a generic
+    term that is not added (the loop stops there): that term's shape, reported as unexplained; "" otherwise."""
+    d = record.get("discovery") or {}
+    if d.get("decision") != "discovered" or not d.get("discovered"):
+        return ""
+    A = d["discovered"]
+    return (f"; the residual stays unexplained: not explained by any library effect; discovered {describe_fit(A)}, "
+            f"p = {A['p']:.2g} < {d['level']:.2g} at the kept model, not added")
+
+
 STATE_OF = {"alpha": "alpha [deg]", "w": "w [m/s]", "lam": "lambda_i", "col": "col [deg]", "lon": "lon [deg]"}
 STATE_OF.update({f"{r}mu": c for r, c in STATE_OF.items() if f"{r}mu" in REGRESSORS})  # speed products
 

@@ -75,7 +75,7 @@ from ..pareto.store import read_checkpoint
 from ..provenance import source_sha256
 from ..settings import Problems, validate
 from ..settings.identification import LoopTable
-from ..report.loop import LOOP_FILE, load_loop, rejected_discovery, unexplained_statement  # noqa: F401 - load_loop re-exported (studies)
+from ..report.loop import LOOP_FILE, limit_statement, load_loop, rejected_discovery, unexplained_statement  # noqa: F401 - load_loop re-exported (studies)
 from .loop_steps import (_with_candidate, _without, backward_check, errors_of,  # noqa: F401 (tests)
                          select_shape, validation_check)
 from .run_folder import RunFolder
@@ -293,19 +293,6 @@ def _stop_message(doc: dict, reason: str) -> str:
     return reason + ("; " + unexplained_statement(*unexplained) if unexplained else "")
 
 
-def _left_at_limit(record: dict) -> str:
-    """At the iteration limit, what the residual left looks like when the last step discovered a generic term that
-    is not added (the loop stops there): that term's shape, reported as unexplained (docs/discovery.md)."""
-    from ..diagnosis.discovery import describe_fit
-
-    d = record.get("discovery") or {}
-    if d.get("decision") != "discovered" or not d.get("discovered"):
-        return ""
-    A = d["discovered"]
-    return (f"; the residual stays unexplained: not explained by any library effect; discovered {describe_fit(A)}, "
-            f"p = {A['p']:.2g} < {d['level']:.2g} at the kept model, not added")
-
-
 def _reject(doc, record, krec, added, reason: str, rejected: list, settings, out, progress) -> bool:
     """The step of ``record`` (adding ``added``) rejected for ``reason`` (the validation rule or the name check),
     ``krec`` the record of the model kept. With ``after_rejection = "stop"`` the loop stops there (``loop.json``
@@ -489,7 +476,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                                            + "".join(f"; {f}" for f in trims))
         elif i >= settings.max_iterations:
             doc["stopped"] = _stop_message(doc, f"iteration limit {settings.max_iterations} reached; {add} would be "
-                                                "added next" + _left_at_limit(record))
+                                                "added next" + limit_statement(record))
         write_json(out / LOOP_FILE, doc)
         progress(f"iteration {i} finished" + bar.tick(from_disk=reused))
         if doc["stopped"]:

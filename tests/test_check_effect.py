@@ -54,6 +54,9 @@ def test_a_wrong_hypothesis_is_not_significant(drag_loop):
     _, _, loop = drag_loop
     r = check_effect(loop, "dM_bump00", progress=lambda s: None)
     assert not r["significant"] and r["term"]["p"] > 0.01
+    # the corrected LR decides, so the size from which a bump of this shape would be significant is given: above
+    # the estimate, as the term is not
+    assert r["criterion"] == "likelihood ratio" and r["term"]["detectable"] > abs(r["term"]["estimate"])
     assert not r["encompassing"]["encompasses"]
 
 
@@ -72,6 +75,7 @@ def test_the_command_prints_the_tests_and_writes_json(drag_loop, drag_check, tmp
     assert r["term"]["estimate"] == pytest.approx(ref["term"]["estimate"], rel=1e-6)
     assert f"k_dr = {r['term']['estimate']:.4g}" in out and ("not significant" in out) != r["significant"]
     assert f"against {ref['against']['name']}:" in out
+    assert f"significant from |k_dr| >= {r['term']['detectable']:.2g}" in out
 
 
 @pytest.mark.parametrize("effect, message", [

@@ -573,6 +573,53 @@ def test_a_step_asks_the_significance_of_the_generic_term_of_smallest_deciding_p
     assert by_lr["best_generic"]["p"] == pytest.approx(0.00715, rel=1e-2) and not by_lr["generic_significant"]
 
 
+def test_the_detection_limit_is_where_the_corrected_likelihood_ratio_reaches_the_level():
+    """The smallest |c| of a term's shape the step would call significant: with white residuals and infinite df a
+    two-sided term at level 0.05 with se 1 is significant from the normal quantile 1.95996 (analytic); on coloured
+    residuals and finite df (one-sided too) the LR of a quadratic profile scaled to that |c| has, by robust_p, p equal
+    to the level; no standard error, no limit."""
+    import math
+
+    from pyomo_heli.diagnosis.discovery import detection_limit, judge, robust_p
+
+    assert detection_limit({"se": 1.0, "df": math.inf}, 0.05) == pytest.approx(1.959964, rel=1e-6)
+    row = {"LM": 5.0, "LM_white": 20.0, "df": 30.0}  # coloured: the LR is corrected by a factor 1/4
+    for one_sided in (False, True):
+        fit = judge({"LR": 9.0, "estimate": 0.01}, row, one_sided, "likelihood ratio")
+        c = detection_limit(fit, 1.6e-4, one_sided)
+        assert c > 0.01  # the fit itself (corrected LR 2.25) is far from significant
+        p, _, _ = robust_p(9.0 * (c / 0.01) ** 2, row, one_sided)
+        assert p == pytest.approx(1.6e-4, rel=1e-6)
+    assert math.isnan(detection_limit({"se": float("nan"), "df": 30.0}, 1e-3))
+
+
+def test_when_nothing_is_significant_the_step_says_from_what_size_a_term_of_the_shape_left_would_be(monkeypatch):
+    """The "none" decision of test_a_step_asks_the_significance_of_the_generic_term_of_smallest_deciding_p ranked by
+    raw LR: col_delay is reported as what is left, with its detection limit (every screened fit carries one, as the
+    corrected LR decides), which lies above its estimate."""
+    from pyomo_heli.diagnosis.discovery import robust_p
+
+    fits = {"col_delay": _fit("col_delay", True, 30.0, 0.0016, "c d(col_d)/dt = col - col_d"),
+            "lon_delay": _fit("lon_delay", True, 20.0, 0.03, "c d(lon_d)/dt = lon - lon_d"),
+            "lon_rigging": _fit("lon_rigging", False, 2.0, -0.0022, "lon offset")}
+
+    def screen(pairs):
+        offered = {n: dict(f) for n, f in fits.items()}
+        pairs(offered)
+        return {"J0": J0, "fits": offered, "pairs": {}}
+
+    step = _stubbed_step(monkeypatch, [0.16, 2e-3, 8e-6], [2.0, 10.0, 20.0], screen, generic=("col_delay", "lon_delay"),
+                         LM_white=[2.0, 50.0, 20.0], rank="likelihood_ratio")
+    G = step["best_generic"]
+    assert step["decision"] == "none" and G["name"] == "col_delay"
+    assert all("detectable" in f for f in step["screen"]["fits"].values())
+    assert G["detectable"] > G["estimate"]
+    # at that size the corrected LR (a fifth of the raw one here) reaches the level, one-sided as col_delay is
+    p, _, _ = robust_p(30.0 * (G["detectable"] / 0.0016) ** 2, {"LM": 10.0, "LM_white": 50.0, "df": np.inf}, True)
+    assert p == pytest.approx(step["level"], rel=1e-6)
+    assert f"a term of its shape is significant from |c| >= {G['detectable']:.2g}" in step["message"]
+
+
 def test_an_ambiguous_step_says_what_the_generic_term_left_looks_like(monkeypatch):
     """discovery_step's decision with the score test and the NLP screen stubbed: a physical candidate significant
     (LR 24.4), the best generic term not significant over the library (LR 6) but adding to the physical one (LR 7.5

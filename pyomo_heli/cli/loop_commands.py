@@ -208,7 +208,9 @@ def cmd_check_effect(args) -> int:
           f"+- {t['se']:.2g}; LR {t['LR']:.3g} (time {t['LR_time']:.3g}, trim {t['LR_trim']:.3g}), corrected "
           f"{t['LR_robust']:.3g} on df {t['df']:.3g}; solve {t['status']}")
     print(f"p = {t['p']:.2g} ({r['criterion']}) {'<' if r['significant'] else '>='} level {r['level']:.2g}: "
-          + ("significant" if r["significant"] else "not significant"))
+          + ("significant" if r["significant"] else "not significant")
+          + (f"; significant from |{t['strength']}| >= {t['detectable']:.2g}"
+             if math.isfinite(t.get("detectable", math.nan)) else ""))
     e = r.get("encompassing")
     if e and "LR_G_given_P" in e:
         g = r["against"]["name"]

@@ -390,7 +390,10 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
     if base_failed:
         out["base_failed"] = screen.get("base_status")
     for n, f in fits.items():
-        judge(f, rows_by.loc[n], getattr(make_candidate(n), "one_sided", False), criterion)
+        one_sided = getattr(make_candidate(n), "one_sided", False)
+        judge(f, rows_by.loc[n], one_sided, criterion)
+        if criterion == "likelihood ratio":
+            f["detectable"] = detection_limit(f, level, one_sided)
     G = best_fit(fits, True, rank)  # the competitor a physical candidate must encompass (a rejected term included)
     A = best_fit({n: f for n, f in fits.items() if n not in rejected_generic}, True, rank)  # the best that may be added
     g_sig = A is not None and A["p"] < level
@@ -412,6 +415,8 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
                               f"p = {G['p']:.2g} < {alpha:g}, not over the library)" if unexplained else "")
                            + (f"; best generic description of what is left: {describe_fit(G)}, p = {G['p']:.2g}"
                               if G else "")
+                           + (f"; a term of its shape is significant from |c| >= {G['detectable']:.2g}"
+                              if G and math.isfinite(G.get("detectable", math.nan)) else "")
                            + (f"; shape per channel (score test): {shapes_sentence(out['shape_by_channel'])}"
                               if out["shape_by_channel"] else ""))
         return out
@@ -544,6 +549,19 @@ def robust_p(lr: float, row, one_sided: bool = False) -> tuple[float, float, flo
     return (p / 2 if one_sided else p), adj, df
 
 
+def detection_limit(fit: dict, level: float, one_sided: bool = False) -> float:
+    """The smallest |c| of a judged term's shape that the corrected LR would call significant at ``level``: its
+    standard error times the root of the F(1, df) (chi-square(1)) quantile the test compares ``LR_robust`` with,
+    taking the profile likelihood as quadratic, ``LR_robust = (c / se)^2`` (:func:`judge`). What the data resolve:
+    an effect of this shape smaller than it goes unnoticed. NaN when the fit has no standard error."""
+    se, df = float(fit.get("se", math.nan)), float(fit.get("df", math.inf))
+    if not (math.isfinite(se) and se > 0):
+        return float("nan")
+    tail = 2.0 * level if one_sided else level
+    ref = stats.f(1, df) if math.isfinite(df) else stats.chi2(1)
+    return se * math.sqrt(float(ref.isf(tail)))
+
+
 def judge(fit: dict, score_row, one_sided: bool, criterion: str) -> dict:
     """Set a screened term's deciding ``p`` (the corrected LR's, :func:`robust_p`, or with ``criterion`` "score
     test" the score test's own, the LR's kept as ``p_robust_LR``), ``LR_robust``, ``df`` and the standard error from
@@ -599,6 +617,8 @@ def check_term(cfg, model, start: dict, data, term, *, level: float, against: st
     screen = nlp_screen(cfg, start, terms, pairs=[(t.name, against)] if against else (), progress=progress)
     criterion = deciding_criterion(cfg, screen)
     fit = judge(screen["fits"][t.name], rows.loc[t.name], getattr(t, "one_sided", False), criterion)
+    if criterion == "likelihood ratio":
+        fit["detectable"] = detection_limit(fit, level, getattr(t, "one_sided", False))
     out = {"term": fit, "score": {"LM": float(rows.loc[t.name, "LM"]), "p": float(rows.loc[t.name, "p_value"])},
            "level": level, "significant": bool(fit["p"] < level), "criterion": criterion}
     if against:

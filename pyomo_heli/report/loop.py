@@ -405,7 +405,8 @@ def discovery_section(it: dict) -> list[str]:
     fits = sc.get("fits", {})
     if fits:
         rows = [{"term": f["name"], "form": f["formula"], "estimate": f["estimate"], "SE": f["se"], "LR": f["LR"],
-                 "p": f["p"], "significant": bool(f["p"] < d["level"]), "solve": f["status"]} for f in fits.values()]
+                 "p": f["p"], "significant": bool(f["p"] < d["level"]), "solve": f["status"],
+                 **({"detectable |c|": f["detectable"]} if "detectable" in f else {})} for f in fits.values()]
         L += [f"Each term alone in the full NLP (joint likelihood of time series and trims, base J = {sc['J0']:.8g}):",
               "", markdown_table(pd.DataFrame(rows), digits=4), ""]
     if d.get("encompassing"):

@@ -50,7 +50,9 @@ of it the loop achieved (shown where at least 5 % is possible). On the validatio
 them), each output's RMS over the truth model's, before and after (1: as good as the truth), and in the md table
 the output worst before. Could the data name the missing effect at all (:func:`truth_form_check`)? The truth's
 own form, its strength free, tested at iteration 0 as the loop tests a library term: its estimate and LR ("truth
-form at M0"), the loop's p ("truth form p") and whether that is below the loop's level ("truth form significant").
+form at M0"), the loop's p ("truth form p"), whether that is below the loop's level ("truth form significant") and
+the strength from which it would be ("truth form significant from": a truth strength below it is too weak for these
+data by the loop's test).
 Evaluation only: this script reads truth.json and the held-out module; the loop does not.
 """
 from __future__ import annotations
@@ -616,6 +618,19 @@ def truth_form_check(effect: str, loop: Path, config: Path = CONFIG) -> dict:
     return out
 
 
+def truth_form_detectable(effect: str, tf: dict) -> float:
+    """The strength from which the truth's own form would be significant at the loop's level (its detection limit:
+    :func:`pyomo_heli.diagnosis.discovery.detection_limit` from the check's corrected LR, df and level): a truth
+    below it is one these data cannot name by the loop's test. NaN when the check has no corrected LR."""
+    from pyomo_heli.diagnosis.discovery import detection_limit
+
+    lr, est = float(tf.get("LR corrected", math.nan)), float(tf.get("estimate", math.nan))
+    if not (lr > 0 and math.isfinite(est)):
+        return math.nan
+    fit = {"se": abs(est) / math.sqrt(lr), "df": float(tf.get("df", math.inf))}
+    return detection_limit(fit, float(tf["level"]), truth_form(effect).one_sided)
+
+
 #: the residual analysis a cached final verdict was made with (a new test in diagnosis/ invalidates the cache)
 RESIDUAL_ANALYSIS = ("trim shape, whiteness, record biases (scaled by each record's innovation RMS), input path "
                      "(stepwise regression of the input errors, corrected for the input noise; parameter shift from "
@@ -895,6 +910,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
                                    f"{tf['truth strength'][HELD_OUT_EFFECTS[effect].strength]:g}), LR {tf['LR']:.3g}")
         row["truth form p"] = tf["p"]
         row["truth form significant"] = tf["significant"]
+        row["truth form significant from"] = truth_form_detectable(effect, tf)
     return row
 
 
@@ -1374,7 +1390,7 @@ def markdown(tab: pd.DataFrame) -> str:
                         "unexplained shape matches truth", "record biases differ", "record bias shape matches truth",
                         "input path", "input path shape matches truth", "residual analysis of",
                         "direct solve failed", "wrong acceptance", "criterion met",
-                        "truth form at M0", "truth form p", "truth form significant",
+                        "truth form at M0", "truth form p", "truth form significant", "truth form significant from",
                         "theta_twist err0 %", "theta_twist err1 %", "CL_alpha_HT err0 %", "CL_alpha_HT err1 %",
                         "Iyy err0 %", "Iyy err1 %") if c in tab]
 

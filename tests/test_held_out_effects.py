@@ -1,6 +1,7 @@
 """The held-out truth effects (pyomo_heli.flighttest.held_out_effects): independent of the diagnosis, M0 at zero
 strength, and each one moves the data the way its equation says."""
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -182,7 +183,8 @@ def study(monkeypatch):
     monkeypatch.setattr(study, "validation_joint_p", lambda doc, config=None: 0.5)
     # the truth form's check needs a real flight test (its own test below): a stand-in record here
     monkeypatch.setattr(study, "truth_form_check", lambda effect, loop, config=None: {
-        "estimate": 1.0, "truth strength": HELD_OUT_STRENGTHS[effect], "LR": 50.0, "p": 1e-6, "significant": True})
+        "estimate": 1.0, "truth strength": HELD_OUT_STRENGTHS[effect], "LR": 50.0, "p": 1e-6, "significant": True,
+        "LR corrected": 25.0, "df": math.inf, "level": 1e-4})
     return study
 
 
@@ -505,6 +507,18 @@ def test_the_reading_above_the_noise_floor_needs_half_the_truth_models_cut_and_t
         assert study.criterion_met_above_floor({**row, **change}) is False, change
     assert study.criterion_met_above_floor({**row, "share of possible trim cut %": "-", "criterion met": True}) is True
     assert study.criterion_met_above_floor({**row, "truth": "none"}) == "n/a"
+
+
+def test_the_truth_forms_detection_limit_is_where_its_corrected_likelihood_ratio_reaches_the_level():
+    """The strength from which the truth's own form is significant: its estimate's standard error (1 / sqrt(25) of
+    the estimate 1) times the normal quantile of the two-sided level 1e-4, 3.8906 (analytic); a lag's form is
+    one-sided (the quantile of 2e-4, 3.7190); no corrected LR, no limit."""
+    study = _study()
+    tf = {"estimate": 1.0, "LR corrected": 25.0, "df": math.inf, "level": 1e-4}
+    assert study.truth_form_detectable("drag_rise", tf) == pytest.approx(0.2 * 3.890592, rel=1e-6)
+    assert study.truth_form("actuator_lag").one_sided
+    assert study.truth_form_detectable("actuator_lag", tf) == pytest.approx(0.2 * 3.719016, rel=1e-6)
+    assert math.isnan(study.truth_form_detectable("drag_rise", {**tf, "LR corrected": 0.0}))
 
 
 def test_the_committed_tallies_are_those_of_the_committed_tables():

@@ -637,33 +637,53 @@ RESIDUAL_ANALYSIS = ("trim shape, whiteness, record biases (scaled by each recor
                      "the inputs less their expected error)")
 
 
-def final_residual(loop: Path) -> dict:
+def final_residual(loop: Path, config: Path | None = None) -> dict:
     """The residual analysis of the model the loop kept (``residual_verdict`` of the loop, the same call), made
     with the current analysis: a loop run before a test was added to it reports its older verdict in
-    ``loop.json``. Cached in ``<case>/final_residual.json``. A loop without its iteration's results folder keeps
-    the verdict of its ``loop.json``."""
+    ``loop.json``. With ``config`` (the study's) whose ``[diagnosis]`` differs from what the loop's analysis was made
+    with (another replay, say), the analysis is made again with the study's ``[diagnosis]`` (its resampling must be
+    the loop's). What the loop's was made with: its record's ``made_with``, else (a loop run before the record held
+    it) the loop's config file as it is now, so a study's ``--set`` that rewrote that file hides the difference:
+    give such settings through a copy of the config (``--config``). Cached in ``<case>/final_residual.json`` (with
+    the settings, when they are not the loop's). A loop without its iteration's results folder keeps the verdict of
+    its ``loop.json``."""
+    from pyomo_heli.config import load_identification_config
     from pyomo_heli.report.loop import final_index
     from pyomo_heli.workflows.check_effect import loop_iteration
-    from pyomo_heli.workflows.close_loop import residual_verdict
+    from pyomo_heli.workflows.close_loop import analysis_settings, residual_verdict
 
     doc = json.loads((loop / "loop.json").read_text())
     said = doc["iterations"][-1].get("residual_diagnosis") or {}
-    if "input_path" in said:  # the loop ran with the current analysis
+    rec = doc["iterations"][final_index(doc)]
+    has_results = (loop / rec.get("results_dir", "-") / "chosen.json").is_file()
+    cfg, made_with = None, None  # made_with: the study's settings where they are not the loop's
+    if config is not None and has_results:
+        _, rec, cfg = loop_iteration(loop, rec["iteration"], doc["config"])
+        study = load_identification_config(config, overrides={"data": {"dataset": doc["dataset"]}})
+        ours, theirs = analysis_settings(study), said.get("made_with") or analysis_settings(cfg)
+        if ours != theirs:
+            if (ours["resample_hz"], ours["resample_inputs"]) != (theirs["resample_hz"], theirs["resample_inputs"]):
+                raise ValueError(f"{config}: resamples the inputs otherwise than the loop {loop} "
+                                 f"({ours['resample_hz']} Hz {ours['resample_inputs']} against {theirs['resample_hz']} "
+                                 f"Hz {theirs['resample_inputs']}): its residual analysis would be of another fit")
+            cfg = dataclasses.replace(cfg, diagnosis=study.diagnosis_settings)
+            made_with = ours
+    if "input_path" in said and made_with is None:  # the loop ran with the current analysis
         return {"analysis": RESIDUAL_ANALYSIS, **said}
     cache = loop.parent / "final_residual.json"
     if cache.is_file():
         old = json.loads(cache.read_text())
-        if old.get("analysis") == RESIDUAL_ANALYSIS:
+        if old.get("analysis") == RESIDUAL_ANALYSIS and old.get("made_with") == made_with:
             return old
-    rec = doc["iterations"][final_index(doc)]
-    if not (loop / rec.get("results_dir", "-") / "chosen.json").is_file():  # nothing to analyse again
+    if not has_results:  # nothing to analyse again
         return {"analysis": "the loop's", "status": said.get("status", "-"),
                 "record_biases": said.get("record_biases") or {}, "input_path": {}}
-    _, rec, cfg = loop_iteration(loop, rec["iteration"], doc["config"])
+    if cfg is None:
+        _, rec, cfg = loop_iteration(loop, rec["iteration"], doc["config"])
     v = residual_verdict(cfg, rec["parameters"], progress=lambda s: None)
     out = {"analysis": RESIDUAL_ANALYSIS, "status": v["status"], "findings": v.get("findings", []),
            "record_biases": {o: t for o, t in (v.get("record_biases") or {}).items()},
-           "input_path": v.get("input_path") or {}}
+           "input_path": v.get("input_path") or {}, **({"made_with": made_with} if made_with else {})}
     cache.write_text(json.dumps(out, indent=1))
     return out
 
@@ -829,7 +849,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
 
     decisions = [step_words(it) + (" (rejected)" if j + 1 < len(its) and its[j + 1].get("rejected") else "")
                  for j, it in enumerate(its)]
-    fr = final_residual(loop)
+    fr = final_residual(loop, config)
     row = {"truth": effect, "seed": seed, "verdict": "; ".join(decisions),
            "added (kept)": "+".join(ik["extensions"]) or "-", "final residual": fr["status"]}
     row.update(residual_columns(effect, fr))
@@ -985,7 +1005,7 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.diagnosis.candidates import model_with_candidates
     from pyomo_heli.nlp.parameters import FreeParameter
-    from pyomo_heli.workflows.close_loop import residual_verdict
+    from pyomo_heli.workflows.close_loop import analysis_settings, residual_verdict
 
     rows = read_rows(out / "held_out.csv")
     for r in rows:
@@ -1012,10 +1032,7 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
         cache = case / f"final_residual_{kept}.json"
         fr = json.loads(cache.read_text()) if cache.is_file() else {}
         # what of the config the analysis depends on: another resampling or replay is another analysis
-        noise = cfg.diagnosis_settings
-        made_with = {"resample_hz": cfg.resample_hz, "resample_inputs": cfg.resample_inputs,
-                     "input_noise": list(noise.input_noise), "replay": noise.replay,
-                     "input_path_family": noise.input_path_family}
+        made_with = analysis_settings(cfg)
         # a cache made before a setting was recorded was made with its default then
         old = {"input_path_family": "standard", **fr.get("made_with", {**made_with, "replay": "fit"})}
         if fr.get("analysis") != RESIDUAL_ANALYSIS or fr.get("parameters") != pars or old != made_with:

@@ -74,6 +74,9 @@ def test_m0_with_noise_accepts_nothing_with_input_errors(tmp_path, seed, flight_
     assert list(tf["shift"]) == ["theta_twist", "CL_alpha_HT"]
     assert all(r["points"] == 13 and r["p beyond"] > 0.01 for r in tf["summary"]), tf["summary"]
     assert not any(f.startswith("the trims ask") for f in verdict["findings"])
+    # and it says what it was made with: the identification's input noise (no [diagnosis] table), the default replay
+    assert verdict["made_with"] == {"resample_hz": cfg.resample_hz, "resample_inputs": cfg.resample_inputs,
+                                    "input_noise": ["col", "lon"], "replay": "record", "input_path_family": "standard"}
 
 
 def test_rigging_only_leads_to_rigging(tmp_path):

@@ -248,6 +248,52 @@ def test_at_the_iteration_limit_the_term_the_loop_would_add_next_is_the_shape_le
     assert row["unexplained shape"] == "-" and not row["unexplained verdict"]
 
 
+def test_the_final_residual_is_analysed_again_with_the_studys_replay_where_the_loops_was_another(tmp_path,
+                                                                                                   monkeypatch):
+    """A loop run with ``replay = "fit"`` (the study config's pin; its record does not say, so its config file
+    does) and a study config that sets ``"record"``: the loop's own verdict is not taken; the kept model is analysed
+    again with the study's [diagnosis] (the loop's config otherwise) and cached with those settings, so a second call
+    reads the cache. With the loop's own config the loop's verdict stands; another resampling is refused, naming the
+    config. A record that says it was made with the record replay stands for the study's."""
+    import pyomo_heli.workflows.check_effect as check_effect
+    import pyomo_heli.workflows.close_loop as close_loop
+    from pyomo_heli.config import load_identification_config
+
+    study = _study()
+    loop = _loop_doc(tmp_path, [{"iteration": 0, "results_dir": "iter_0", "residual_diagnosis": {
+        "status": "noise only", "input_path": {"terms": []}, "record_biases": {}}}], 0)
+    (loop / "iter_0").mkdir()
+    (loop / "iter_0" / "chosen.json").write_text("{}")
+    doc = json.loads((loop / "loop.json").read_text())
+    doc["config"] = str(study.CONFIG)
+    doc["dataset"] = str(ROOT / "data" / "bo105_synthetic")  # a flight test the study's config loads with
+    (loop / "loop.json").write_text(json.dumps(doc))
+    loop_cfg = load_identification_config(study.CONFIG)
+    assert loop_cfg.diagnosis_settings.replay == "fit"
+    monkeypatch.setattr(check_effect, "loop_iteration", lambda loop_dir, it, config: (doc, doc["iterations"][0],
+                                                                                      loop_cfg))
+    calls = []
+
+    def verdict(cfg, parameters, progress):
+        calls.append(cfg.diagnosis_settings.replay)
+        return {"status": f"analysed with replay {cfg.diagnosis_settings.replay}", "input_path": {}}
+
+    monkeypatch.setattr(close_loop, "residual_verdict", verdict)
+    assert study.final_residual(loop, study.CONFIG)["status"] == "noise only" and calls == []
+    record = study.with_setting(study.CONFIG, "diagnosis", "replay", "record", tmp_path / "record.toml")
+    got = study.final_residual(loop, record)
+    assert got["status"] == "analysed with replay record" and got["made_with"]["replay"] == "record"
+    assert study.final_residual(loop, record) == got and calls == ["record"]  # the second call reads the cache
+    other = study.with_settings(study.CONFIG, [("data", "resample_hz", "50")], tmp_path / "other.toml")
+    with pytest.raises(ValueError, match="other.toml: resamples the inputs otherwise than the loop"):
+        study.final_residual(loop, other)
+    # a loop whose record says what its analysis was made with: that, not its config file, is compared
+    doc["iterations"][0]["residual_diagnosis"]["made_with"] = close_loop.analysis_settings(
+        load_identification_config(record))
+    (loop / "loop.json").write_text(json.dumps(doc))
+    assert study.final_residual(loop, record)["status"] == "noise only" and calls == ["record"]
+
+
 def test_the_study_reads_a_loop_that_went_on_after_a_rejected_step(tmp_path, study):
     """A loop that discovered dX_mu4 at iteration 0, had that step rejected, went back to iteration 0's model,
     discovered dX_mu2 there and kept it: the kept discovered term is dX_mu2 (not the rejected one), the verdict

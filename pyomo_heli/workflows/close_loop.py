@@ -194,13 +194,23 @@ def _finished(cfg: IdentificationConfig, folder: Path):
     return res if same else None
 
 
+def analysis_settings(cfg: IdentificationConfig) -> dict:
+    """What of a config the residual analysis depends on besides the model and its parameters: the inputs'
+    resampling and the ``[diagnosis]`` input-noise model, replay and input-path family (``made_with`` of
+    :func:`residual_verdict`: another setting is another analysis)."""
+    noise = cfg.diagnosis_settings
+    return {"resample_hz": cfg.resample_hz, "resample_inputs": cfg.resample_inputs,
+            "input_noise": list(noise.input_noise), "replay": noise.replay,
+            "input_path_family": noise.input_path_family}
+
+
 def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> dict:
     """When nothing is accepted: is the residual noise only, or an unexplained residual with a signature?
 
     Uses the residual analysis of :mod:`pyomo_heli.diagnosis.analysis` (trim shapes, whiteness,
     coherence, the records' agreement on each output's bias, the input errors' regression on the flight's signals) on
     the chosen parameters. A failure is reported,
-    not raised (the loop's results stand).
+    not raised (the loop's results stand). ``made_with``: the settings it was made with (:func:`analysis_settings`).
     """
     try:
         from ..diagnosis.analysis import diagnose
@@ -213,7 +223,7 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
     status = "noise only" if d.verdict.get("noise_only") else "unexplained residual"
     progress(f"residual diagnosis: {status}")
     out = {"status": status, "verdict": d.verdict, "findings": list(d.findings), "record_biases": d.record_biases,
-           "input_path": d.input_path}
+           "input_path": d.input_path, "made_with": analysis_settings(cfg)}
     try:  # what the missing effect looks like at the trims, with no library (a pointer; the status stands)
         from ..dataset import load_flight_test
         from ..diagnosis.trim_forces import implied_forces

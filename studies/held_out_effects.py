@@ -637,16 +637,35 @@ RESIDUAL_ANALYSIS = ("trim shape, whiteness, record biases (scaled by each recor
                      "the inputs less their expected error)")
 
 
+def made_with_of(loop: Path, rec: dict, doc: dict, cfg) -> dict:
+    """The analysis settings (:func:`pyomo_heli.workflows.close_loop.analysis_settings`) of the config an iteration's
+    results were made with: the text its ``chosen.json`` records (``info.config_text``; the loop's config file may
+    have been rewritten since, e.g. by a study's ``--set``), read beside that file so its relative paths hold; ``cfg``
+    (the config as it is now) for results that record none."""
+    import tempfile
+
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.workflows.close_loop import analysis_settings
+
+    info = json.loads((loop / rec["results_dir"] / "chosen.json").read_text()).get("info") or {}
+    text = info.get("config_text")
+    if not text:
+        return analysis_settings(cfg)
+    with tempfile.NamedTemporaryFile("w", suffix=".toml", dir=Path(doc["config"]).parent) as f:
+        f.write(text)
+        f.flush()
+        return analysis_settings(load_identification_config(f.name, overrides={"data": {"dataset": doc["dataset"]}}))
+
+
 def final_residual(loop: Path, config: Path | None = None) -> dict:
     """The residual analysis of the model the loop kept (``residual_verdict`` of the loop, the same call), made
     with the current analysis: a loop run before a test was added to it reports its older verdict in
     ``loop.json``. With ``config`` (the study's) whose ``[diagnosis]`` differs from what the loop's analysis was made
     with (another replay, say), the analysis is made again with the study's ``[diagnosis]`` (its resampling must be
     the loop's). What the loop's was made with: its record's ``made_with``, else (a loop run before the record held
-    it) the loop's config file as it is now, so a study's ``--set`` that rewrote that file hides the difference:
-    give such settings through a copy of the config (``--config``). Cached in ``<case>/final_residual.json`` (with
-    the settings, when they are not the loop's). A loop without its iteration's results folder keeps the verdict of
-    its ``loop.json``."""
+    it) the config text the kept iteration's results record (:func:`made_with_of`). Cached in
+    ``<case>/final_residual.json`` (with the settings, when they are not the loop's). A loop without its
+    iteration's results folder keeps the verdict of its ``loop.json``."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.report.loop import final_index
     from pyomo_heli.workflows.check_effect import loop_iteration
@@ -660,7 +679,7 @@ def final_residual(loop: Path, config: Path | None = None) -> dict:
     if config is not None and has_results:
         _, rec, cfg = loop_iteration(loop, rec["iteration"], doc["config"])
         study = load_identification_config(config, overrides={"data": {"dataset": doc["dataset"]}})
-        ours, theirs = analysis_settings(study), said.get("made_with") or analysis_settings(cfg)
+        ours, theirs = analysis_settings(study), said.get("made_with") or made_with_of(loop, rec, doc, cfg)
         if ours != theirs:
             if (ours["resample_hz"], ours["resample_inputs"]) != (theirs["resample_hz"], theirs["resample_inputs"]):
                 raise ValueError(f"{config}: resamples the inputs otherwise than the loop {loop} "

@@ -250,11 +250,12 @@ def test_at_the_iteration_limit_the_term_the_loop_would_add_next_is_the_shape_le
 
 def test_the_final_residual_is_analysed_again_with_the_studys_replay_where_the_loops_was_another(tmp_path,
                                                                                                    monkeypatch):
-    """A loop run with ``replay = "fit"`` (the study config's pin; its record does not say, so its config file
-    does) and a study config that sets ``"record"``: the loop's own verdict is not taken; the kept model is analysed
-    again with the study's [diagnosis] (the loop's config otherwise) and cached with those settings, so a second call
-    reads the cache. With the loop's own config the loop's verdict stands; another resampling is refused, naming the
-    config. A record that says it was made with the record replay stands for the study's."""
+    """A loop run with ``replay = "fit"`` (the study config's pin) and a study config that sets ``"record"``: the
+    loop's own verdict is not taken; the kept model is analysed again with the study's [diagnosis] (the loop's
+    config otherwise) and cached with those settings, so a second call reads the cache. With the loop's own config
+    the loop's verdict stands; another resampling is refused, naming the config. What the loop's verdict was made
+    with: its record's ``made_with``, else the config text its results hold, else its config file as it is now (a
+    study's ``--set`` may have rewritten that file since)."""
     import pyomo_heli.workflows.check_effect as check_effect
     import pyomo_heli.workflows.close_loop as close_loop
     from pyomo_heli.config import load_identification_config
@@ -263,15 +264,16 @@ def test_the_final_residual_is_analysed_again_with_the_studys_replay_where_the_l
     loop = _loop_doc(tmp_path, [{"iteration": 0, "results_dir": "iter_0", "residual_diagnosis": {
         "status": "noise only", "input_path": {"terms": []}, "record_biases": {}}}], 0)
     (loop / "iter_0").mkdir()
-    (loop / "iter_0" / "chosen.json").write_text("{}")
+    (loop / "iter_0" / "chosen.json").write_text("{}")  # results that record no config text
+    own = study.with_settings(study.CONFIG, [], tmp_path / "config_set.toml")  # the loop's config: replay "fit"
+    fit_text = own.read_text()
     doc = json.loads((loop / "loop.json").read_text())
-    doc["config"] = str(study.CONFIG)
+    doc["config"] = str(own)
     doc["dataset"] = str(ROOT / "data" / "bo105_synthetic")  # a flight test the study's config loads with
     (loop / "loop.json").write_text(json.dumps(doc))
-    loop_cfg = load_identification_config(study.CONFIG)
-    assert loop_cfg.diagnosis_settings.replay == "fit"
-    monkeypatch.setattr(check_effect, "loop_iteration", lambda loop_dir, it, config: (doc, doc["iterations"][0],
-                                                                                      loop_cfg))
+    assert load_identification_config(own).diagnosis_settings.replay == "fit"
+    monkeypatch.setattr(check_effect, "loop_iteration", lambda loop_dir, it, config: (
+        doc, doc["iterations"][0], load_identification_config(config, overrides={"data": {"dataset": doc["dataset"]}})))
     calls = []
 
     def verdict(cfg, parameters, progress):
@@ -279,7 +281,7 @@ def test_the_final_residual_is_analysed_again_with_the_studys_replay_where_the_l
         return {"status": f"analysed with replay {cfg.diagnosis_settings.replay}", "input_path": {}}
 
     monkeypatch.setattr(close_loop, "residual_verdict", verdict)
-    assert study.final_residual(loop, study.CONFIG)["status"] == "noise only" and calls == []
+    assert study.final_residual(loop, own)["status"] == "noise only" and calls == []
     record = study.with_setting(study.CONFIG, "diagnosis", "replay", "record", tmp_path / "record.toml")
     got = study.final_residual(loop, record)
     assert got["status"] == "analysed with replay record" and got["made_with"]["replay"] == "record"
@@ -287,11 +289,18 @@ def test_the_final_residual_is_analysed_again_with_the_studys_replay_where_the_l
     other = study.with_settings(study.CONFIG, [("data", "resample_hz", "50")], tmp_path / "other.toml")
     with pytest.raises(ValueError, match="other.toml: resamples the inputs otherwise than the loop"):
         study.final_residual(loop, other)
-    # a loop whose record says what its analysis was made with: that, not its config file, is compared
+    # the loop's config file rewritten with the record replay: the config text its results hold still says "fit"
+    own.write_text(record.read_text())
+    (tmp_path / "final_residual.json").unlink()
+    assert study.final_residual(loop, record)["status"] == "noise only"  # the file alone hides the difference
+    (loop / "iter_0" / "chosen.json").write_text(json.dumps({"info": {"config_text": fit_text}}))
+    assert study.final_residual(loop, record)["status"] == "analysed with replay record"
+    assert calls == ["record", "record"]
+    # a record that says it was made with the record replay stands for the study's
     doc["iterations"][0]["residual_diagnosis"]["made_with"] = close_loop.analysis_settings(
         load_identification_config(record))
     (loop / "loop.json").write_text(json.dumps(doc))
-    assert study.final_residual(loop, record)["status"] == "noise only" and calls == ["record"]
+    assert study.final_residual(loop, record)["status"] == "noise only" and len(calls) == 2
 
 
 def test_the_study_reads_a_loop_that_went_on_after_a_rejected_step(tmp_path, study):

@@ -52,6 +52,11 @@ def test_noise_only_nothing_is_accepted(tmp_path, monkeypatch, flight_test_cache
     assert its[0]["discovery"]["library_size"] == len(CANDIDATES) + len(GENERIC)
     report = (tmp_path / "loop" / "loop_report.md").read_text()
     assert "Structure determination over a library of 19 terms" in report
+    # what is left, with the size from which a term of its shape would be significant (the corrected LR decides)
+    best = its[0]["discovery"]["best_generic"]
+    assert best["detectable"] > abs(best["estimate"])
+    assert f"a term of its shape is significant from |c| >= {best['detectable']:.2g}" in its[0]["discovery"]["message"]
+    assert "detectable |c|" in report
     # the step is kept on disk; a rerun reads it back instead of solving the screen again (the identification is
     # reused as well), and records the same
     steps = list((tmp_path / "loop" / "steps").glob("step_*.json"))

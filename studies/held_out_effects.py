@@ -106,6 +106,10 @@ class StudyFolderError(ValueError):
     """A case folder holds another study's files (the folder given is at fault, not the code)."""
 
 
+class StudyConfigError(ValueError):
+    """The study's config cannot evaluate a finished loop (the config given is at fault, not the code)."""
+
+
 def generate_case(case: Path, template: str, effect: str, seed: int) -> Path:
     """The flight test of ``effect`` and ``seed`` in ``case/data`` (generated unless it is there): its generator
     config ``case/gen.toml`` is ``template`` with the truth effect and seed replaced (:func:`data_config`)."""
@@ -682,7 +686,7 @@ def final_residual(loop: Path, config: Path | None = None) -> dict:
         ours, theirs = analysis_settings(study), said.get("made_with") or made_with_of(loop, rec, doc, cfg)
         if ours != theirs:
             if (ours["resample_hz"], ours["resample_inputs"]) != (theirs["resample_hz"], theirs["resample_inputs"]):
-                raise ValueError(f"{config}: resamples the inputs otherwise than the loop {loop} "
+                raise StudyConfigError(f"{config}: resamples the inputs otherwise than the loop {loop} "
                                  f"({ours['resample_hz']} Hz {ours['resample_inputs']} against {theirs['resample_hz']} "
                                  f"Hz {theirs['resample_inputs']}): its residual analysis would be of another fit")
             cfg = dataclasses.replace(cfg, diagnosis=study.diagnosis_settings)
@@ -1293,7 +1297,10 @@ def main(argv=None) -> int:
             doc = loop / "loop.json"
             if doc.is_file() and json.loads(doc.read_text()).get("stopped"):
                 effect, seed = loop.parent.name.rsplit("_", 1)
-                save_row(loop.parent, evaluate(effect, int(seed), loop, config))
+                try:
+                    save_row(loop.parent, evaluate(effect, int(seed), loop, config))
+                except StudyConfigError as exc:
+                    ap.error(f"--config: {exc}")
         write_table(out)
         print((out / "held_out.md").read_text())
         return 0

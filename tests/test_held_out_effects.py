@@ -287,7 +287,7 @@ def test_the_final_residual_is_analysed_again_with_the_studys_replay_where_the_l
     assert got["status"] == "analysed with replay record" and got["made_with"]["replay"] == "record"
     assert study.final_residual(loop, record) == got and calls == ["record"]  # the second call reads the cache
     other = study.with_settings(study.CONFIG, [("data", "resample_hz", "50")], tmp_path / "other.toml")
-    with pytest.raises(ValueError, match="other.toml: resamples the inputs otherwise than the loop"):
+    with pytest.raises(study.StudyConfigError, match="other.toml: resamples the inputs otherwise than the loop"):
         study.final_residual(loop, other)
     # the loop's config file rewritten with the record replay: the config text its results hold still says "fit"
     own.write_text(record.read_text())

@@ -578,6 +578,48 @@ def test_a_step_asks_the_significance_of_the_generic_term_of_smallest_deciding_p
     assert by_lr["best_generic"]["p"] == pytest.approx(0.00715, rel=1e-2) and not by_lr["generic_significant"]
 
 
+def test_a_physical_candidate_is_named_only_if_it_encompasses_the_best_generic_term_by_either_ranking(monkeypatch):
+    """held_out control_mixing 23 in miniature: no generic term significant (level 0.01 / 3), and the best by the
+    deciding p (lon_delay, LR 7 on white residuals: one-sided p = 0.0041) is not the best by raw LR (col_delay,
+    LR 30 on coloured ones: corrected LR 6, p = 0.0072). lon_rigging (LR 60) leaves lon_delay nothing (LR 0.5)
+    but not col_delay (LR 20): under either ranking both pairs are solved and nothing is named ("ambiguous"), where
+    a test against the best by p alone named it. When col_delay adds nothing either, lon_rigging is named, and the
+    message says both."""
+    fits = {"col_delay": _fit("col_delay", True, 30.0, 0.0016, "c d(col_d)/dt = col - col_d"),
+            "lon_delay": _fit("lon_delay", True, 7.0, 0.03, "c d(lon_d)/dt = lon - lon_d"),
+            "lon_rigging": _fit("lon_rigging", False, 60.0, -0.0022, "lon offset")}
+
+    def screen_with(adds_col_delay):
+        pair_J = {"lon_rigging+lon_delay": fits["lon_rigging"]["J"] - 0.25,
+                  "lon_rigging+col_delay": fits["lon_rigging"]["J"] - adds_col_delay / 2}
+
+        def screen(pairs):
+            offered = {n: dict(f) for n, f in fits.items()}
+            wanted = pairs(offered)
+            assert sorted(wanted) == [("lon_rigging", "col_delay"), ("lon_rigging", "lon_delay")]
+            return {"J0": J0, "fits": offered,
+                    "pairs": {f"{a}+{b}": {"success": True, "J": pair_J[f"{a}+{b}"]} for a, b in wanted}}
+        return screen
+
+    kw = dict(generic=("col_delay", "lon_delay"), LM_white=[60.0, 50.0, 7.0])
+    args = ([1e-12, 2e-3, 8e-3], [60.0, 10.0, 7.0])
+    for rank in ("p", "likelihood_ratio"):
+        out = _stubbed_step(monkeypatch, *args, screen_with(20.0), rank=rank, **kw)
+        assert out["decision"] == "ambiguous" and out["added"] is None
+        assert out["screen"]["fits"]["lon_delay"]["p"] == pytest.approx(0.0041, rel=2e-2)
+        assert out["screen"]["fits"]["col_delay"]["p"] == pytest.approx(0.00715, rel=1e-2)
+        assert set(out["competitors"]) == {"col_delay", "lon_delay"}
+        by = {r["generic"]: r for r in out["encompassing"]}
+        assert by["lon_delay"]["encompasses"] and not by["col_delay"]["encompasses"]
+        assert by["col_delay"]["LR_G_given_P"] == pytest.approx(20.0)
+        assert ("col_delay adds to lon_rigging (p < 0.01)" if rank == "p"
+                else "the best generic term col_delay adds to each of them") in out["message"]
+    named = _stubbed_step(monkeypatch, *args, screen_with(1.0), **kw)
+    assert named["decision"] == "named" and named["added"] == "lon_rigging"
+    assert named["best_generic_fit"]["name"] == "lon_delay"
+    assert "nor does col_delay, the best by raw likelihood ratio (p = 0.32)" in named["message"]
+
+
 def test_the_detection_limit_is_where_the_corrected_likelihood_ratio_reaches_the_level():
     """The smallest |c| of a term's shape the step would call significant: with white residuals and infinite df a
     two-sided term at level 0.05 with se 1 is significant from the normal quantile 1.95996 (analytic); on coloured

@@ -366,16 +366,14 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
     out["shape_by_channel"] = channel_shapes(sc, omega_r)
 
     def pairs_of(fits):
-        """(P, G) for every significant physical candidate and the best generic term, when that one is significant."""
+        """(P, G) for every significant physical candidate P and each competitor G (:func:`competitors`)."""
         for n, f in fits.items():  # the deciding p-values (the pairs are asked for before they are set below)
             f.setdefault("p_LR", f["p"])
             judge(f, sc.set_index("name").loc[n], getattr(make_candidate(n), "one_sided", False),
                   "likelihood ratio" if cfg.nlp.input_errors and not math.isnan(f["LR"]) else "score test")
-        g = best_fit(fits, True, rank)
-        if g is None:
-            return []
-        # every significant physical candidate against the best generic term (significant or not)
-        return [(n, g["name"]) for n in phys_screen if fits[n]["success"] and fits[n]["p"] < level]
+        # every significant physical candidate against each best generic term (significant or not)
+        return [(n, g["name"]) for g in competitors(fits, rank)
+                for n in phys_screen if fits[n]["success"] and fits[n]["p"] < level]
 
     screen = nlp_screen(cfg, start, gen_screen + phys_screen, pairs=pairs_of, progress=progress)
     out["screen"] = screen
@@ -420,24 +418,39 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
                            + (f"; shape per channel (score test): {shapes_sentence(out['shape_by_channel'])}"
                               if out["shape_by_channel"] else ""))
         return out
-    rows = [encompassing(pf, G, screen["pairs"].get(f"{pf['name']}+{G['name']}"), alpha) for pf in p_sig]
+    # a physical candidate must encompass every competitor: the best generic term by either ranking (they part when
+    # the terms' colour corrections differ, and then which one is "best" is a near tie the name must not hang on)
+    comps = competitors(fits, rank)
+    rows = [{**encompassing(pf, g, screen["pairs"].get(f"{pf['name']}+{g['name']}"), alpha), "generic": g["name"]}
+            for pf in p_sig for g in comps]
     out["encompassing"] = rows
-    named = [r for r in rows if r["encompasses"]]
+    if len(comps) > 1:
+        out["competitors"] = [g["name"] for g in comps]
+    by_candidate = {}
+    for r in rows:
+        by_candidate.setdefault(r["candidate"], []).append(r)
+    # named: it encompasses every competitor; equivalent: no competitor adds to it, and it is not named
+    named = [rs[0] for rs in by_candidate.values() if all(r["encompasses"] for r in rs)]
+    not_added_to = {c for c, rs in by_candidate.items() if all(r["encompasses"] or r.get("equivalent") for r in rs)}
     if not g_sig:
-        # physical candidates significant, no generic term: named when one encompasses the best generic term too
+        # physical candidates significant, no generic term: named when one encompasses the best generic terms too
         if named:
             best = min(named, key=lambda r: _lowest_J(r, "J_P"))
             rej = ", rejected earlier" if G["name"] in rejected_generic else ""
+            others = [r for r in by_candidate[best["candidate"]] if r["generic"] != G["name"]]
             out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
                        message=f"{best['candidate']} significant (p < {level:.2g}) and encompasses the best generic "
                                f"term {G['name']} (p = {G['p']:.2g}{rej}; no generic term that may be added is "
                                f"significant): with {best['candidate']} "
                                f"fitted, {G['name']} adds nothing (p = {best['p_G_given_P']:.2g} >= {alpha:g}), and it "
-                               f"adds to {G['name']} (p = {best['p_P_given_G']:.2g}); named {best['candidate']}")
+                               f"adds to {G['name']} (p = {best['p_P_given_G']:.2g})"
+                               + "".join(f"; nor does {r['generic']}, the best by {_OTHER_RANK_WORDS[rank]} "
+                                         f"(p = {r['p_G_given_P']:.2g})" for r in others)
+                               + f"; named {best['candidate']}")
             return out
-        equivalent = [r for r in rows if r.get("equivalent")]
+        equivalent = [f for f in p_sig if f["name"] in not_added_to]
         if equivalent or G is None:
-            best = min(p_sig, key=_lowest_J)
+            best = min(equivalent or p_sig, key=_lowest_J)
             out.update(decision="accepted", added=best["name"], initial=float(best["estimate"]),
                        message=f"{best['name']} significant (LR {best['LR']:.3g}, p = {best['p']:.2g} < {level:.2g}); "
                                + ("no generic term that may be added is" if G and G["name"] in rejected_generic
@@ -449,22 +462,24 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
             return out
         out.update(decision="ambiguous", best_generic=G,
                    message="physical candidates significant (" + ", ".join(f["name"] for f in p_sig)
-                   + f") but the best generic term {G['name']}"
-                   + (" (rejected earlier)" if G["name"] in rejected_generic else "")
-                   + " adds to each of them: none added; what is left "
+                   + ") but " + _adders(by_candidate, G, rejected_generic, alpha) + ": none added; what is left "
                    f"looks like {describe_fit(G)}, p = {G['p']:.2g}")
         return out
     if named:
         best = min(named, key=lambda r: r["J_P"])
+        others = [r for r in by_candidate[best["candidate"]] if r["generic"] != G["name"]]
         out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
                    message=f"{best['candidate']} encompasses the "
                            + ("generic term rejected earlier " if G["name"] in rejected_generic else "discovered ")
                            + f"{G['name']} ({G['formula']}): with "
                            f"{best['candidate']} fitted, {G['name']} adds nothing (LR {best['LR_G_given_P']:.3g}, "
-                           f"p = {best['p_G_given_P']:.2g} >= {alpha:g}); named {best['candidate']}")
+                           f"p = {best['p_G_given_P']:.2g} >= {alpha:g})"
+                           + "".join(f"; nor does {r['generic']}, the best by {_OTHER_RANK_WORDS[rank]} "
+                                     f"(p = {r['p_G_given_P']:.2g})" for r in others)
+                           + f"; named {best['candidate']}")
     else:
-        tested = ", ".join(f"{r['candidate']} (p of {G['name']} given it {r.get('p_G_given_P', float('nan')):.2g}, "
-                           f"of it given {G['name']} {r.get('p_P_given_G', float('nan')):.2g}"
+        tested = ", ".join(f"{r['candidate']} (p of {r['generic']} given it {r.get('p_G_given_P', float('nan')):.2g}, "
+                           f"of it given {r['generic']} {r.get('p_P_given_G', float('nan')):.2g}"
                            + ("; equivalent on these data" if r.get("equivalent") else "") + ")" for r in rows)
         out.update(decision="discovered", added=A["name"], initial=float(A["estimate"]), discovered=A,
                    message="not explained by any library effect" + (f" (tested: {tested})" if rows else "")
@@ -637,6 +652,34 @@ def _lowest_J(fit: dict, key: str = "J") -> float:
 
 #: how a step ranks the screened generic terms (``[loop] generic_rank``): by the p it decides on, or by raw LR
 GENERIC_RANKS = ("p", "likelihood_ratio")
+#: the ranking other than the step's, in words (a physical candidate must encompass the best by either)
+_OTHER_RANK_WORDS = {"p": "raw likelihood ratio", "likelihood_ratio": "deciding p"}
+
+
+def competitors(fits: dict, rank: str = "p") -> list:
+    """The generic terms a significant physical candidate must encompass to be named: the best by ``rank``
+    (:func:`best_fit`, rejected terms included) and, when it is another term, the best by the other ranking.
+    The two orders part when the terms' colour corrections or degrees of freedom differ; the best is then often a
+    near tie (held_out control_mixing 23: col_delay p = 0.084 by p, dM_w p = 0.091 by raw LR), and a name must not
+    hang on which of the two a ranking happens to put first."""
+    out = []
+    for r in (rank, *(x for x in GENERIC_RANKS if x != rank)):
+        g = best_fit(fits, True, r)
+        if g is not None and all(g["name"] != o["name"] for o in out):
+            out.append(g)
+    return out
+
+
+def _adders(by_candidate: dict, G: dict, rejected: list, alpha: float) -> str:
+    """Which competitor adds to the significant physical candidates, in words: the best generic term when it adds
+    to each, else each candidate with the competitors that add to it."""
+    adds = {c: [r["generic"] for r in rs if not (r["encompasses"] or r.get("equivalent"))]
+            for c, rs in by_candidate.items()}
+    if all(G["name"] in a for a in adds.values()):
+        return (f"the best generic term {G['name']}" + (" (rejected earlier)" if G["name"] in rejected else "")
+                + " adds to each of them")
+    return "; ".join(f"{', '.join(a)} add{'s' if len(a) == 1 else ''} to {c} (p < {alpha:g})"
+                     for c, a in adds.items() if a)
 
 
 def _nan_last(x: float) -> float:

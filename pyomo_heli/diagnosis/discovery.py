@@ -421,7 +421,8 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
     # a physical candidate must encompass every competitor: the best generic term by either ranking (they part when
     # the terms' colour corrections differ, and then which one is "best" is a near tie the name must not hang on)
     comps = competitors(fits, rank)
-    rows = [{**encompassing(pf, g, screen["pairs"].get(f"{pf['name']}+{g['name']}"), alpha), "generic": g["name"]}
+    rows = [{"candidate": pf["name"], "generic": g["name"],
+             **encompassing(pf, g, screen["pairs"].get(f"{pf['name']}+{g['name']}"), alpha)}
             for pf in p_sig for g in comps]
     out["encompassing"] = rows
     if len(comps) > 1:

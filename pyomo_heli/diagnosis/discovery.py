@@ -661,8 +661,8 @@ def competitors(fits: dict, rank: str = "p") -> list:
     """The generic terms a significant physical candidate must encompass to be named: the best by ``rank``
     (:func:`best_fit`, rejected terms included) and, when it is another term, the best by the other ranking.
     The two orders part when the terms' colour corrections or degrees of freedom differ; the best is then often a
-    near tie (held_out control_mixing 23: col_delay p = 0.084 by p, dM_w p = 0.091 by raw LR), and a name must not
-    hang on which of the two a ranking happens to put first."""
+    near tie (docs/discovery.md, step 4), and a name must not hang on which of the two a ranking happens to put
+    first."""
     out = []
     for r in (rank, *(x for x in GENERIC_RANKS if x != rank)):
         g = best_fit(fits, True, r)

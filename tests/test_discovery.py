@@ -855,7 +855,7 @@ def test_a_base_that_stopped_short_is_solved_again_from_the_best_fit_and_the_rat
     at a worse point): its J is the start's, and every LR against it would be inflated. The base is then solved
     from the best single fit's solution with that term at zero, and the estimates and likelihood ratios equal
     those of a screen whose base solved normally. Every solve is capped (base and fits, their own caps)."""
-    from pyomo_heli.diagnosis.discovery import SCREEN_BASE_MAX_ITER, SCREEN_FIT_MAX_ITER, nlp_screen
+    from pyomo_heli.diagnosis.discovery import SCREEN_BASE_MAX_ITER, SCREEN_CONTINUATION_MAX_ITER, nlp_screen
 
     cfg, start, normal = screen_case
     log = []
@@ -863,11 +863,45 @@ def test_a_base_that_stopped_short_is_solved_again_from_the_best_fit_and_the_rat
     got = nlp_screen(cfg, start, SCREEN_TERMS, progress=print, separate_on_failure=False)
     assert got["base_refined"] and got["base_refined"]["status_before"] == "Maximum_Iterations_Exceeded"
     # the base again from the best fit, after the two base solves and one solve per term, is capped like them;
-    # each term's fit has its own cap
+    # each term's fit (a continuation warm start) has its own cap
     caps = [(o or {}).get("max_iter") for _, _, o in log]
     n = len(SCREEN_TERMS)
-    assert caps[:2] + caps[2 + n:3 + n] == [SCREEN_BASE_MAX_ITER] * 3 and caps[2:2 + n] == [SCREEN_FIT_MAX_ITER] * n
+    assert caps[:2] + caps[2 + n:3 + n] == [SCREEN_BASE_MAX_ITER] * 3
+    assert caps[2:2 + n] == [SCREEN_CONTINUATION_MAX_ITER] * n
     assert got["base_success"] and got["J0"] == pytest.approx(normal["J0"], abs=0.05)
+    _same_fits(got, normal)
+
+
+def test_a_fit_whose_continuation_warm_start_fails_is_solved_again_from_the_primal_values(screen_case, monkeypatch):
+    """Each term's continuation warm start made to fail (the stand-in for one stuck at SCREEN_CONTINUATION_MAX_ITER,
+    as nx_delay's on the bundled flight test): the fit is solved again from the base's primal values alone under
+    SCREEN_FIT_MAX_ITER, and its estimate and likelihood ratio equal the normal screen's (a second warm start to
+    the same optimum)."""
+    from types import SimpleNamespace
+
+    import pyomo_heli.solvers as solvers
+    from pyomo_heli.diagnosis.discovery import SCREEN_FIT_MAX_ITER, nlp_screen
+
+    cfg, start, normal = screen_case
+    real, log = solvers.make_solver, []
+
+    def make(*a, **k):
+        s = real(*a, **k)
+
+        class ContinuationFails:
+            def solve(self, warm_start="none", options=None):
+                log.append((warm_start, (options or {}).get("max_iter")))
+                if warm_start == "continuation":
+                    return SimpleNamespace(success=False, status="Maximum_Iterations_Exceeded", iterations=0,
+                                           wall_time=0.0)
+                return s.solve(warm_start=warm_start, options=options)
+        return ContinuationFails()
+
+    monkeypatch.setattr(solvers, "make_solver", make)
+    got = nlp_screen(cfg, start, SCREEN_TERMS, progress=print)
+    n = len(SCREEN_TERMS)
+    assert log[1:1 + 2 * n] == [("continuation", log[1][1]), ("primal", SCREEN_FIT_MAX_ITER)] * n
+    assert all(got["fits"][t]["success"] for t in SCREEN_TERMS)
     _same_fits(got, normal)
 
 

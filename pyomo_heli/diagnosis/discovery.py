@@ -76,10 +76,10 @@ SCREEN_BASE_MAX_ITER = 200
 #: fuselage_wake_incidence 22 with the extended family: 1000 iterations, more than 30 min, then the retry). A fit
 #: stopped at the cap is a failed fit: no likelihood ratio.
 SCREEN_FIT_MAX_ITER = 300
-#: Ipopt iteration cap of a fit's continuation warm start (the base's multipliers, a small barrier): 929 of 932
-#: continuation fits that converged on the held-out flight tests took at most 45 iterations; one that needs more is
-#: mostly stuck (nx_delay: 6 converged in 7 or fewer, 5 ran to the 300 cap), and is solved again from the primal
-#: values alone under SCREEN_FIT_MAX_ITER
+#: Ipopt iteration cap of a fit's continuation warm start (the base's multipliers, a small barrier): the fits that
+#: converge from it take 3-25 iterations (docs/discovery.md, step 2); one that needs more is mostly stuck (a lag or
+#: time-constant term, nx_delay on the bundled flight test: uncapped it ran to the 300 cap, ~11 min) and is solved
+#: again from the primal values alone under SCREEN_FIT_MAX_ITER
 SCREEN_CONTINUATION_MAX_ITER = 50
 
 

@@ -444,16 +444,13 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
         if named:
             best = min(named, key=lambda r: _lowest_J(r, "J_P"))
             rej = ", rejected earlier" if G["name"] in rejected_generic else ""
-            others = [r for r in by_candidate[best["candidate"]] if r["generic"] != G["name"]]
             out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
                        message=f"{best['candidate']} significant (p < {level:.2g}) and encompasses the best generic "
                                f"term {G['name']} (p = {G['p']:.2g}{rej}; no generic term that may be added is "
                                f"significant): with {best['candidate']} "
                                f"fitted, {G['name']} adds nothing (p = {best['p_G_given_P']:.2g} >= {alpha:g}), and it "
                                f"adds to {G['name']} (p = {best['p_P_given_G']:.2g})"
-                               + "".join(f"; nor does {r['generic']}, the best by {_OTHER_RANK_WORDS[rank]} "
-                                         f"(p = {r['p_G_given_P']:.2g})" for r in others)
-                               + f"; named {best['candidate']}")
+                               + _nor_does(by_candidate[best["candidate"]], G, rank) + f"; named {best['candidate']}")
             return out
         equivalent = [f for f in p_sig if f["name"] in not_added_to]
         if equivalent or G is None:
@@ -474,16 +471,13 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
         return out
     if named:
         best = min(named, key=lambda r: r["J_P"])
-        others = [r for r in by_candidate[best["candidate"]] if r["generic"] != G["name"]]
         out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
                    message=f"{best['candidate']} encompasses the "
                            + ("generic term rejected earlier " if G["name"] in rejected_generic else "discovered ")
                            + f"{G['name']} ({G['formula']}): with "
                            f"{best['candidate']} fitted, {G['name']} adds nothing (LR {best['LR_G_given_P']:.3g}, "
                            f"p = {best['p_G_given_P']:.2g} >= {alpha:g})"
-                           + "".join(f"; nor does {r['generic']}, the best by {_OTHER_RANK_WORDS[rank]} "
-                                     f"(p = {r['p_G_given_P']:.2g})" for r in others)
-                           + f"; named {best['candidate']}")
+                           + _nor_does(by_candidate[best["candidate"]], G, rank) + f"; named {best['candidate']}")
     else:
         tested = ", ".join(f"{r['candidate']} (p of {r['generic']} given it {r.get('p_G_given_P', float('nan')):.2g}, "
                            f"of it given {r['generic']} {r.get('p_P_given_G', float('nan')):.2g}"
@@ -675,6 +669,12 @@ def competitors(fits: dict, rank: str = "p") -> list:
         if g is not None and all(g["name"] != o["name"] for o in out):
             out.append(g)
     return out
+
+
+def _nor_does(rows: list, G: dict, rank: str) -> str:
+    """A named candidate's other competitors in words: "; nor does X, the best by ... (p = ...)"."""
+    return "".join(f"; nor does {r['generic']}, the best by {_OTHER_RANK_WORDS[rank]} (p = {r['p_G_given_P']:.2g})"
+                   for r in rows if r["generic"] != G["name"])
 
 
 def _adders(by_candidate: dict, G: dict, rejected: list, alpha: float) -> str:

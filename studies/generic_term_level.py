@@ -1,4 +1,4 @@
-"""How far generic terms' NLP estimates move when nothing is missing (docs/discovery_results.md).
+"""How far generic terms' NLP estimates move when nothing is missing (docs/generic_term_level.md).
 
 The study is ``pyomo_heli.studies.generic_term_level``;
 ``python studies/generic_term_level.py --help`` lists its options.

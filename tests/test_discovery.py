@@ -872,15 +872,15 @@ def test_a_base_that_stopped_short_is_solved_again_from_the_best_fit_and_the_rat
     _same_fits(got, normal)
 
 
-def test_a_fit_whose_continuation_warm_start_fails_is_solved_again_from_the_primal_values(screen_case, monkeypatch):
-    """Each term's continuation warm start made to fail (the stand-in for one stuck at SCREEN_CONTINUATION_MAX_ITER,
-    as nx_delay's on the bundled flight test): the fit is solved again from the base's primal values alone under
-    SCREEN_FIT_MAX_ITER, and its estimate and likelihood ratio equal the normal screen's (a second warm start to
-    the same optimum)."""
+def test_a_fit_whose_continuation_warm_starts_fail_is_solved_again_from_the_primal_values(screen_case, monkeypatch):
+    """Each term's continuation warm starts made to fail, the first and the one with the curvature test (the
+    stand-in for a fit stuck at SCREEN_CONTINUATION_MAX_ITER both times): the fit is solved again from the base's
+    primal values alone under SCREEN_FIT_MAX_ITER, and its estimate and likelihood ratio equal the normal screen's
+    (a second warm start to the same optimum)."""
     from types import SimpleNamespace
 
     import pyomo_heli.solvers as solvers
-    from pyomo_heli.diagnosis.discovery import SCREEN_FIT_MAX_ITER, nlp_screen
+    from pyomo_heli.diagnosis.discovery import SCREEN_CURVATURE_TEST, SCREEN_FIT_MAX_ITER, nlp_screen
 
     cfg, start, normal = screen_case
     real, log = solvers.make_solver, []
@@ -890,7 +890,8 @@ def test_a_fit_whose_continuation_warm_start_fails_is_solved_again_from_the_prim
 
         class ContinuationFails:
             def solve(self, warm_start="none", options=None):
-                log.append((warm_start, (options or {}).get("max_iter")))
+                log.append((warm_start, (options or {}).get("max_iter"),
+                            all((options or {}).get(k) == v for k, v in SCREEN_CURVATURE_TEST.items())))
                 if warm_start == "continuation":
                     return SimpleNamespace(success=False, status="Maximum_Iterations_Exceeded", iterations=0,
                                            wall_time=0.0)
@@ -900,8 +901,45 @@ def test_a_fit_whose_continuation_warm_start_fails_is_solved_again_from_the_prim
     monkeypatch.setattr(solvers, "make_solver", make)
     got = nlp_screen(cfg, start, SCREEN_TERMS, progress=print)
     n = len(SCREEN_TERMS)
-    assert log[1:1 + 2 * n] == [("continuation", log[1][1]), ("primal", SCREEN_FIT_MAX_ITER)] * n
-    assert all(got["fits"][t]["success"] for t in SCREEN_TERMS)
+    cap = log[1][1]
+    assert log[1:1 + 3 * n] == [("continuation", cap, False), ("continuation", cap, True),
+                                ("primal", SCREEN_FIT_MAX_ITER, False)] * n
+    assert all(got["fits"][t]["success"] and got["fits"][t]["solved_from"] == "primal" for t in SCREEN_TERMS)
+    _same_fits(got, normal)
+
+
+def test_a_fit_whose_first_warm_start_fails_is_solved_with_the_curvature_test(screen_case, monkeypatch):
+    """Each term's first continuation warm start made to fail: the fit is solved again from the base's solution
+    with Ipopt's inertia-free curvature test (SCREEN_CURVATURE_TEST) under the same cap, the primal retry is not
+    needed, and the estimates and likelihood ratios equal the normal screen's, which never needed the retry."""
+    from types import SimpleNamespace
+
+    import pyomo_heli.solvers as solvers
+    from pyomo_heli.diagnosis.discovery import SCREEN_CONTINUATION_MAX_ITER, SCREEN_CURVATURE_TEST, nlp_screen
+
+    cfg, start, normal = screen_case
+    assert all(f["solved_from"] == "continuation" for f in normal["fits"].values())
+    real, log = solvers.make_solver, []
+
+    def make(*a, **k):
+        s = real(*a, **k)
+
+        class FirstContinuationFails:
+            def solve(self, warm_start="none", options=None):
+                curvature = "neg_curv_test_tol" in (options or {})
+                log.append((warm_start, curvature))
+                if warm_start == "continuation" and not curvature:
+                    return SimpleNamespace(success=False, status="Maximum_Iterations_Exceeded", iterations=0,
+                                           wall_time=0.0)
+                assert not curvature or options == {"max_iter": SCREEN_CONTINUATION_MAX_ITER, **SCREEN_CURVATURE_TEST}
+                return s.solve(warm_start=warm_start, options=options)
+        return FirstContinuationFails()
+
+    monkeypatch.setattr(solvers, "make_solver", make)
+    got = nlp_screen(cfg, start, SCREEN_TERMS, progress=print)
+    n = len(SCREEN_TERMS)
+    assert log[1:1 + 2 * n] == [("continuation", False), ("continuation", True)] * n
+    assert all(got["fits"][t]["success"] and got["fits"][t]["solved_from"] == "curvature test" for t in SCREEN_TERMS)
     _same_fits(got, normal)
 
 

@@ -17,7 +17,8 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
 
    then each term is freed by its bounds alone, solved warm from that solution (its primal values and
    multipliers, the barrier parameter from tol / 10: the fronts' ``continuation``, a few Ipopt
-   iterations; if that fails, from the primal values alone) and pinned again:
+   iterations; if that stops at its cap, again with Ipopt's inertia-free curvature test, then from the primal
+   values alone) and pinned again:
    its estimate, ``LR = 2 (J_0 - J_term)`` and a standard error |c| / sqrt(LR) (the curvature of the
    profile likelihood). The LR is corrected for coloured residuals (:func:`robust_p`: times the score
    test's robust-over-white ratio, capped at 1, referred to F(1, df)). **Significant: p < alpha / L**
@@ -81,6 +82,14 @@ SCREEN_FIT_MAX_ITER = 300
 #: time-constant term, nx_delay on the bundled flight test: uncapped it ran to the 300 cap, ~11 min) and is solved
 #: again from the primal values alone under SCREEN_FIT_MAX_ITER
 SCREEN_CONTINUATION_MAX_ITER = 50
+#: Ipopt options of a fit's second continuation warm start, after the first stopped at SCREEN_CONTINUATION_MAX_ITER:
+#: the inertia-free curvature test (Zavala and Chiang 2014) in place of the inertia check. A fit that stops at the
+#: cap is one crept under Hessian regularization (nx_delay on the bundled flight test: a regularization near 1e-4 at
+#: every iteration, steps of 1e-4, J falling in the sixth digit); Ipopt then accepts a step of positive curvature
+#: along itself whatever the factorisation's inertia (nx_delay: 13 iterations, 24 s, where the primal retry took
+#: 124 iterations, 149 s; docs/discovery.md, step 2). The fit is solved from the primal values alone only if this
+#: fails too.
+SCREEN_CURVATURE_TEST = {"neg_curv_test_tol": 1e-12}
 
 
 def library(model, physical=None, generic=None) -> list[str]:
@@ -215,11 +224,21 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
     def fit(group):
         free(group)
         ok_k, status_k = solve(warm_start, fit_cap if warm_start == "primal" else continuation_cap)
+        solved_from = warm_start
+        if not ok_k and warm_start != "primal":  # crept under regularization: the curvature test instead of inertia
+            progress(f"    NLP screen: {'+'.join(group)}: {warm_start} warm start failed ({status_k}); again with "
+                     "the inertia-free curvature test")
+            snap.restore()
+            free(group)
+            ok_k, status_k = solve(warm_start, {**continuation_cap, **SCREEN_CURVATURE_TEST})
+            solved_from = "curvature test"
         if not ok_k and warm_start != "primal":  # the base's multipliers did not carry it: from its primal alone
-            progress(f"    NLP screen: {'+'.join(group)}: {warm_start} warm start failed ({status_k}); primal")
+            progress(f"    NLP screen: {'+'.join(group)}: {warm_start} warm start with the curvature test failed "
+                     f"({status_k}); primal")
             snap.restore()
             free(group)
             ok_k, status_k = solve("primal", fit_cap)
+            solved_from = "primal"
         J = float(pyo.value(m.discovery_objective))
         J_tr = float(pyo.value(m.discovery_trim_nll))
         vals = free_parameter_values(m)
@@ -233,7 +252,7 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
                           "shape": {n: vals[n] for n in own[name][1:]}}
         res = {"J": J, "LR": lr, "LR_trim": 2.0 * (J0_tr - J_tr), "LR_time": 2.0 * (J0 - J0_tr - J + J_tr),
                "p": float(stats.chi2.sf(lr, len(group))) if not math.isnan(lr) else float("nan"),
-               "success": bool(ok_k), "status": status_k, **effort, "terms": rows,
+               "success": bool(ok_k), "status": status_k, "solved_from": solved_from, **effort, "terms": rows,
                "parameters": {f.name: vals[f.name] for f in cfg.free}}
         progress(f"    NLP screen: {'+'.join(group)}: "
                  + ", ".join(f"{r['strength']} = {r['estimate']:.4g}" for r in rows.values())

@@ -80,13 +80,13 @@ SCREEN_FIT_MAX_ITER = 300
 #: Ipopt iteration cap of a fit's continuation warm start (the base's multipliers, a small barrier): the fits that
 #: converge from it take 3-25 iterations (docs/discovery.md, step 2); one that needs more is mostly stuck (a lag or
 #: time-constant term, nx_delay on the bundled flight test: uncapped it ran to the 300 cap, ~11 min) and is solved
-#: again from the primal values alone under SCREEN_FIT_MAX_ITER
+#: again with SCREEN_CURVATURE_TEST, then from the primal values alone under SCREEN_FIT_MAX_ITER
 SCREEN_CONTINUATION_MAX_ITER = 50
 #: Ipopt options of a fit's second continuation warm start, after the first stopped at SCREEN_CONTINUATION_MAX_ITER:
 #: the inertia-free curvature test (Zavala and Chiang 2014) in place of the inertia check. A fit that stops at the
 #: cap is one crept under Hessian regularization (nx_delay on the bundled flight test: a regularization near 1e-4 at
 #: every iteration, steps of 1e-4, J falling in the sixth digit); Ipopt then accepts a step of positive curvature
-#: along itself whatever the factorisation's inertia (nx_delay: 13 iterations, 24 s, where the primal retry took
+#: along itself whatever the factorisation's inertia (nx_delay: 10 iterations, 11 s, where the primal retry took
 #: 124 iterations, 149 s; docs/discovery.md, step 2). The fit is solved from the primal values alone only if this
 #: fails too.
 SCREEN_CURVATURE_TEST = {"neg_curv_test_tol": 1e-12}
@@ -221,24 +221,21 @@ def nlp_screen(cfg, start: dict, terms: list, pairs=(), shape_free: bool = True,
                 f = by[e.strength]
                 m.theta_s[e.strength].set_value((f.lower + 0.05 * (f.upper - f.lower)) / m.theta_scale[e.strength])
 
+    # a fit's starts, each from the base's solution: the warm start, then (crept under regularization) the same with
+    # the curvature test instead of the inertia check, then (the multipliers did not carry it) its primal values alone
+    starts = ([(warm_start, warm_start, continuation_cap),
+               ("curvature test", warm_start, {**continuation_cap, **SCREEN_CURVATURE_TEST})]
+              if warm_start != "primal" else []) + [("primal", "primal", fit_cap)]
+
     def fit(group):
-        free(group)
-        ok_k, status_k = solve(warm_start, fit_cap if warm_start == "primal" else continuation_cap)
-        solved_from = warm_start
-        if not ok_k and warm_start != "primal":  # crept under regularization: the curvature test instead of inertia
-            progress(f"    NLP screen: {'+'.join(group)}: {warm_start} warm start failed ({status_k}); again with "
-                     "the inertia-free curvature test")
-            snap.restore()
+        for k, (solved_from, ws, options) in enumerate(starts):
+            if k:
+                snap.restore()
             free(group)
-            ok_k, status_k = solve(warm_start, {**continuation_cap, **SCREEN_CURVATURE_TEST})
-            solved_from = "curvature test"
-        if not ok_k and warm_start != "primal":  # the base's multipliers did not carry it: from its primal alone
-            progress(f"    NLP screen: {'+'.join(group)}: {warm_start} warm start with the curvature test failed "
-                     f"({status_k}); primal")
-            snap.restore()
-            free(group)
-            ok_k, status_k = solve("primal", fit_cap)
-            solved_from = "primal"
+            ok_k, status_k = solve(ws, options)
+            if ok_k or k + 1 == len(starts):
+                break
+            progress(f"    NLP screen: {'+'.join(group)}: {solved_from} start failed ({status_k}); {starts[k + 1][0]}")
         J = float(pyo.value(m.discovery_objective))
         J_tr = float(pyo.value(m.discovery_trim_nll))
         vals = free_parameter_values(m)

@@ -3,8 +3,7 @@
 The audit cases: with casadi-ipopt ``tol = nan`` hung, ``linear_solver = "ma97"``
 segfaulted, unknown/out-of-range/mistyped options printed raw Ipopt text and
 ``max_iter = 2.5`` was silently accepted; with pounce every bad option became
-a per-point failure. No test solves anything; none is timed (the cost of one
-call is printed).
+a per-point failure. No test solves anything; none is timed.
 """
 
 from __future__ import annotations
@@ -12,7 +11,6 @@ from __future__ import annotations
 import glob
 import math
 import os
-import time
 
 import pytest
 
@@ -150,12 +148,3 @@ def test_committed_configs_pass(name, options):
     validate_solver_options(name, options)
     if options:  # the study comments offer pounce as the alternative: the options must suit it too
         validate_solver_options("pounce", options)
-
-
-def test_cost_of_one_call_printed():
-    options = {"tol": 1e-8, "max_iter": 1000}
-    validate_solver_options("casadi-ipopt", options)  # first call loads the Ipopt library
-    for name in SOLVER_NAMES:
-        t0 = time.perf_counter()
-        validate_solver_options(name, options)
-        print(f"validate_solver_options({name!r}, {options}): {1e3 * (time.perf_counter() - t0):.2f} ms")

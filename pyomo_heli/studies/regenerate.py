@@ -205,9 +205,10 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("noise_only", (f"{HELD_OUT} --effects none --seeds 5 --out {{out}}/noise_only",
                          *reanalysed("noise_only")),
           ("held_out.csv", "held_out.md"), minutes=140),
-    Entry("held_out", (f"{HELD_OUT} --seeds 3 --effects {H1_H13} --out {{out}}/held_out",
-                       f"{HELD_OUT} --bundled --out {{out}}/held_out", *reanalysed("held_out")),
-          ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=800),
+    Entry("held_out", (f"{HELD_OUT} --seeds 3 --effects {H1_H13} {RECORD_P} --workers 2 --out {{out}}/held_out",
+                       f"{HELD_OUT} --bundled {RECORD_P} --out {{out}}/held_out",
+                       *reanalysed("held_out", RECORD_P)),
+          ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=320),
     Entry("held_out_extended", (
         f"{HELD_OUT} --seeds 3 --effects fuselage_pitch_damping cyclic_gearing "
         "control_mixing --generic-family extended --out {out}/held_out_extended --workers 2",
@@ -222,13 +223,13 @@ ENTRIES: tuple[Entry, ...] = (
         ("held_out.csv", "held_out.md", "bundled/cost.json"), minutes=990),
     # the control family (extended + control-path feedback) on pitch_rate_damper; written after those rows failed
     Entry("held_out_control", (
-        f"{HELD_OUT} --seeds 2 --effects pitch_rate_damper --generic-family control "
+        f"{HELD_OUT} --seeds 2 --effects pitch_rate_damper --generic-family control {RECORD_P} "
         "--out {out}/held_out_control --workers 2",
-        f"{HELD_OUT} --seeds 1 --effects none --generic-family control "
-        "--out {out}/held_out_control", *reanalysed("held_out_control", "--generic-family control")),
+        f"{HELD_OUT} --seeds 1 --effects none --generic-family control {RECORD_P} "
+        "--out {out}/held_out_control", *reanalysed("held_out_control", f"--generic-family control {RECORD_P}")),
         ("held_out.csv", "held_out.md"), minutes=60),
-    # the blind sets are ranked by the deciding p and analysed against the record-rate replay (the defaults), not as
-    # the held_out_discovery.toml pins have the others
+    # the blind sets (as held_out) are ranked by the deciding p and analysed against the record-rate replay (the
+    # defaults), not as the held_out_discovery.toml pins have the others
     Entry("held_out_blind3", (f"{HELD_OUT} --seeds 3 --effects {H14_H16} {RECORD_P} --workers 2 "
                               "--out {out}/held_out_blind3", *reanalysed("held_out_blind3", RECORD_P)),
           ("held_out.csv", "held_out.md"), minutes=90),
@@ -238,8 +239,8 @@ ENTRIES: tuple[Entry, ...] = (
     # the input path's extended dictionary on the kept models of the standard family's full-size rows, reanalysed
     Entry("input_path_extended", tuple(
         f"{HELD_OUT} --reanalyse {{out}}/input_path_extended/scratch --rows "
-        f"{{out}}/{t}/held_out.csv --input-path-family extended --out {{out}}/input_path_extended/{t}"
-        for t in ("held_out", "held_out_blind3", "noise_only")),
+        f"{{out}}/{t}/held_out.csv --input-path-family extended{flags} --out {{out}}/input_path_extended/{t}"
+        for t, flags in (("held_out", f" {RECORD_P}"), ("held_out_blind3", f" {RECORD_P}"), ("noise_only", ""))),
         tuple(f"{t}/held_out.{x}" for t in ("held_out", "held_out_blind3", "noise_only") for x in ("csv", "md")),
         needs=("held_out", "held_out_blind3", "noise_only"), minutes=70),
     Entry("held_out_summary", (f"{HELD_OUT} --summary " + " ".join(

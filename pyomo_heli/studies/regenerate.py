@@ -202,8 +202,8 @@ ENTRIES: tuple[Entry, ...] = (
                                     "--out {out}/held_out_small_blind4",
                                     *reanalysed("held_out_small_blind4", SMALL)),
           ("held_out.csv", "held_out.md"), minutes=8),
-    Entry("noise_only", (f"{HELD_OUT} --effects none --seeds 5 --out {{out}}/noise_only",
-                         *reanalysed("noise_only")),
+    Entry("noise_only", (f"{HELD_OUT} --effects none --seeds 5 {RECORD_P} --workers 2 --out {{out}}/noise_only",
+                         *reanalysed("noise_only", RECORD_P)),
           ("held_out.csv", "held_out.md"), minutes=140),
     Entry("held_out", (f"{HELD_OUT} --seeds 3 --effects {H1_H13} {RECORD_P} --workers 2 --out {{out}}/held_out",
                        f"{HELD_OUT} --bundled {RECORD_P} --out {{out}}/held_out",
@@ -239,8 +239,8 @@ ENTRIES: tuple[Entry, ...] = (
     # the input path's extended dictionary on the kept models of the standard family's full-size rows, reanalysed
     Entry("input_path_extended", tuple(
         f"{HELD_OUT} --reanalyse {{out}}/input_path_extended/scratch --rows "
-        f"{{out}}/{t}/held_out.csv --input-path-family extended{flags} --out {{out}}/input_path_extended/{t}"
-        for t, flags in (("held_out", f" {RECORD_P}"), ("held_out_blind3", f" {RECORD_P}"), ("noise_only", ""))),
+        f"{{out}}/{t}/held_out.csv --input-path-family extended {RECORD_P} --out {{out}}/input_path_extended/{t}"
+        for t in ("held_out", "held_out_blind3", "noise_only")),
         tuple(f"{t}/held_out.{x}" for t in ("held_out", "held_out_blind3", "noise_only") for x in ("csv", "md")),
         needs=("held_out", "held_out_blind3", "noise_only"), minutes=70),
     Entry("held_out_summary", (f"{HELD_OUT} --summary " + " ".join(

@@ -1017,14 +1017,14 @@ def merge(out: Path, sources: list[Path]) -> pd.DataFrame:
 
 def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataFrame:
     """The residual analysis of the kept model, made with the current analysis, for the rows of ``OUT/held_out.csv``
-    whose loops are gone and whose kept model the table holds: M0 (nothing added), or M0 plus the one discovered
-    term the row reports with its estimate (3 significant digits; the analysis allows a shift of every free
-    parameter, the term's strength included). The flight test is generated again (``template``, the row's truth and
-    seed; deterministic) into ``SCRATCH/<effect>_<seed>/data``, the parameters rebuilt from the row's parameter
-    errors against its truth.json, and the loop's own call (``residual_verdict`` under ``config``) made. Rewrites the
-    final residual, record-bias and input-path columns and the criterion; any other row is left as it is. Cached
-    per case and kept model in ``final_residual_<kept>.json`` (with the parameters, and the config's resampling and
-    ``[diagnosis]`` input noise and replay, it was made with)."""
+    whose loops are gone and whose kept model the table holds: M0 (nothing added), or M0 plus the discovered terms
+    it kept at the kept model's estimates ("kept terms", 3 significant digits; the analysis allows a shift of every
+    free parameter, the terms' strengths included). The flight test is generated again (``template``, the row's
+    truth and seed; deterministic) into ``SCRATCH/<effect>_<seed>/data``, the parameters rebuilt from the row's
+    parameter errors against its truth.json, and the loop's own call (``residual_verdict`` under ``config``) made.
+    Rewrites the final residual, record-bias and input-path columns and the criterion; any other row is left as it
+    is. Cached per case and kept model in ``final_residual_<kept>.json`` (with the parameters, and the config's
+    resampling and ``[diagnosis]`` input noise and replay, it was made with)."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.diagnosis.candidates import model_with_candidates
     from pyomo_heli.nlp.parameters import FreeParameter
@@ -1032,9 +1032,10 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
 
     rows = read_rows(out / "held_out.csv")
     for r in rows:
-        kept, term = str(r["added (kept)"]), parse_term(r.get("generic term", "-"))
-        if kept != "-" and not (term and kept == term["name"]):
-            continue
+        kept = str(r["added (kept)"])
+        terms = parse_terms(r.get("kept terms", "-"))
+        if kept != "-" and sorted(kept.split("+")) != sorted(f["name"] for f in terms):
+            continue  # a kept term the table holds no estimate of (a named library effect): the loop's analysis stays
         effect, seed = r["truth"], int(r["seed"])
         case = scratch / f"{effect}_{seed}"
         data = generate_case(case, template, effect, seed)
@@ -1043,14 +1044,17 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
         free = sorted(p.name for p in cfg.free)
         if free != sorted(PARAMETERS):
             raise ValueError(f"{config}: frees {free}, the table's parameter errors are of {sorted(PARAMETERS)}")
-        pars = {n: truth[n] * (1 + float(r[f"{n} err1 %"]) / 100) for n in PARAMETERS}
-        if kept != "-":
-            model = model_with_candidates(cfg.model, [kept])
-            strength = model.extensions[-1].strength
-            spec = model.parameters.spec(strength)
-            cfg = dataclasses.replace(cfg, model=model, free=[*cfg.free, FreeParameter(
-                strength, term["estimate"], spec.bounds[0], spec.bounds[1], spec.scale or 1.0)])
-            pars[strength] = term["estimate"]
+        # the inverse of the row's error, 100 (p - truth) / |truth| (a negative truth, the twist, included)
+        pars = {n: truth[n] + float(r[f"{n} err1 %"]) / 100 * abs(truth[n]) for n in PARAMETERS}
+        if terms:
+            model = model_with_candidates(cfg.model, [f["name"] for f in terms])
+            added = []
+            for ext, fit in zip(model.extensions[-len(terms):], terms):
+                spec = model.parameters.spec(ext.strength)
+                added.append(FreeParameter(ext.strength, fit["estimate"], spec.bounds[0], spec.bounds[1],
+                                           spec.scale or 1.0))
+                pars[ext.strength] = fit["estimate"]
+            cfg = dataclasses.replace(cfg, model=model, free=[*cfg.free, *added])
         # one cache per kept model: tables of other families share a case's flight test, not its kept model
         cache = case / f"final_residual_{kept}.json"
         fr = json.loads(cache.read_text()) if cache.is_file() else {}

@@ -427,8 +427,9 @@ def test_reanalyse_rebuilds_a_kept_m0_from_the_table_and_runs_the_loops_own_resi
     and seed, M0's parameters rebuilt from the row's errors against that truth.json, and the loop's residual verdict
     (stubbed here: the call is tested in test_input_path.py and test_close_loop.py) fills the final residual and
     input-path columns; a reported input error that is the truth's own (control_mixing's cross-feed) meets the
-    criterion. A row that kept one discovered term is rebuilt with it at the row's estimate; one that kept two is
-    left as it is (the table holds one estimate)."""
+    criterion. A row that kept discovered terms is rebuilt with them at the kept model's estimates ("kept terms",
+    not the screen's estimate in "generic term"); one that kept a library effect is left as it is (the table holds
+    no estimate of it). A parameter error is 100 (p - truth) / |truth|: the twist (negative) is rebuilt with it."""
     import json
 
     import pandas as pd
@@ -453,23 +454,34 @@ def test_reanalyse_rebuilds_a_kept_m0_from_the_table_and_runs_the_loops_own_resi
             "theta_twist err1 %": -1.5, "CL_alpha_HT err1 %": 11.0, "Iyy err1 %": 0.5}
     out = tmp_path / "table"
     out.mkdir()
-    pd.DataFrame([{**base, "truth": "control_mixing", "added (kept)": "-", "generic term": "-"},
-                  {**base, "truth": "cyclic_gearing", "added (kept)": "dM_q+dX_q",
-                   "generic term": "dM_q: c = 0.0012 +- 0.0003"},
-                  {**base, "truth": "drag_rise", "added (kept)": "dX_mu4", "generic term": "dX_mu4: c = -0.019 +- "
-                   "0.002"}]).to_csv(out / "held_out.csv", index=False)
+    pd.DataFrame([{**base, "truth": "control_mixing", "added (kept)": "-", "generic term": "-", "kept terms": "-"},
+                  {**base, "truth": "cyclic_gearing", "added (kept)": "lon_rigging", "generic term": "-",
+                   "kept terms": "-"},
+                  {**base, "truth": "drag_rise", "added (kept)": "dX_mu4", "generic term": "dX_mu4: c = -0.0151 +- "
+                   "0.001", "kept terms": "dX_mu4: c = -0.0198 +- 0.0016"},
+                  {**base, "truth": "fuselage_download", "added (kept)": "dM_bump00+dZ_lam",
+                   "generic term": "dM_bump00: c = 0.00891 +- 0.00035",
+                   "kept terms": "dM_bump00: c = 0.00561 +- 0.00091; dZ_lam: c = 0.0164 +- 0.0063"}]
+                 ).to_csv(out / "held_out.csv", index=False)
     tab = study.reanalyse(out, tmp_path / "scratch", ROOT / "studies" / "held_out_small.toml",
                           (ROOT / "studies" / "held_out_small_gen.toml").read_text())
     truth = json.loads((tmp_path / "scratch" / "control_mixing_20261122" / "data" / "truth.json").read_text())
-    assert "control_mixing" in truth["effects"] and len(calls) == 2
-    assert calls[0][1] == pytest.approx({"theta_twist": truth["parameters"]["theta_twist"] * 0.985,
+    assert "control_mixing" in truth["effects"] and len(calls) == 3
+    assert truth["parameters"]["theta_twist"] < 0  # rebuilt 1.5 % below truth: farther from zero
+    assert calls[0][1] == pytest.approx({"theta_twist": truth["parameters"]["theta_twist"] * 1.015,
                                          "CL_alpha_HT": truth["parameters"]["CL_alpha_HT"] * 1.11,
                                          "Iyy": truth["parameters"]["Iyy"] * 1.005})
-    # one kept discovered term: M0 plus that term at the row's estimate, its strength free like the loop's
+    # one kept discovered term: M0 plus that term at the kept model's estimate, its strength free like the loop's
     cfg, pars = calls[1]
-    assert [e.name for e in cfg.model.extensions] == ["dX_mu4"] and pars["c_dX_mu4"] == -0.019
+    assert [e.name for e in cfg.model.extensions] == ["dX_mu4"] and pars["c_dX_mu4"] == -0.0198
     assert [f.name for f in cfg.free][-1] == "c_dX_mu4"
+    # two: both, each at its estimate
+    cfg, pars = calls[2]
+    assert [e.name for e in cfg.model.extensions] == ["dM_bump00", "dZ_lam"]
+    assert (pars["c_dM_bump00"], pars["c_dZ_lam"]) == (0.00561, 0.0164)
+    assert [f.name for f in cfg.free][-2:] == ["c_dM_bump00", "c_dZ_lam"]
     mix, gear, drag = tab.iloc[0], tab.iloc[1], tab.iloc[2]
+    assert tab.iloc[3]["residual analysis of"] == "M0 + dM_bump00+dZ_lam rebuilt from the table"
     assert drag["residual analysis of"] == "M0 + dX_mu4 rebuilt from the table"
     assert mix["input path"] == "lon += +0.05 +- 0.002 x col" and mix["final residual"] == "unexplained residual"
     assert mix["residual analysis of"] == "M0 rebuilt from the table" and mix["criterion met"] in (True, "True")
@@ -478,7 +490,7 @@ def test_reanalyse_rebuilds_a_kept_m0_from_the_table_and_runs_the_loops_own_resi
     # a second run reads the case's cache, not the analysis again
     study.reanalyse(out, tmp_path / "scratch", ROOT / "studies" / "held_out_small.toml",
                     (ROOT / "studies" / "held_out_small_gen.toml").read_text())
-    assert len(calls) == 2
+    assert len(calls) == 3
 
 
 def test_an_input_path_shape_counts_only_where_no_discovered_term_was_kept(study):

@@ -144,29 +144,20 @@ def test_wake_on_tail_is_picked_first_and_the_errors_fall(tmp_path, capsys, requ
     # ... the same standard errors as the loop computed itself at the diagnosed point (its own model, not rebuilt)
     assert it1["standard_errors"] == pytest.approx(se, rel=1e-9)
     assert "iter 1 error / SE" in report
-    # --restart identifies afresh what the changed setting refused above (iteration 0 only: what --restart
-    # decides is whether iter_0 is reused, and a second iteration would only repeat the loop checked above)
-    cfg.path.write_text(text.replace("resample_hz = 25\n", f'resample_hz = 25\nresample_inputs = "{other}"\n')
-                        .replace("max_iterations = 1\n", "max_iterations = 0\n"))
-    capsys.readouterr()
-    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop"), "--restart",
-                 "--figure-format", "none"]) == 0
-    out = capsys.readouterr().out
-    assert "reusing" not in out
-    fresh = json.loads((tmp_path / "loop" / "loop.json").read_text())
-    assert len(fresh["iterations"]) == 1 and fresh["stopped"].startswith("iteration limit 0 reached")
-    assert fresh["iterations"][0]["attribution"]["accepted"] == "rotor_wake_on_tail"
-    assert fresh["iterations"][0]["parameters"] != it0["parameters"]  # the other inputs, another fit
 
 
 @pytest.mark.slow
-def test_wake_loop_with_input_errors(tmp_path, flight_test_cache):
+def test_wake_loop_with_input_errors(tmp_path, capsys, flight_test_cache):
     """The same small wake instance with the measured inputs' errors estimated ([objectives] input_errors):
     the loop runs with the known-noise likelihood, picks the wake first, and the trim error, the parameter
     errors against truth and the model's validation error against the truth replay all fall.
 
-    Slow (50 s; CI time): the default run has loops with input errors in tests/test_discovery.py and
-    tests/test_close_loop.py (M0 + noise), and the innovations' whiteness in tests/test_innovations.py."""
+    A rerun with another setting and ``--restart`` identifies afresh instead of reusing iteration 0.
+
+    Slow (70 s; CI time): the default run has loops with input errors in tests/test_discovery.py and
+    tests/test_close_loop.py (M0 + noise), the innovations' whiteness in tests/test_innovations.py, the refusal of a
+    finished front made with another setting in test_wake_on_tail_is_picked_first_and_the_errors_fall, and the
+    front store's --restart in tests/test_pareto_store.py."""
     loop = '\n[objectives]\ninput_errors = ["col", "lon"]\n\n[loop]\nmax_iterations = 1\n'
     cfg = make_case(tmp_path, "[truth.effects.wake_on_tail]\nK_lamT = 1.5\nd_t = 1.8\ns_w = 0.5\n", seed=25,
                     loop=loop, maneuvers=WAKE_MANEUVERS, input_reference_s=1.9, data_cache=flight_test_cache)
@@ -191,6 +182,22 @@ def test_wake_loop_with_input_errors(tmp_path, flight_test_cache):
     diag = json.loads((tmp_path / "diag" / "diagnosis.json").read_text())
     assert diag["info"]["extensions"] == ["rotor_wake_on_tail"]
     assert {w["series"] for w in diag["whiteness"]} == {"innovation"}
+    # another setting (the inputs resampled the other way) is refused for the finished front (checked in the default
+    # run, test_wake_on_tail_is_picked_first_and_the_errors_fall); --restart identifies afresh (iteration 0 only: what
+    # --restart decides is whether iter_0 is reused, and a second iteration would only repeat the loop checked above)
+    text = cfg.path.read_text()
+    other = "sample" if cfg.resample_inputs == "project" else "project"
+    cfg.path.write_text(text.replace("resample_hz = 25\n", f'resample_hz = 25\nresample_inputs = "{other}"\n')
+                        .replace("max_iterations = 1\n", "max_iterations = 0\n"))
+    capsys.readouterr()
+    assert main(["close-loop", str(cfg.path), "--out", str(tmp_path / "loop"), "--restart",
+                 "--figure-format", "none"]) == 0
+    out = capsys.readouterr().out
+    assert "reusing" not in out
+    fresh = json.loads((tmp_path / "loop" / "loop.json").read_text())
+    assert len(fresh["iterations"]) == 1 and fresh["stopped"].startswith("iteration limit 0 reached")
+    assert fresh["iterations"][0]["attribution"]["accepted"] == "rotor_wake_on_tail"
+    assert fresh["iterations"][0]["parameters"] != it0["parameters"]  # the other inputs, another fit
 
 
 def test_report_loop_bad_folders_are_one_line_exit_2(tmp_path, capsys):

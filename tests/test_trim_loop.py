@@ -293,7 +293,6 @@ def test_trim_loop_discovery_names_the_wake_by_encompassing_and_describes_a_held
     assert g["name"][:2] in ("dZ", "dM") and g["kappa_hat"] > 0, d["message"]  # down / nose-up
 
 
-
 def test_trim_loop_name_check_withdraws_a_named_candidate_that_leaves_a_generic_term(tmp_path, monkeypatch):
     """The name check on trims. The wake's trims: the wake is named at iteration 0, and at iteration 1 (M0 + wake)
     the real decision finds no generic term significant, so the name would stand. The test's stand-in then marks a
@@ -325,6 +324,7 @@ def test_trim_loop_name_check_withdraws_a_named_candidate_that_leaves_a_generic_
     assert doc["final_iteration"] == 2
     write_trim_report(cfg, doc, tmp_path / "o")
     assert "**Rejected**: name check" in (tmp_path / "o" / "report.md").read_text()
+
 
 def test_maneuver_identification_refuses_trim_rows_with_empty_channels(tmp_path):
     from pyomo_heli.config import load_identification_config

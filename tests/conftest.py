@@ -14,12 +14,12 @@ def pytest_addoption(parser):
 
 
 #: the test files that take longest, longest first (seconds of one worker in the default run, summed from
-#: `pytest -n 2 --dist loadfile --junitxml`): discovery 230, identification 145, trim_loop 110, flighttest,
-#: close_loop and close_loop_wake 95 each, interrupts 90, ... . `--dist loadfile` (with `--no-loadscope-reorder`,
+#: `pytest -n 2 --dist loadfile --junitxml`): discovery 260, identification 160, trim_loop 130, close_loop_wake 110,
+#: close_loop 105, flighttest 95, interrupts 90, ... . `--dist loadfile` (with `--no-loadscope-reorder`,
 #: pyproject.toml) hands the files to the two workers in collection order; a long file handed out last
 #: (test_close_loop_wake was) leaves the other worker idle to the end. Longest first, the two end close together.
-LONGEST_FIRST = ("test_discovery.py", "test_identification.py", "test_trim_loop.py", "test_flighttest.py",
-                 "test_close_loop.py", "test_close_loop_wake.py", "test_interrupts.py", "test_input_path.py",
+LONGEST_FIRST = ("test_discovery.py", "test_identification.py", "test_trim_loop.py", "test_close_loop_wake.py",
+                 "test_close_loop.py", "test_flighttest.py", "test_interrupts.py", "test_input_path.py",
                  "test_uncertainty.py", "test_check_effect.py", "test_innovations.py", "test_held_out_effects.py",
                  "test_pareto_resume.py", "test_input_errors.py", "test_inspect.py", "test_point_rows.py",
                  "test_parallel.py", "test_discrepancy.py")

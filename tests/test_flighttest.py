@@ -135,43 +135,57 @@ def test_bundled_datasets_regenerate_identically(tmp_path):
     to 1e-6 of each column's largest magnitude (a few units in the last stored
     digit), which is far below the sensor noise and any identification tolerance.
 
-    Default run: bo105_clean whole, and bo105_synthetic's first 12 maneuvers (the 10 identification maneuvers
-    and the two 80 kt validation doublets) with its trims and truth. Each maneuver has its own noise stream and
-    the trims theirs (``trim_stream = 12``), so this prefix of the config regenerates those files exactly as
-    the whole config does (test_appended_maneuvers_keep_the_trims_with_trim_stream). The whole synthetic set
-    (10 more validation doublets, the four 95 s sweeps) is test_bundled_synthetic_dataset_regenerates_whole
-    (slow).
+    Default run: bo105_synthetic's first 12 maneuvers (the 10 identification maneuvers and the two 80 kt
+    validation doublets) with its trims and truth. Each maneuver has its own noise stream and the trims theirs
+    (``trim_stream = 12``), so this prefix of the config regenerates those files exactly as the whole config
+    does (test_appended_maneuvers_keep_the_trims_with_trim_stream). bo105_clean (no noise: each file depends
+    on its own entry alone) with its trims, truth and the two maneuvers the default tests fit. The whole sets,
+    by the command line, are test_bundled_dataset_regenerates_whole (slow).
     """
     import dataclasses
     import json
 
-    procs = _regenerate_with_cli(["bo105_clean"], tmp_path)
-    n, k = "bo105_synthetic", 12
-    cfg = load_config(SYNTHETIC_TOML)
+    def part(n, maneuvers):
+        cfg = load_config(DATA / f"{n}.toml")
+        generate(dataclasses.replace(cfg, maneuvers=maneuvers(cfg)), tmp_path / n)
+        names = [p.name for p in maneuvers(cfg)]
+        committed = json.loads((DATA / n / "manifest.json").read_text())
+        fresh = json.loads((tmp_path / n / "manifest.json").read_text())
+        assert [m["name"] for m in fresh.pop("maneuvers")] == names
+        committed["maneuvers"] = [m for m in committed["maneuvers"] if m["name"] in names]
+        assert fresh == {k: v for k, v in committed.items() if k != "maneuvers"}
+        files = ["trims.csv", "truth.json"] + [f"maneuvers/{m}.csv" for m in names]
+        assert sorted(_files(tmp_path / n)) == sorted(files + ["manifest.json"])
+        # the committed files, the trims cut to the level ones and the start trims of these maneuvers
+        ref = tmp_path / "committed" / n
+        (ref / "maneuvers").mkdir(parents=True)
+        for f in files[1:]:
+            (ref / f).write_bytes((DATA / n / f).read_bytes())
+        lines = (DATA / n / "trims.csv").read_text().splitlines(keepends=True)
+        header = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+        (ref / "trims.csv").write_text("".join(lines[:header + 1] + [line for line in lines[header + 1:] if
+                                                                      line.rstrip().rsplit(",", 1)[1] in
+                                                                      ["level", *names]]))
+        _compare_regenerated(ref, tmp_path / n, files)
+        return cfg
+
+    cfg = part("bo105_synthetic", lambda c: c.maneuvers[:12])
     assert cfg.trim_stream == 12 and {p.role for p in cfg.maneuvers[:10]} == {"identification"}
-    generate(dataclasses.replace(cfg, maneuvers=cfg.maneuvers[:k]), tmp_path / n)
-    committed = json.loads((DATA / n / "manifest.json").read_text())
-    fresh = json.loads((tmp_path / n / "manifest.json").read_text())
-    assert fresh.pop("maneuvers") == committed.pop("maneuvers")[:k] and fresh == committed
-    files = ["trims.csv", "truth.json"] + [f"maneuvers/{p.name}.csv" for p in cfg.maneuvers[:k]]
-    assert sorted(_files(tmp_path / n)) == sorted(files + ["manifest.json"])
-    _compare_regenerated(DATA / n, tmp_path / n, files)
-    for name, proc in procs.items():
-        out, err = proc.communicate(timeout=600)
-        assert proc.returncode == 0, f"{name}: {err}"
-        _check_whole(name, tmp_path)
+    cfg = part("bo105_clean", lambda c: [p for p in c.maneuvers if p.name in ("lon3211_80kt_a", "coldoublet_hover")])
+    assert cfg.noise is False
 
 
 @pytest.mark.slow
-def test_bundled_synthetic_dataset_regenerates_whole(tmp_path):
-    """The whole bo105_synthetic flight test from its committed config, the sweep set (role "frequency") too."""
-    n = "bo105_synthetic"
-    procs = _regenerate_with_cli([n], tmp_path)
-    out, err = procs[n].communicate(timeout=900)
-    assert procs[n].returncode == 0, f"{n}: {err}"
+def test_bundled_dataset_regenerates_whole(tmp_path):
+    """The whole bo105_synthetic flight test (the sweep set, role "frequency", too) and the whole bo105_clean, from
+    their committed configs by `pyomo-heli generate-data`, side by side."""
+    procs = _regenerate_with_cli(["bo105_synthetic", "bo105_clean"], tmp_path)
+    for n, proc in procs.items():
+        out, err = proc.communicate(timeout=900)
+        assert proc.returncode == 0, f"{n}: {err}"
+        _check_whole(n, tmp_path)
     assert {f"maneuvers/{s}.csv" for s in ("lonsweep_hover", "colsweep_hover", "lonsweep_80kt",
-                                           "colsweep_80kt")} <= set(_files(DATA / n))
-    _check_whole(n, tmp_path)
+                                           "colsweep_80kt")} <= set(_files(DATA / "bo105_synthetic"))
 
 
 # ============================================================== 2. check-data and the dataset's shape

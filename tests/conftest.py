@@ -1,10 +1,19 @@
 import os
+import sys
 
 # One BLAS thread per test process, set before numpy loads. `pytest -n 2` runs two workers on CI's two cores; each
 # worker's OpenBLAS would start a thread per core and spin-wait on the other's core (measured on one
 # identification fixture: 61 s of system time in 93 s without this, 11 s with it).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+
+# Bytecode caches: the README installs with `pip install --no-compile` (byte-compiling every installed file took half
+# of the install), so a module is compiled when it is first imported. Where the environment says not to write the
+# caches (PYTHONDONTWRITEBYTECODE), every process would compile every module it imports again: 6.6 s a process for
+# the package and its dependencies on the project's machine, and the tests start about 40 commands. The test run and
+# the commands it starts write them.
+os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+sys.dont_write_bytecode = False
 
 import pytest  # noqa: E402
 

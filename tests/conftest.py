@@ -23,8 +23,8 @@ def pytest_addoption(parser):
 
 
 #: the test files that take longest, longest first (seconds of one worker in the default run, summed from
-#: `pytest -n 2 --dist loadfile --junitxml`): discovery 260, identification 160, trim_loop 130, close_loop_wake 110,
-#: close_loop 105, flighttest 95, interrupts 90, ... . `--dist loadfile` (with `--no-loadscope-reorder`,
+#: `pytest -n 2 --dist loadfile --junitxml`): discovery 215, identification 140, trim_loop 115, close_loop 100,
+#: close_loop_wake, interrupts and flighttest 85 each, ... . `--dist loadfile` (with `--no-loadscope-reorder`,
 #: pyproject.toml) hands the files to the two workers in collection order; a long file handed out last
 #: (test_close_loop_wake was) leaves the other worker idle to the end. Longest first, the two end close together.
 LONGEST_FIRST = ("test_discovery.py", "test_identification.py", "test_trim_loop.py", "test_close_loop_wake.py",

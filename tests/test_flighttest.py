@@ -147,26 +147,25 @@ def test_bundled_datasets_regenerate_identically(tmp_path):
 
     def part(n, maneuvers):
         cfg = load_config(DATA / f"{n}.toml")
-        generate(dataclasses.replace(cfg, maneuvers=maneuvers(cfg)), tmp_path / n)
-        names = [p.name for p in maneuvers(cfg)]
+        plans = maneuvers(cfg)
+        names = [p.name for p in plans]
+        generate(dataclasses.replace(cfg, maneuvers=plans), tmp_path / n)
         committed = json.loads((DATA / n / "manifest.json").read_text())
         fresh = json.loads((tmp_path / n / "manifest.json").read_text())
-        assert [m["name"] for m in fresh.pop("maneuvers")] == names
-        committed["maneuvers"] = [m for m in committed["maneuvers"] if m["name"] in names]
-        assert fresh == {k: v for k, v in committed.items() if k != "maneuvers"}
+        assert [m["name"] for m in fresh["maneuvers"]] == names
+        assert fresh.pop("maneuvers") == [m for m in committed.pop("maneuvers") if m["name"] in names]
+        assert fresh == committed
         files = ["trims.csv", "truth.json"] + [f"maneuvers/{m}.csv" for m in names]
         assert sorted(_files(tmp_path / n)) == sorted(files + ["manifest.json"])
-        # the committed files, the trims cut to the level ones and the start trims of these maneuvers
-        ref = tmp_path / "committed" / n
-        (ref / "maneuvers").mkdir(parents=True)
-        for f in files[1:]:
-            (ref / f).write_bytes((DATA / n / f).read_bytes())
+        _compare_regenerated(DATA / n, tmp_path / n, files[1:])
+        # the committed trims cut to the level ones and the start trims of these maneuvers
         lines = (DATA / n / "trims.csv").read_text().splitlines(keepends=True)
         header = next(i for i, line in enumerate(lines) if not line.startswith("#"))
-        (ref / "trims.csv").write_text("".join(lines[:header + 1] + [line for line in lines[header + 1:] if
-                                                                      line.rstrip().rsplit(",", 1)[1] in
-                                                                      ["level", *names]]))
-        _compare_regenerated(ref, tmp_path / n, files)
+        kept = [line for line in lines[header + 1:] if line.rstrip().rsplit(",", 1)[1] in ["level", *names]]
+        ref = tmp_path / "committed" / n
+        ref.mkdir(parents=True)
+        (ref / "trims.csv").write_text("".join(lines[:header + 1] + kept))
+        _compare_regenerated(ref, tmp_path / n, ["trims.csv"])
         return cfg
 
     cfg = part("bo105_synthetic", lambda c: c.maneuvers[:12])

@@ -323,3 +323,41 @@ def test_a_finished_iteration_is_reused_only_under_the_same_fingerprint(tmp_path
     assert _finished(cfg, folder) is not None
     other = load_identification_config(cfg.path, {"data": {"resample_inputs": "project"}})
     assert _finished(other, folder) is None
+
+
+def test_a_moved_flight_test_keeps_the_fingerprint_and_the_finished_iteration(tmp_path):
+    """The dataset enters the fingerprint by content: the same flight test in another folder (a ``--dataset``
+    override puts its absolute path into the config's tables) keeps the fingerprint, so a moved run folder
+    resumes its finished iteration; an edited data file changes the fingerprint and is not taken."""
+    import json
+    import shutil
+    from pathlib import Path
+
+    from pyomo_heli.workflows.close_loop import _finished
+    from pyomo_heli.workflows.identify import identification_fingerprint
+
+    root = Path(__file__).resolve().parent
+    cfg = load_identification_config(root / "configs" / "m0_noise_small.toml")
+    here, there = tmp_path / "here", tmp_path / "there"
+    shutil.copytree(cfg.dataset, here)
+    shutil.copytree(cfg.dataset, there)
+    at_here = load_identification_config(cfg.path, {"data": {"dataset": str(here)}})
+    at_there = load_identification_config(cfg.path, {"data": {"dataset": str(there)}})
+    assert at_here.raw["data"]["dataset"] != at_there.raw["data"]["dataset"]
+    assert identification_fingerprint(at_here) == identification_fingerprint(at_there) == \
+        identification_fingerprint(cfg)
+
+    folder = tmp_path / "moved" / "iter_0"
+    shutil.copytree(root / "results" / "m0_noise_small", folder)
+    chosen = json.loads((folder / "chosen.json").read_text())
+    chosen["info"]["config"] = str(tmp_path / "where_it_was" / "config.toml")
+    chosen["info"]["dataset"] = str(here)
+    (folder / "chosen.json").write_text(json.dumps(chosen))
+    assert _finished(at_there, folder) is None  # no checkpoint: the recorded paths must be the config's
+    (folder / "checkpoint.json").write_text(json.dumps({"fingerprint": identification_fingerprint(at_here)}))
+    assert _finished(at_there, folder) is not None
+
+    first = sorted(p for p in there.rglob("*.csv"))[0]
+    first.write_text(first.read_text() + "\n")
+    assert identification_fingerprint(at_there) != identification_fingerprint(at_here)
+    assert _finished(at_there, folder) is None

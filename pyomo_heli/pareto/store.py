@@ -239,11 +239,16 @@ def _canonical(obj) -> str:
 def fingerprint(raw_config: dict, dataset: str | Path | None = None, **settings) -> str:
     """SHA-256 over the config table, the dataset files' contents and extra settings.
 
-    The dataset enters by content (not path), so moving a checkout keeps the
-    fingerprint, while editing a data file changes it.
+    The dataset enters by content, not by path: given ``dataset``, the config's
+    ``[data] dataset`` (a path, absolute after a ``--dataset`` override) is left
+    out, so moving a checkout or a run folder keeps the fingerprint, while
+    editing a data file changes it.
     """
     from .._version import __version__
 
+    data = raw_config.get("data")
+    if dataset is not None and isinstance(data, dict) and "dataset" in data:
+        raw_config = {**raw_config, "data": {k: v for k, v in data.items() if k != "dataset"}}
     h = hashlib.sha256()
     h.update(_canonical({"config": raw_config, "settings": settings, "version": __version__}).encode())
     if dataset is not None:

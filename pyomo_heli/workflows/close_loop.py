@@ -165,7 +165,8 @@ def _finished(cfg: IdentificationConfig, folder: Path):
     if not (folder / "chosen.json").is_file():
         return None
     meta = folder / "checkpoint.json"  # written by every identification run (copies in docs/ may lack it)
-    if meta.is_file():
+    fingerprinted = meta.is_file()
+    if fingerprinted:
         from .identify import identification_fingerprint
 
         if read_checkpoint(meta).get("fingerprint") != identification_fingerprint(cfg):
@@ -181,9 +182,11 @@ def _finished(cfg: IdentificationConfig, folder: Path):
             and res.info.get("extensions") == [e.name for e in cfg.model.extensions]
             and res.info.get("extension_forms", {}) == extension_forms(cfg.model.extensions)
             and res.info.get("input_reference_s", 0.0) == cfg.input_reference_s
-            and Path(res.info.get("config", "")).resolve() == Path(cfg.path).resolve()
-            and Path(res.info.get("dataset", "")).resolve() == Path(cfg.dataset).resolve()
             and len(res.front) == cfg.pareto.points)
+    # the fingerprint holds the config's tables and the dataset's content, so a moved folder resumes;
+    # without it (copies) the same config and dataset files must be named
+    same = same and (fingerprinted or (Path(res.info.get("config", "")).resolve() == Path(cfg.path).resolve()
+                                       and Path(res.info.get("dataset", "")).resolve() == Path(cfg.dataset).resolve()))
     if same:  # and the recorded maneuvers, dataset content and model (folders that record them)
         from ..provenance import ResultsMismatchError, check_results_match
 

@@ -102,7 +102,8 @@ def free_parameter_unit(parameters, name: str, unit: str | None, problems, where
 
 def load_identification_config(path: str | Path, overrides: dict | None = None,
                                raw: dict | None = None) -> IdentificationConfig:
-    """Read and check an identification config. ``overrides`` replace top-level tables (tests, CLI).
+    """Read and check an identification config. ``overrides`` replace top-level tables (tests, CLI); a relative
+    ``[data] dataset`` among them is relative to the working directory (one in the file, to the file's folder).
 
     ``raw``: the config's tables as a dict (the parsed TOML) instead of reading ``path``; ``path`` then
     only names the config in messages and is the base of relative paths (its folder).
@@ -119,6 +120,11 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
             raise ConfigError(f"{path}: a config must be a dict of tables, got {type(raw).__name__}")
         raw = copy.deepcopy(raw)
     for k, v in (overrides or {}).items():
+        if k == "data" and isinstance(v, dict) and isinstance(v.get("dataset"), (str, Path)) \
+                and not Path(v["dataset"]).is_absolute():
+            # a path given as an override (a command line, a study) is relative to the working directory, as one
+            # written in the config is relative to the config's folder
+            v = {**v, "dataset": str(Path(v["dataset"]).resolve())}
         raw[k] = {**raw.get(k, {}), **v} if isinstance(v, dict) else v
     f = str(path)
     problems = Problems(f, ConfigError)

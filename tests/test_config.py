@@ -191,6 +191,24 @@ def test_dataset_folder_without_manifest(tmp_path):
         load_identification_config(tmp_path / "cfg.toml")
 
 
+def test_a_relative_dataset_override_is_relative_to_the_working_directory(tmp_path, monkeypatch):
+    """A relative [data] dataset in the config is relative to the config's folder; given as an override (a
+    command line, a study's --out) it is relative to the working directory."""
+    import re
+    import shutil
+
+    conf = tmp_path / "configs"
+    conf.mkdir()
+    shutil.copytree(DATA, tmp_path / "flight")
+    (conf / "cfg.toml").write_text(write(tmp_path).read_text().replace(str(DATA), "../flight"))
+    assert load_identification_config(conf / "cfg.toml").dataset == (tmp_path / "flight").resolve()
+    monkeypatch.chdir(tmp_path)
+    cfg = load_identification_config(conf / "cfg.toml", {"data": {"dataset": "flight"}})
+    assert cfg.dataset == (tmp_path / "flight").resolve()
+    with pytest.raises(ConfigError, match=re.escape(f"folder {tmp_path / 'configs' / 'elsewhere'} not found")):
+        load_identification_config(conf / "cfg.toml", {"data": {"dataset": "configs/elsewhere"}})
+
+
 def test_spectral_window_of_too_few_samples_is_named():
     from pyomo_heli.dataset import load_flight_test
     from pyomo_heli.dataset.frequency_response import SpectralSettings, estimate

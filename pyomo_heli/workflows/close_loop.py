@@ -177,16 +177,16 @@ def _finished(cfg: IdentificationConfig, folder: Path):
         return None
     from .identify import extension_forms
 
+    # the fingerprint holds the config's tables and the dataset's content, so a moved folder resumes;
+    # without it (copies) the same config and dataset files must be named
+    same_files = fingerprinted or (Path(res.info.get("config", "")).resolve() == Path(cfg.path).resolve()
+                                   and Path(res.info.get("dataset", "")).resolve() == Path(cfg.dataset).resolve())
     same = (res.info.get("shape_parameters", {}) == shape_values(cfg.model)
             and res.parameters == [f.name for f in cfg.free]
             and res.info.get("extensions") == [e.name for e in cfg.model.extensions]
             and res.info.get("extension_forms", {}) == extension_forms(cfg.model.extensions)
             and res.info.get("input_reference_s", 0.0) == cfg.input_reference_s
-            and len(res.front) == cfg.pareto.points)
-    # the fingerprint holds the config's tables and the dataset's content, so a moved folder resumes;
-    # without it (copies) the same config and dataset files must be named
-    same = same and (fingerprinted or (Path(res.info.get("config", "")).resolve() == Path(cfg.path).resolve()
-                                       and Path(res.info.get("dataset", "")).resolve() == Path(cfg.dataset).resolve()))
+            and len(res.front) == cfg.pareto.points and same_files)
     if same:  # and the recorded maneuvers, dataset content and model (folders that record them)
         from ..provenance import ResultsMismatchError, check_results_match
 

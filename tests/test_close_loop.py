@@ -361,3 +361,37 @@ def test_a_moved_flight_test_keeps_the_fingerprint_and_the_finished_iteration(tm
     first.write_text(first.read_text() + "\n")
     assert identification_fingerprint(at_there) != identification_fingerprint(at_here)
     assert _finished(at_there, folder) is None
+
+
+def test_a_loop_folder_made_on_another_machine_reads_the_configs_own_flight_test(tmp_path):
+    """A committed loop folder records the absolute path of the flight test it ran on (another machine's). Reading
+    one of its iterations (check-effect, the envelope study) falls back to the config's own flight test, which must
+    have the content the results record: the same data are accepted, other data are refused by name."""
+    import json
+    import shutil
+    from pathlib import Path
+
+    from pyomo_heli.provenance import ResultsMismatchError, dataset_sha256
+    from pyomo_heli.workflows.check_effect import loop_iteration
+
+    root = Path(__file__).resolve().parent
+    cfg = load_identification_config(root / "configs" / "m0_noise_small.toml")
+    loop = tmp_path / "loop"
+    shutil.copytree(root / "results" / "m0_noise_small", loop / "iter_0")
+    chosen = json.loads((loop / "iter_0" / "chosen.json").read_text())
+    chosen["info"]["dataset_sha256"] = dataset_sha256(cfg.dataset)  # as results folders record it now
+    (loop / "iter_0" / "chosen.json").write_text(json.dumps(chosen))
+    record = {"iteration": 0, "extensions": [], "results_dir": "iter_0", "parameters": {}}
+    doc = {"config": str(cfg.path), "dataset": "/elsewhere/on/another/machine/flight_test", "iterations": [record]}
+    (loop / "loop.json").write_text(json.dumps(doc))
+    _, it, got = loop_iteration(loop, 0, config=cfg.path)
+    assert it["iteration"] == 0 and Path(got.dataset).resolve() == Path(cfg.dataset).resolve()
+
+    edited = tmp_path / "edited"  # the config's own flight test, one sample changed: refused, naming the dataset
+    shutil.copytree(cfg.dataset, edited)
+    first = sorted(edited.rglob("*.csv"))[0]
+    first.write_text(first.read_text() + "\n")
+    other = tmp_path / "other.toml"
+    other.write_text(cfg.path.read_text().replace('dataset = "../data/m0_noise_small"', f'dataset = "{edited}"'))
+    with pytest.raises(ResultsMismatchError, match="dataset"):
+        loop_iteration(loop, 0, config=other)

@@ -32,7 +32,8 @@ from .close_loop import loop_settings, score_test_inputs
 
 def loop_iteration(loop_dir, iteration: int | None = None, config=None) -> tuple[dict, dict, IdentificationConfig]:
     """A finished loop's ``loop.json``, the record of iteration ``iteration`` (default: the model the loop kept) and
-    that iteration's config: ``config`` (else the one its ``chosen.json`` names) on the loop's dataset, plus the
+    that iteration's config: ``config`` (else the one its ``chosen.json`` names) on the loop's dataset (the config's
+    own when the loop's path is not on this machine and the results record the content it must have), plus the
     effects the loop had added, checked against the iteration's results folder. ValueError for an iteration the
     loop did not run."""
     loop_dir = Path(loop_dir)
@@ -47,8 +48,11 @@ def loop_iteration(loop_dir, iteration: int | None = None, config=None) -> tuple
             raise ValueError(f"{loop_dir}: no iteration {iteration} (the loop ran iterations {ran})")
     folder = loop_dir / it["results_dir"]
     res = IdentificationResult.load(folder)
+    # the loop's dataset; a loop folder made on another machine (a path that is not here) reads the config's own,
+    # which check_results_match below holds to the loop's by the content the results record
+    here = Path(doc["dataset"]).is_dir() or not res.info.get("dataset_sha256")
     cfg = load_identification_config(config or find_config(folder, res),
-                                     overrides={"data": {"dataset": doc["dataset"]}})
+                                     overrides={"data": {"dataset": doc["dataset"]}} if here else None)
     if res.info.get("extensions"):
         cfg = config_of_result(cfg, res)
     check_results_match(cfg, res, folder)

@@ -123,6 +123,53 @@ def test_weights_of_an_interior_front_point_make_it_stationary():
     assert u.combination == "weighted" and b / a == pytest.approx(0.25, rel=1e-8)
 
 
+def test_weights_do_not_depend_on_the_parameters_nominal_scales():
+    """A front point's standard errors must not depend on the unit a parameter is scaled in. The case a
+    closed loop met (fuselage_wake_incidence 22, iteration 2's direct point): the trade between the objectives
+    runs along p0 (g_trim = -4 g_time there), the trims cannot see p2, and the float model's J_time gradient
+    keeps about one standard error's worth along p2 (the collocation NLP's optimum is not the float model's to
+    the last digit). With p2's nominal scale 200 times its standard error, a balance in scaled units saw two
+    orthogonal gradients and took weights (1, 0) or (0, 1) by the rounding of a sign: time-only or trim-only
+    standard errors, 5-10 times apart."""
+    rng = np.random.default_rng(8)
+    info = _linear_info(rng)
+    info.S_trim = {"col": info.S_trim["col"] * np.array([1.0, 1.0, 0.0])}  # the trims do not see p2
+    se_time = np.sqrt(np.diag(np.linalg.inv(info.fisher_time())))
+    g_t = np.array([7.0 / se_time[0], 0.0, 1.0 / se_time[2]])  # 7 standard errors' worth along p0, 1 along p2
+    g_r = np.array([-4 * g_t[0], 0.0, 0.0])
+    info.e_time = {"y1": -np.linalg.pinv(info.S_time["y1"].T) @ g_t * info.R_time["y1"], "y2": np.zeros(200)}
+    info.e_trim = {"col": np.linalg.pinv(info.S_trim["col"].T) @ (-g_r) * info.n_trims * DEG**2 / 2}
+    np.testing.assert_allclose(info.grad_time(), g_t, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(info.grad_trim(), g_r, rtol=1e-6, atol=1e-9)
+    ref = cramer_rao(info, _free(3), kind="eps")
+    assert ref.combination == "weighted"
+    a, b = ref.weights
+    assert b / a == pytest.approx(0.25, rel=0.05)  # the trade along p0; p2's stray gradient moves it little
+    for s2 in (1e-3, 200 * se_time[2], 1e4):
+        info.scale = np.array([1.0, 1.0, s2])
+        u = cramer_rao(info, _free(3), kind="eps")
+        assert u.weights == pytest.approx(ref.weights, rel=1e-9), s2
+        assert u.se == pytest.approx(ref.se, rel=1e-9), s2
+
+
+def test_weights_from_the_gradients_are_eq11s_at_its_direct_solve():
+    """An independent check of the multiplier estimate on a real front: the direct Eq. 11 solve of the committed
+    Case 1 run (a copy in tests/results/case1) minimises sum_k ((J_k - U_k) / (N_k - U_k))^2, so it is stationary
+    for a J_time + b J_trim with a, b proportional to (J_k - U_k) / (N_k - U_k)^2: known in closed form. The
+    weights found from the float model's gradients alone agree with them, and so the standard errors."""
+    from pyomo_heli.pareto.result import IdentificationResult
+    from pyomo_heli.uncertainty.front import _information, eq11_weights
+
+    cfg = load_identification_config(CONFIGS / "case1.toml")
+    res = IdentificationResult.load(HERE / "results" / "case1")
+    exact = eq11_weights(res.direct, res.utopia, res.nadir)
+    info = _information(cfg, identification_data(cfg), res.direct["parameters"])
+    found = cramer_rao(info, cfg.free, kind="direct")
+    assert found.combination == "weighted"
+    assert found.weights[1] / found.weights[0] == pytest.approx(exact[1] / exact[0], rel=0.01)
+    assert found.se == pytest.approx(cramer_rao(info, cfg.free, weights=exact).se, rel=1e-3)
+
+
 def test_weights_of_a_point_that_is_both_optima_are_the_time_domain_ones():
     """A degenerate front (noise-free data: A = B = every point): gradients of rounding size in
     arbitrary directions must not pick the weights; the point is J_time's optimum, so (1, 0), the same

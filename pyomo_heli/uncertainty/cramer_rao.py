@@ -21,7 +21,8 @@ is the sandwich (M-estimator) covariance of that weighted sum,
 
 with ``H_trim`` the Gauss-Newton Hessian of J_trim and ``G_trim`` the
 covariance of its gradient under the estimated trim noise. The weights (a, b)
-are found from the two gradients at the point (``a g_time + b g_trim = 0``):
+are found from the two gradients at the point (``a g_time + b g_trim = 0``; b/a is the
+least-squares multiplier in the metric of the inverse information, so no parameter's nominal scale enters):
 point A has (1, 0) (pure ML: cov = F_time^-1), the trim anchor B the limit
 b >> a, an interior point its own ratio. This needs no solver multipliers, so
 it works for any parameter set read back from ``front.csv``. A point whose
@@ -322,16 +323,30 @@ def objective_weights(info: PointInformation, kind: str, free_idx) -> tuple[floa
     if kind == "B":
         # lexicographic trim anchor: J_trim dominates; J_time only decides what trims cannot see
         return 1e-6 * np.linalg.norm(Hr) / max(np.linalg.norm(Ft), 1e-300), 1.0
-    sc = info.scale[free_idx]
-    G = np.column_stack([info.grad_time()[free_idx] * sc, info.grad_trim()[free_idx] * sc])
-    G = G / np.maximum(np.linalg.norm(G, axis=0), 1e-300)  # balance, then undo below
-    v = np.linalg.svd(G)[2][-1]
-    v = v if v.sum() >= 0 else -v
-    a, b = max(v[0], 0.0), max(v[1], 0.0)
-    nt, nr = np.linalg.norm(info.grad_time()[free_idx] * sc), np.linalg.norm(info.grad_trim()[free_idx] * sc)
-    a, b = a / max(nt, 1e-300), b / max(nr, 1e-300)
-    s = a + b
-    return (a / s, b / s) if s > 0 else (1.0, 0.0)
+    # b/a: the least-squares multiplier, the k >= 0 that brings g_time + k g_trim closest to zero, with gradients
+    # compared in the metric of the combined information's inverse (a step in standard errors): exact when the
+    # gradients are anti-parallel (a g_time + b g_trim = 0), continuous in them otherwise, and independent of the
+    # parameters' nominal scales. Only the part of g_time along g_trim is balanced: what the float model's J_time
+    # gradient keeps along a parameter the trims cannot see (its optimum is the collocation NLP's only to within
+    # a fraction of a standard error) is left out instead of setting the ratio. A balance in nominal scales let
+    # that part dominate through an inertia's scale, and a sign picked by rounding then gave time-only or
+    # trim-only standard errors.
+    F = info.fisher_time()[np.ix_(free_idx, free_idx)] + info.fisher_trim()[np.ix_(free_idx, free_idx)]
+    Fi = _pseudo_inverse(F)
+    gt, gr = info.grad_time()[free_idx], info.grad_trim()[free_idx]
+    rr = float(gr @ Fi @ gr)
+    k = max(-float(gt @ Fi @ gr) / rr, 0.0) if rr > 0 else 0.0
+    return 1.0 / (1.0 + k), k / (1.0 + k)
+
+
+def _pseudo_inverse(F: np.ndarray) -> np.ndarray:
+    """F^-1, with directions F does not see floored at 1e-12 of its largest eigenvalue (after scaling F to a unit
+    diagonal, so that no parameter's unit decides what counts as unseen)."""
+    d = np.sqrt(np.clip(np.diag(F), 0.0, None))
+    d = np.where(d > 0, d, 1.0)
+    w, V = np.linalg.eigh(F / np.outer(d, d))
+    w = np.maximum(w, 1e-12 * max(w.max(), 1e-300))
+    return (V / w) @ V.T / np.outer(d, d)
 
 
 def cramer_rao(info: PointInformation, free, kind: str = "A", weights: tuple | None = None) -> ParameterUncertainty:

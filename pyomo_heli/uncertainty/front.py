@@ -6,12 +6,14 @@ Adds to an :class:`~pyomo_heli.pareto.result.IdentificationResult`:
   a bound) and ``at_bound`` (e.g. ``theta_twist:upper``) for every solved point;
 - ``chosen.json``: an ``uncertainty`` entry (standard errors, correlation
   matrix, at-bound flags, the objective weights used) in ``chosen``,
-  ``direct`` and in ``time_domain.json``;
+  ``direct`` and in ``time_domain.json``; the direct Eq. 11 solve's weights are known in closed form
+  (:func:`eq11_weights`), the others' are found from the gradients;
 - ``identifiability.csv``: singular values and directions of the scaled
   sensitivity matrices (time, trim, combined) at the chosen point.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from ..log import info
@@ -28,6 +30,21 @@ def _information(cfg, data, parameters):
 def point_standard_errors(cfg, data, parameters: dict, kind: str = "eps") -> dict:
     """name -> Cramer-Rao standard error (SI; nan at a bound) of a front point with these parameter values."""
     return dict(cramer_rao(_information(cfg, data, parameters), cfg.free, kind=kind).se)
+
+
+def eq11_weights(point: dict, utopia, nadir) -> tuple | None:
+    """(a, b) with the direct Eq. 11 solve stationary for a J_time + b J_trim, in closed form: it minimises
+    sum_k ((J_k - U_k) / (N_k - U_k))^2, so a and b are proportional to (J_k - U_k) / (N_k - U_k)^2. None (the
+    weights are then found from the gradients) unless the front has exactly the two objectives and a spread in
+    each."""
+    if len(utopia) != 2 or len(nadir) != 2:
+        return None
+    w = []
+    for j, u, n in zip((point["J_time"], point["J_trim"]), utopia, nadir):
+        if not all(map(math.isfinite, (j, u, n))) or n == u:
+            return None
+        w.append(max(j - u, 0.0) / (n - u) ** 2)
+    return (w[0] / sum(w), w[1] / sum(w)) if sum(w) > 0 else None
 
 
 def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "all"):
@@ -60,7 +77,8 @@ def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "a
         if point and int(point["index"]) in by_index:
             point["uncertainty"] = by_index[int(point["index"])][0].to_dict()
     if result.direct and result.direct.get("success"):
-        u = cramer_rao(_information(cfg, data, result.direct["parameters"]), cfg.free, kind="direct")
+        u = cramer_rao(_information(cfg, data, result.direct["parameters"]), cfg.free, kind="direct",
+                       weights=eq11_weights(result.direct, result.utopia, result.nadir))
         result.direct["uncertainty"] = u.to_dict()
     ident = None
     if int(result.chosen["index"]) in by_index:

@@ -170,6 +170,30 @@ def test_weights_from_the_gradients_are_eq11s_at_its_direct_solve():
     assert found.se == pytest.approx(cramer_rao(info, cfg.free, weights=exact).se, rel=1e-3)
 
 
+def test_weights_of_the_front_points_lie_between_the_fronts_slopes():
+    """A second independent check, on every interior point of the committed Case 1 front: an epsilon point's
+    multiplier b/a is -dJ_time/dJ_trim along the front (envelope theorem), so it lies between the slopes of the
+    chords to its two neighbours (the front is convex there). The multiplier found from the gradients does."""
+    from pyomo_heli.pareto.result import IdentificationResult
+    from pyomo_heli.uncertainty.front import _information
+
+    cfg = load_identification_config(CONFIGS / "case1.toml")
+    res = IdentificationResult.load(HERE / "results" / "case1")
+    data = identification_data(cfg)
+    f = res.front[res.front["success"].astype(bool)].sort_values("J_trim").reset_index(drop=True)
+    checked = 0
+    for r in range(1, len(f) - 1):
+        if f.loc[r, "kind"] != "eps":
+            continue
+        info = _information(cfg, data, {n: float(f.loc[r, n]) for n in res.parameters})
+        a, b = cramer_rao(info, cfg.free, kind="eps").weights
+        steeper = -(f.J_time[r] - f.J_time[r - 1]) / (f.J_trim[r] - f.J_trim[r - 1])
+        flatter = -(f.J_time[r + 1] - f.J_time[r]) / (f.J_trim[r + 1] - f.J_trim[r])
+        assert flatter <= b / a <= steeper, (int(f.loc[r, "index"]), b / a, flatter, steeper)
+        checked += 1
+    assert checked == 9
+
+
 def test_weights_of_a_point_that_is_both_optima_are_the_time_domain_ones():
     """A degenerate front (noise-free data: A = B = every point): gradients of rounding size in
     arbitrary directions must not pick the weights; the point is J_time's optimum, so (1, 0), the same

@@ -29,6 +29,17 @@ def utopia_distance_n(J, utopia, nadir) -> np.ndarray:
     return np.sqrt(np.sum(terms**2, axis=1))
 
 
+def utopia_distance_weights(J, utopia, nadir) -> np.ndarray | None:
+    """The weights w (summing to 1) for which the point J of the direct Eq. 11 solve is stationary for sum_k w_k J_k:
+    it minimises sum_k ((J_k - U_k)/(N_k - U_k))^2, so w_k is proportional to (J_k - U_k)/(N_k - U_k)^2. None when an
+    objective has no spread on the front (or a value is not finite) or J is at utopia."""
+    J, U, N = (np.asarray(x, float) for x in (J, utopia, nadir))
+    if not (np.isfinite(J).all() and np.isfinite(U).all() and np.isfinite(N).all()) or np.any(N == U):
+        return None
+    w = np.maximum(J - U, 0.0) / (N - U) ** 2
+    return w / w.sum() if w.sum() > 0 else None
+
+
 def nondominated(J) -> np.ndarray:
     """Mask of the rows of J (points, objectives; all minimised) that no other row dominates.
 

@@ -13,10 +13,10 @@ Adds to an :class:`~pyomo_heli.pareto.result.IdentificationResult`:
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from ..log import info
+from ..pareto.eq11 import utopia_distance_weights
 from .cramer_rao import cramer_rao, point_information
 from .identifiability import identifiability
 
@@ -33,18 +33,13 @@ def point_standard_errors(cfg, data, parameters: dict, kind: str = "eps") -> dic
 
 
 def eq11_weights(point: dict, utopia, nadir) -> tuple | None:
-    """(a, b) with the direct Eq. 11 solve stationary for a J_time + b J_trim, in closed form: it minimises
-    sum_k ((J_k - U_k) / (N_k - U_k))^2, so a and b are proportional to (J_k - U_k) / (N_k - U_k)^2. None (the
-    weights are then found from the gradients) unless the front has exactly the two objectives and a spread in
-    each."""
+    """(a, b) with the direct Eq. 11 solve stationary for a J_time + b J_trim, in closed form
+    (:func:`~pyomo_heli.pareto.eq11.utopia_distance_weights`). None (the weights are then found from the gradients)
+    unless the front has exactly the two objectives and a spread in each."""
     if len(utopia) != 2 or len(nadir) != 2:
         return None
-    w = []
-    for j, u, n in zip((point["J_time"], point["J_trim"]), utopia, nadir):
-        if not all(map(math.isfinite, (j, u, n))) or n == u:
-            return None
-        w.append(max(j - u, 0.0) / (n - u) ** 2)
-    return (w[0] / sum(w), w[1] / sum(w)) if sum(w) > 0 else None
+    w = utopia_distance_weights((point["J_time"], point["J_trim"]), utopia, nadir)
+    return None if w is None else (float(w[0]), float(w[1]))
 
 
 def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "all"):

@@ -115,6 +115,33 @@ def test_front_sanity(noisy_case1):
     assert np.linalg.norm(direct) <= d[k] + 1e-6  # and it is at least as close to utopia
 
 
+def test_epsilon_points_record_the_fronts_slope(noisy_case1):
+    """Each epsilon point records b/a = -dJ_time/dJ_trim from its J_trim bound's multiplier. Two independent checks:
+    it lies between the slopes of the chords to its neighbours (envelope theorem; the front is convex), and it
+    equals the least-squares multiplier found from the float model's gradients alone (uncertainty.cramer_rao),
+    so the standard errors are the same either way. A's bound is inactive: 0."""
+    from pyomo_heli.nlp.identification import identification_data
+    from pyomo_heli.uncertainty.cramer_rao import cramer_rao
+    from pyomo_heli.uncertainty.front import _information
+
+    cfg, out, res = noisy_case1
+    f = pd.read_csv(out / "front.csv").sort_values("J_trim").reset_index(drop=True)
+    assert f.loc[f["kind"] == "A", "multiplier_trim"].abs().max() < 1e-9
+    data, checked = identification_data(cfg), 0
+    for r in range(1, len(f) - 1):
+        assert f.loc[r, "kind"] == "eps"
+        k = f.loc[r, "multiplier_trim"]
+        steeper = -(f.J_time[r] - f.J_time[r - 1]) / (f.J_trim[r] - f.J_trim[r - 1])
+        flatter = -(f.J_time[r + 1] - f.J_time[r]) / (f.J_trim[r + 1] - f.J_trim[r])
+        assert flatter <= k <= steeper, (r, k, flatter, steeper)
+        info = _information(cfg, data, {n: float(f.loc[r, n]) for n in res.parameters})
+        a, b = cramer_rao(info, cfg.free, kind="eps").weights
+        assert k == pytest.approx(b / a, rel=1e-3)
+        assert cramer_rao(info, cfg.free, kind="eps", multiplier=k).weights == pytest.approx((a, b), rel=1e-3)
+        checked += 1
+    assert checked == 3
+
+
 def test_warm_starts_save_iterations(noisy_case1):
     _, out, res = noisy_case1
     warm, cold = res.info["mean_iterations_front"], res.info["mean_iterations_front_cold"]

@@ -83,6 +83,10 @@ def test_front_points_match_the_closed_form(box_front):
         np.testing.assert_allclose([p.parameters["a"], p.parameters["b"]], [a, b], atol=1e-5)
         np.testing.assert_allclose([p.J_f1, p.J_f2, p.J_f3], _f(a, b), atol=2e-5)
         assert 0 < p.iterations < 100
+        # the bounds' multipliers, -df1/df_k = a / (1 - a) (KKT: 2a + 2 lambda (a - 1) = 0), 0 where inactive
+        np.testing.assert_allclose([p.multipliers["f2"], p.multipliers["f3"]], [a / (1 - a), b / (1 - b)],
+                                   rtol=1e-4, atol=1e-5)
+        assert p.row()["multiplier_f2"] == p.multipliers["f2"]
 
 
 def test_eq11_choice_under_both_nadir_rules(box_front):

@@ -204,16 +204,32 @@ class EpsilonConstraintSolver:
             success, status, iterations, wall, setup = False, f"{type(exc).__name__}: {exc}", -1, 0.0, 0.0
         if not success and status in IPOPT_INFEASIBLE and any(math.isfinite(v) for v in eps.values()):
             status, note = INFEASIBLE, status
+        multipliers = self.multipliers(scale or self.scale[objective]) if success and objective == self.primary else {}
         return Outcome(J={k: _value(e) for k, e in self.J.items()}, parameters=free_parameter_values(self.m),
                        success=success, status=status, iterations=iterations, wall_time=wall, setup_time=setup,
-                       note=note)
+                       note=note, multipliers=multipliers)
+
+    def multipliers(self, primary_scale: float) -> dict:
+        """bounded objective -> -dJ_0/dJ_k at the solution in the model, from its epsilon constraint's multiplier.
+
+        The solve minimised J_0 / primary_scale subject to J_k / s_k <= eps_k, and the solver's ``dual`` is
+        d(objective)/d(bound) (pyomo_heli.solvers), so -dJ_0/dJ_k = -dual primary_scale / s_k: the weight ratio b/a
+        of the a J_0 + b J_k the point is stationary for (KKT), and the front's slope (envelope theorem). NaN when
+        the solver wrote no multipliers."""
+        dual = self.m.component("dual")
+        out = {}
+        for k in self.bounded:
+            con = self.m.component("eps_con" if k == "trim" else f"eps_{k}_con")
+            lam = dual.get(con) if isinstance(dual, pyo.Suffix) else None
+            out[k] = -float(lam) * primary_scale / self.scale[k] if lam is not None else math.nan
+        return out
 
     def _point(self, index: int, kind: str, eps: dict, out: Outcome, warm_start: str, grid=()):
         """The point record of a solve (subclasses return their own point type)."""
         return EpsilonPoint(index=index, kind=kind, J=out.J, epsilon={k: eps.get(k, math.inf) for k in self.bounded},
                             parameters=out.parameters, success=out.success, status=out.status,
                             iterations=out.iterations, wall_time=out.wall_time, setup_time=out.setup_time,
-                            warm_start=warm_start, grid=tuple(grid), note=out.note)
+                            warm_start=warm_start, grid=tuple(grid), note=out.note, multipliers=dict(out.multipliers))
 
     def solve_eps(self, index: int, eps: dict, warm_start: str, options=None, grid=()):
         """min J_0 under the bounds ``eps`` at the front's objective scale: one point."""

@@ -88,6 +88,7 @@ class FrontPoint:
     cold_status: str | None = None
     cold_J_time: float | None = None
     cold_wall_time: float | None = None
+    multiplier_trim: float = math.nan  # -dJ_time/dJ_trim from the J_trim bound's multiplier (0: inactive; nan: none)
 
     def row(self) -> dict:
         d = asdict(self)
@@ -189,7 +190,7 @@ class ParetoSolver(EpsilonConstraintSolver):
         return FrontPoint(index=index, kind=point_kind, epsilon=epsilon, J_time=out.J["time"], J_trim=out.J["trim"],
                           parameters=out.parameters, success=out.success, status=out.status,
                           iterations=out.iterations, wall_time=out.wall_time, setup_time=out.setup_time,
-                          warm_start=warm_start)
+                          warm_start=warm_start, multiplier_trim=out.multipliers.get("trim", math.nan))
 
     def solve_eps(self, index: int, eps: dict, warm_start: str, options=None, grid=()):
         return self._solve("time", index, "eps", float(eps.get("trim", math.inf)), warm_start, options,

@@ -6,7 +6,7 @@ Used by :mod:`.epsilon` (the N-objective solver) and the fronts built on it (:mo
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import pyomo.environ as pyo
@@ -141,6 +141,9 @@ class Outcome:
     wall_time: float
     setup_time: float
     note: str = ""
+    #: bounded objective -> -dJ_0/dJ_k at the solution, from the epsilon constraint's multiplier (0: bound inactive;
+    #: only for a solve that minimises J_0); the weight ratio b/a of a J_0 + b J_k the point is stationary for
+    multipliers: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -164,6 +167,7 @@ class EpsilonPoint:
     grid: tuple = ()
     note: str = ""
     first_stage_min: float = math.nan  # anchors of bounded objectives: the objective's own minimum
+    multipliers: dict = field(default_factory=dict)  # bounded objective -> -dJ_0/dJ_k (Outcome.multipliers)
     start: str = ""  # grid points: the solution the solve started from (EpsilonConstraintSolver.grid_start)
 
     def __getattr__(self, name):
@@ -173,10 +177,11 @@ class EpsilonPoint:
 
     def row(self) -> dict:
         d = asdict(self)
-        for k in ("J", "epsilon", "parameters"):
+        for k in ("J", "epsilon", "parameters", "multipliers"):
             d.pop(k)
         d.update({f"J_{k}": v for k, v in self.J.items()})
         d.update({f"epsilon_{k}": v for k, v in self.epsilon.items()})
+        d.update({f"multiplier_{k}": v for k, v in self.multipliers.items()})
         d["grid"] = ",".join(str(i) for i in self.grid)
         d.update(self.parameters)
         return d

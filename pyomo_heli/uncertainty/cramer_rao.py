@@ -21,11 +21,12 @@ is the sandwich (M-estimator) covariance of that weighted sum,
 
 with ``H_trim`` the Gauss-Newton Hessian of J_trim and ``G_trim`` the
 covariance of its gradient under the estimated trim noise. The weights (a, b)
-are found from the two gradients at the point (``a g_time + b g_trim = 0``; b/a is the
-least-squares multiplier in the metric of the inverse information, so no parameter's nominal scale enters):
-point A has (1, 0) (pure ML: cov = F_time^-1), the trim anchor B the limit
-b >> a, an interior point its own ratio. This needs no solver multipliers, so
-it works for any parameter set read back from ``front.csv``. A point whose
+of an epsilon point are its solve's: b/a = -dJ_time/dJ_trim from the J_trim bound's multiplier (front.csv
+``multiplier_trim``). Without one (a parameter set from elsewhere, a front.csv written before the column) they
+are found from the two gradients at the point (``a g_time + b g_trim = 0``; b/a is the least-squares multiplier in
+the metric of the inverse information, so no parameter's nominal scale enters); on the small Case 1 front the two
+agree to 1e-5 (tests/test_identification.py). Point A has (1, 0) (pure ML: cov = F_time^-1), the trim anchor B the
+limit b >> a, an interior point its own ratio. A point whose
 Newton step towards one objective's optimum is below ``STATIONARY_SE``
 standard errors counts as that objective's optimum (weights (1, 0) or
 (0, 1)): on a degenerate front (noise-free data, every point the same
@@ -303,8 +304,12 @@ def newton_step_in_standard_errors(H: np.ndarray, G: np.ndarray, g: np.ndarray) 
     return float(np.max(ratio))
 
 
-def objective_weights(info: PointInformation, kind: str, free_idx) -> tuple[float, float]:
-    """(a, b) with the point stationary for a J_time + b J_trim; see the module docstring."""
+def objective_weights(info: PointInformation, kind: str, free_idx, multiplier: float | None = None
+                      ) -> tuple[float, float]:
+    """(a, b) with the point stationary for a J_time + b J_trim; see the module docstring.
+
+    ``multiplier``: an epsilon point's b/a as its solve found it (-dJ_time/dJ_trim from the J_trim bound's
+    multiplier, front.csv ``multiplier_trim``), used instead of the least-squares estimate when finite."""
     if kind == "A" or not info.S_trim:
         return 1.0, 0.0
     if not info.S_time:
@@ -320,6 +325,8 @@ def objective_weights(info: PointInformation, kind: str, free_idx) -> tuple[floa
         Gr = info.gradient_covariance_trim()[np.ix_(free_idx, free_idx)]
         if newton_step_in_standard_errors(Hr, Gr, gr) < STATIONARY_SE:
             return 0.0, 1.0
+    if kind == "eps" and multiplier is not None and math.isfinite(multiplier) and multiplier >= 0:
+        return 1.0 / (1.0 + multiplier), multiplier / (1.0 + multiplier)
     if kind == "B":
         # lexicographic trim anchor: J_trim dominates; J_time only decides what trims cannot see
         return 1e-6 * np.linalg.norm(Hr) / max(np.linalg.norm(Ft), 1e-300), 1.0
@@ -349,18 +356,20 @@ def _pseudo_inverse(F: np.ndarray) -> np.ndarray:
     return (V / w) @ V.T / np.outer(d, d)
 
 
-def cramer_rao(info: PointInformation, free, kind: str = "A", weights: tuple | None = None) -> ParameterUncertainty:
+def cramer_rao(info: PointInformation, free, kind: str = "A", weights: tuple | None = None,
+               multiplier: float | None = None) -> ParameterUncertainty:
     """Standard errors and correlations at ``info``'s estimate for a front point of ``kind``.
 
     kind "A" (time domain): F_time^-1. "B" / "eps" / "direct": the sandwich
     covariance of the weighted sum it is stationary for (module docstring).
-    ``weights`` (a, b) overrides the weights found from the gradients.
+    ``weights`` (a, b) overrides the weights found from the gradients; ``multiplier``, an epsilon point's
+    b/a from its solve (:func:`objective_weights`).
     """
     names = info.names
     bounds = active_bounds(info.values, free)
     idx = [i for i, n in enumerate(names) if not bounds[n]]
     n = len(names)
-    a, b = weights if weights is not None else objective_weights(info, kind, idx)
+    a, b = weights if weights is not None else objective_weights(info, kind, idx, multiplier)
     Ft = info.fisher_time()[np.ix_(idx, idx)]
     H = a * Ft + b * info.hessian_trim()[np.ix_(idx, idx)]
     G = a * a * Ft + b * b * info.gradient_covariance_trim()[np.ix_(idx, idx)]

@@ -7,12 +7,14 @@ Adds to an :class:`~pyomo_heli.pareto.result.IdentificationResult`:
 - ``chosen.json``: an ``uncertainty`` entry (standard errors, correlation
   matrix, at-bound flags, the objective weights used) in ``chosen``,
   ``direct`` and in ``time_domain.json``; the direct Eq. 11 solve's weights are known in closed form
-  (:func:`eq11_weights`), the others' are found from the gradients;
+  (:func:`eq11_weights`), an epsilon point's from its solve's multiplier (``multiplier_trim``), the others'
+  are found from the gradients;
 - ``identifiability.csv``: singular values and directions of the scaled
   sensitivity matrices (time, trim, combined) at the chosen point.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from ..log import info
@@ -27,9 +29,10 @@ def _information(cfg, data, parameters):
                              input_error_ar=cfg.nlp.input_error_ar)
 
 
-def point_standard_errors(cfg, data, parameters: dict, kind: str = "eps") -> dict:
-    """name -> Cramer-Rao standard error (SI; nan at a bound) of a front point with these parameter values."""
-    return dict(cramer_rao(_information(cfg, data, parameters), cfg.free, kind=kind).se)
+def point_standard_errors(cfg, data, parameters: dict, kind: str = "eps", multiplier: float | None = None) -> dict:
+    """name -> Cramer-Rao standard error (SI; nan at a bound) of a front point with these parameter values
+    (``multiplier``: its solve's -dJ_time/dJ_trim, :func:`~.cramer_rao.objective_weights`)."""
+    return dict(cramer_rao(_information(cfg, data, parameters), cfg.free, kind=kind, multiplier=multiplier).se)
 
 
 def eq11_weights(point: dict, utopia, nadir) -> tuple | None:
@@ -40,6 +43,15 @@ def eq11_weights(point: dict, utopia, nadir) -> tuple | None:
         return None
     w = utopia_distance_weights((point["J_time"], point["J_trim"]), utopia, nadir)
     return None if w is None else (float(w[0]), float(w[1]))
+
+
+def _multiplier(row) -> float | None:
+    """A front.csv row's multiplier_trim (None when the column is missing or empty)."""
+    try:
+        v = float(row.get("multiplier_trim"))
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
 
 
 def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "all"):
@@ -61,7 +73,7 @@ def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "a
             continue
         params = {n: float(r[n]) for n in names}
         info = _information(cfg, data, params)
-        u = cramer_rao(info, cfg.free, kind=str(r["kind"]))
+        u = cramer_rao(info, cfg.free, kind=str(r["kind"]), multiplier=_multiplier(r))
         for k, v in u.row().items():
             front.at[i, k] = v
         by_index[int(r["index"])] = (u, info)

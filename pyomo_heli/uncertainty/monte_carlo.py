@@ -92,7 +92,7 @@ def _row(task, estimator, p, cfg, noisy, t0) -> dict:
         info = point_information(cfg.model, cfg.free, p.parameters, noisy.maneuvers, noisy.trims,
                                  cfg.nlp.time_outputs, cfg.nlp.trim_outputs, input_errors=cfg.nlp.input_errors,
                                  noise_sigma=cfg.nlp.noise_sigma, input_error_ar=cfg.nlp.input_error_ar)
-        row.update(cramer_rao(info, cfg.free, kind=p.kind).row())
+        row.update(cramer_rao(info, cfg.free, kind=p.kind, multiplier=getattr(p, "multiplier_trim", None)).row())
     row["wall_time"] = time.perf_counter() - t0
     return row
 

@@ -137,8 +137,8 @@ def _run_identification(cfg, run: RunFolder, progress, uncertainty) -> Identific
     if adaptive:
         from ..uncertainty.front import point_standard_errors
 
-        placement = AdaptiveFront(ps, cfg.pareto.max_solves, lambda p: point_standard_errors(cfg, data, p.parameters,
-                                                                                           p.kind),
+        placement = AdaptiveFront(ps, cfg.pareto.max_solves, lambda p: point_standard_errors(
+            cfg, data, p.parameters, p.kind, p.multiplier_trim),
                                   spacing=cfg.pareto.spacing, on_point=on_point, progress=progress)
         points = placement.run()
     else:

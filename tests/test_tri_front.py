@@ -47,6 +47,12 @@ def test_tri_front_on_analytic_problem():
     assert failed == [(1, 2), (2, 1), (2, 2)]
     for p in (p for p in grid if p.success):  # every bound is respected, and active unless the point is A's
         assert p.J_trim <= p.epsilon * (1 + 1e-6) and p.J_linear <= p.epsilon_linear * (1 + 1e-6)
+        # the recorded multipliers make the point stationary (KKT): grad J_time + k_trim grad J_trim
+        # + k_linear grad J_linear = 0, with the gradients in closed form; k >= 0
+        x, y = p.parameters["a"], p.parameters["b"]
+        k1, k2 = p.multiplier_trim, p.multiplier_linear
+        kkt = np.array([2 * (x - 1) + k1 * 2 * x + k2 * 2 * (x + 1), 2 * y + k1 * 2 * (y - 1) + k2 * 2 * y])
+        assert min(k1, k2) > -1e-8 and np.abs(kkt).max() < 1e-5, (p.i_trim, p.i_linear, k1, k2, kkt)
     # snake path: row 1 is visited right to left
     row1 = [p.i_linear for p in grid if p.i_trim == 1]
     assert row1 == [2, 1, 0]

@@ -37,6 +37,7 @@ class TriFrontPoint(FrontPoint):
     i_linear: int = -1
     note: str = ""  # why a point is infeasible (Ipopt's status, or the a-priori reason)
     start: str = ""  # grid points: the solution the solve started from (EpsilonConstraintSolver.grid_start)
+    multiplier_linear: float = math.nan  # -dJ_time/dJ_linear from the J_linear bound's multiplier (multiplier_trim)
 
 
 class TriParetoSolver(EpsilonConstraintSolver):
@@ -66,7 +67,8 @@ class TriParetoSolver(EpsilonConstraintSolver):
                              status=out.status, iterations=out.iterations, wall_time=out.wall_time,
                              setup_time=out.setup_time, warm_start=warm_start, J_linear=out.J["linear"],
                              epsilon_linear=eps.get("linear", math.inf), i_trim=i_trim, i_linear=i_linear,
-                             note=out.note)
+                             note=out.note, multiplier_trim=out.multipliers.get("trim", math.nan),
+                             multiplier_linear=out.multipliers.get("linear", math.nan))
 
     def front(self) -> list[TriFrontPoint]:
         """Anchors A, B, C, then the grid (:meth:`~.epsilon.EpsilonConstraintSolver.grid_front`)."""

@@ -39,6 +39,7 @@ from pyomo_heli.studies.commands import run_command
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.nlp.identification import validation_maneuvers
+from pyomo_heli.provenance import dataset_sha256
 from pyomo_heli.report.identification import VALIDATION_OUTPUTS, read_truth
 from pyomo_heli.report.loop import JOINT, iterations_validation_change, truth_replay_errors
 
@@ -76,8 +77,15 @@ def evaluate(name: str, loop: Path, config: Path) -> dict:
     doc = json.loads((loop / "loop.json").read_text())
     dataset = Path(doc["dataset"])
     if not dataset.is_dir():
-        raise SystemExit(f"{loop / 'loop.json'} names the dataset {dataset}, which is not there; regenerate it "
-                         "(pyomo-heli generate-data --config data/bo105_synthetic.toml --seed N --out ...)")
+        # a loop folder made on another machine (docs/results/close_loop): the config's own flight test, if its
+        # content is the one the loop's first identification records
+        own = Path(load_identification_config(config).dataset)
+        chosen = loop / doc["iterations"][0]["results_dir"] / "chosen.json"
+        recorded = json.loads(chosen.read_text()).get("info", {}).get("dataset_sha256") if chosen.is_file() else None
+        if not (own.is_dir() and recorded and dataset_sha256(own) == recorded):
+            raise SystemExit(f"{loop / 'loop.json'} names the dataset {dataset}, which is not there; regenerate it "
+                             "(pyomo-heli generate-data --config data/bo105_synthetic.toml --seed N --out ...)")
+        dataset = own
     cfg = load_identification_config(config, {"data": {"dataset": str(dataset.resolve())}})
     truth = read_truth(dataset)
     if truth is None:

@@ -395,3 +395,10 @@ def test_a_loop_folder_made_on_another_machine_reads_the_configs_own_flight_test
     other.write_text(cfg.path.read_text().replace('dataset = "../data/m0_noise_small"', f'dataset = "{edited}"'))
     with pytest.raises(ResultsMismatchError, match="dataset"):
         loop_iteration(loop, 0, config=other)
+
+    # the seeds study's reader of such a folder (close_loop_seeds.py --existing) likewise
+    from pyomo_heli.studies.close_loop_seeds import loop_dataset
+
+    assert loop_dataset(loop, doc, cfg.path).resolve() == Path(cfg.dataset).resolve()
+    with pytest.raises(SystemExit, match="/elsewhere/on/another/machine/flight_test, which is not there"):
+        loop_dataset(loop, doc, other)

@@ -396,9 +396,13 @@ def test_a_loop_folder_made_on_another_machine_reads_the_configs_own_flight_test
     with pytest.raises(ResultsMismatchError, match="dataset"):
         loop_iteration(loop, 0, config=other)
 
-    # the seeds study's reader of such a folder (close_loop_seeds.py --existing) likewise
-    from pyomo_heli.studies.close_loop_seeds import loop_dataset
+    # the one resolution both read such a folder with (check-effect, close_loop_seeds.py --existing)
+    from pyomo_heli.workflows.check_effect import loop_dataset
 
     assert loop_dataset(loop, doc, cfg.path).resolve() == Path(cfg.dataset).resolve()
-    with pytest.raises(SystemExit, match="/elsewhere/on/another/machine/flight_test, which is not there"):
+    with pytest.raises(ResultsMismatchError, match="flight_test, which is not there, .* has other content"):
         loop_dataset(loop, doc, other)
+    chosen["info"].pop("dataset_sha256")  # a folder that records no content: the config's flight test is not taken
+    (loop / "iter_0" / "chosen.json").write_text(json.dumps(chosen))
+    with pytest.raises(ResultsMismatchError, match="record no content"):
+        loop_dataset(loop, doc, cfg.path)

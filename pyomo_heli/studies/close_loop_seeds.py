@@ -39,9 +39,10 @@ from pyomo_heli.studies.commands import run_command
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.nlp.identification import validation_maneuvers
-from pyomo_heli.provenance import dataset_sha256
+from pyomo_heli.provenance import ResultsMismatchError
 from pyomo_heli.report.identification import VALIDATION_OUTPUTS, read_truth
 from pyomo_heli.report.loop import JOINT, iterations_validation_change, truth_replay_errors
+from pyomo_heli.workflows.check_effect import loop_dataset
 
 ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, data/
 WAKE = "rotor_wake_on_tail"
@@ -72,26 +73,13 @@ def seed_task(task: tuple):
         return None, int(exc.code) if isinstance(exc.code, int) else 1
 
 
-def loop_dataset(loop: Path, doc: dict, config: Path) -> Path:
-    """The flight test of the loop in ``loop`` (``doc``: its loop.json). A loop folder made on another machine
-    (docs/results/close_loop) names a path that is not here: then the config's own flight test, if its content is
-    the one the loop's first identification records; else SystemExit naming the path."""
-    dataset = Path(doc["dataset"])
-    if dataset.is_dir():
-        return dataset
-    own = Path(load_identification_config(config).dataset)
-    chosen = loop / doc["iterations"][0]["results_dir"] / "chosen.json"
-    recorded = json.loads(chosen.read_text()).get("info", {}).get("dataset_sha256") if chosen.is_file() else None
-    if not (own.is_dir() and recorded and dataset_sha256(own) == recorded):
-        raise SystemExit(f"{loop / 'loop.json'} names the dataset {dataset}, which is not there; regenerate it "
-                         "(pyomo-heli generate-data --config data/bo105_synthetic.toml --seed N --out ...)")
-    return own
-
-
 def evaluate(name: str, loop: Path, config: Path) -> dict:
     """One row of the table: the criteria of issue 5 for the loop in ``loop``."""
     doc = json.loads((loop / "loop.json").read_text())
-    dataset = loop_dataset(loop, doc, config)
+    try:
+        dataset = loop_dataset(loop, doc, config)
+    except ResultsMismatchError as exc:
+        raise SystemExit(str(exc)) from None
     cfg = load_identification_config(config, {"data": {"dataset": str(dataset.resolve())}})
     truth = read_truth(dataset)
     if truth is None:

@@ -16,6 +16,7 @@ the data as well as that term does when the term adds nothing once it is in.
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from ..config import IdentificationConfig, config_of_result, load_identification_config
@@ -25,9 +26,30 @@ from ..diagnosis.residuals import find_config
 from ..log import info
 from ..nlp.identification import identification_data
 from ..pareto.result import IdentificationResult
-from ..provenance import check_results_match
+from ..provenance import ResultsMismatchError, check_results_match, dataset_sha256
 from ..report.loop import final_index, load_loop
 from .close_loop import loop_settings, score_test_inputs
+
+
+def loop_dataset(loop_dir, doc: dict, config) -> Path:
+    """The flight test the loop in ``loop_dir`` ran on (``doc``: its ``loop.json``; ``config``: the loop's config
+    file). A loop folder made on another machine (a committed one) names a path that is not here: then the
+    config's own flight test, when its content is the one the loop's first identification records.
+    ResultsMismatchError (one line, naming the path) otherwise."""
+    loop_dir = Path(loop_dir)
+    dataset = Path(doc["dataset"])
+    if dataset.is_dir():
+        return dataset
+    own = Path(load_identification_config(config).dataset)
+    chosen = loop_dir / doc["iterations"][0]["results_dir"] / "chosen.json"
+    recorded = json.loads(chosen.read_text()).get("info", {}).get("dataset_sha256") if chosen.is_file() else None
+    if own.is_dir() and recorded and dataset_sha256(own) == recorded:
+        return own
+    why = ("has other content than the loop's" if recorded and own.is_dir() else
+           "is not there either" if recorded else "cannot stand in for it: the loop's results record no content")
+    raise ResultsMismatchError(f"{loop_dir / 'loop.json'} names the dataset {dataset}, which is not there, and the "
+                               f"config's own ({own}) {why}; regenerate it (pyomo-heli generate-data --config "
+                               "data/bo105_synthetic.toml --seed N --out ...)")
 
 
 def loop_iteration(loop_dir, iteration: int | None = None, config=None) -> tuple[dict, dict, IdentificationConfig]:
@@ -48,11 +70,8 @@ def loop_iteration(loop_dir, iteration: int | None = None, config=None) -> tuple
             raise ValueError(f"{loop_dir}: no iteration {iteration} (the loop ran iterations {ran})")
     folder = loop_dir / it["results_dir"]
     res = IdentificationResult.load(folder)
-    # the loop's dataset; a loop folder made on another machine (a path that is not here) reads the config's own,
-    # which check_results_match below holds to the loop's by the content the results record
-    here = Path(doc["dataset"]).is_dir() or not res.info.get("dataset_sha256")
-    cfg = load_identification_config(config or find_config(folder, res),
-                                     overrides={"data": {"dataset": doc["dataset"]}} if here else None)
+    config = config or find_config(folder, res)
+    cfg = load_identification_config(config, overrides={"data": {"dataset": str(loop_dataset(loop_dir, doc, config))}})
     if res.info.get("extensions"):
         cfg = config_of_result(cfg, res)
     check_results_match(cfg, res, folder)

@@ -241,3 +241,13 @@ def test_plot_functions_return_figures():
     assert len(fig.axes) == 3
     fig = plots.plot_validation({}, {"m": {}})
     assert fig.axes
+
+
+def test_a_report_names_a_dataset_inside_the_working_directory_by_its_relative_path(tmp_path, monkeypatch):
+    """Committed reports name data/... rather than the folder of the machine that wrote them."""
+    from pyomo_heli.report.identification import shown_path
+
+    (tmp_path / "data" / "flight").mkdir(parents=True)
+    monkeypatch.chdir(tmp_path)
+    assert shown_path(tmp_path / "data" / "flight") == str(Path("data") / "flight")
+    assert shown_path("/elsewhere/flight") == "/elsewhere/flight"

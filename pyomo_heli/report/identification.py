@@ -45,6 +45,15 @@ TIME_DOMAIN = "time-domain (A)"
 MULTI_OBJECTIVE = "multi-objective (C)"
 
 
+def shown_path(path) -> str:
+    """A path as a report shows it: relative to the working directory when it lies inside it (a checkout's
+    ``data/...``, so a committed report names no machine's folders), else as given."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
 def _rms(x) -> float:
     x = np.asarray(x, dtype=float)
     return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
@@ -312,7 +321,7 @@ def write_report(out_dir, cfg, results_dir=None, figure_format: str = "png") -> 
     # --- report.md
     info = result.info
     L = ["# Identification report", ""]
-    L += [f"- config: `{info.get('config', cfg.path)}`", f"- dataset: `{cfg.dataset}`",
+    L += [f"- config: `{info.get('config', cfg.path)}`", f"- dataset: `{shown_path(cfg.dataset)}`",
           f"- free parameters: {', '.join(result.parameters)}",
           f"- identification maneuvers: {', '.join(info.get('maneuvers', [])) or str(cfg.maneuvers)}",
           f"- model extensions: {', '.join(info.get('extensions', [])) or 'none (M0)'}",

@@ -31,7 +31,7 @@ from ..diagnosis.discovery import describe_fit
 from ..diagnosis.trim_forces import implied_forces
 from .diagnosis import implied_forces_section, record_bias_shapes
 from .identification import (CURVE_SPEEDS, TRIM_CHANNELS, VALIDATION_OUTPUTS, _fmt, _save, markdown_table, predict,
-                             read_truth, truth_model_errors, truth_prediction, validation_rms)
+                             read_truth, shown_path, truth_model_errors, truth_prediction, validation_rms)
 
 
 #: the closed loop's record in its results folder (written by :mod:`pyomo_heli.workflows.close_loop`)
@@ -259,7 +259,7 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
         else:
             fig.savefig(out / f"loop_validation.{figure_format}", dpi=72)
 
-    L = ["# Closed-loop report", "", f"- config: `{doc['config']}`", f"- dataset: `{doc['dataset']}`",
+    L = ["# Closed-loop report", "", f"- config: `{doc['config']}`", f"- dataset: `{shown_path(doc['dataset'])}`",
          f"- settings: {doc['settings']}", f"- stopped: {doc['stopped']}"]
     if not draw:
         L += [f"- figures: not drawn (`--figure-format {NO_FIGURES}`); `pyomo-heli report-loop {out}` draws them"]

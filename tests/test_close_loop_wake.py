@@ -4,6 +4,7 @@ Split from test_close_loop.py (same instances, same helpers) so that `pytest -n 
 these two long loops on one worker while the other runs the attribution tests.
 """
 import json
+from pathlib import Path
 
 import pytest
 
@@ -12,6 +13,8 @@ from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.nlp.identification import prepare_data
 from pyomo_heli.studies.small_instances import WAKE_MANEUVERS, make_case
 from test_close_loop import _pooled_trim
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _truth_replay_errors(cfg, doc):
@@ -205,7 +208,11 @@ def test_report_loop_bad_folders_are_one_line_exit_2(tmp_path, capsys):
     assert main(["report-loop", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{tmp_path}: no loop.json" in err[0], err
-    (tmp_path / "loop.json").write_text('{"config": "gone.toml", "dataset": "."}')
+    (tmp_path / "loop.json").write_text('{"config": "gone.toml", "dataset": ".", "iterations": []}')
+    assert main(["report-loop", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a loop record" in err[0], err
+    (tmp_path / "loop.json").write_text('{"config": "gone.toml", "dataset": ".", "iterations": [{"results_dir": "i"}]}')
     assert main(["report-loop", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "config gone.toml" in err[0] and "--config" in err[0], err
@@ -213,3 +220,26 @@ def test_report_loop_bad_folders_are_one_line_exit_2(tmp_path, capsys):
     assert main(["report-loop", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a loop record" in err[0], err
+
+
+def test_report_loop_on_a_folder_made_elsewhere(tmp_path, monkeypatch):
+    """A committed loop folder names the flight test where it was made (not on this machine): ``report-loop`` reads
+    the config's own, whose content the loop recorded, and writes the committed report again with its figures;
+    a flight test of other content is refused in one line."""
+    import shutil
+
+    monkeypatch.chdir(ROOT)  # the folder names its config relative to the checkout
+    folder = tmp_path / "close_loop"
+    shutil.copytree(ROOT / "docs" / "results" / "close_loop", folder)
+    doc = json.loads((folder / "loop.json").read_text())
+    assert not Path(doc["dataset"]).is_dir()  # made elsewhere
+    assert main(["report-loop", str(folder)]) == 0
+    assert ((folder / "loop_report.md").read_text()
+            == (ROOT / "docs" / "results" / "close_loop" / "loop_report.md").read_text())
+    for name in ("loop_trim_vs_speed.png", "loop_trim_forces.png", "loop_validation.png"):
+        assert (folder / name).stat().st_size > 10_000, name
+    chosen = folder / doc["iterations"][0]["results_dir"] / "chosen.json"
+    rec = json.loads(chosen.read_text())
+    rec["info"]["dataset_sha256"] = "0" * 64
+    chosen.write_text(json.dumps(rec))
+    assert main(["report-loop", str(folder)]) == 2

@@ -60,13 +60,17 @@ def cmd_report_loop(args) -> int:
         raise UserError(f"{args.loop_dir}: no {LOOP_FILE}; not a results folder of pyomo-heli close-loop")
     try:
         doc = json.loads(f.read_text())
-        config, dataset = args.config or doc["config"], doc["dataset"]
-    except (ValueError, KeyError) as exc:
+        config, its = args.config or doc["config"], doc["iterations"]
+        doc["dataset"], its[0]["results_dir"]
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
         raise UserError(f"{f}: not a loop record of close-loop ({exc})") from None
     if not Path(config).is_file():
         raise UserError(f"config {config} (named in {f}) not found; give it with --config")
-    if not Path(dataset).is_dir():
-        raise UserError(f"dataset {dataset} (named in {f}) not found")
+    from ..workflows.check_effect import loop_dataset
+
+    # a folder made on another machine names a path not here: the config's own flight test, when its content is
+    # the loop's (ResultsMismatchError, one line, otherwise)
+    dataset = loop_dataset(folder, doc, config)
     cfg = load_identification_config(config, {"data": {"dataset": str(Path(dataset).resolve())}})
     path = write_loop_report(folder, cfg, figure_format=args.figure_format)
     print(f"{path} written")

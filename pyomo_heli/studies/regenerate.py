@@ -37,6 +37,8 @@ TRI_FILES = ("band_errors.csv", "bode.png", "chosen.json", "front.csv", "front_p
              "parameters_tri.csv", "report_linear.md", "time_domain.json")
 LOOP_FILES = ("loop.json", "loop_report.md", "shape_*.json", "iter_*/chosen.json", "iter_*/front.csv",
               "iter_*/time_domain.json")
+#: the figures a loop's report shows (``pyomo-heli report-loop`` draws them again from the kept files, no solve)
+LOOP_FIGURES = ("loop_trim_vs_speed.png", "loop_trim_forces.png", "loop_validation.png")
 SEEDS = "20261123 20261124 20261125 20261126 20261127"
 #: held-out effects H1-H13 (the full-size table ``held_out``), H14-H16 (the third blind set, ``held_out_blind3``) and
 #: H17-H19 (the fourth, ``held_out_blind4``)
@@ -104,9 +106,9 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("case2_tri", ("pyomo-heli identify studies/case2_tri.toml --out {out}/case2_tri --restart",), TRI_FILES,
           minutes=15),
     Entry("close_loop", ("pyomo-heli close-loop studies/close_loop.toml --out {out}/close_loop --restart",),
-          LOOP_FILES + ("loop_trim_vs_speed.png", "loop_trim_forces.png"), minutes=9),
+          LOOP_FILES + LOOP_FIGURES, minutes=9),
     Entry("close_loop_eiv", ("pyomo-heli close-loop studies/close_loop_eiv.toml --out {out}/close_loop_eiv "
-                             "--restart",), LOOP_FILES, minutes=9),
+                             "--restart",), LOOP_FILES + LOOP_FIGURES, minutes=9),
     Entry("close_loop_seeds", (f"python studies/close_loop_seeds.py --seeds {SEEDS} --existing {{out}}/close_loop "
                                f"--out {{out}}/close_loop_seeds",),
           ("seeds.md", "seeds.csv"), needs=("close_loop",), minutes=45),

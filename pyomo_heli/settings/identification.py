@@ -376,7 +376,7 @@ class LoopTable(Table):
         "p", description="which screened generic term a step takes as the best (the one it asks the significance "
                          "of, the competitor a physical candidate must encompass, the description of what is "
                          "left): the smallest deciding p (p) or the largest raw likelihood ratio "
-                         "(likelihood_ratio, the order the full-size held-out tables were made with)")
+                         "(likelihood_ratio; docs/discovery_results.md says which held-out tables each ranked)")
 
 
 class IdentificationFile(Table):

@@ -13,7 +13,7 @@ and estimator) goes to ``summary.csv``/stdout, the figure to
 once; running the same command again continues where it stopped.
 
 Realizations run in worker processes (``--workers``). With a Dask cluster,
-``--dask ADDRESS`` (or ``--dask local`` for a ``LocalCluster``) hands the same
+``--scheduler ADDRESS`` (or ``--scheduler local`` for a ``LocalCluster``; ``--dask`` is the older name) hands the same
 tasks to ``distributed.Client(...).get_executor()`` instead; Dask is optional
 (``pip install distributed``).
 """
@@ -42,7 +42,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=nonneg_int, default=2026)
     ap.add_argument("--workers", type=nonneg_int, default=2, help="worker processes (0: run in this process)")
     ap.add_argument("--time-only", action="store_true", help="time-domain estimates only (no front)")
-    ap.add_argument("--dask", metavar="ADDRESS", help="run on a Dask cluster: scheduler address or 'local'")
+    ap.add_argument("--scheduler", "--dask", dest="scheduler", metavar="ADDRESS",
+                    help="run on a Dask cluster: its scheduler's address, or 'local' for a LocalCluster of --workers "
+                         "processes (--dask: the older name)")
     ap.add_argument("--out", default="results/monte_carlo")
     a = ap.parse_args(argv)
     out_folder(ap, a.out)
@@ -58,14 +60,14 @@ def main(argv=None) -> int:
     sigma = {o: sigma[o] for o in cfg.nlp.time_outputs}
     trim_sigma = {o: trim_sigma[o] for o in cfg.nlp.trim_outputs}
     executor = client = None
-    if a.dask:
+    if a.scheduler:
         try:
             from distributed import Client, LocalCluster
         except ImportError:
-            print("monte_carlo: --dask needs the distributed package (pip install distributed)", file=sys.stderr)
+            print("monte_carlo: --scheduler needs the distributed package (pip install distributed)", file=sys.stderr)
             return 2
-        client = Client(LocalCluster(n_workers=max(a.workers, 1), threads_per_worker=1)) if a.dask == "local" \
-            else Client(a.dask)
+        client = Client(LocalCluster(n_workers=max(a.workers, 1), threads_per_worker=1)) if a.scheduler == "local" \
+            else Client(a.scheduler)
         executor = client.get_executor()
     truth = dict(bo105())  # the clean data are M0 at the nominal table (data/bo105_clean.toml)
     res = run_monte_carlo(ProblemSpec.make(a.config), a.realizations, a.seed, sigma, trim_sigma, truth, out=a.out,

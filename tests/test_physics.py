@@ -1,5 +1,6 @@
 """M0 physics against independent references (model_spec.md sections 1.11, 3, 6.1)."""
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -112,3 +113,40 @@ def test_parameter_table_rejects_unknown_names():
     p = bo105()
     assert p.spec("theta_twist").shown()[0] == pytest.approx(-1.6329)
     assert p["theta_twist"] * p["R"] == pytest.approx(-0.14, abs=2e-4)
+
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def _doc_rows(page: str, first_cell: str) -> list[list[str]]:
+    """The rows of the markdown tables of docs/``page`` whose first cell matches ``first_cell`` (a regex)."""
+    import re
+
+    return [[c.strip() for c in line.strip().strip("|").split("|")]
+            for line in (DOCS / page).read_text().splitlines() if re.match(rf"^\| {first_cell} \|", line)]
+
+
+def test_the_documented_parameter_table_is_the_codes():
+    """docs/model_parameters.md's table of the nominal Bo-105: every parameter of bo105(), the value the code has."""
+    p = bo105()
+    rows = {r[0].strip("`"): float(r[2]) for r in _doc_rows("model_parameters.md", r"`\w+`") if r[0].strip("`") in p}
+    assert set(rows) == set(p)
+    for name, value in rows.items():
+        assert value == pytest.approx(p[name], rel=5e-4, abs=1e-9), name
+
+
+def test_the_documented_m0_trim_table_is_what_the_code_trims():
+    """docs/model_forces.md 9.4: the M0 trims at 0-120 kt, to the digits printed (the command printed there)."""
+    m = HelicopterModel()
+    p = m.parameters
+    rows = _doc_rows("model_forces.md", r"\d+")
+    rows = [r for r in rows if len(r) == 11]
+    assert [int(r[0]) for r in rows] == [0, 20, 40, 60, 80, 100, 120]
+    for r, tp in zip(rows, trim_sweep(m, [int(r[0]) * 0.514444 for r in rows])):
+        thrust = m.evaluate(tp.state(), tp.inputs()).thrust / (p["m"] * p["g"])
+        theta0 = tp.col - p["r_ref"] * p["theta_twist"] * p["R"]
+        got = [tp.V, tp.col / DEG, theta0 / DEG, tp.lon / DEG, tp.theta / DEG, tp.lambda_i, tp.beta_0 / DEG,
+               tp.beta_1c / DEG, tp.beta_1s / DEG, thrust]
+        for doc, value in zip(r[1:], got):
+            step = 10.0 ** -len(doc.split(".")[1])  # the printed resolution
+            assert abs(float(doc) - value) <= 0.51 * step, (r[0], doc, value)

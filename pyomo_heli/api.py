@@ -85,7 +85,9 @@ class Results:
         Columns: ``point`` (A: time-domain anchor; C: chosen front point; direct: the direct Eq. 11
         solve), ``parameter``, ``unit``, ``estimate``, ``standard_error`` (Cramer-Rao, one sigma; NaN
         where the folder has none, e.g. ``uncertainty="none"``, or the parameter is at a bound),
-        ``relative_se_percent``, ``at_bound`` ("", "lower" or "upper"), and ``J_time``, ``J_trim``.
+        ``relative_se_percent``, ``at_bound`` ("", "lower" or "upper"), ``J_time``, ``J_trim``, and the solve's
+        ``success`` and ``status`` (a point whose solve did not converge, e.g. a failed direct solve, keeps its last
+        iterate as ``estimate``: not an estimate to use).
         """
         rows = []
         for label, attr in POINTS.items():
@@ -102,9 +104,11 @@ class Results:
                              "standard_error": se * abs(f),
                              "relative_se_percent": 100 * se / abs(v) if v != 0 else float("nan"),
                              "at_bound": (unc.get("at_bound") or {}).get(n, ""),
-                             "J_time": point.get("J_time"), "J_trim": point.get("J_trim")})
+                             "J_time": point.get("J_time"), "J_trim": point.get("J_trim"),
+                             "success": bool(point.get("success", True)), "status": point.get("status", "")})
         return pd.DataFrame(rows, columns=["point", "parameter", "unit", "estimate", "standard_error",
-                                           "relative_se_percent", "at_bound", "J_time", "J_trim"])
+                                           "relative_se_percent", "at_bound", "J_time", "J_trim", "success",
+                                           "status"])
 
     def __str__(self) -> str:
         return str(self.result)

@@ -122,3 +122,21 @@ def test_load_results_of_the_committed_case1():
     assert est.loc[("C", "theta_twist"), "unit"] == "deg/m"
     assert est.loc[("C", "CL_alpha_HT"), "standard_error"] == pytest.approx(
         chosen["uncertainty"]["se"]["CL_alpha_HT"], rel=1e-12)
+
+
+def test_a_point_that_did_not_converge_is_not_shown_as_an_estimate():
+    """A failed direct Eq. 11 solve keeps its last iterate in chosen.json: ``Results.estimates()`` says so (success,
+    status), the parameter table and its errors against truth leave it out (n/a), and the printed result marks it."""
+    from pyomo_heli.diagnosis.residuals import find_config
+    from pyomo_heli.report.identification import parameter_table
+
+    res = ph.load_results(HERE / "results" / "case1")
+    res.result.direct.update(success=False, status="Maximum_Iterations_Exceeded")
+    est = res.estimates()
+    assert not est[est["point"] == "direct"]["success"].any() and est[est["point"] != "direct"]["success"].all()
+    assert (est[est["point"] == "direct"]["status"] == "Maximum_Iterations_Exceeded").all()
+    cfg = load_identification_config(find_config(HERE / "results" / "case1", res.result))
+    tab = parameter_table(res.result, cfg, truth={n: 1.0 for n in res.parameters})
+    assert tab["Eq. 11 direct"].isna().all() and tab["Eq. 11 direct error %"].isna().all()
+    assert tab["multi-objective"].notna().all()
+    assert "NOT CONVERGED (Maximum_Iterations_Exceeded)" in str(res.result)

@@ -158,3 +158,33 @@ def test_trim_shapes_tell_a_cg_offset_from_a_rigging_bias(tmp_path, name, param,
     d = diagnose(r, n_mc=2000)
     assert d.verdict["trim_shape"] == {"col": "noise", "lon": lon, "theta": theta}
     assert "V^2" in d.shape("lon").absorbed  # twist and tail lift slope make a V^2-like lon trend themselves
+
+
+def test_a_verdict_whose_tests_could_not_run_is_not_noise_only():
+    """The M0 + noise result (noise only when every test runs) with parts of its residual analysis made untestable:
+    an identification record that was not replayed, an output with no data in a record (Ljung-Box p = NaN) or too few
+    trims for a channel's shape test. Each leaves the verdict "not fully tested", naming what was not tested, never
+    "noise only"."""
+    import dataclasses
+
+    import numpy as np
+
+    from pyomo_heli.diagnosis.analysis import verdict_status
+
+    res = IdentificationResult.load(M0_NOISE)
+    cfg = load_identification_config(find_config(M0_NOISE, res))
+    r = compute_residuals(cfg, res.chosen["parameters"], "C", roles=("identification",))
+    d = diagnose(r, n_mc=500)
+    assert d.verdict["noise_only"] is True and verdict_status(d.verdict) == "noise only"
+    first = r.time["maneuver"].iloc[0]
+
+    gone = dataclasses.replace(r, time=r.time[r.time["maneuver"] != first].reset_index(drop=True),
+                               info={**r.info, "not_replayed": [{"maneuver": first, "role": "identification"}]})
+    no_data = r.time.copy()
+    no_data.loc[no_data["maneuver"] == first, "res_q"] = np.nan
+    few = r.trim.iloc[:5].reset_index(drop=True)
+    for case, bad in (("not replayed", gone), ("whiteness of q", dataclasses.replace(r, time=no_data)),
+                      ("trim shape of", dataclasses.replace(r, trim=few))):
+        v = diagnose(bad, n_mc=500).verdict
+        assert v["noise_only"] is False and verdict_status(v) == "not fully tested", case
+        assert any(case in u for u in v["untested"]), (case, v["untested"])

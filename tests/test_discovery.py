@@ -289,6 +289,39 @@ def test_validation_rule_flags_a_worse_model_and_passes_a_better_one():
     assert joint["change [%]"] > 0 and joint["z"] > 0
 
 
+def test_validation_rule_rejects_a_model_that_cannot_be_replayed_on_a_validation_record(monkeypatch):
+    """A step whose model diverges on a validation record the kept model replays is a rise (the test table, over the
+    records both replay, cannot show it); the message names the record and the replay's problem. A record only the
+    kept model cannot replay is left out of the test, and said so, without a rise."""
+    from pathlib import Path
+
+    import pyomo_heli.workflows.loop_steps as steps
+
+    root = Path(__file__).resolve().parent
+    cfg = load_identification_config(root / "configs" / "m0_noise_small.toml")
+    val = list(prepare_data(load_flight_test(cfg.dataset), ["londoublet_80kt_val"]).maneuvers)
+    m0 = HelicopterModel()
+    real = steps.predict
+
+    def diverging(which):
+        def predict(label, *args):
+            pred = real(label, *args)
+            if label == which:
+                pred.maneuvers["londoublet_80kt_val"] = None
+                pred.problems.append("maneuver londoublet_80kt_val: simulation diverged at t = 3.1 s (test)")
+            return pred
+        return predict
+
+    monkeypatch.setattr(steps, "predict", diverging("after"))
+    check = validation_check(m0, {}, m0, {}, val)
+    assert check["rise"] and check["not_replayed"] == ["londoublet_80kt_val"]
+    assert "could not be replayed on validation record(s) londoublet_80kt_val" in check["message"]
+    assert "diverged at t = 3.1 s" in check["message"] and check["rows"] == []
+    monkeypatch.setattr(steps, "predict", diverging("before"))
+    check = validation_check(m0, {}, m0, {}, val)
+    assert not check["rise"] and "which the kept model could not replay" in check["message"]
+
+
 def test_validation_rule_rejects_a_joint_rise_only_when_told(monkeypatch):
     """A step whose error rises on every output, significantly on none alone but significantly all at once, passes
     the per-output rule (the default) and is rejected by the joint row with ``joint=True`` (``[loop]

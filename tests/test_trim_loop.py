@@ -190,6 +190,11 @@ def test_bundled_real_data_study_writes_report(tmp_path):
         assert last["rms_deg"]["identification"][ch] < doc["initial"]["rms_deg"]["identification"][ch]
     text = (out / "report.md").read_text()
     assert "degenerate" in text and "theta_datum (convention offset)" in text
+    # a channel with a single point has no step: the report says "-" where the step's speeds go
+    for k in ("step_deg", "step_between_kt", "mean_below_step_deg", "mean_above_step_deg"):
+        last["residual_shape"]["col"].pop(k, None)
+    write_trim_report(load_trim_loop_config(ROOT / "tests" / "configs" / "bo105_flight_trims.toml"), doc, out)
+    assert "| col | " in (out / "report.md").read_text() and " | - | " in (out / "report.md").read_text()
 
 
 def test_trim_loop_config_errors(tmp_path):
@@ -339,3 +344,21 @@ def test_maneuver_identification_refuses_trim_rows_with_empty_channels(tmp_path)
         'dataset = "../../data/bo105_synthetic"', f'dataset = "{ds}"'))
     with pytest.raises(ValueError, match=r"trims.csv: rows \[2\] leave a trim channel empty"):
         identification_data(load_identification_config(cfg_path))
+
+
+def test_a_parameter_the_trims_do_not_see_has_an_infinite_standard_error(tmp_path):
+    """The trim-only standard errors with a free parameter no trim depends on (the inflow time constant): its
+    standard error is infinite and the condition number too, and the others' are those of the fit without it (a
+    least-squares inverse would drop the blind direction and report a standard error of about zero)."""
+    from pyomo_heli.nlp.trim_identification import standard_errors
+
+    ft = load_flight_test(_generated(tmp_path / "ds"))
+    pts = trim_points(ft)
+    model = HelicopterModel(extensions=(TrimOutputDatum(),)).with_parameters(**TRUTH)
+    alone = standard_errors(model, ft.conventions, pts, ["a", "f_e"])
+    blind = standard_errors(model, ft.conventions, pts, ["a", "f_e", "tau_lambda"])
+    assert blind["se"]["tau_lambda"] == math.inf and blind["cond"] == math.inf
+    for n in ("a", "f_e"):  # the same inverse; the residual variance counts one parameter more
+        scale = math.sqrt(alone["dof"] / blind["dof"])
+        assert blind["se"][n] == pytest.approx(alone["se"][n] * scale, rel=1e-6), n
+    assert math.isfinite(alone["cond"]) and all(math.isfinite(v) for v in alone["se"].values())

@@ -21,6 +21,7 @@ from pyomo_heli.nlp.identification import (NLPOptions, build_identification_nlp,
                                            set_measurements)
 from pyomo_heli.nlp.parameters import FreeParameter
 from pyomo_heli.physics.parameters import bo105
+from pyomo_heli.provenance import ResultsMismatchError
 from pyomo_heli.uncertainty.cramer_rao import PointInformation, cramer_rao, point_information
 from pyomo_heli.uncertainty.identifiability import identifiability
 from pyomo_heli.uncertainty.monte_carlo import ProblemSpec, run_monte_carlo
@@ -60,6 +61,28 @@ def test_cramer_rao_agrees_with_monte_carlo_spread(tmp_path):
     again = run_monte_carlo(spec, n, seed=11, sigma=SIGMA, trim_sigma={}, out=tmp_path / "mc", **quiet)
     cols = ["realization", "CL_alpha_HT", "Iyy"]
     np.testing.assert_allclose(again.estimates[cols].to_numpy(float), res.estimates[cols].to_numpy(float), rtol=1e-11)
+    # a rerun asking for fewer summarises those; another run's settings are refused, naming what differs
+    fewer = run_monte_carlo(spec, 5, seed=11, sigma=SIGMA, trim_sigma={}, out=tmp_path / "mc", **quiet)
+    assert (fewer.summary()["n"] == 5).all()
+    with pytest.raises(ResultsMismatchError, match="differs in: seed"):
+        run_monte_carlo(spec, n, seed=12, sigma=SIGMA, trim_sigma={}, out=tmp_path / "mc", **quiet)
+    with pytest.raises(ResultsMismatchError, match="differs in: sigma"):
+        run_monte_carlo(spec, n, seed=11, sigma={**SIGMA, "q": 2 * SIGMA["q"]}, trim_sigma={}, out=tmp_path / "mc",
+                        **quiet)
+
+
+def test_monte_carlo_counts_a_parameter_at_its_bound_by_name():
+    """``at bound`` counts a parameter by its name in the cell, not by a substring: "a" is not at its bound when
+    "theta_twist" is."""
+    import pandas as pd
+
+    from pyomo_heli.uncertainty.monte_carlo import MonteCarloResult
+
+    est = pd.DataFrame({"realization": [0, 1, 2], "estimator": "time", "success": True, "a": [6.0, 6.1, 5.9],
+                        "theta_twist": [-0.03, 0.0, -0.03],
+                        "at_bound": [float("nan"), "theta_twist:upper", "theta_twist:upper;a:lower"]})
+    s = MonteCarloResult(est, ["a", "theta_twist"], {"a": 6.0, "theta_twist": -0.03}).summary().set_index("parameter")
+    assert s.loc["theta_twist", "at bound"] == 2 and s.loc["a", "at bound"] == 1
 
 
 def _linear_info(rng, n=3, N=200, M=12):

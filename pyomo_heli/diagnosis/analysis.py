@@ -251,6 +251,17 @@ def _whiteness(res: Residuals, clean: pd.DataFrame, test_rate_hz: float, alpha: 
     return with_bound(pd.concat(parts, ignore_index=True), alpha) if parts else pd.DataFrame()
 
 
+def verdict_status(verdict: dict) -> str:
+    """One word for a :func:`diagnose` verdict: "noise only", "unexplained residual" (a test found structure) or
+    "not fully tested" (no test found structure, but a part of the verdict could not be tested: ``untested``)."""
+    if verdict.get("noise_only"):
+        return "noise only"
+    structure = not (all(s == "noise" for s in verdict.get("trim_shape", {}).values())
+                     and verdict.get("white_identification", True) and verdict.get("record_biases_agree", True)
+                     and verdict.get("input_path_consistent", True))
+    return "not fully tested" if verdict.get("untested") and not structure else "unexplained residual"
+
+
 def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RATE_HZ, n_mc: int = 4000, seed: int = 0,
              absorb_parameters: bool = True) -> Diagnosis:
     """Run every residual test on ``res`` (see the module docstring).
@@ -263,6 +274,7 @@ def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RAT
                 "absorb_parameters": absorb_parameters}
     problems = list(res.problems)
     shapes = {}
+    untested = []  # the parts of the verdict whose test could not run: no "noise only" without them
     for c in res.trim_channels:
         S, names = trim_nuisance(res, c) if absorb_parameters else (None, [])
         try:
@@ -270,6 +282,7 @@ def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RAT
                                         nuisance=S, nuisance_names=names)
         except ValueError as exc:
             problems.append(str(exc))
+            untested.append(f"trim shape of {c}")
     time = res.time
     if len(time):
         clean, nuisance = clean_time_residuals(time, res.outputs)
@@ -292,8 +305,14 @@ def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RAT
     verdict = {"trim_shape": {c: t.shape for c, t in shapes.items()}}
     for role in ("identification", "validation"):
         w = white[white["role"] == role] if len(white) else white
-        if len(w):
-            verdict[f"white_{role}"] = bool(w["white"].astype(bool).all())
+        ran = w[w["p"].notna()] if len(w) else w  # a Ljung-Box p of NaN: too few samples or no data, not white
+        if len(ran):
+            verdict[f"white_{role}"] = bool(ran["white"].astype(bool).all())
+        if role == "identification":
+            untested += [f"whiteness of {r['output']} in {r['maneuver']} (n = {r['n']})"
+                         for r in w[w["p"].isna()].to_dict(orient="records")] if len(w) else []
+            untested += [f"the identification record {r['maneuver']} (not replayed)"
+                         for r in res.info.get("not_replayed", []) if r["role"] == "identification"]
     if biases:
         verdict["record_biases_agree"] = all(t.consistent for t in biases.values())
     path = InputPathTest.from_dict(res.info["innovations"]["input_path"]) \
@@ -303,10 +322,13 @@ def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RAT
         verdict["input_path_consistent"] = path.consistent
         if path.alpha != alpha:
             d.problems.append(f"input path tested at alpha {path.alpha:g}, not {alpha:g}")
-    verdict["noise_only"] = bool(all(t.shape == "noise" for t in shapes.values())
-                                 and verdict.get("white_identification", True)
-                                 and verdict.get("record_biases_agree", True)
-                                 and verdict.get("input_path_consistent", True))
+    structure = not (all(t.shape == "noise" for t in shapes.values())
+                     and verdict.get("white_identification", True)
+                     and verdict.get("record_biases_agree", True)
+                     and verdict.get("input_path_consistent", True))
+    if untested:
+        verdict["untested"] = untested
+    verdict["noise_only"] = not structure and not untested
     d.verdict = verdict
     d.findings = (_findings(d, shapes, white, coh, corr) + [t.describe() for t in biases.values() if not t.consistent]
                   + ([path.describe()] if path is not None and not path.consistent else []))
@@ -314,7 +336,10 @@ def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RAT
                                         "white" + (", record biases agree" if biases else "")
                                         + (", input errors white" if path is not None else "") + ")"
                                         if verdict["noise_only"] else
-                                        "structure left in the residuals: something is missing from the model"))
+                                        "structure left in the residuals: something is missing from the model"
+                                        if structure else
+                                        "not every test ran, so the residuals are not called noise only; not tested: "
+                                        + "; ".join(untested)))
     return d
 
 

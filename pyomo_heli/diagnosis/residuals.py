@@ -280,16 +280,18 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
     trims = ft.trims.reset_index(drop=True)
     tps = _trims(model, trims, [mv.trim_speed for _, mv in mans], problems)
 
-    frames = []
+    frames, not_replayed = [], []
     for role, mv in mans:
         tp = tps.get((round(float(mv.trim_speed), 6), 0.0))
         if tp is None:
             problems.append(f"maneuver {mv.name}: no model trim at {mv.trim_speed / KT:.1f} kt, not replayed")
+            not_replayed.append({"maneuver": mv.name, "role": role})
             continue
         try:
             sim = replay(model, mv, tp)
         except Exception as exc:  # noqa: BLE001 - an unstable model must not stop the diagnosis
             problems.append(f"maneuver {mv.name}: replay failed ({str(exc).splitlines()[0] or type(exc).__name__})")
+            not_replayed.append({"maneuver": mv.name, "role": role})
             continue
         df = pd.DataFrame({"maneuver": mv.name, "role": role, "trim_speed": float(mv.trim_speed),
                            "t": mv.data["t"].to_numpy(dtype=float)})
@@ -357,7 +359,8 @@ def compute_residuals(cfg: IdentificationConfig, parameters: dict, label: str = 
                      trim=trim, outputs=list(outputs), trim_channels=list(TRIM_CHANNELS),
                      fitted_outputs=list(cfg.nlp.time_outputs), fitted_trim=list(cfg.nlp.trim_outputs),
                      problems=problems,
-                     info={"config": _shown_path(cfg.path), "dataset": _shown_path(cfg.dataset),
+                     info={**({"not_replayed": not_replayed} if not_replayed else {}),
+                           "config": _shown_path(cfg.path), "dataset": _shown_path(cfg.dataset),
                            "extensions": [e.name for e in cfg.model.extensions],
                            "inputs": {mv.name: list(mv.inputs) for _, mv in mans},
                            **({"innovations": inn_info} if inn_info else {})},

@@ -166,7 +166,8 @@ def spectra(time: pd.DataFrame, outputs, role: str) -> dict:
     names = list(dict.fromkeys(df["maneuver"]))
     if not names:
         return {}
-    f_ref, acc, count, fs_ref = None, {o: None for o in outputs}, 0, None
+    f_ref, acc, fs_ref = None, {o: None for o in outputs}, None
+    count = {o: 0 for o in outputs}  # the records each output's average is over (a record without it is left out)
     for name in names:
         m = df[df["maneuver"] == name]
         t = m["t"].to_numpy()
@@ -182,8 +183,8 @@ def spectra(time: pd.DataFrame, outputs, role: str) -> dict:
             if len(f) != len(f_ref) or not np.allclose(f, f_ref):
                 p = np.interp(f_ref, f, p)
             acc[o] = p if acc[o] is None else acc[o] + p
-        count += 1
-    psd = {o: (acc[o] / count).tolist() for o in outputs if acc[o] is not None}
+            count[o] += 1
+    psd = {o: (acc[o] / count[o]).tolist() for o in outputs if acc[o] is not None}
     ratio = {o: band_mean(f_ref, np.asarray(v), DYN_BAND) / band_mean(f_ref, np.asarray(v), HIGH_BAND)
              for o, v in psd.items()}
     return {"f": f_ref.tolist(), "fs": fs_ref, "psd": psd, "band_ratio": ratio}
@@ -257,7 +258,8 @@ def whiteness_table(time: pd.DataFrame, outputs, test_rate_hz: float = 5.0, alph
             r1_full = autocorrelation(e[np.isfinite(e)], 1)[1] if np.isfinite(e).sum() > 2 else float("nan")
             rows.append({"maneuver": name, "role": m["role"].iloc[0], "output": o, "n": lb["n"], "lags": lb["lags"],
                          "Q": lb["Q"], "p": lb["p"], "r1_test_rate": lb["r1"], "r1_full_rate": float(r1_full),
-                         "rms": float(np.sqrt(np.nanmean(e**2))), "mean": float(np.nanmean(e))})
+                         "rms": float(np.sqrt(np.mean(e[np.isfinite(e)] ** 2))) if np.isfinite(e).any() else np.nan,
+                         "mean": float(np.mean(e[np.isfinite(e)])) if np.isfinite(e).any() else np.nan})
     return with_bound(pd.DataFrame(rows), alpha)
 
 

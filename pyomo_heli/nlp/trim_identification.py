@@ -73,10 +73,17 @@ def identify_trims(model: HelicopterModel, free, pts: pd.DataFrame, conventions,
     return free_parameter_values(m), info
 
 
+#: a parameter whose trim sensitivity (scaled) is below this share of the largest is not seen by the trims
+BLIND_RTOL = 1e-8
+
+
 def standard_errors(model: HelicopterModel, conventions, pts: pd.DataFrame, names) -> dict:
     """Least-squares standard errors of ``names`` at ``model`` (its values are the estimate).
 
-    e = data - model [deg]; J [deg per SI unit]; s^2 = e.e / (n - p); cov = s^2 (J^T J)^-1.
+    e = data - model [deg]; J [deg per SI unit]; s^2 = e.e / (n - p); cov = s^2 (J^T J)^-1, computed on J's columns
+    scaled to unit norm. A parameter the trims do not see (its column, or its share of a direction of the scaled
+    J^T J, below ``BLIND_RTOL`` of the largest) has an infinite standard error, and ``cond`` is then infinite: the
+    inverse would otherwise drop that direction and report a standard error of about zero.
     """
     y = predict(model, conventions, pts["V"], pts["channel"])
     e = (pts["value"].to_numpy(dtype=float) - y) / DEG
@@ -86,15 +93,30 @@ def standard_errors(model: HelicopterModel, conventions, pts: pd.DataFrame, name
     s2 = float(e @ e) / dof
     if p == 0:
         return {"se": {}, "se_robust": {}, "corr": [], "s_deg": math.sqrt(s2), "dof": dof, "cond": 0.0}
-    JtJ = J.T @ J
-    inv = np.linalg.pinv(JtJ)
+    norms = np.linalg.norm(J, axis=0)
+    seen = norms > BLIND_RTOL * max(float(norms.max()), np.finfo(float).tiny)
+    Js = J[:, seen] / norms[seen]
+    _, sv, vt = np.linalg.svd(Js, full_matrices=False)
+    keep = sv > BLIND_RTOL * sv[0] if sv.size else np.zeros(0, bool)
+    blind = ~seen
+    if not keep.all():  # a combination of the seen columns the trims do not see: its parameters are blind too
+        loads = np.abs(vt[~keep]).max(axis=0)
+        blind[np.flatnonzero(seen)[loads > 1e-3]] = True
+    inv_s = (vt[keep].T / sv[keep] ** 2) @ vt[keep]  # (Js^T Js)^-1 on the seen directions
+    inv = np.full((p, p), np.nan)
+    inv[np.ix_(seen, seen)] = inv_s / np.outer(norms[seen], norms[seen])
+    inv[np.ix_(blind, blind)] = np.nan
     cov = s2 * inv
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    se[blind] = np.inf
     # sandwich (heteroscedasticity-robust, HC1) covariance: does not assume one variance for every point
     meat = (J * (e**2)[:, None]).T @ J * n / dof
-    se_rob = np.sqrt(np.maximum(np.diag(inv @ meat @ inv), 0.0))
-    d = np.where(se > 0, se, 1.0)
+    ok = ~blind
+    se_rob = np.full(p, np.inf)
+    sub = inv[np.ix_(ok, ok)]
+    se_rob[ok] = np.sqrt(np.maximum(np.diag(sub @ meat[np.ix_(ok, ok)] @ sub), 0.0))
+    d = np.where((se > 0) & np.isfinite(se), se, np.nan)
     corr = cov / np.outer(d, d)
+    cond = float(sv[0] ** 2 / sv[-1] ** 2) if not blind.any() and sv.size else math.inf
     return {"se": dict(zip(names, se.tolist())), "se_robust": dict(zip(names, se_rob.tolist())),
-            "corr": corr.tolist(), "s_deg": math.sqrt(s2), "dof": dof,
-            "cond": float(np.linalg.cond(JtJ / np.outer(np.sqrt(np.diag(JtJ)), np.sqrt(np.diag(JtJ)))))}
+            "corr": corr.tolist(), "s_deg": math.sqrt(s2), "dof": dof, "cond": cond}

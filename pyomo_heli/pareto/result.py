@@ -202,5 +202,7 @@ class IdentificationResult:
         for label, d in rows:
             lines.append(f"{label:26s}" + "".join(f"{d['parameters'][p] * shown[p][1]:{width}.6g}"
                                                   for p in self.parameters)
-                         + f"{d['J_time']:14.6g}{d['J_trim']:12.6g}")
+                         + f"{d['J_time']:14.6g}{d['J_trim']:12.6g}"
+                         + ("" if d.get("success", True) else f"  NOT CONVERGED ({d.get('status', '?')}): "
+                                                               "its last iterate, not an estimate"))
         return "\n".join(lines)

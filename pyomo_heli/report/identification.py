@@ -146,16 +146,22 @@ def read_truth_effects(dataset: Path) -> dict | None:
 
 
 def parameter_table(result: IdentificationResult, cfg, truth: dict | None = None) -> pd.DataFrame:
-    """Parameters in display units: initial, time-domain, multi-objective, Eq. 11 direct (+ truth and errors)."""
+    """Parameters in display units: initial, time-domain, multi-objective, Eq. 11 direct (+ truth and errors). A
+    point whose solve did not converge (a failed direct solve, a failed anchor A) is NaN ("n/a"): its last iterate is
+    not an estimate."""
     initial = {f.name: f.initial for f in cfg.free}
+
+    def value(point, name):
+        return point["parameters"][name] if point and point.get("success", True) else np.nan
+
     rows = []
     for name in result.parameters:
         unit, fac = _display(cfg.model, name)
         row = {"parameter": name, "unit": unit,
                "initial": initial.get(name, cfg.model.parameters[name]) * fac,
-               "time-domain": result.time_domain["parameters"][name] * fac,
-               "multi-objective": result.chosen["parameters"][name] * fac,
-               "Eq. 11 direct": (result.direct["parameters"][name] * fac if result.direct else np.nan)}
+               "time-domain": value(result.time_domain, name) * fac,
+               "multi-objective": value(result.chosen, name) * fac,
+               "Eq. 11 direct": value(result.direct, name) * fac}
         if truth is not None:
             tv = truth.get(name)
             row["truth"] = tv * fac if tv is not None else np.nan

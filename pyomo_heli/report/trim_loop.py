@@ -163,8 +163,9 @@ def write_trim_loop_report(doc: dict, config_path, out) -> Path:
           "| channel | RMS | largest step | between [kt] | mean below / above | trend [deg/10 kt] |",
           "|---|---|---|---|---|---|"]
     for ch, s in last["residual_shape"].items():
+        between = s.get("step_between_kt")  # no step with a single point of the channel
         L.append(f"| {ch} | {s['rms_deg']:.3f} | {s.get('step_deg', 0):+.2f} | "
-                 f"{s.get('step_between_kt', ['-', '-'])[0]:.1f}-{s.get('step_between_kt', ['-', '-'])[1]:.1f} | "
+                 + (f"{between[0]:.1f}-{between[1]:.1f}" if between else "-") + " | "
                  f"{s.get('mean_below_step_deg', 0):+.2f} / {s.get('mean_above_step_deg', 0):+.2f} | "
                  f"{s.get('trend_deg_per_10kt', 0):+.3f} |")
     d = last["score_test"].get("discovery")

@@ -28,6 +28,7 @@ HERE = Path(__file__).resolve().parents[2] / "studies"
 
 def main(argv=None) -> int:
     from pyomo_heli.config import ConfigError, load_identification_config
+    from pyomo_heli.provenance import ResultsMismatchError
     from pyomo_heli.physics.parameters import bo105
     from pyomo_heli.report.monte_carlo import plot_monte_carlo, summary_markdown
     from pyomo_heli.uncertainty.monte_carlo import ProblemSpec, run_monte_carlo
@@ -70,10 +71,15 @@ def main(argv=None) -> int:
             else Client(a.scheduler)
         executor = client.get_executor()
     truth = dict(bo105())  # the clean data are M0 at the nominal table (data/bo105_clean.toml)
-    res = run_monte_carlo(ProblemSpec.make(a.config), a.realizations, a.seed, sigma, trim_sigma, truth, out=a.out,
-                          multi_objective=not a.time_only, workers=a.workers, executor=executor)
-    if client is not None:
-        client.close()
+    try:
+        res = run_monte_carlo(ProblemSpec.make(a.config), a.realizations, a.seed, sigma, trim_sigma, truth,
+                              out=a.out, multi_objective=not a.time_only, workers=a.workers, executor=executor)
+    except ResultsMismatchError as exc:  # --out holds another run's realizations
+        print(f"monte_carlo: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if client is not None:
+            client.close()
     out = Path(a.out)
     plot_monte_carlo(res, out / "monte_carlo.png")
     (out / "summary.md").write_text(summary_markdown(res) + "\n")

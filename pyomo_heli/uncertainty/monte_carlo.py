@@ -35,6 +35,7 @@ import numpy as np
 import pandas as pd
 
 from ..config import load_identification_config
+from ..provenance import ResultsMismatchError, config_sha256
 from ..dataset import load_flight_test
 from ..nlp.identification import build_identification_nlp, identification_data, set_measurements
 from ..pareto.front import ParetoSolver
@@ -97,6 +98,13 @@ def _row(task, estimator, p, cfg, noisy, t0) -> dict:
     return row
 
 
+def _bound_names(cell) -> set:
+    """The parameter names of an ``at_bound`` cell ("theta_twist:upper;Iyy:lower"; empty or NaN: none)."""
+    if not isinstance(cell, str):
+        return set()
+    return {part.split(":")[0].strip() for part in cell.split(";") if part.strip()}
+
+
 def run_realization(task: RealizationTask) -> list[dict]:
     """Solve one realization; rows for the time-domain estimate and (optionally) the multi-objective one.
 
@@ -122,7 +130,11 @@ def _run_realization(task: RealizationTask) -> list[dict]:
         a = points[0]
         rows = [_row(task, "time", a, cfg, noisy, t0)]
         chosen, _ = ps.choose()
-        rows.append(_row(task, "multi", chosen, cfg, noisy, t0))
+        multi = _row(task, "multi", chosen, cfg, noisy, t0)
+        failed = ps.anchor_failures()  # utopia and nadir of an unconverged anchor: the choice is not to be trusted
+        if failed:
+            multi.update(success=False, status="; ".join(failed))
+        rows.append(multi)
     else:
         # point A alone: J_time from the initial guess, as the front's first anchor
         a = ps._solve("time", 0, "A", math.inf, "none")
@@ -152,8 +164,7 @@ class MonteCarloResult:
                 se = d[se_col].to_numpy(dtype=float) if se_col in d else np.array([np.nan])
                 crb = float(np.nanmedian(se)) if np.isfinite(se).any() else float("nan")
                 std = float(np.std(x, ddof=1)) if len(x) > 1 else float("nan")
-                at_bound = (int(d["at_bound"].astype(object).fillna("").astype(str).str.contains(p).sum())
-                            if "at_bound" in d else 0)
+                at_bound = (sum(p in _bound_names(v) for v in d["at_bound"]) if "at_bound" in d else 0)
                 rows.append({"estimator": e, "parameter": p, "n": len(x), "truth": tr, "mean": float(np.mean(x)),
                              "bias": float(np.mean(x)) - tr, "bias %": 100 * (float(np.mean(x)) - tr) / abs(tr)
                              if tr else float("nan"), "std": std, "crb": crb,
@@ -180,6 +191,25 @@ class MonteCarloResult:
         return self.summary().to_string(index=False, float_format=lambda x: f"{x:.5g}")
 
 
+def _check_same_run(out: Path, run: dict) -> None:
+    """Realizations stored in ``out`` are resumed only by the run that made them: the same config (path and content),
+    overrides, seed, noise sigmas, estimators and standard errors (``monte_carlo.json``'s ``info``; a key it lacks is
+    not compared). ResultsMismatchError, one line naming what differs, otherwise."""
+    f = out / "monte_carlo.json"
+    if not f.is_file():
+        raise ResultsMismatchError(f"{out / 'realizations.csv'} has no monte_carlo.json beside it, so it cannot be "
+                                   f"told to belong to this run; use another --out or remove the folder")
+    try:
+        stored = json.loads(f.read_text()).get("info", {})
+    except ValueError as exc:
+        raise ResultsMismatchError(f"{f}: not readable ({exc}); use another --out or remove the folder") from None
+    differ = [k for k, v in run.items()
+              if k != "config" and k in stored and json.loads(json.dumps(v)) != stored[k]]  # the path may differ
+    if differ:
+        raise ResultsMismatchError(f"{out} holds the realizations of another run (it differs in: {', '.join(differ)});"
+                                   " use another --out or remove the folder")
+
+
 def _config_and_dataset(arguments):
     spec = arguments["problem"]
     return spec.config, [load_identification_config(spec.config, json.loads(spec.overrides)).dataset]
@@ -200,11 +230,18 @@ def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: d
     cfg = load_identification_config(problem.config, json.loads(problem.overrides))
     params = [f.name for f in cfg.free]
     csv = Path(out) / "realizations.csv" if out is not None else None
+    run = {"config": problem.config, "config_sha256": config_sha256(problem.config),
+           "overrides": json.loads(problem.overrides), "seed": seed, "sigma": dict(sigma),
+           "trim_sigma": dict(trim_sigma), "multi_objective": multi_objective, "crb": crb}
     rows: list[dict] = []
     if csv is not None:
         csv.parent.mkdir(parents=True, exist_ok=True)
         if csv.exists():
-            rows = pd.read_csv(csv).to_dict("records")
+            _check_same_run(Path(out), run)
+            # a rerun asking for fewer realizations than are stored summarises those it asks for
+            rows = [r for r in pd.read_csv(csv).to_dict("records") if int(r["realization"]) < realizations]
+        (Path(out) / "monte_carlo.json").write_text(json.dumps({"parameters": params, "info": run}, indent=2,
+                                                               sort_keys=True) + "\n")
     done = {int(r["realization"]) for r in rows}
     tasks = [RealizationTask(problem, k, seed, tuple(sorted(sigma.items())), tuple(sorted(trim_sigma.items())),
                              multi_objective, crb) for k in range(realizations) if k not in done]
@@ -231,9 +268,7 @@ def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: d
             run_tasks(run_realization, tasks, ex, finished)
     est = pd.DataFrame(rows)
     result = MonteCarloResult(estimates=est, parameters=params, truth={p: float(truth[p]) for p in params},
-                              info={"config": problem.config, "overrides": json.loads(problem.overrides),
-                                    "realizations": realizations, "seed": seed, "sigma": sigma,
-                                    "trim_sigma": trim_sigma, "multi_objective": multi_objective,
+                              info={**run, "realizations": realizations,
                                     "wall_time_this_run": time.perf_counter() - t0})
     if out is not None:
         result.save(out)

@@ -216,14 +216,14 @@ def residual_verdict(cfg: IdentificationConfig, chosen: dict, progress=info) -> 
     not raised (the loop's results stand). ``made_with``: the settings it was made with (:func:`analysis_settings`).
     """
     try:
-        from ..diagnosis.analysis import diagnose
+        from ..diagnosis.analysis import diagnose, verdict_status
         from ..diagnosis.residuals import compute_residuals
 
         d = diagnose(compute_residuals(cfg, chosen, label="chosen"))
     except Exception as exc:  # noqa: BLE001 - the verdict is an addition to finished results
         progress(f"residual diagnosis failed: {exc}")
         return {"status": f"failed: {exc}"}
-    status = "noise only" if d.verdict.get("noise_only") else "unexplained residual"
+    status = verdict_status(d.verdict)
     progress(f"residual diagnosis: {status}")
     out = {"status": status, "verdict": d.verdict, "findings": list(d.findings), "record_biases": d.record_biases,
            "input_path": d.input_path, "made_with": analysis_settings(cfg)}

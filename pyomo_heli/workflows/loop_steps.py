@@ -54,17 +54,29 @@ def validation_check(model0: HelicopterModel, params0: dict, model1: HelicopterM
     """The validation rule: the paired test (Diebold-Mariano, :mod:`pyomo_heli.diagnosis.validation_change`) of each
     output's validation error, model 1 against model 0 on the same records, and of all outputs at once (the table's
     joint row). ``rise``: True when any output's error rises significantly (one-sided p < ``alpha``), or, with
-    ``joint``, the joint error does; ``rows``: the test table as records; ``message`` names them."""
+    ``joint``, the joint error does, or model 1 cannot be replayed on a validation record model 0 could (a diverged
+    or failed replay is the largest rise there is); ``rows``: the test table as records, over the records both
+    models replayed; ``message`` names the rise and the records left out."""
     from ..report.loop import JOINT, validation_change_table
 
     p0 = predict("before", model0, params0, [], val_mans)
     p1 = predict("after", model1, params1, [], val_mans)
-    tab = validation_change_table(p0, p1, val_mans, alpha=alpha)
+    lost = [mv.name for mv in val_mans if p1.maneuvers.get(mv.name) is None and p0.maneuvers.get(mv.name) is not None]
+    both = [mv for mv in val_mans if p0.maneuvers.get(mv.name) is not None and p1.maneuvers.get(mv.name) is not None]
+    tab = validation_change_table(p0, p1, both, alpha=alpha)
     rows = tab.to_dict(orient="records")
     bad = [r for r in rows if r["significant rise"] and (joint or r["output"] != JOINT)]
-    msg = ("made the validation error rise significantly on " + ", ".join(
-        f"{r['output']} ({r['change [%]']:+.1f} %, p = {r['p (rise)']:.2g})" for r in bad)) if bad else ""
-    return {"rise": bool(bad), "rows": rows, "message": msg}
+    parts = []
+    if lost:
+        why = [m for m in p1.problems if any(f"maneuver {n}:" in m for n in lost)] or p1.problems[:1]
+        parts.append(f"could not be replayed on validation record(s) {', '.join(lost)} ({'; '.join(why)})")
+    if bad:
+        parts.append("made the validation error rise significantly on " + ", ".join(
+            f"{r['output']} ({r['change [%]']:+.1f} %, p = {r['p (rise)']:.2g})" for r in bad))
+    if len(both) < len(val_mans) and not lost:  # the kept model does not replay them: the test runs on the others
+        parts.append("tested without validation record(s) " + ", ".join(
+            mv.name for mv in val_mans if mv not in both) + ", which the kept model could not replay")
+    return {"rise": bool(bad or lost), "rows": rows, "message": "; ".join(parts), "not_replayed": lost}
 
 
 def backward_check(cfg: IdentificationConfig, record: dict, base_names, level: float) -> list[dict]:

@@ -11,12 +11,15 @@ An identification records in ``chosen.json`` (``info``), besides the config's na
   hash of their source, :func:`pyomo_heli.physics.extensions.extension_forms`) and the settings that decide
   what the model is compared with (outputs, input errors, resampling, crop, input reference), and
   the SHA-256 of that record;
+- ``noise_model``: the noise sigmas, the AR orders of the input errors and output noise, the input reference
+  error and the collocation points per interval (:func:`noise_record`), which the likelihood and the standard
+  errors rest on (outside the fingerprint, so that folders made before it still match);
 
 and ``parameters`` (the free parameters) at the top level of ``chosen.json``.
 
 Every command that reads a results folder with a config (``diagnose``, ``uncertainty``,
 ``report-linear``, a resumed ``close-loop``) calls :func:`check_results_match`: a mismatch of the
-free parameters, fitted maneuvers, dataset content or model is refused with one line naming both
+free parameters, fitted maneuvers, dataset content, model or noise model is refused with one line naming both
 sides (:class:`ResultsMismatchError`); a record the folder lacks (folders written before it existed,
 e.g. the committed ones under docs/results) is not checked and a one-line warning says so; a config
 whose text differs from the recorded one while all of that agrees gets a one-line note.
@@ -93,10 +96,23 @@ def fitted_maneuvers(cfg, ft=None) -> list[str]:
     return [n for n, mv in ft.maneuvers.items() if mv.role == cfg.maneuvers]
 
 
+def noise_record(cfg) -> dict:
+    """The noise model and discretisation a fit's likelihood and standard errors rest on (JSON): the noise sigmas
+    (SI; None: from the records' lead-in), the AR orders of the input errors and the output noise, the records'
+    input reference error, the collocation points per interval. Kept beside the model record (not in its fingerprint,
+    so that results made before it still match)."""
+    nlp = cfg.nlp
+    sigma = None if nlp.noise_sigma is None else {k: float(v) for k, v in sorted(nlp.noise_sigma.items())}
+    return {"noise_sigma": sigma, "input_error_ar": int(nlp.input_error_ar),
+            "output_error_ar": int(nlp.output_error_ar), "input_reference_error": bool(nlp.input_reference_error),
+            "ncp": int(nlp.ncp)}
+
+
 def provenance_info(cfg) -> dict:
     """The records an identification adds to ``chosen.json``'s ``info`` (see the module docstring)."""
     rec = model_record(cfg)
-    out = {"dataset_sha256": dataset_sha256(cfg.dataset), "model": rec, "model_fingerprint": model_fingerprint(rec)}
+    out = {"dataset_sha256": dataset_sha256(cfg.dataset), "model": rec, "model_fingerprint": model_fingerprint(rec),
+           "noise_model": noise_record(cfg)}
     try:
         raw = Path(cfg.path).read_bytes()
     except OSError:  # a config object not read from a file (tests): nothing to record by content
@@ -181,6 +197,13 @@ def check_results_match(cfg, result, results_dir, ft=None, warn=_warn) -> None:
             raise ResultsMismatchError(f"{where} disagree: the model differs: {what}; {fix}")
     else:
         unchecked.append("model")
+    recorded = info.get("noise_model")
+    if recorded is not None:  # results made before this record: the model check above is all there is
+        now = json.loads(json.dumps(noise_record(cfg)))
+        diff = sorted(k for k in set(recorded) | set(now) if recorded.get(k) != now.get(k))
+        if diff:
+            raise ResultsMismatchError(f"{where} disagree: the noise model differs: " + ", ".join(
+                f"{k} (results {recorded.get(k)!r}, config {now.get(k)!r})" for k in diff) + f"; {fix}")
     if unchecked:
         warn(f"{results_dir}/chosen.json records no {', no '.join(unchecked)} (written before these records "
              f"existed): not checked against config {cfg.path}")

@@ -238,6 +238,18 @@ def test_another_model_is_refused(checkout, tmp_path, capsys):
     _one_line(capsys, "model differs", "Iyy", "5500")
 
 
+def test_another_noise_model_or_discretisation_is_refused(checkout, tmp_path, capsys):
+    """The standard errors rest on the noise model and the discretisation: a config that differs there only (three
+    collocation points instead of two) is refused by uncertainty and diagnose, naming the setting."""
+    info = json.loads((checkout / "res" / "chosen.json").read_text())["info"]
+    assert info["noise_model"]["ncp"] == 2 and info["noise_model"]["noise_sigma"] is None
+    cfg = _id_config(checkout, "ncp3.toml", model="[discretization]\nncp = 3\n")
+    assert main(["uncertainty", str(cfg), "--results", "res", "--points", "chosen"]) == 2
+    _one_line(capsys, "noise model differs", "ncp (results 2, config 3)")
+    assert main(["diagnose", "res", "--config", str(cfg), "--out", str(tmp_path / "o")]) == 2
+    _one_line(capsys, "noise model differs", "ncp")
+
+
 def test_an_extra_parameter_in_chosen_json_is_refused(checkout, tmp_path, capsys):
     path = checkout / "res" / "chosen.json"
     doc = json.loads(path.read_text())

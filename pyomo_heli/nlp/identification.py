@@ -515,6 +515,8 @@ def identification_data(cfg, ft=None) -> IdentificationData:
         if both:
             raise ValueError(f"maneuver(s) {', '.join(both)} both fitted (field 'maneuvers') and validation records "
                              f"(field 'validation'); a validation record must be one the fit has not seen")
+    except np.linalg.LinAlgError:  # a ValueError, but of the numerics (the inputs' projection), not of the input
+        raise
     except (KeyError, ValueError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
         raise ValueError(f"{cfg.path} [data]: {msg}") from None

@@ -180,6 +180,11 @@ def test_point_a_equals_single_shooting(tmp_path):
     for f in free:
         assert a.parameters[f.name] == pytest.approx(ss.parameters[f.name], rel=1e-3), f.name
     assert a.J_time == pytest.approx(ss.J_time, rel=1e-5)
+    assert ss.converged
+    # an evaluation budget that leaves the fit one simulation returns the start: not converged, whatever moved
+    short = fit_single_shooting(cfg.model, data.maneuvers, free, list(cfg.nlp.time_outputs), integrator="rk4-casadi",
+                                max_simulations=3)
+    assert not short.converged
 
 
 BAD = [

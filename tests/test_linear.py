@@ -239,3 +239,19 @@ def test_truth_lines_name_the_parameters_beyond_two_standard_errors_and_the_lack
     assert "has wake_on_tail (truth.json), which the identification model lacks" in line
     assert truth_lines(params.assign(**{"tri-objective error/SE": [0.5, -1.9]}), cfg)[0].endswith("beyond: none.")
     assert truth_lines(params.drop(columns="tri-objective error/SE"), cfg) == []
+
+
+def test_one_spectral_segment_in_all_is_refused_by_name(clean_responses):
+    """A window as long as the only record leaves one segment, whose coherence is 1 at every frequency whatever the
+    data: refused, naming linear.window_s (two records at that speed give two segments and are estimated)."""
+    from pyomo_heli.dataset.frequency_response import SpectralSettings, estimate
+
+    ft, _ = clean_responses
+    hover = [mv for mv in ft.identification() if mv.trim_speed == 0.0 and "lon" in mv.inputs]
+    one = hover[0]
+    whole = SpectralSettings(window_s=(one.n_samples - 1) / one.sample_rate)
+    with pytest.raises(ValueError, match="linear.window_s .* leaves one spectral segment"):
+        estimate([one], "q", "lon", whole)
+    assert len(hover) >= 2
+    pair = [mv for mv in hover if mv.n_samples >= one.n_samples][:2]
+    estimate(pair, "q", "lon", SpectralSettings(window_s=(min(m.n_samples for m in pair) - 1) / one.sample_rate))

@@ -265,6 +265,25 @@ def test_infeasible_bounds_are_reported_without_an_iteration_limit_solve():
     assert r.success and r.J_f2 <= 0.6 * (1 + 1e-6) and r.J_f3 <= 0.6 * (1 + 1e-6)
 
 
+def test_a_local_infeasibility_verdict_on_bounds_a_converged_point_meets_is_a_failure_not_infeasible(monkeypatch):
+    """Ipopt's Restoration_Failed is local, often numerical: on bounds that a converged solve already meets it is
+    recorded as a failure (retried by the front, the note says why), not as infeasible, and looser bounds are then
+    solved, not skipped as "at most those of a point found infeasible"."""
+    from types import SimpleNamespace
+
+    ps = EpsilonConstraintSolver(_box(), NAMES, SETTINGS)
+    ps.anchors()
+    assert ps.solve_at({"f2": 0.5, "f3": 0.5}).success  # a converged point with f2 = f3 = 0.5
+    real = ps.solver.solve
+    monkeypatch.setattr(ps.solver, "solve", lambda **kw: SimpleNamespace(
+        success=False, status="Restoration_Failed", iterations=7, wall_time=0.0, setup_time=0.0))
+    p = ps.solve_at({"f2": 0.6, "f3": 0.6})
+    assert not p.success and p.status == "Restoration_Failed" and "not infeasible" in p.note
+    monkeypatch.setattr(ps.solver, "solve", real)
+    q = ps.solve_at({"f2": 0.55, "f3": 0.55})  # tighter than the failed point: solved, not skipped
+    assert q.success and q.J_f2 <= 0.55 * (1 + 1e-6)
+
+
 def test_nondominated_nadir_by_hand():
     J = np.array([[1.0, 5.0, 2.0],
                   [2.0, 3.0, 3.0],

@@ -221,3 +221,14 @@ def test_placement_on_the_epsilon_constraint_solver(rule):
     assert direct.success and ada.compare_direct(chosen, direct) <= 1.0
     if rule == "payoff":
         assert direct.parameters["a"] == pytest.approx(T, abs=1e-5)
+
+
+def test_the_coarse_grid_leaves_the_last_objectives_free_in_their_first_position():
+    """As on the grid (EpsilonConstraintSolver.grid_bounds): the coarse grid's points at position 0 of the second
+    axis bound J_2 only, so that row is the two-objective front the tri-objective report takes its bi-objective
+    choice from, not a front capped at J_3(A)."""
+    ps = BoxFront(se=0.05)
+    AdaptiveFrontN(ps, max_solves=12, standard_errors=lambda p: {"a": 0.05, "b": 0.05}).run()
+    row0 = [p for p in ps.seen if p.kind == "eps" and p.grid and p.grid[1] == 0]
+    assert row0 and all(p.epsilon["f3"] == math.inf and math.isfinite(p.epsilon["f2"]) for p in row0)
+    assert all(math.isfinite(p.epsilon["f3"]) for p in ps.seen if p.kind == "eps" and p.grid and p.grid[1] > 0)

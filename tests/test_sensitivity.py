@@ -94,3 +94,17 @@ def test_trims_from_the_nominal_trim_match_the_continuation_from_hover(monkeypat
     at = zero.with_parameters(**{lag.strength: 0.02})
     assert len(at.state_names) == len(zero.state_names) + 1
     same(trim.trim_sweep(at, speeds), trim.trim_near(at, trim.trim_sweep(zero, speeds)))
+
+
+def test_difference_steps_do_not_shrink_to_rounding_near_zero():
+    """A parameter at a normal value steps by rel_step times its magnitude; at zero, or estimated near zero (below a
+    tenth of its scale), by rel_step times its scale: a strength of 1e-11 would otherwise step by 1e-16."""
+    from pyomo_heli.diagnosis.candidates import CANDIDATES
+    from pyomo_heli.simulation.sensitivity import parameter_steps
+
+    m = HelicopterModel(extensions=[CANDIDATES["cg_offset"]()])
+    scale = m.parameters.spec("dx_fwd").scale
+    assert parameter_steps(m, ["Iyy"], 1e-5)[0] == pytest.approx(1e-5 * m.parameters["Iyy"])
+    for v in (0.0, 1e-11 * scale, -1e-3 * scale):
+        assert parameter_steps(m.with_parameters(dx_fwd=v), ["dx_fwd"], 1e-5)[0] == pytest.approx(1e-5 * scale), v
+    assert parameter_steps(m.with_parameters(dx_fwd=2 * scale), ["dx_fwd"], 1e-5)[0] == pytest.approx(2e-5 * scale)

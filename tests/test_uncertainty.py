@@ -353,3 +353,45 @@ def test_a_direction_no_objective_sees_gets_an_infinite_error():
     assert r.se["p2"] == math.inf and np.isfinite([r.se["p0"], r.se["p1"]]).all()
     np.testing.assert_allclose([r.se["p0"], r.se["p1"]],
                                np.sqrt(np.diag(np.linalg.inv(info.fisher_trim()[:2, :2]))), rtol=1e-8)
+
+
+def test_a_large_valued_parameter_beside_a_small_one_is_determined():
+    """The flap spring K_beta (1e5 N m/rad) freed beside the twist (rad/m): in SI their information differs by 1e14,
+    which an unscaled eigenvalue test reads as a null direction (an infinite standard error). In the parameters'
+    nominal scales the problem is well conditioned: the standard errors are those of the inverse information."""
+    rng = np.random.default_rng(3)
+    N = 200
+    S = {"q": np.column_stack([rng.normal(size=N) * 1e-6, rng.normal(size=N) * 10.0])}
+    info = PointInformation(names=["K_beta", "theta_twist"], values={"K_beta": 2e5, "theta_twist": -0.03},
+                            scale=np.array([1e5, 0.01]), S_time=S, e_time={"q": np.zeros(N)}, R_time={"q": 0.01},
+                            S_trim={}, e_trim={}, R_trim={})
+    free = [FreeParameter("K_beta", 2e5, 1e4, 1e6, 1e5), FreeParameter("theta_twist", -0.03, -0.2, 0.0, 0.01)]
+    se = cramer_rao(info, free, kind="A").se
+    direct = np.sqrt(np.diag(np.linalg.inv(info.fisher_time())))
+    assert se["K_beta"] == pytest.approx(direct[0], rel=1e-8)
+    assert se["theta_twist"] == pytest.approx(direct[1], rel=1e-8)
+
+
+def test_fewer_trim_rows_than_parameters_leave_an_unseen_direction_with_an_infinite_bound():
+    """Two trim rows, three parameters: the third direction is seen by no row. It is in the table with singular value
+    0 and an infinite bound (a thin SVD would leave it out and report a finite condition number)."""
+    A = np.array([[3.0, 0.0, 0.0], [0.0, 2.0, 0.0]])
+    info = PointInformation(names=["a", "b", "c"], values={"a": 1.0, "b": 1.0, "c": 1.0}, scale=np.ones(3),
+                            S_trim={"col": A}, e_trim={"col": np.zeros(2)}, R_trim={"col": 1.0})
+    ident = identifiability(info)
+    t = ident.table[ident.table.objective == "trim"]
+    assert t.singular_value.tolist() == [3.0, 2.0, 0.0] and t.direction.iloc[2] == "+1.00 c"
+    assert ident.condition("trim") == np.inf and ident.weakest("trim").se_scaled == np.inf
+
+
+def test_noise_model_terms_the_information_leaves_out_are_named():
+    """The Cramer-Rao information takes each output's noise white: with an AR output-noise model, input reference
+    errors or a full covariance the standard errors are approximate, and ``approximations`` names each (the
+    results record them and the report says so); the plain errors-in-variables config has none."""
+    from pyomo_heli.uncertainty.front import approximations
+
+    path = CONFIGS / "tiny_case1_input_errors.toml"
+    assert approximations(load_identification_config(path)) == []
+    cfg = load_identification_config(path, {"objectives": {"output_error_ar": 2, "input_reference_error": True}})
+    got = approximations(cfg)
+    assert len(got) == 2 and "AR(2)" in got[0] and "input_reference_error" in got[1]

@@ -114,6 +114,7 @@ def estimate(maneuvers, output: str, input: str, settings: SpectralSettings | No
     if len(speeds) != 1:
         raise ValueError(f"maneuvers at different speeds {sorted(speeds)}: spectra of one flight condition only")
     g_uu = g_uy = g_yy = 0.0
+    segments = 0
     for mv in maneuvers:
         fs = mv.sample_rate
         n = int(round(s.window_s * fs))
@@ -127,10 +128,15 @@ def estimate(maneuvers, output: str, input: str, settings: SpectralSettings | No
         y = mv.data[output].to_numpy() - mv.data[output].iloc[0]
         kw = dict(fs=fs, window="hann", nperseg=n, noverlap=int(round(s.overlap * n)), detrend=False,
                   nfft=s.nfft_factor * n)
+        segments += 1 + (mv.n_samples - n) // max(n - kw["noverlap"], 1)
         f, puu = signal.welch(u, **kw)
         _, puy = signal.csd(u, y, **kw)
         _, pyy = signal.welch(y, **kw)
         g_uu, g_uy, g_yy = g_uu + puu, g_uy + puy, g_yy + pyy
+    if segments < 2:  # one averaged segment has coherence 1 at every frequency, whatever the data
+        raise ValueError(f"{output}/{input} at {maneuvers[0].trim_speed:.6g} m/s: linear.window_s = {s.window_s:g} s "
+                         f"leaves one spectral segment in all ({', '.join(mv.name for mv in maneuvers)}); the "
+                         f"coherence needs at least two: a shorter window or more records")
     omega = 2 * np.pi * f
     with np.errstate(divide="ignore", invalid="ignore"):
         T = g_uy / g_uu

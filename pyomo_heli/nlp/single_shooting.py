@@ -103,7 +103,9 @@ def fit_single_shooting(model: HelicopterModel, maneuvers, free: list[FreeParame
         z_new = sol.x
         e = residuals_of(z_new)
         R_new = {o: float(np.mean(e[o] ** 2) + R_FLOOR[o] ** 2) for o in outputs}
-        done = np.max(np.abs(z_new - z)) < rtol * max(1.0, np.max(np.abs(z))) and \
+        # converged: the inner fit ended on its own tolerances (status > 0; 0 is the evaluation budget, which
+        # returns the start unchanged when it allows one evaluation), and the outer iteration stopped moving
+        done = sol.status > 0 and np.max(np.abs(z_new - z)) < rtol * max(1.0, np.max(np.abs(z))) and \
             max(abs(R_new[o] / R[o] - 1) for o in outputs) < 1e-9
         z, R = z_new, R_new
         if done:

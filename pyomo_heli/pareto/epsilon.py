@@ -135,6 +135,7 @@ class EpsilonConstraintSolver:
         self.anchor_points: dict = {}
         self._solved: list = []  # (bounds tuple, snapshot at the front's scale) of every converged front point
         self._infeasible: list = []  # bounds tuples of points found infeasible
+        self._witnesses: list = []  # objective values of every converged solve: bounds they meet are feasible
         self.row_minima: dict = {}  # grid row -> least J_2 under that row's J_1 bound (two bounded objectives)
         self.row_solves: list = []  # the solves that found them (records for the run's info)
         self._row_snapshots: dict = {}
@@ -161,7 +162,10 @@ class EpsilonConstraintSolver:
             self.eps_params[k].set_value(v / self.scale[k] if math.isfinite(v) else 1e20)
 
     def a_priori_infeasible(self, eps: dict) -> str:
-        """Why the bounds ``eps`` are infeasible without a solve ('' when that is not known)."""
+        """Why the bounds ``eps`` are infeasible without a solve ('' when that is not known, or when a converged
+        solve meets them: :meth:`witnessed`)."""
+        if self.witnessed(eps):
+            return ""
         for k, v in eps.items():
             lo = self.minima.get(k)
             if lo is not None and math.isfinite(v) and v < lo - 1e-12 * max(abs(lo), 1.0):
@@ -178,6 +182,13 @@ class EpsilonConstraintSolver:
             if all(v <= b for v, b in zip(vec, bad)):
                 return "every bound at most that of a point found infeasible"
         return ""
+
+    def witnessed(self, eps: dict) -> bool:
+        """Whether a converged solve of this model (since the anchors) meets every finite bound of ``eps``."""
+        tight = {k: v for k, v in eps.items() if math.isfinite(v)}
+        return bool(tight) and any(
+            all(math.isfinite(J.get(k, math.nan)) and J[k] <= v + 1e-9 * max(abs(v), 1.0) for k, v in tight.items())
+            for J in self._witnesses)
 
     def solve_once(self, objective: str, eps: dict | None = None, warm_start: str = "primal", options=None,
                    scale: float | None = None, utopia=None, nadir=None) -> Outcome:
@@ -202,10 +213,18 @@ class EpsilonConstraintSolver:
                                                         res.setup_time)
         except SolverError as exc:  # no solution at all: record it, the sweep goes on
             success, status, iterations, wall, setup = False, f"{type(exc).__name__}: {exc}", -1, 0.0, 0.0
-        if not success and status in IPOPT_INFEASIBLE and any(math.isfinite(v) for v in eps.values()):
-            status, note = INFEASIBLE, status
+        J = {k: _value(e) for k, e in self.J.items()}
+        if success:
+            self._witnesses.append(J)
+        elif status in IPOPT_INFEASIBLE and any(math.isfinite(v) for v in eps.values()):
+            # Ipopt's verdict is local (Restoration_Failed is often a numerical failure): bounds that a converged
+            # solve meets are feasible, and the point is a failure to retry, not an infeasible one
+            if self.witnessed(eps):
+                note = "a converged solve meets these bounds: not infeasible"
+            else:
+                status, note = INFEASIBLE, status
         multipliers = self.multipliers(scale or self.scale[objective]) if success and objective == self.primary else {}
-        return Outcome(J={k: _value(e) for k, e in self.J.items()}, parameters=free_parameter_values(self.m),
+        return Outcome(J=J, parameters=free_parameter_values(self.m),
                        success=success, status=status, iterations=iterations, wall_time=wall, setup_time=setup,
                        note=note, multipliers=multipliers)
 
@@ -316,7 +335,7 @@ class EpsilonConstraintSolver:
 
         Raises RuntimeError naming the anchor when one fails: everything after rests on them.
         """
-        self.minima, self._infeasible, self._solved = {}, [], []
+        self.minima, self._infeasible, self._solved, self._witnesses = {}, [], [], []
         self.row_minima, self.row_solves, self._row_snapshots = {}, [], {}
         out = self.solve_once(self.primary, warm_start="none")
         a = self._point(0, "A", {}, out, "none", (0,) * len(self.bounded))

@@ -225,7 +225,8 @@ class ParetoSolver(EpsilonConstraintSolver):
         A is written to the store once its outcome is final (after B, when A needs the retry), so a
         resumed run repeats exactly the attempts of an uninterrupted one.
         """
-        self.minima, self._infeasible = {}, []  # known again once B is (a rerun may find another minimum)
+        self.minima, self._infeasible, self._witnesses = {}, [], []  # known again once B is (a rerun may find
+        # another minimum; a Monte Carlo realization has other data)
         a_final = self.store is not None and self.store.has("A")
         if a_final:
             a = self.solve_point("A", self.point_a)

@@ -153,7 +153,11 @@ class AdaptiveFrontN(AdaptiveFront):
         ps.axes = ps.grid_axes(self.coarse)
         for pos in snake(self.coarse):
             if any(pos) and len(ps.points) < self.max_solves:
-                self._solve_n([float(ax[i]) for ax, i in zip(ps.axes, pos)], pos)
+                # position 0 of every axis after the first leaves that objective free, as on the grid
+                # (EpsilonConstraintSolver.grid_bounds): the two-objective row of the choice is not capped
+                self._solve_n([float(ax[i]) for ax, i in zip(ps.axes, pos)], pos,
+                              solve=[math.inf if n > 0 and i == 0 else float(ax[i])
+                                     for n, (ax, i) in enumerate(zip(ps.axes, pos))])
         s.arc_length_solves = len(ps.points)
         try:
             self._scaling()
@@ -163,10 +167,12 @@ class AdaptiveFrontN(AdaptiveFront):
         self._refine()
         return self._finish()
 
-    def _solve_n(self, eps, grid=()) -> None:
+    def _solve_n(self, eps, grid=(), solve=None) -> None:
+        """Solve at the bounds ``solve`` (default ``eps``); ``eps``, finite, is where the placement counts the point
+        as tried (a grid point's free objective at the value of its axis)."""
         self.tried.append(np.asarray(eps, float))
         key = f"ada{len(self.ps.points):03d}" if getattr(self.ps, "store", None) is not None else None
-        p = self.ps.solve_at([float(v) for v in eps], key=key, grid=tuple(grid))
+        p = self.ps.solve_at([float(v) for v in (eps if solve is None else solve)], key=key, grid=tuple(grid))
         if p.status == INFEASIBLE:
             self.infeasible_tried.append(self.tried[-1])
 

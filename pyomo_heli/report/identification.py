@@ -339,6 +339,10 @@ def write_report(out_dir, cfg, results_dir=None, figure_format: str = "png") -> 
         u = info["unreliable"]
         L += [f"> **UNRELIABLE**: {u.get('reason')}. The {', '.join(u.get('quantities', []))} depend on the "
               "anchors and are not to be trusted (chosen.json `info.unreliable`).", ""]
+    if info.get("uncertainty_approximations"):  # the noise model the Cramer-Rao information leaves out
+        L += ["> **Standard errors approximate**: the information leaves out "
+              + "; ".join(info["uncertainty_approximations"]) + " (chosen.json `info.uncertainty_approximations`).",
+              ""]
     all_problems = [f"{lab}: {p}" for lab, ps in problems.items() for p in ps]
     if all_problems:
         L += ["> **Simulation problems** (the affected curves are missing or cut short in the figures, "

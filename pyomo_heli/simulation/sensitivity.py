@@ -40,12 +40,15 @@ def trim_outputs(model: HelicopterModel, speeds, outputs, near: tuple | None = N
 
 
 def parameter_steps(model: HelicopterModel, names, rel_step: float = 1e-5) -> np.ndarray:
-    """Difference step per parameter: rel_step times its magnitude, or its scale when it is zero."""
+    """Difference step per parameter: rel_step times its magnitude, or times its scale when the magnitude is below a
+    tenth of the scale (zero, or an effect's strength estimated near zero, whose own magnitude would give a step of
+    rounding size)."""
     h = []
     for n in names:
         v = model.parameters[n]
         spec = model.parameters.spec(n)
-        ref = abs(v) if v != 0 else abs(spec.scale or 1.0)
+        scale = abs(spec.scale or 0.0)
+        ref = abs(v) if abs(v) >= 0.1 * scale and v != 0 else (scale or 1.0)
         h.append(rel_step * ref)
     return np.array(h)
 

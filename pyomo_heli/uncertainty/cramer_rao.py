@@ -376,10 +376,13 @@ def cramer_rao(info: PointInformation, free, kind: str = "A", weights: tuple | N
     cov_free = np.full((len(idx), len(idx)), np.nan)
     if idx:
         # H singular along some direction: the data do not determine it; the parameters taking part
-        # in it get an infinite standard error instead of the zero a pseudo-inverse would give
-        w, V = np.linalg.eigh(H)
+        # in it get an infinite standard error instead of the zero a pseudo-inverse would give. The test is made
+        # in the parameters' nominal scales (info.scale), so that a parameter of large SI value (K_beta, 1e5) next
+        # to a small one (the twist) is not read as a null direction
+        d = np.asarray(info.scale, dtype=float)[idx]
+        w, V = np.linalg.eigh(H * np.outer(d, d))
         null = w <= 1e-12 * max(w.max(), 1e-300)
-        Hi = (V[:, ~null] / w[~null]) @ V[:, ~null].T
+        Hi = ((V[:, ~null] / w[~null]) @ V[:, ~null].T) * np.outer(d, d)
         cov_free = Hi @ G @ Hi
         blind = np.abs(V[:, null]).max(axis=1) > 1e-6 if null.any() else np.zeros(len(idx), bool)
         cov_free[blind, :] = cov_free[:, blind] = np.nan

@@ -29,6 +29,22 @@ def _information(cfg, data, parameters):
                              input_error_ar=cfg.nlp.input_error_ar)
 
 
+def approximations(cfg) -> list[str]:
+    """What of the identification's noise model the Cramer-Rao information leaves out (it takes each output's noise
+    white with its own variance, and the input errors of :func:`~.cramer_rao.point_information`): the standard errors
+    are then approximate, and the results say so (``info.uncertainty_approximations``)."""
+    nlp = cfg.nlp
+    out = []
+    if nlp.output_error_ar:
+        out.append(f"the output noise's AR({nlp.output_error_ar}) model ([objectives] output_error_ar): outputs taken "
+                   "as white, so coloured noise makes the standard errors too small")
+    if nlp.input_reference_error:
+        out.append("the records' input reference errors ([objectives] input_reference_error)")
+    if nlp.covariance == "full":
+        out.append("the outputs' full covariance ([objectives] covariance = \"full\"): taken diagonal")
+    return out
+
+
 def point_standard_errors(cfg, data, parameters: dict, kind: str = "eps", multiplier: float | None = None) -> dict:
     """name -> Cramer-Rao standard error (SI; nan at a bound) of a front point with these parameter values
     (``multiplier``: its solve's -dJ_time/dJ_trim, :func:`~.cramer_rao.objective_weights`)."""
@@ -61,6 +77,11 @@ def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "a
     """
     if points not in ("all", "chosen"):
         raise ValueError(f"points must be 'all' or 'chosen', got {points!r}")
+    approx = approximations(cfg)
+    result.info.pop("uncertainty_approximations", None)
+    if approx:
+        result.info["uncertainty_approximations"] = approx
+        progress("standard errors are approximate: the information leaves out " + "; ".join(approx))
     names = list(result.parameters)
     front = result.front
     for c in [f"se_{n}" for n in names] + ["at_bound"]:

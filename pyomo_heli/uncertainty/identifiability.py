@@ -83,7 +83,10 @@ class Identifiability:
 def _svd_rows(objective: str, A: np.ndarray, names) -> list[dict]:
     if A.shape[0] == 0:
         return []
-    _, s, vt = np.linalg.svd(A, full_matrices=False)
+    # full_matrices: with fewer rows than parameters (a few trims) the directions the rows cannot see are the last
+    # rows of vt, singular value 0, not left out
+    _, s, vt = np.linalg.svd(A, full_matrices=A.shape[0] < A.shape[1])  # full only where it is small
+    s = np.concatenate([s, np.zeros(vt.shape[0] - s.size)])
     s = np.where(s < SV_RTOL * s.max(), 0.0, s) if s.size else s
     rows = []
     for k, (sk, v) in enumerate(zip(s, vt)):

@@ -182,7 +182,10 @@ def _run_identification(cfg, run: RunFolder, progress, uncertainty) -> Identific
               "eq11_by_nadir": ps.choices() if chosen is not None else None,
               # an anchor that did not converge (after its retries) spoils everything derived from the anchors
               "unreliable": ({"reason": "; ".join(anchor_failures),
-                              "quantities": list(UNRELIABLE_WITHOUT_ANCHORS)} if anchor_failures else None),
+                              "quantities": list(UNRELIABLE_WITHOUT_ANCHORS)
+                              + (["time-domain estimate (A) and its replays"]
+                                 if any(f.startswith("anchor A ") for f in anchor_failures) else [])}
+                             if anchor_failures else None),
               "resumed_points": sum(bool(getattr(p, "from_disk", False)) for p in points),
               "mean_iterations_front": _mean(front.loc[front.kind == "eps", "iterations"]),
               "mean_iterations_front_cold": _mean(front.loc[front.kind == "eps", "cold_iterations"]),

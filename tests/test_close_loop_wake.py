@@ -238,6 +238,12 @@ def test_report_loop_on_a_folder_made_elsewhere(tmp_path, monkeypatch):
             == (ROOT / "docs" / "results" / "close_loop" / "loop_report.md").read_text())
     for name in ("loop_trim_vs_speed.png", "loop_trim_forces.png", "loop_validation.png"):
         assert (folder / name).stat().st_size > 10_000, name
+    # a config that is not the loop's (another model: a fixed parameter changed) is refused, not replayed
+    other = tmp_path / "other.toml"
+    other.write_text((ROOT / "studies" / "close_loop.toml").read_text().replace(
+        '"../data/bo105_synthetic"', f'"{ROOT / "data" / "bo105_synthetic"}"').replace(
+        "[objectives]", "[model]\nparameters = { f_e = 1.2 }\n\n[objectives]", 1))
+    assert main(["report-loop", str(folder), "--config", str(other)]) == 2
     chosen = folder / doc["iterations"][0]["results_dir"] / "chosen.json"
     rec = json.loads(chosen.read_text())
     rec["info"]["dataset_sha256"] = "0" * 64

@@ -381,6 +381,8 @@ CASES = [
               "field 'trim_file'", "truth.json is evaluation-only"),
     _mutation("same-file-twice", lambda f: m(f, lambda d: d["maneuvers"][2].update(file=LON)),
               "field 'maneuvers[2].file'", "same file"),
+    _mutation("same-file-by-another-path", lambda f: m(f, lambda d: d["maneuvers"][2].update(
+        file="maneuvers/../" + LON)), "field 'maneuvers[2].file'", "same file"),
     _mutation("trim-file-missing", lambda f: (f / "trims.csv").unlink(), "field 'trim_file'", "does not exist"),
     _mutation("missing-required-column", lambda f: _edit_csv(f, LON, lambda d: d.drop(columns=["q_deg_s"])),
               f"{LON}: column 'q'", "missing required column", "'q_deg_s', 'q_rad_s'"),

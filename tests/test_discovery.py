@@ -319,7 +319,7 @@ def test_validation_rule_rejects_a_model_that_cannot_be_replayed_on_a_validation
     assert "diverged at t = 3.1 s" in check["message"] and check["rows"] == []
     monkeypatch.setattr(steps, "predict", diverging("before"))
     check = validation_check(m0, {}, m0, {}, val)
-    assert not check["rise"] and "which the kept model could not replay" in check["message"]
+    assert not check["rise"] and "tested on no validation record: the kept model could not replay" in check["message"]
 
 
 def test_validation_rule_rejects_a_joint_rise_only_when_told(monkeypatch):
@@ -1047,6 +1047,11 @@ def test_the_backward_check_removes_at_the_level_the_terms_entered_at():
     assert rows["dX_bump10"]["p"] == pytest.approx(0.003732, rel=1e-3) and not rows["dX_bump10"]["significant"]
     assert rows["dM_mu"]["significant"] and rows["dM_mu"]["level"] == level
     assert backward_check(cfg, record, [], 0.01)[0]["significant"]  # at alpha itself it would have stayed
+    # a strength without a standard error (at its bound, or none computed) is a row that says it was not tested,
+    # neither significant nor removed
+    record["standard_errors"]["c_dM_mu"] = None
+    row = {r["name"]: r for r in backward_check(cfg, record, [], level)}["dM_mu"]
+    assert row["significant"] is None and "not tested" in row["note"]
 
 
 # slow (108 s; CI time): four identifications and three screens. The default run has the check's levels and

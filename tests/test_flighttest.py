@@ -640,6 +640,9 @@ BAD = {
     "bad role": (lambda s: s.replace('role = "identification"', 'role = "training"'), ["role", "training"]),
     "missing trims": (lambda s: s.replace("[trims]\nspeeds_kt = [20, 60]\n", ""), ["trims"]),
     "duplicate maneuver names": (lambda s: s + "\n" + s[s.index("[[maneuvers]]"):], ["maneuver", "name", "duplicate"]),
+    "one effect under two names": (lambda s: s.replace("[truth.effects.wake_on_tail]", "[truth.effects.E1]\n"
+                                                       "K_lamT = 1.5\n\n[truth.effects.wake_on_tail]"),
+                                   ["truth.effects", "name the same effect"]),
 }
 
 

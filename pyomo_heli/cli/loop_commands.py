@@ -66,11 +66,13 @@ def cmd_report_loop(args) -> int:
         raise UserError(f"{f}: not a loop record of close-loop ({exc})") from None
     if not Path(config).is_file():
         raise UserError(f"config {config} (named in {f}) not found; give it with --config")
-    from ..workflows.check_effect import loop_dataset
+    from ..workflows.check_effect import loop_dataset, loop_iteration
 
     # a folder made on another machine names a path not here: the config's own flight test, when its content is
     # the loop's (ResultsMismatchError, one line, otherwise)
     dataset = loop_dataset(folder, doc, config)
+    for k in dict.fromkeys((0, None)):  # the report replays the first and the kept model: the config must be theirs
+        loop_iteration(folder, k, config)
     cfg = load_identification_config(config, {"data": {"dataset": str(Path(dataset).resolve())}})
     path = write_loop_report(folder, cfg, figure_format=args.figure_format)
     print(f"{path} written")

@@ -263,10 +263,11 @@ class ManifestChecks:
             if "file" in item:
                 f = self.rel_path(item["file"], p + "file", "maneuver file")
                 if f is not None:
-                    if f in seen_files:
-                        self.add(MANIFEST_NAME, p + "file", f"same file {f!r} as maneuvers[{seen_files[f]}].file")
+                    same = (self.root / f).resolve()  # by target: "a/../a/x.csv" or a link is the same record
+                    if same in seen_files:
+                        self.add(MANIFEST_NAME, p + "file", f"same file {f!r} as maneuvers[{seen_files[same]}].file")
                     else:
-                        seen_files[f] = i
+                        seen_files[same] = i
                         e["file"] = f
             if e["name"] is None:
                 self._names_complete = False

@@ -149,10 +149,16 @@ def load_config(path: str | Path) -> GeneratorConfig:
                                                  f"{lo:g}..{hi:g} {unit} of the dataset format (manifest check)")
     effects = {}
     TRUTH_EFFECTS = all_effects()
+    by_class = {}  # one effect under two of its names would be applied twice (truth.json would record it once)
     for name, eff in s.truth.effects.items():
         if name not in TRUTH_EFFECTS:
             problems.add("truth.effects", f"unknown effect '{name}'; choose from {', '.join(sorted(TRUTH_EFFECTS))}")
             continue
+        if TRUTH_EFFECTS[name] in by_class:
+            problems.add("truth.effects", f"'{name}' and '{by_class[TRUTH_EFFECTS[name]]}' name the same effect; "
+                                          "give it once")
+            continue
+        by_class[TRUTH_EFFECTS[name]] = name
         known = [p.name for p in TRUTH_EFFECTS[name]().parameters()]
         for k in eff:
             if k not in known:

@@ -377,6 +377,8 @@ def iteration_checks(it: dict) -> list[str]:
         L += ["Validation rule (paired test against the model kept so far; a significant rise on any output rejects "
               f"the step, and of all outputs at once with `[loop] validation_joint`): **{verdict}**", "",
               markdown_table(pd.DataFrame(it["validation_check"]), digits=4), ""]
+    if it.get("validation_note"):  # records the test could not take (it passed on the others, or on none)
+        L += [f"Validation rule: {it['validation_note']}", ""]
     if named:
         G = named["best_generic_fit"]
         L += [f"Name check (a physical candidate the loop added must leave the generic family nothing significant "

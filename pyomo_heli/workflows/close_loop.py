@@ -387,6 +387,8 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             check = validation_check(kcfg.model, krec["parameters"], cfg.model, chosen, val_mans,
                                      joint=settings.validation_joint)
             record["validation_check"] = check["rows"]
+            if check["message"] and not check["rise"]:  # records left out of a passed test: said, not dropped
+                record["validation_note"] = check["message"]
             if check["rise"]:
                 if added is not None:
                     rejected.append(added)
@@ -407,7 +409,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                     if settings.discovery and not record.get("rejected") else [])
         if backward:
             record["backward_check"] = backward
-        dropped = [b["name"] for b in backward if not b["significant"]]
+        dropped = [b["name"] for b in backward if b["significant"] is False]  # None: not tested
         if dropped:  # past the iteration limit too; the validation rule judges the model without it as any step
             b = next(b for b in backward if b["name"] == dropped[0])
             record["decision"] = {"decision": "dropped", "name": dropped[0],

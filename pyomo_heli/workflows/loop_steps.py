@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import time
 from pathlib import Path
 
@@ -74,14 +75,16 @@ def validation_check(model0: HelicopterModel, params0: dict, model1: HelicopterM
         parts.append("made the validation error rise significantly on " + ", ".join(
             f"{r['output']} ({r['change [%]']:+.1f} %, p = {r['p (rise)']:.2g})" for r in bad))
     if len(both) < len(val_mans) and not lost:  # the kept model does not replay them: the test runs on the others
-        parts.append("tested without validation record(s) " + ", ".join(
-            mv.name for mv in val_mans if mv not in both) + ", which the kept model could not replay")
+        parts.append(("tested on no validation record" if not both else "tested without validation record(s) "
+                      + ", ".join(mv.name for mv in val_mans if mv not in both))
+                     + ": the kept model could not replay " + ("them" if both else "any"))
     return {"rise": bool(bad or lost), "rows": rows, "message": "; ".join(parts), "not_replayed": lost}
 
 
 def backward_check(cfg: IdentificationConfig, record: dict, base_names, level: float) -> list[dict]:
     """Wald test of every loop-added effect's strength but the last added (forward selection's backward check), from
-    the Cramer-Rao standard errors at the diagnosed point; skipped for a strength without one. ``level``: the level a
+    the Cramer-Rao standard errors at the diagnosed point; a strength without one (at a bound, or none computed) is a
+    row with ``significant`` None and a note: not tested, so not removed. ``level``: the level a
     term entered at (the structure step's alpha / L), so that every term of a kept model stays significant at the level
     it needed to enter, as in stepwise regression with equal F-to-enter and F-to-remove."""
     from scipy.stats import norm
@@ -92,6 +95,9 @@ def backward_check(cfg: IdentificationConfig, record: dict, base_names, level: f
     for e in added:
         s = se.get(e.strength)
         if not s or s <= 0 or e.strength not in record["parameters"]:
+            # not tested, and said so (a strength at a bound has no standard error; none without [loop] uncertainty)
+            rows.append({"name": e.name, "strength": e.strength, "z": math.nan, "p": math.nan, "level": level,
+                         "significant": None, "note": "not tested: no standard error (at a bound, or none computed)"})
             continue
         z = record["parameters"][e.strength] / s
         p = float(norm.sf(z) if getattr(e, "one_sided", False) else 2 * norm.sf(abs(z)))

@@ -803,6 +803,24 @@ def test_a_failed_base_solve_leaves_the_decision_to_the_score_test_and_says_so(m
     assert "base solve failed: Maximum_Iterations_Exceeded" in out["message"]
 
 
+def test_a_significant_term_whose_fit_failed_is_not_read_as_nothing_significant(monkeypatch):
+    """The score test decides (the base solve failed) and finds col_delay significant (p = 1e-7), but its NLP fit
+    failed: the step cannot say "nothing significant over the whole library". It says the decision is open, names
+    the term, and leaves the residual unexplained."""
+    J = -117175.06
+
+    def fit(name, generic, ok):
+        return {"name": name, "generic": generic, "success": ok, "LR": float("nan"), "p": float("nan"),
+                "J": J - 1.0 if ok else float("nan"), "estimate": 0.001, "formula": name, "shape": {}}
+
+    fits = {"col_delay": fit("col_delay", True, False), "lon_rigging": fit("lon_rigging", False, True)}
+    out = _stubbed_step(monkeypatch, [0.02, 1e-7], [9.2, 49.4], lambda pairs: {
+        "J0": float("nan"), "base_success": False, "base_status": "Maximum_Iterations_Exceeded", "fits": fits,
+        "pairs": {}})
+    assert out["decision"] == "none" and out["unexplained"] and out["significant_unfitted"] == ["col_delay"]
+    assert out["message"].startswith("not decided: the NLP fit of col_delay failed"), out["message"]
+
+
 def test_a_hypothesis_checked_where_the_base_solve_failed_is_decided_by_the_score_test(monkeypatch):
     """check_term with input errors and the NLP screen's base failed (no likelihood ratio, LR nan): the score test's
     p decides (1e-6 < level 1e-3: significant), as in a structure step, instead of a nan p read as "not

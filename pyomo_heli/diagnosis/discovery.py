@@ -423,16 +423,27 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
     out.update(generic_significant=bool(G is not None and G["p"] < level), best_generic_fit=G)
     if rejected_generic:
         out["rejected_generic"] = list(rejected_generic)
+    # a term the deciding test finds significant whose NLP fit failed (no estimate, no likelihood ratio): best_fit
+    # leaves it out, so the step must not read "nothing significant" as if the library had been tested in full
+    unfitted = sorted((f for f in fits.values() if not f["success"] and f.get("p", math.nan) < level),
+                      key=lambda f: f["p"])
+    if unfitted:
+        out["significant_unfitted"] = [f["name"] for f in unfitted]
     if not g_sig and not p_sig:
-        # "unexplained": the best generic term is significant on its own (p < alpha) but not over the library
-        unexplained = G is not None and G["p"] < alpha
+        # "unexplained": the best generic term is significant on its own (p < alpha) but not over the library, or a
+        # significant term could not be fitted
+        unexplained = (G is not None and G["p"] < alpha) or bool(unfitted)
         out.update(decision="none", best_generic=G, unexplained=bool(unexplained),
-                   message=f"nothing significant over the whole library of {len(names)} terms ({criterion}, "
+                   message=(f"not decided: the NLP fit of {', '.join(f['name'] for f in unfitted)} failed although "
+                            f"its {criterion} is significant (p = {unfitted[0]['p']:.2g} < {level:.2g}); of the "
+                            "terms fitted, " if unfitted else "")
+                           + f"nothing significant over the whole library of {len(names)} terms ({criterion}, "
                            f"Bonferroni: p < {level:.2g})"
                            + (f" but the rejected {G['name']}, which is not added again (p = {G['p']:.2g})"
                               if G is not None and G["name"] in rejected_generic and G["p"] < level else "")
                            + ("; unexplained residual (its best generic term is significant on its own, "
-                              f"p = {G['p']:.2g} < {alpha:g}, not over the library)" if unexplained else "")
+                              f"p = {G['p']:.2g} < {alpha:g}, not over the library)"
+                              if G is not None and G["p"] < alpha else "")
                            + (f"; best generic description of what is left: {describe_fit(G)}, p = {G['p']:.2g}"
                               if G else "")
                            + (f"; a term of its shape is significant from |c| >= {G['detectable']:.2g}"

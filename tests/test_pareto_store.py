@@ -152,6 +152,23 @@ def test_points_without_checkpoint_are_refused(tmp_path):
     assert PointStore(tmp_path, "fp", restart=True, what="identification").keys() == []
 
 
+def test_points_solved_by_other_code_are_resumed_and_flagged(tmp_path):
+    """The fingerprint covers config, data and settings; the code that solved the points is recorded beside it.
+    Reopened by other code the store still resumes them (the same problem), flags ``other_code`` for the caller to
+    say so, and remembers the folder as mixed; the same code resumes silently."""
+    store = PointStore(tmp_path, "fp", what="identification", source="code-1")
+    store.save("A", {"x": 1.0})
+    assert not PointStore(tmp_path, "fp", what="identification", source="code-1").other_code
+    again = PointStore(tmp_path, "fp", what="identification", source="code-2")
+    assert again.other_code and again.keys() == ["A"]
+    assert json.loads((tmp_path / "checkpoint.json").read_text())["source"] == "mixed"
+    assert PointStore(tmp_path, "fp", what="identification", source="code-2").other_code  # stays mixed
+    # stores written before the record: nothing known, nothing flagged
+    legacy = tmp_path / "legacy"
+    PointStore(legacy, "fp", what="identification").save("A", {"x": 1.0})
+    assert not PointStore(legacy, "fp", what="identification", source="code-1").other_code
+
+
 def test_damaged_checkpoint_of_a_close_loop_iteration_is_named(config, reference, tmp_path):
     from pyomo_heli.workflows.close_loop import _finished
     from pyomo_heli.config import load_identification_config

@@ -224,9 +224,12 @@ def claim_folder(root: str | Path, what: str, restart: bool = False) -> None:
                                                         "another command's results)" if restart else ""))
 
 
-def write_checkpoint(root: str | Path, what: str, fingerprint: str | None = None) -> None:
-    """Write ``root/checkpoint.json``: what the folder holds (see KINDS) and, for a point store, its fingerprint."""
+def write_checkpoint(root: str | Path, what: str, fingerprint: str | None = None, source: str | None = None) -> None:
+    """Write ``root/checkpoint.json``: what the folder holds (see KINDS) and, for a point store, its fingerprint and
+    the code that solved its points (``source``: the package sources' hash, or "mixed")."""
     doc = {"fingerprint": fingerprint, "what": what} if fingerprint is not None else {"what": what}
+    if source is not None:
+        doc["source"] = source
     path = Path(root) / "checkpoint.json"
     with writing(path):
         path.write_text(json.dumps(doc, indent=2) + "\n")
@@ -290,10 +293,14 @@ class PointStore:
     folder with points of another fingerprint raises StoreMismatchError.
     """
 
-    def __init__(self, root: str | Path, fingerprint: str, restart: bool = False, what: str = "run"):
+    def __init__(self, root: str | Path, fingerprint: str, restart: bool = False, what: str = "run",
+                 source: str | None = None):
         self.root = Path(root)
         self.dir = self.root / "points"
         self.fingerprint = fingerprint
+        #: the stored points were solved by other code than ``source`` (the package's sources changed since): they are
+        #: resumed as stored, and the caller says so (the fingerprint covers config, data and settings, not the code)
+        self.other_code = False
         meta = self.root / "checkpoint.json"
         if what in KINDS:
             claim_folder(self.root, what, restart)
@@ -305,14 +312,16 @@ class PointStore:
                 raise StoreMismatchError(
                     f"{self.dir}: holds finished points but {meta} is missing, so nothing tells which {what} "
                     f"they belong to; rerun with --restart to discard them, or choose another --out")
-            old = read_checkpoint(meta).get("fingerprint")
+            stored = read_checkpoint(meta)
+            old = stored.get("fingerprint")
+            self.other_code = source is not None and stored.get("source", source) != source
             if old != fingerprint:
                 raise StoreMismatchError(
                     f"{self.root}: holds finished points of a different {what} (config, data or settings changed: "
                     f"fingerprint {str(old)[:12]} here, {fingerprint[:12]} now); rerun with --restart to "
                     f"discard them, or choose another --out")
         self.dir.mkdir(exist_ok=True)
-        write_checkpoint(self.root, what, fingerprint)
+        write_checkpoint(self.root, what, fingerprint, "mixed" if self.other_code else source)
 
     def _path(self, key: str) -> Path:
         return self.dir / f"{key}.npz"

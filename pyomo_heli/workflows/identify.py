@@ -187,6 +187,9 @@ def _run_identification(cfg, run: RunFolder, progress, uncertainty) -> Identific
                                  if any(f.startswith("anchor A ") for f in anchor_failures) else [])}
                              if anchor_failures else None),
               "resumed_points": sum(bool(getattr(p, "from_disk", False)) for p in points),
+              # resumed points solved by other code (the package changed since they were stored): said, not hidden
+              **({"resumed_from_other_code": True}
+                 if store.other_code and any(getattr(p, "from_disk", False) for p in points) else {}),
               "mean_iterations_front": _mean(front.loc[front.kind == "eps", "iterations"]),
               "mean_iterations_front_cold": _mean(front.loc[front.kind == "eps", "cold_iterations"]),
               **({"placement": placement.summary.to_dict()} if placement is not None else {}),

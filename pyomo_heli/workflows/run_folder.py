@@ -32,9 +32,11 @@ from pathlib import Path
 import pandas as pd
 
 from .. import interrupts
-from ..log import Progress, config_and_dataset, logged_run
+from ..log import Progress, config_and_dataset, get_logger, logged_run
 from ..pareto.result import write_csv
 from ..pareto.store import FolderLock, PointStore, claim_folder, write_checkpoint
+
+warning = get_logger(__name__).warning
 
 
 class FrontWriter:
@@ -101,9 +103,14 @@ class RunFolder:
 
     def store(self, fingerprint: str, progress=None, items: str = "point") -> PointStore:
         """The run's finished points (``OUT/points``); ``progress`` says how many are resumed, if any."""
-        store = PointStore(self.root, fingerprint, restart=self.restart, what=self.what)
+        from ..provenance import source_sha256
+
+        store = PointStore(self.root, fingerprint, restart=self.restart, what=self.what, source=source_sha256())
         if progress is not None and store.keys():
             progress(f"resuming: {len(store.keys())} finished {items}(s) in {store.dir}")
+        if store.other_code and store.keys():
+            warning(f"{store.dir}: its finished {items}s were solved by other code (the package changed since); "
+                    f"they are resumed as stored: rerun with --restart for results of this code alone")
         return store
 
     def mark(self) -> None:

@@ -95,3 +95,20 @@ def test_whitening_is_the_input_error_eliminated_metric_and_causal(instance):
 def test_unknown_variance_is_a_clear_error():
     with pytest.raises(ValueError, match="variance = 'hac'"):
         attribute(None, [], None, [], [], variance="hac")
+
+
+def test_a_significant_candidate_below_a_non_significant_top_is_named():
+    """Candidates are ranked by LM but judged on their own df: A (LM 40 on 2 df, p = 0.024) tops B (LM 15 on 200 df,
+    p = 1.5e-4 < level 1e-3). The decision stays "none" (the top is not significant), but the message names B as
+    significant below it instead of calling the residual unexplained by the library alone."""
+    import pandas as pd
+
+    from pyomo_heli.diagnosis.attribution import decide, none_message
+
+    scores = pd.DataFrame({"name": ["A", "B"], "evidence": [40.0, 15.0], "LM": [40.0, 15.0], "df": [2.0, 200.0],
+                           "p_value": [0.024, 1.5e-4], "significant": [False, True], "LM_needed": [60.0, 12.0]})
+    proj = {"A": np.ones(3), "B": np.arange(3.0)}
+    assert decide(["A", "B"], [40.0, 15.0], [False, True], proj)["decision"] == "none"
+    msg = none_message(scores, 1e-3)
+    assert "not decided: B (LM 15, df 200, p = 0.00015) is significant below it" in msg
+    assert "not decided" not in none_message(scores.assign(significant=False), 1e-3)

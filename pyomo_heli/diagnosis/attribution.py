@@ -324,6 +324,19 @@ def decide(names, evidence, significant, projected: dict, ratio: float = RATIO,
     return {"decision": decision, "rho": rho, "pairs": pairs}
 
 
+def none_message(scores: pd.DataFrame, level: float) -> str:
+    """The message of a "none" decision: the top candidate by LM (``scores`` sorted) is not significant. Candidates
+    significant on their own df but ranked below it are named ("not decided"), not left out of the message."""
+    top = scores.iloc[0]
+    below = [f"{r.name} (LM {r.evidence:.3g}, df {r.df:.3g}, p = {r.p_value:.2g})"
+             for r in scores[scores["significant"]].itertuples()]
+    return (f"top candidate not significant ({top['name']}: LM {top.evidence:.3g}, p = {top.p_value:.2g} >= "
+            f"{level:.2g}, needs LM > {top.LM_needed:.3g} with df {top.df:.3g}); "
+            + (f"not decided: {', '.join(below)} {'is' if len(below) == 1 else 'are'} significant below it; "
+               if below else "")
+            + "any remaining residual is unexplained by the library, signature attached")
+
+
 def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outputs, candidates=None,
               alpha: float = ALPHA, ratio: float = RATIO, confound_corr: float = CONFOUND_CORR,
               substeps: int = 2, robust: bool = True, segment_s: float = SEGMENT_S, input_errors=(),
@@ -426,9 +439,7 @@ def attribute(model: HelicopterModel, identified, data, time_outputs, trim_outpu
     if rule["decision"] == "none":
         decision = "none"
         signature = _signature(e, w, groups)
-        message = (f"top candidate not significant ({top['name']}: LM {top.evidence:.3g}, p = {top.p_value:.2g} >= "
-                   f"{level:.2g}, needs LM > {top.LM_needed:.3g} with df {top.df:.3g}); "
-                   "any remaining residual is unexplained by the library, signature attached")
+        message = none_message(scores, level)
     elif rule["decision"] == "accepted":
         decision, accepted = "accepted", str(top["name"])
         runner = f"; runner-up {second['name']} LM {second.evidence:.3g}" if second is not None else ""

@@ -195,3 +195,25 @@ def test_by_speed_table_puts_a_rise_at_the_speed_where_it_is():
     assert tab.loc[100.0, "joint p (rise)"] < 0.01
     whole = validation_change_table(p0, p1, mans).set_index("output")
     assert 0 < whole.loc["q", "change [%]"] < expected and JOINT in whole.index
+
+
+def test_the_change_table_says_when_the_two_models_pooled_other_records():
+    """The loop's before/after change pools each iteration's RMS over the records its model could replay: when the
+    first and the kept model lost different records (a divergence), every time-domain row says so; the trims'
+    rows and a comparison over the same records carry no note."""
+    import pandas as pd
+
+    from pyomo_heli.report.loop import change_table
+
+    def it(i, val, lost=()):
+        return {"iteration": i, "extensions": [] if i == 0 else ["dM_q"], "J_time": -1.0, "J_trim": 0.1,
+                "trim_rms": {"col": 0.002}, "identification_rms": {"q": 0.01}, "validation_rms": {"q": val},
+                **({"not_replayed": list(lost)} if lost else {})}
+
+    doc = {"iterations": [it(0, 0.02), it(1, 0.005, lost=["londoublet_100kt_val"])], "final_iteration": 1}
+    tab = change_table(doc).set_index("error")
+    note = tab.loc["val q [deg/s]", "note"]
+    assert "not replayed by the first: none; by the kept: londoublet_100kt_val" in note
+    assert tab.loc["id q [deg/s]", "note"] == note and pd.isna(tab.loc["trim col [deg]", "note"])
+    same = {"iterations": [it(0, 0.02), it(1, 0.005)], "final_iteration": 1}
+    assert "note" not in change_table(same).columns

@@ -88,10 +88,16 @@ def change_table(doc: dict) -> pd.DataFrame:
     if len(tab) < 2 or final_index(doc) == 0:
         return pd.DataFrame()
     first, last = tab.iloc[0], tab.iloc[final_index(doc)]
+    its = doc["iterations"]
+    lost0, lost1 = (set(its[j].get("not_replayed", [])) for j in (0, final_index(doc)))
+    note = "" if lost0 == lost1 else (  # the pooled RMS of the two are over different records: said, not hidden
+        "over other records: not replayed by the first: " + (", ".join(sorted(lost0)) or "none")
+        + "; by the kept: " + (", ".join(sorted(lost1)) or "none"))
     rows = []
     for c in tab.columns[4:]:
         if pd.notna(first[c]) and pd.notna(last[c]) and first[c]:
-            rows.append({"error": c, "first": first[c], "last": last[c], "change %": 100 * (last[c] / first[c] - 1)})
+            rows.append({"error": c, "first": first[c], "last": last[c], "change %": 100 * (last[c] / first[c] - 1),
+                         **({"note": note} if note and not c.startswith("trim") else {})})
     return pd.DataFrame(rows)
 
 

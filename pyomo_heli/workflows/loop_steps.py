@@ -23,9 +23,13 @@ def errors_of(model: HelicopterModel, params: dict, id_mans, val_mans, trims, la
     """RMS of data minus model (SI) per output on identification and validation maneuvers and per trim channel."""
     speeds = list(trims["V"]) + list(CURVE_SPEEDS)
     pred = predict(label, model, params, speeds, list(id_mans) + list(val_mans))
+    # the RMS pools the records the model could replay: the ones it could not are named, so that a comparison of
+    # two iterations over different records is said (report.loop.change_table)
+    lost = [mv.name for mv in list(id_mans) + list(val_mans) if pred.maneuvers.get(mv.name) is None]
     return {"identification_rms": validation_rms(pred, id_mans)["all"],
             "validation_rms": validation_rms(pred, val_mans)["all"] if val_mans else {},
-            "trim_rms": trim_rms(pred, trims)["all"], "problems": pred.problems}
+            "trim_rms": trim_rms(pred, trims)["all"], "problems": pred.problems,
+            **({"not_replayed": lost} if lost else {})}
 
 
 def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: float) -> IdentificationConfig:

@@ -71,7 +71,10 @@ def test_resume_reads_back_what_was_stored_and_restart_discards_it(tmp_path):
         info("a message of the run")
     out = tmp_path / "out"
     # what the run left: its point, its table (rows in the order they finished), its log and provenance
-    assert json.loads((out / "checkpoint.json").read_text()) == {"fingerprint": "fp-1", "what": "identification"}
+    from pyomo_heli.provenance import source_sha256
+
+    assert json.loads((out / "checkpoint.json").read_text()) == {"fingerprint": "fp-1", "what": "identification",
+                                                                 "source": source_sha256()}  # the code that solved
     front = pd.read_csv(out / "front.csv")
     assert front["index"].tolist() == [2, 0] and front["J_time"].tolist() == [float(f"{1 / 7:.12g}"), 0.3]
     log = (out / "pyomo_heli.log").read_text()

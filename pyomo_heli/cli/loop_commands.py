@@ -51,7 +51,6 @@ def cmd_report_loop(args) -> int:
     """Rewrite ``loop_report.md`` and the figures of a finished close-loop folder from its loop.json (no solve)."""
     import json
 
-    from ..config import load_identification_config
     from ..report.loop import LOOP_FILE, write_loop_report
 
     folder = Path(args.loop_dir)
@@ -66,14 +65,13 @@ def cmd_report_loop(args) -> int:
         raise UserError(f"{f}: not a loop record of close-loop ({exc})") from None
     if not Path(config).is_file():
         raise UserError(f"config {config} (named in {f}) not found; give it with --config")
-    from ..workflows.check_effect import loop_dataset, loop_iteration
+    from ..workflows.check_effect import loop_iteration
 
-    # a folder made on another machine names a path not here: the config's own flight test, when its content is
-    # the loop's (ResultsMismatchError, one line, otherwise)
-    dataset = loop_dataset(folder, doc, config)
-    for k in dict.fromkeys((0, None)):  # the report replays the first and the kept model: the config must be theirs
-        loop_iteration(folder, k, config)
-    cfg = load_identification_config(config, {"data": {"dataset": str(Path(dataset).resolve())}})
+    # the report replays the first and the kept model, so the config is checked against both iterations' results
+    # (ResultsMismatchError, one line); a folder made on another machine names a flight test not here: the
+    # config's own, when its content is the loop's. Iteration 0 (M0) gives the config on that flight test
+    cfg = loop_iteration(folder, 0, config)[2]
+    loop_iteration(folder, None, config)
     path = write_loop_report(folder, cfg, figure_format=args.figure_format)
     print(f"{path} written")
     return 0

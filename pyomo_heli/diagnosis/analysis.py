@@ -256,10 +256,15 @@ def verdict_status(verdict: dict) -> str:
     "not fully tested" (no test found structure, but a part of the verdict could not be tested: ``untested``)."""
     if verdict.get("noise_only"):
         return "noise only"
-    structure = not (all(s == "noise" for s in verdict.get("trim_shape", {}).values())
-                     and verdict.get("white_identification", True) and verdict.get("record_biases_agree", True)
-                     and verdict.get("input_path_consistent", True))
-    return "not fully tested" if verdict.get("untested") and not structure else "unexplained residual"
+    return "not fully tested" if verdict.get("untested") and not structure_found(verdict) else "unexplained residual"
+
+
+def structure_found(verdict: dict) -> bool:
+    """Whether a test of the verdict found structure: a trim shape, identification residuals not white, records
+    disagreeing on a bias, or input errors a signal explains (a part not tested counts as none)."""
+    return not (all(s == "noise" for s in verdict.get("trim_shape", {}).values())
+                and verdict.get("white_identification", True) and verdict.get("record_biases_agree", True)
+                and verdict.get("input_path_consistent", True))
 
 
 def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RATE_HZ, n_mc: int = 4000, seed: int = 0,
@@ -322,10 +327,7 @@ def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RAT
         verdict["input_path_consistent"] = path.consistent
         if path.alpha != alpha:
             d.problems.append(f"input path tested at alpha {path.alpha:g}, not {alpha:g}")
-    structure = not (all(t.shape == "noise" for t in shapes.values())
-                     and verdict.get("white_identification", True)
-                     and verdict.get("record_biases_agree", True)
-                     and verdict.get("input_path_consistent", True))
+    structure = structure_found(verdict)
     if untested:
         verdict["untested"] = untested
     verdict["noise_only"] = not structure and not untested

@@ -52,7 +52,7 @@ from ..solvers import MULTIPLIER_MODES, SolverError, make_solver, scale_multipli
 from .eq11 import (NADIR_RULES, dominating, nondominated, nondominated_nadir,  # noqa: F401 - re-exported
                    payoff_nadir, utopia_distance_n)
 from .snapshot import Snapshot
-from .steps import (ANCHOR_NAMES, FRONT_STEP_OPTIONS, INFEASIBLE, IPOPT_INFEASIBLE,  # noqa: F401 - re-exported
+from .steps import (ANCHOR_NAMES, FRONT_STEP_OPTIONS, INFEASIBLE, IPOPT_INFEASIBLE, grid_bound_values,  # noqa: F401 - re-exported
                     LEAVE_ANCHOR_OPTIONS, TIGHT_MARGIN, EpsilonPoint, Outcome, _value, epsilon_grid,
                     pin_objective_settings, retried, snake, solve_from_starts, solve_with_fallback)
 
@@ -537,8 +537,7 @@ class EpsilonConstraintSolver:
         axis after the first leaves that objective free (inf). Column 0 of a two-bound grid is then the
         two-objective front of J_0 and J_1 wherever it goes, not only as far as J_2 stays below its value at A
         (bounded there, the rows where the least J_2 exceeds J_2(A) would be infeasible in every column)."""
-        return {k: (math.inf if n > 0 and i == 0 else float(ax[i]))
-                for n, (k, ax, i) in enumerate(zip(self.bounded, self.axes, pos))}
+        return dict(zip(self.bounded, grid_bound_values(self.axes, pos)))
 
     def grid_axes(self, counts, margin: float = TIGHT_MARGIN) -> list:
         """The grid's bounds per bounded objective (needs the anchors): ``counts[k]`` values from J_k at

@@ -41,7 +41,7 @@ import math
 import numpy as np
 
 from .placement import MIN_STEP, AdaptiveFront, _placed, denormalise, distance_in_se, normalise, refinement_probes
-from .steps import INFEASIBLE, snake
+from .steps import INFEASIBLE, grid_bound_values, snake
 
 
 def cone_neighbours(Z, c: int, infeasible=()) -> list[tuple]:
@@ -153,11 +153,10 @@ class AdaptiveFrontN(AdaptiveFront):
         ps.axes = ps.grid_axes(self.coarse)
         for pos in snake(self.coarse):
             if any(pos) and len(ps.points) < self.max_solves:
-                # position 0 of every axis after the first leaves that objective free, as on the grid
-                # (EpsilonConstraintSolver.grid_bounds): the two-objective row of the choice is not capped
+                # solved as on the grid: position 0 of a later axis leaves that objective free, so the two-objective
+                # row of the choice is not capped
                 self._solve_n([float(ax[i]) for ax, i in zip(ps.axes, pos)], pos,
-                              solve=[math.inf if n > 0 and i == 0 else float(ax[i])
-                                     for n, (ax, i) in enumerate(zip(ps.axes, pos))])
+                              solve=grid_bound_values(ps.axes, pos))
         s.arc_length_solves = len(ps.points)
         try:
             self._scaling()

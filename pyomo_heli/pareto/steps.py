@@ -185,3 +185,9 @@ class EpsilonPoint:
         d["grid"] = ",".join(str(i) for i in self.grid)
         d.update(self.parameters)
         return d
+
+
+def grid_bound_values(axes, pos) -> list:
+    """The bounds at grid position ``pos``, one per axis: ``axes[k][pos[k]]``, except that position 0 of every axis
+    after the first leaves that objective free (inf); see :meth:`EpsilonConstraintSolver.grid_bounds`."""
+    return [math.inf if n > 0 and i == 0 else float(ax[i]) for n, (ax, i) in enumerate(zip(axes, pos))]

@@ -776,6 +776,36 @@ def test_a_physical_candidate_equivalent_to_a_rejected_term_is_taken_and_the_mes
     assert "is equivalent to it on these data): taken by the library" in out["message"]
 
 
+def test_a_pair_fit_above_its_candidate_alone_is_no_encompassing_test(monkeypatch):
+    """A pair nests each of its terms, so its fit cannot end above either alone except at a worse local optimum.
+    lon_rigging (LR 80) and the discovered col_delay (LR 40), their pair's J 3 above lon_rigging's alone: read as
+    it stands, col_delay would add LR 0 (clipped) to lon_rigging, lon_rigging LR 34 to col_delay, and lon_rigging
+    would be named. The row says the joint fit is not a test, and nothing is named: col_delay is discovered. With
+    the pair 0.1 above (within PAIR_SLACK, solver tolerance) the test stands and names lon_rigging."""
+    from pyomo_heli.diagnosis.discovery import PAIR_SLACK
+
+    fits = {"lon_rigging": _fit("lon_rigging", False, 80.0, -0.0022, "lon offset"),
+            "col_delay": _fit("col_delay", True, 40.0, 0.0016, "c d(col_d)/dt = col - col_d")}
+
+    def screen_above(dJ):
+        def screen(pairs):
+            wanted = pairs(fits)
+            return {"J0": J0, "fits": fits,
+                    "pairs": {f"{a}+{b}": {"success": True, "J": fits["lon_rigging"]["J"] + dJ} for a, b in wanted}}
+        return screen
+
+    args = ([1e-12, 1e-9], [80.0, 40.0])
+    out = _stubbed_step(monkeypatch, *args, screen_above(3.0))
+    row, = out["encompassing"]
+    assert not row["encompasses"] and not row["equivalent"] and "LR_G_given_P" not in row
+    assert row["note"] == "joint fit ended 3 above the better term alone (a worse local optimum)"
+    assert out["decision"] == "discovered" and out["added"] == "col_delay"
+    assert 0.1 < PAIR_SLACK
+    named = _stubbed_step(monkeypatch, *args, screen_above(0.1))
+    assert named["decision"] == "named" and named["added"] == "lon_rigging"
+    assert named["encompassing"][0]["LR_P_given_G"] == pytest.approx(2 * (20.0 - 0.1))
+
+
 def test_a_failed_base_solve_leaves_the_decision_to_the_score_test_and_says_so(monkeypatch):
     """The NLP screen's base solve failed (twice): no likelihood ratio exists (LR nan). With input errors the step
     would refer the LR; instead the score test's own p decides (lon_rigging p = 1e-6 < 0.01/2 significant,
@@ -992,6 +1022,51 @@ def test_a_fit_whose_first_warm_start_fails_is_solved_with_the_curvature_test(sc
     assert log[1:1 + 2 * n] == [("continuation", False), ("continuation", True)] * n
     assert all(got["fits"][t]["success"] and got["fits"][t]["solved_from"] == "curvature test" for t in SCREEN_TERMS)
     _same_fits(got, normal)
+
+
+def test_a_pair_fit_that_stops_above_its_term_alone_is_solved_again_from_that_terms_fit(screen_case, monkeypatch):
+    """The pair's first solve made to stop where it started (the base's solution, both terms at zero) and report
+    success: the test's stand-in for a pair that converged to a worse local optimum. Its J is the base's, above
+    both terms alone, which a pair nesting each of them cannot be at its optimum. The screen solves the pair again
+    from the better term's own fit and keeps that: its J and estimates equal the normal screen's pair, and the
+    first start is recorded."""
+    from types import SimpleNamespace
+
+    import pyomo_heli.solvers as solvers
+    from pyomo_heli.diagnosis.discovery import PAIR_SLACK, encompassing, nlp_screen
+
+    cfg, start, normal = screen_case
+    real, calls = solvers.make_solver, []
+
+    def make(*a, **k):
+        s = real(*a, **k)
+
+        class PairStopsAtStart:
+            def solve(self, warm_start="none", options=None):
+                calls.append(warm_start)
+                # the base, one fit per term, the base again from the best fit, then the pair's first solve
+                if len(calls) == 3 + len(SCREEN_TERMS):
+                    return SimpleNamespace(success=True, status="Solve_Succeeded", iterations=0, wall_time=0.0)
+                return s.solve(warm_start=warm_start, options=options)
+        return PairStopsAtStart()
+
+    monkeypatch.setattr(solvers, "make_solver", make)
+    got = nlp_screen(cfg, start, SCREEN_TERMS, pairs=SCREEN_PAIRS, progress=print)
+    key = "+".join(SCREEN_PAIRS[0])
+    pair, ref = got["pairs"][key], normal["pairs"][key]
+    better = min(SCREEN_TERMS, key=lambda t: normal["fits"][t]["J"])
+    assert pair["first_start"]["J"] == pytest.approx(got["J0"], abs=1e-6)
+    assert pair["first_start"]["J"] > normal["fits"][better]["J"] + PAIR_SLACK
+    assert pair["success"] and pair["solved_from"] == f"{better}'s fit"
+    assert pair["J"] == pytest.approx(ref["J"], abs=0.05)
+    assert normal["fits"][better]["J"] - pair["J"] > -PAIR_SLACK
+    for t in SCREEN_TERMS:
+        assert pair["terms"][t]["estimate"] == pytest.approx(ref["terms"][t]["estimate"], rel=1e-3, abs=1e-6)
+    a, b = SCREEN_PAIRS[0]
+    e_got = encompassing(got["fits"][a], got["fits"][b], pair, 0.01)
+    e_ref = encompassing(normal["fits"][a], normal["fits"][b], ref, 0.01)
+    assert e_got["LR_G_given_P"] == pytest.approx(e_ref["LR_G_given_P"], abs=0.1)
+    assert e_got["encompasses"] == e_ref["encompasses"]
 
 
 # slow (45 s; CI time): the fallback after the refined base's fallback; the default run has the base solved again

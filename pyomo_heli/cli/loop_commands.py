@@ -225,7 +225,7 @@ def cmd_check_effect(args) -> int:
               f"{e['p_G_given_P']:.2g}); {effect.name} adds LR {e['LR_P_given_G']:.3g} (p = {e['p_P_given_G']:.2g}) "
               f"to {g}: {verdict}")
     elif e:
-        print(f"against {r['against']['name']}: the joint solve failed; no encompassing test")
+        print(f"against {r['against']['name']}: {e.get('note', 'the joint solve failed')}; no encompassing test")
     if args.json is not None:
         Path(args.json).write_text(json.dumps(r, indent=1, default=float))
         print(f"wrote {args.json}")

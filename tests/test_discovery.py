@@ -1180,3 +1180,53 @@ def test_a_term_the_backward_check_rejects_is_removed_past_the_iteration_limit(t
     assert check[0]["level"] == pytest.approx(0.01 / 3) == its[1]["discovery"]["level"]
     assert its[2]["decision"]["decision"] == "dropped" and ">= 0.0033" in its[2]["decision"]["message"]
     assert doc["final_iteration"] == 3 and "dM_one" not in offered[-1]
+
+
+# slow (CI time): four identifications and four screens. The default run has the name check's decision at its step
+# (test_a_physical_candidate_is_named_only_if_it_encompasses_...) and the backward check's levels
+@pytest.mark.slow
+def test_the_name_check_runs_after_a_backward_check_drop_and_goes_back_to_before_the_name(tmp_path, monkeypatch,
+                                                                                         flight_test_cache):
+    """M0 + noise, the first two steps made to add the generic dM_one and then to name nx_bias, and the backward
+    check at M0 + dM_one + nx_bias made to drop dM_one (the test's stand-ins; each step and check itself runs).
+    The step after the drop is nx_bias's first with it fitted: its name check runs there (the stand-in marks the
+    best generic term significant), nx_bias is withdrawn, and the loop goes back past both models that held it to
+    iteration 1's (M0 + dM_one), not to the one before the drop."""
+    import pyomo_heli.diagnosis.discovery as disc
+    import pyomo_heli.workflows.close_loop as cl
+
+    real_step, real_check = disc.discovery_step, cl.backward_check
+    forced = [("accepted", "dM_one"), ("named", "nx_bias")]
+    checked = []
+
+    def step(cfg, model, start, data, **kw):
+        out = real_step(cfg, model, start, data, **kw)
+        ext = [e.name for e in model.extensions]
+        if forced:
+            decision, name = forced.pop(0)
+            out = {**out, "decision": decision, "added": name, "initial": 0.0, "message": f"{name} (test)"}
+        elif ext == ["nx_bias"]:  # the model after the drop: the name check's step
+            checked.append(ext)
+            out = {**out, "generic_significant": True}
+        return out
+
+    def check(cfg, record, base, level):
+        rows = real_check(cfg, record, base, level)
+        if [e.name for e in cfg.model.extensions] == ["dM_one", "nx_bias"]:
+            rows = [{**r, "z": 0.5, "p": 0.62, "significant": False, "note": "test"} for r in rows]
+        return rows
+
+    monkeypatch.setattr(disc, "discovery_step", step)
+    monkeypatch.setattr(cl, "backward_check", check)
+    _cfg, doc = _loop(tmp_path, "", seed=21, max_iterations=3, generic=["dM_one", "dZ_one", "dM_mu2"],
+                      extra='candidates = ["nx_bias"]\nvalidation_rule = false\n', data_cache=flight_test_cache)
+    its = doc["iterations"]
+    print([(it["extensions"], it.get("rejected"), (it.get("decision") or {}).get("message")) for it in its])
+    assert [it["extensions"] for it in its[:4]] == [[], ["dM_one"], ["dM_one", "nx_bias"], ["nx_bias"]]
+    assert its[2]["decision"]["decision"] == "dropped" and its[2]["decision"]["name"] == "dM_one"
+    assert checked == [["nx_bias"]]
+    assert "(name check)" in its[3]["rejected"] and its[3]["name_check"]["best_generic_fit"]["name"] in GENERIC
+    assert its[3]["step_from"]["iteration"] == 1 and "nx_bias" in its[3]["step_from"]["without"]
+    assert all(it["extensions"] == ["dM_one"] for it in its[4:])
+    assert doc["final_iteration"] in (1, *(it["iteration"] for it in its[4:]))
+    assert "nx_bias" not in its[doc["final_iteration"]]["extensions"]

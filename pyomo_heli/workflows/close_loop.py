@@ -26,9 +26,10 @@ output (with ``[loop] validation_joint``, also of all outputs at once) rejects t
 after_rejection = "next"`` (default) the loop then goes back to the kept model and runs its step again with the
 rejected terms left out for the rest of the loop; ``"stop"`` stops there.
 With ``[loop] discovery``, the name check: a physical candidate added at the last step (named by encompassing, or
-taken by the library) must leave the generic family nothing significant at the next step; when the best generic
-term is significant there, the candidate described the missing effect only in part, and its step is rejected in
-the same way (``name_check`` in the record: that step; the loop goes back and tries the next term).
+taken by the library) must leave the generic family nothing significant at the next step (after a backward-check
+drop, the step after that); when the best generic term is significant there, the candidate described the missing
+effect only in part, and its step is rejected in the same way (``name_check`` in the record: that step; the loop
+goes back to the model before the candidate came in and tries the next term).
 With ``[loop] discovery``, the backward check as well: from the second added term on, an earlier added term whose
 strength is no longer significant at the level it entered at (Wald, Cramer-Rao SE) is removed, not offered again,
 and the model re-identified, past the iteration limit too; the validation rule judges the model without it as it
@@ -344,6 +345,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
     added = None  # the term the current iteration added (None: the first, or a backward-check drop)
     kept = None  # (config, record) of the model kept so far: the validation rule's reference
     kept_models = []  # every model kept so far, in order (the name check goes back past the last)
+    unchecked = None  # a physical candidate added whose name check has not run (a backward-check drop may come first)
     rejected = []  # terms whose step the validation rule or the name check rejected: not offered again
     base_names = [e.name for e in cfg.model.extensions]  # declared by the config: never dropped by the loop
     while True:
@@ -443,16 +445,20 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                     restart, progress)
 
             step = structure_step(cfg, model, chosen, left)
-            if added in CANDIDATES and not record.get("rejected") and step.get("generic_significant"):
-                # the name check: a physical candidate must leave the generic family nothing significant; one that
-                # does not describes the missing effect only in part (docs/discovery.md): the step is rejected
+            # the name check, at the first structure step of a model holding the physical candidate added last
+            # (the next iteration's, or after a backward-check drop the one after); not when its step was rejected
+            named, unchecked = (unchecked if unchecked in names else None), None
+            if named and step.get("generic_significant"):
+                # a physical candidate must leave the generic family nothing significant; one that does not
+                # describes the missing effect only in part (docs/discovery.md): the step that added it is rejected
                 G = step["best_generic_fit"]
                 record["name_check"] = {k: v for k, v in step.items() if k != "attribution"}
-                rejected.append(added)
-                kept_models.pop()
+                rejected.append(named)
+                while named in [e.name for e in kept_models[-1][0].model.extensions]:  # back to before it came in
+                    kept_models.pop()
                 kcfg, krec = kept = kept_models[-1]
                 doc["final_iteration"] = krec["iteration"]
-                if _reject(doc, record, krec, added, f"left the generic term {G['name']} significant (p = "
+                if _reject(doc, record, krec, named, f"left the generic term {G['name']} significant (p = "
                            f"{G['p']:.2g} < {step['level']:.2g}): a physical candidate must account for the whole "
                            "missing effect (name check)", rejected, settings, out, progress):
                     return doc
@@ -500,6 +506,8 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         progress(f"adding {add} with {make_candidate(add).strength} free (estimate {init:.4g})")
         cfg = _with_candidate(cfg, chosen, add, init)
         added = add
+        if add in CANDIDATES:
+            unchecked = add
         cand = cfg.model.extensions[-1]
         added_shape = None
         if cand.shape_parameters and settings.shape == "time_domain":

@@ -851,6 +851,53 @@ def test_a_significant_term_whose_fit_failed_is_not_read_as_nothing_significant(
     assert out["message"].startswith("not decided: the NLP fit of col_delay failed"), out["message"]
 
 
+def test_a_term_significant_by_the_score_test_that_the_screen_did_not_estimate_is_named(monkeypatch):
+    """Four generic terms, the screen estimates the best three by LM. The fourth (dM_q: LM 20 on df 8, score test
+    p = 2e-5 < 0.01 / 5) is significant by its own test and was never estimated; the three estimated are not
+    significant by the likelihood ratio. The step decides "none" but does not say "nothing significant over the
+    whole library": it names dM_q as not estimated (``significant_unscreened``). Without it the usual words stand."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from pyomo_heli.diagnosis import discovery
+
+    generic = ["col_delay", "lon_delay", "dM_one", "dM_q"]
+    names = ["lon_rigging", *generic]
+
+    def step(p_q):
+        scores = pd.DataFrame({"name": names, "p_value": [0.5, 0.02, 0.03, 0.04, p_q],
+                               "LM": [1.0, 30.0, 28.0, 25.0, 20.0], "LM_white": [1.0, 30.0, 28.0, 25.0, 60.0],
+                               "df": [np.inf, np.inf, np.inf, np.inf, 8.0], "kappa_hat": [1e-3] * 5})
+        monkeypatch.setattr(discovery.attr, "attribute",
+                            lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
+        fits = {n: _fit(n, n != "lon_rigging", lr, 0.001, n) for n, lr in
+                [("lon_rigging", 1.0), ("col_delay", 6.0), ("lon_delay", 5.0), ("dM_one", 4.0)]}
+        screened = []
+
+        def screen(cfg, start, terms, pairs=(), **kw):
+            screened.extend(terms)
+            pairs(fits) if callable(pairs) else None
+            return {"J0": J0, "fits": {n: dict(fits[n]) for n in terms}, "pairs": {}}
+
+        monkeypatch.setattr(discovery, "nlp_screen", screen)
+        cfg = SimpleNamespace(free=[SimpleNamespace(name="Iyy")],
+                              nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=True))
+        model = SimpleNamespace(extensions=(), parameters={"Omega": 44.4, "R": 4.91})
+        out = discovery.discovery_step(cfg, model, {}, None, physical=["lon_rigging"], generic=generic,
+                                       progress=lambda s: None)
+        assert sorted(screened) == sorted(["lon_rigging", "col_delay", "lon_delay", "dM_one"])
+        return out
+
+    out = step(2e-5)
+    assert out["decision"] == "none" and out["significant_unscreened"] == ["dM_q"]
+    assert "nothing significant among the terms estimated" in out["message"]
+    assert "dM_q (p = 2e-05)" in out["message"] and "over the whole library" not in out["message"]
+    plain = step(0.05)
+    assert plain["decision"] == "none" and "significant_unscreened" not in plain
+    assert "nothing significant over the whole library of 5 terms" in plain["message"]
+
+
 def test_a_hypothesis_checked_where_the_base_solve_failed_is_decided_by_the_score_test(monkeypatch):
     """check_term with input errors and the NLP screen's base failed (no likelihood ratio, LR nan): the score test's
     p decides (1e-6 < level 1e-3: significant), as in a structure step, instead of a nan p read as "not

@@ -40,7 +40,9 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
    encompasses it, taken (lowest J) if the two are equivalent, nothing added otherwise ("ambiguous", with
    the best generic term reported as what is left).
 4. **Nothing significant**: nothing is added; the best generic term's NLP estimate is still reported
-   as the shape of what is left.
+   as the shape of what is left. A generic term the score test finds significant that the screen did not
+   estimate (below the best ``SCREEN_GENERIC`` by LM) is named (``significant_unscreened``): the step then says
+   "nothing significant among the terms estimated", not "over the whole library".
 
 The backward check (a term added earlier that is no longer significant once the new one is in), the
 validation rule (a step that makes validation significantly worse on any output is rejected) and the name check
@@ -462,6 +464,12 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
                       key=lambda f: f["p"])
     if unfitted:
         out["significant_unfitted"] = [f["name"] for f in unfitted]
+    # generic terms that may be added, significant by the score test's own p, but below the screen's best by LM:
+    # never estimated, so "nothing significant" holds only for the terms that were
+    unscreened = [n for n in ranked if is_generic(n) and n not in rejected_generic and n not in fits
+                  and rows_by.loc[n, "p_value"] < level]
+    if unscreened:
+        out["significant_unscreened"] = unscreened
     if not g_sig and not p_sig:
         # "unexplained": the best generic term is significant on its own (p < alpha) but not over the library, or a
         # significant term could not be fitted
@@ -470,8 +478,14 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
                    message=(f"not decided: the NLP fit of {', '.join(f['name'] for f in unfitted)} failed although "
                             f"its {criterion} is significant (p = {unfitted[0]['p']:.2g} < {level:.2g}); of the "
                             "terms fitted, " if unfitted else "")
-                           + f"nothing significant over the whole library of {len(names)} terms ({criterion}, "
-                           f"Bonferroni: p < {level:.2g})"
+                           + (f"nothing significant among the terms estimated ({criterion}, Bonferroni over the "
+                              f"library of {len(names)} terms: p < {level:.2g}); not estimated, significant by the "
+                              "score test: " + ", ".join(f"{n} (p = {rows_by.loc[n, 'p_value']:.2g})"
+                                                         for n in unscreened)
+                              + f" (the NLP estimates the best {SCREEN_GENERIC} generic terms by LM)"
+                              if unscreened else
+                              f"nothing significant over the whole library of {len(names)} terms ({criterion}, "
+                              f"Bonferroni: p < {level:.2g})")
                            + (f" but the rejected {G['name']}, which is not added again (p = {G['p']:.2g})"
                               if G is not None and G["name"] in rejected_generic and G["p"] < level else "")
                            + ("; unexplained residual (its best generic term is significant on its own, "

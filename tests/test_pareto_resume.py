@@ -128,6 +128,32 @@ def test_failed_interior_point_is_recorded_and_the_sweep_goes_on(reference, tmp_
     assert res.chosen is not None and res.chosen["index"] != 1
 
 
+def test_a_resumed_front_knows_the_bounds_its_loaded_points_meet(tmp_path, monkeypatch):
+    """Ipopt's Restoration_Failed on bounds a converged solve meets is a failure to retry, not an infeasible point
+    (which would mark every tighter point infeasible unsolved). Anchor B meets every bound of the front. Resumed
+    from a store that holds A and B, the loaded anchors are witnesses as the solved ones were: a failed solve
+    halfway between them is still a failure, as in the uninterrupted run, and not "infeasible"."""
+    from types import SimpleNamespace
+
+    from pyomo_heli.nlp.identification import build_identification_nlp, identification_data
+    from pyomo_heli.pareto.front import ParetoSettings
+
+    cfg = load_identification_config(TINY)
+    data = identification_data(cfg)
+    statuses = []
+    for run in ("solved", "resumed"):
+        m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
+        ps = ParetoSolver(m, ParetoSettings(points=4), store=PointStore(tmp_path, "fp"))
+        a, b = ps.anchors()
+        assert getattr(a, "from_disk", False) == getattr(b, "from_disk", False) == (run == "resumed")
+        eps = {"trim": 0.5 * (a.J_trim + b.J_trim)}
+        assert ps.witnessed(eps), run
+        monkeypatch.setattr(ps.solver, "solve", lambda **kw: SimpleNamespace(
+            success=False, status="Restoration_Failed", iterations=5, wall_time=0.0, setup_time=0.0))
+        statuses.append(ps.solve_eps(1, eps, "primal").status)
+    assert statuses == ["Restoration_Failed", "Restoration_Failed"]
+
+
 def test_every_point_failing_still_finishes_the_sweep(tmp_path):
     """max_iter=1 everywhere: every point recorded as not converged, no exception, exit status 1."""
     from pyomo_heli.cli import main

@@ -267,13 +267,16 @@ class EpsilonConstraintSolver:
         """``solve()`` a point, or load it from the store when an earlier run finished it.
 
         A loaded point's stored solution is put back into the model, so what
-        follows starts from the same values as in an uninterrupted run. A
-        solved point is written to the store at once.
+        follows starts from the same values as in an uninterrupted run, and a
+        converged one is a witness of the bounds it meets (:meth:`witnessed`), as
+        its solve was. A solved point is written to the store at once.
         """
         if self.store is not None and self.store.has(key):
             p = self.point_class(**self.store.record(key))
             self.store.restore(key, self.m)
             p.from_disk = True
+            if p.success:
+                self._witnesses.append({k: _get(p, k) for k in self.names})
             return p
         try:
             p = solve()
@@ -437,6 +440,8 @@ class EpsilonConstraintSolver:
             self.snapshots[index] = self._solved[-1][1] if not getattr(p, "from_disk", False) else Snapshot(self.m)
             if getattr(p, "from_disk", False):
                 self._solved.append((self.bounds_vector(eps), self.snapshots[index]))
+        elif getattr(p, "from_disk", False) and p.status == INFEASIBLE:  # as _solve_from records one it solves
+            self._infeasible.append(self.bounds_vector(eps))
         self.points.append(p)
         self.on_point(p)
         return p

@@ -130,6 +130,16 @@ def test_trim_speed_disputed_by_the_record_is_reported_once(ds):
     assert [(p.file, p.field) for p in validate_flight_test(ds)] == [("manifest.json", "maneuvers[0].trim_speed_kt")]
 
 
+@pytest.mark.parametrize("speed", [8.0, 0.0])
+def test_a_trim_speed_below_the_pitot_range_for_a_record_above_it_is_named(ds, speed):
+    """trim_speed_kt 8 (or 0) for an 80 kt record: the record's start speed is one the pitot reads, so the two are
+    compared although the manifest's is below 15 kt (before, only a manifest speed of 15 kt or more was)."""
+    _edit_manifest(ds, lambda m: m["maneuvers"][0].update(trim_speed_kt=speed))
+    problems = validate_flight_test(ds)
+    assert [(p.file, p.field) for p in problems] == [("manifest.json", "maneuvers[0].trim_speed_kt")]
+    assert "disagrees with the start of column 'tas_kt'" in problems[0].message
+
+
 def test_start_trim_of_a_maneuver_with_a_bad_trim_speed_reports_the_manifest_only(ds):
     _edit_manifest(ds, lambda m: m["maneuvers"][0].update(trim_speed_kt="80"))
     assert [(p.file, p.field) for p in validate_flight_test(ds)] == [("manifest.json", "maneuvers[0].trim_speed_kt")]

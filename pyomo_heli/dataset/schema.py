@@ -27,7 +27,8 @@ NAME_PATTERN = r"[A-Za-z0-9_-]+"
 
 #: model speed range of trim speeds [kt]
 SPEED_RANGE_KT = (0.0, 150.0)
-#: below this trim speed [kt] the pitot is unreliable: no manifest-vs-TAS consistency check
+#: below this speed [kt] the pitot is unreliable: no manifest-vs-TAS consistency check where both the manifest's
+#: trim speed and the measured one are below it
 PITOT_MIN_KT = 15.0
 #: length of the record start [s] averaged for the manifest-vs-TAS consistency check
 TRIM_WINDOW_S = 1.0

@@ -1,4 +1,6 @@
 """Local linear models: NLP linearisation vs finite differences, poles, data frequency responses."""
+from pathlib import Path
+
 import numpy as np
 import pyomo.environ as pyo
 import pytest
@@ -239,6 +241,67 @@ def test_truth_lines_name_the_parameters_beyond_two_standard_errors_and_the_lack
     assert "has wake_on_tail (truth.json), which the identification model lacks" in line
     assert truth_lines(params.assign(**{"tri-objective error/SE": [0.5, -1.9]}), cfg)[0].endswith("beyond: none.")
     assert truth_lines(params.drop(columns="tri-objective error/SE"), cfg) == []
+
+
+def _lag_record(name, fs=50.0, length=60.0, seed=0):
+    """A 3/(s+3) lag (bilinear at ``fs``) driven by lon = white noise of 0.01 rad (seeded), output q, trim speed 0."""
+    import pandas as pd
+    from scipy import signal
+
+    from pyomo_heli.dataset.schema import Maneuver
+
+    t = np.arange(0.0, length, 1.0 / fs)
+    u = 0.01 * np.random.default_rng(seed).standard_normal(t.size)
+    return Maneuver(name=name, role="identification", trim_speed=0.0, inputs=["lon"],
+                    data=pd.DataFrame({"t": t, "lon": u, "q": signal.lfilter(*signal.bilinear([3.0], [1.0, 3.0], fs),
+                                                                               u)}))
+
+
+def test_records_of_different_sample_rates_are_refused_by_name():
+    """Spectra are summed bin by bin: records at 50 and 50.05 Hz round to one window length and would be summed on
+    two frequency grids, 50 and 100 Hz would raise numpy's broadcast error. Refused naming the record and rates."""
+    from pyomo_heli.dataset.frequency_response import estimate
+
+    for other in (50.05, 100.0):
+        with pytest.raises(ValueError, match=f"maneuver b: sample rate {other:g} Hz differs from 50 Hz of a"):
+            estimate([_lag_record("a"), _lag_record("b", fs=other, seed=1)], "q", "lon")
+
+
+def test_input_power_is_relative_to_the_peak_inside_the_band():
+    """lon holds a 0.5 deg step from 2 s and flies a 0.01 rad doublet at 10 s: the step's power peaks below
+    omega_min, and relative to that peak every bin of the band was under input_power_min (none kept, though the
+    coherence is above 0.96 over 1-8 rad/s). Relative to the peak inside the band the doublet's bins are kept, and
+    the estimate there is the lag's 3/(jw+3) within 30 % (a doublet's few coherent bins, window 10 s)."""
+    from scipy import signal
+
+    from pyomo_heli.dataset.frequency_response import SpectralSettings, estimate
+
+    mv = _lag_record("a")
+    t = mv.data["t"].to_numpy()
+    u = (np.where(t > 2, np.radians(0.5), 0.0) + 1e-4 * np.random.default_rng(1).standard_normal(t.size)
+         + 0.01 * (((t > 10) & (t < 11)).astype(float) - ((t > 11) & (t < 12))))
+    mv.data = mv.data.assign(lon=u, q=signal.lfilter(*signal.bilinear([3.0], [1.0, 3.0], 50.0), u))
+    fr = estimate([mv], "q", "lon", SpectralSettings(window_s=10.0))
+    kept = fr.coherent
+    assert kept.sum() >= 3 and fr.input_power[(fr.omega >= 0.9) & (fr.omega <= 20.0)].max() == 1.0
+    assert np.max(np.abs(fr.T[kept] / (3.0 / (1j * fr.omega[kept] + 3.0)) - 1.0)) < 0.3
+
+
+def test_a_response_with_no_coherent_bin_is_named_not_left_out(tmp_path, capsys):
+    """coherence_min = 0.99999 leaves q/lon at 80 kt no coherent bin: left out, J_linear would hold nothing of it.
+    identify stops in one line naming the config's [linear], the response and the file holding every bin (exit 2)."""
+    from pyomo_heli.cli import main
+
+    here = Path(__file__).parent / "configs"
+    text = (here / "tiny_case1_tri.toml").read_text()
+    cfg = tmp_path / "nobins.toml"
+    cfg.write_text(text.replace("coherence_min = 0.9\n", "coherence_min = 0.99999\n")
+                   .replace('"../../data', f'"{here.parent.parent / "data"}'))
+    assert "0.99999" in cfg.read_text()
+    assert main(["identify", str(cfg), "--out", str(tmp_path / "o"), "--no-report"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "[linear]: no coherent bin in q/lon at 80 kt" in err[0], err
+    assert (tmp_path / "o" / "frequency_responses.csv").is_file()
 
 
 def test_one_spectral_segment_in_all_is_refused_by_name(clean_responses):

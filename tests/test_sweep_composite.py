@@ -438,6 +438,33 @@ def test_tischler_remple_j_linear_on_pilot_flown_sweeps(pilot_flown):
         data_responses(cfg, no_sweeps)
 
 
+def test_a_flight_condition_asked_for_without_a_record_is_named_not_dropped():
+    """[linear] speeds_kt = [0, 79.9] on the bundled flight test, whose records are at 0 and 80 kt: the 79.9 kt
+    responses would be left out and J_linear would hold hover alone. One line names the config's field, each
+    missing response and the speeds the records offer; [0, 80] gives all four."""
+    from types import SimpleNamespace
+
+    from pyomo_heli.dataset import load_flight_test
+    from pyomo_heli.linear_settings import LinearSettings
+    from pyomo_heli.units import KT
+    from pyomo_heli.workflows.identify_linear import data_responses
+
+    from pathlib import Path
+
+    ft = load_flight_test(Path(__file__).resolve().parents[1] / "data" / "bo105_synthetic")
+
+    def cfg(*kt):
+        return SimpleNamespace(linear=LinearSettings(speeds=tuple(v * KT for v in kt)), path="c.toml", dataset="d",
+                               maneuvers="identification")
+
+    assert len(data_responses(cfg(0, 80), ft)) == 4
+    with pytest.raises(ValueError) as e:
+        data_responses(cfg(0, 79.9), ft)
+    msg = str(e.value)
+    assert msg.startswith("c.toml [linear] speeds_kt: no response for q/lon at 79.9 kt, n_z/col at 79.9 kt")
+    assert "records at [0.0, 20.0, 80.0] kt" in msg and "\n" not in msg
+
+
 def test_sweep_check_rejects_bad_regeneration_options(capsys):
     """One-line usage errors (exit 2) before any simulation."""
     from pyomo_heli.studies.sweep_check import main

@@ -9,7 +9,7 @@ estimate T = G_uy / G_uu and the coherence |G_uy|^2 / (G_uu G_yy).
 The bundled maneuvers are short transients (doublets and 3-2-1-1s of 12-15 s),
 so not every frequency carries information. A bin is kept ("coherent band")
 only where the coherence is at least ``coherence_min`` AND the input
-autospectrum is at least ``input_power_min`` of its peak (near the spectral
+autospectrum is at least ``input_power_min`` of its peak in the band (near the spectral
 nulls of a doublet the coherence can stay high while the H1 ratio is
 dominated by leakage of the window), inside [omega_min, omega_max].
 The defaults were chosen once on bo105_clean (docs/linear.md lists the
@@ -115,8 +115,12 @@ def estimate(maneuvers, output: str, input: str, settings: SpectralSettings | No
         raise ValueError(f"maneuvers at different speeds {sorted(speeds)}: spectra of one flight condition only")
     g_uu = g_uy = g_yy = 0.0
     segments = 0
+    rate = maneuvers[0].sample_rate  # spectra are summed bin by bin: one frequency grid, one sample rate
     for mv in maneuvers:
         fs = mv.sample_rate
+        if abs(fs - rate) > 1e-9:
+            raise ValueError(f"maneuver {mv.name}: sample rate {fs:g} Hz differs from {rate:g} Hz of "
+                             f"{maneuvers[0].name}: spectra of one sample rate only")
         n = int(round(s.window_s * fs))
         if n < MIN_WINDOW_SAMPLES:
             raise ValueError(f"maneuver {mv.name}: linear.window_s = {s.window_s:g} s is {n} samples at {fs:g} Hz; "
@@ -141,7 +145,10 @@ def estimate(maneuvers, output: str, input: str, settings: SpectralSettings | No
     with np.errstate(divide="ignore", invalid="ignore"):
         T = g_uy / g_uu
         coh = np.abs(g_uy) ** 2 / (g_uu * g_yy)
-    power = g_uu / np.max(g_uu)
+    # relative to the input's peak inside the band: a held offset or a step puts the peak of the whole spectrum
+    # below omega_min, which would leave every bin of the band under input_power_min
+    in_band = (omega >= s.omega_min) & (omega <= s.omega_max)
+    power = g_uu / (np.max(g_uu[in_band]) if in_band.any() else np.max(g_uu))
     ok = ((omega >= s.omega_min) & (omega <= s.omega_max) & (coh >= s.coherence_min) & (power >= s.input_power_min)
           & np.isfinite(T))
     return FrequencyResponse(float(maneuvers[0].trim_speed), output, input, omega, T, np.nan_to_num(coh), power, ok,

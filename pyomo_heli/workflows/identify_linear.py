@@ -31,6 +31,7 @@ from ..pareto.steps import starts_note
 from ..pareto.tri_front import TriParetoSolver, utopia_distance_n
 from ..provenance import provenance_info
 from .identify import built_message
+from ..units import KT
 from .run_folder import RunFolder
 
 
@@ -46,19 +47,30 @@ def data_responses(cfg, ft):
     ``[linear] weighting = "tischler_remple"`` the composite responses of the sweep records (role
     "frequency", estimator ``[linear] sweep_*``), each band cut to ``sweep_points`` (20) logarithmically spaced
     frequencies."""
-    if cfg.linear.weighting == "tischler_remple":
+    lin = cfg.linear
+    if lin.weighting == "tischler_remple":
         sweeps = ft.frequency()
         if not sweeps:
             raise ValueError(f"{cfg.path} [linear]: weighting = 'tischler_remple' needs sweep records (role "
                              f"'frequency') in {cfg.dataset}; it has none")
-        lin = cfg.linear
-        return [tischler_remple_points(r, lin.sweep_points)
-                for r in sweep_responses(sweeps, lin.pairs, lin.speeds, lin.composite)]
-    if cfg.maneuvers == "identification":
-        mans = ft.identification()
+        out = [tischler_remple_points(r, lin.sweep_points)
+               for r in sweep_responses(sweeps, lin.pairs, lin.speeds, lin.composite)]
+        offered = sweeps
     else:
-        mans = [ft.maneuvers[n] for n in cfg.maneuvers]
-    return frequency_responses(mans, cfg.linear.pairs, cfg.linear.speeds, cfg.linear.spectral)
+        offered = ft.identification() if cfg.maneuvers == "identification" else [ft.maneuvers[n] for n in
+                                                                                 cfg.maneuvers]
+        out = frequency_responses(offered, lin.pairs, lin.speeds, lin.spectral)
+    # every flight condition asked for must give every pair: one left out silently would leave J_linear a part
+    if lin.speeds is not None and out:
+        got = {(round(r.speed, 6), r.output, r.input) for r in out}
+        missing = [(v, o, i) for v in lin.speeds for o, i in lin.pairs
+                   if not any(abs(sp - v) < 1e-3 and (o, i) == (go, gi) for sp, go, gi in got)]
+        if missing:
+            have = sorted({round(float(mv.trim_speed) / KT, 3) for mv in offered})
+            raise ValueError(f"{cfg.path} [linear] speeds_kt: no response for "
+                             + ", ".join(f"{o}/{i} at {v / KT:g} kt" for v, o, i in missing)
+                             + f" (no record at that speed moves that input alone; records at {have} kt)")
+    return out
 
 
 def run_tri_identification(cfg, run: RunFolder, progress=info) -> IdentificationResult:
@@ -75,7 +87,12 @@ def run_tri_identification(cfg, run: RunFolder, progress=info) -> Identification
     for r in band:
         progress(f"  frequency response {r.label}: {len(r.omega)} coherent bins"
                  + (f", {r.omega.min():.2f}..{r.omega.max():.2f} rad/s" if len(r.omega) else ""))
-    m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp, responses=[r for r in band if len(r.omega)])
+    empty = [r.label for r in band if not len(r.omega)]
+    if empty:  # left out, J_linear would hold the other responses alone
+        raise ValueError(f"{cfg.path} [linear]: no coherent bin in {', '.join(empty)} (coherence_min, "
+                         f"input_power_min, omega_min..omega_max; every bin is in {out / 'frequency_responses.csv'}): "
+                         "loosen them or leave the pair or speed out")
+    m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp, responses=band)
     t_build = time.perf_counter() - t0
     progress(built_message(data, f"{sum(len(r.omega) for r in band)} frequency points", t_build))
     table = run.front("front.csv")  # rewritten as each point finishes

@@ -23,11 +23,14 @@ from .schema import (
     INPUT_DOMINANCE,
     INPUT_NOISE_FACTOR,
     INPUT_STD_FLOOR_DEG,
+    KINEMATIC_CORR_MIN,
+    KINEMATIC_SLOPE_RANGE,
     KT,
     MANEUVER_QUANTITIES,
     MANIFEST_NAME,
     MASS_RANGE_KG,
     MODEL_MATCH_RTOL,
+    NZ_START_MIN_G,
     PITOT_MIN_KT,
     RHO_RANGE_KG_M3,
     SPEED_RANGE_KT,
@@ -154,6 +157,8 @@ class _Reader(ManifestChecks, TableChecks):
                          f"{trim_kt:g} kt disagrees with the start of column '{names['TAS']}' in {rel}: "
                          f"{start_kt:.1f} kt (mean over the first {TRIM_WINDOW_S:g} s; tolerance "
                          f"{tol:.1f} kt)")
+        if "t" in cols:
+            self.check_kinematics(rel, cols, names)
         if e["inputs"] is not None and all(c in cols for c in INPUT_CHANNELS):
             self.check_inputs_move(e, rel, cols, names)
         if len(self.problems) > n0 or None in (e["name"], e["role"], e["trim_kt"], e["inputs"]):
@@ -162,6 +167,29 @@ class _Reader(ManifestChecks, TableChecks):
         data = pd.DataFrame({k: cols[k] for k in order})
         return Maneuver(name=e["name"], role=e["role"], trim_speed=e["trim_kt"] * KT, inputs=e["inputs"],
                         data=data, file=rel, description=e["description"])
+
+    def check_kinematics(self, rel, cols, names) -> None:
+        """Units and signs the plausible limits cannot see (schema.py, "Kinematic consistency"): n_z about +1 g
+        at the record's start, and theta moving as the time integral of q."""
+        t = cols["t"]
+        if "n_z" in cols:
+            start = float(np.mean(cols["n_z"][t - t[0] <= TRIM_WINDOW_S]))
+            if start < NZ_START_MIN_G:
+                self.add(rel, names["n_z"], f"starts at {start:.3g} g (mean over the first {TRIM_WINDOW_S:g} s): the "
+                                            "format's n_z is positive up, about +1 g at a trim; a record of the "
+                                            "opposite sign must be negated")
+        if "q" in cols and "theta" in cols:
+            integral = np.concatenate([[0.0], np.cumsum(0.5 * (cols["q"][1:] + cols["q"][:-1]) * np.diff(t))])
+            rise = cols["theta"] - cols["theta"][0]
+            if np.ptp(integral) > 0 and np.ptp(rise) > 0:
+                r = float(np.corrcoef(integral, rise)[0, 1])
+                slope = float(np.polyfit(integral, rise, 1)[0])
+                lo, hi = KINEMATIC_SLOPE_RANGE
+                if abs(r) >= KINEMATIC_CORR_MIN and not lo <= slope <= hi:
+                    self.add(rel, names["q"], f"pitch attitude '{names['theta']}' moves {slope:.3g} times the time "
+                                              f"integral of this column (correlation {r:.2f}; 1 expected): is "
+                                              f"'{names['t']}' in seconds, the rate in the unit its name says, and "
+                                              "both nose-up positive?")
 
     def check_inputs_move(self, e, rel, cols, names) -> None:
         """The manifest's ``inputs`` against the record: no undeclared input channel may clearly move more.

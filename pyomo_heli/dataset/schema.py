@@ -85,6 +85,18 @@ INPUT_DOMINANCE = 2.0
 INPUT_NOISE_FACTOR = 3.0
 #: ... and this [deg] (a noise-free record's round-off is far below)
 INPUT_STD_FLOOR_DEG = 0.01
+# Kinematic consistency of a record (check-data): the pitch attitude is the time integral of the pitch rate
+# (longitudinal motion), so theta - theta(t0) regressed on the integral of q dt has slope 1. Time in minutes, q in
+# rad/s under a deg/s name (or the reverse) or q of the opposite sign give slopes near 60, 57 (1/57) or -1. Tested
+# only where the two are clearly related (|correlation| >= KINEMATIC_CORR_MIN): a collective record at hover
+# hardly pitches. On the bundled records (noisy and clean) the related ones give 0.94-1.05, correlation >= 0.93.
+#: |correlation| of theta - theta(t0) with the integral of q dt from which the slope is tested
+KINEMATIC_CORR_MIN = 0.9
+#: accepted slope of theta - theta(t0) on the integral of q dt
+KINEMATIC_SLOPE_RANGE = (0.5, 2.0)
+#: least mean n_z [g] over the first TRIM_WINDOW_S of a record (a trim): the format's n_z is positive up, about
+#: cos(gamma) >= 0.87 in steady flight; a record of the opposite sign (about -1 g) is caught
+NZ_START_MIN_G = 0.5
 #: relative difference allowed between a manifest constant and the model parameter it stands for
 #: (mass_kg / m, rho_kg_m3 / rho, g_m_s2 / g), see ``check_model_matches_manifest``
 MODEL_MATCH_RTOL = 0.005

@@ -140,6 +140,56 @@ def test_a_trim_speed_below_the_pitot_range_for_a_record_above_it_is_named(ds, s
     assert "disagrees with the start of column 'tas_kt'" in problems[0].message
 
 
+@pytest.mark.parametrize("column, factor, field", [
+    ("t_s", 1 / 60, "q_deg_s"),                 # time in minutes: theta moves 60 times the integral of q
+    ("q_deg_s", 1 / 57.29577951308232, "q_deg_s"),  # rad/s under a deg/s name: 57.3 times
+    ("q_deg_s", -1.0, "q_deg_s"),               # q of the other sign: -1 times
+    ("nz_g", -1.0, "nz_g")])                    # n_z positive down: about -1 g at a trim
+def test_a_unit_or_sign_the_limits_cannot_see_is_named_by_kinematics(ds, column, factor, field):
+    """The plausible limits pass each of these; the pitch attitude against the time integral of q (slope 1.04 on
+    this record, a least-squares fit of theta - theta(t0)) and n_z at the record's start (+1 g) name the column,
+    with the slope or start value that gives it away."""
+    import re
+
+    path = ds / LON
+    df = pd.read_csv(path)
+    df[column] = df[column] * factor
+    df.to_csv(path, index=False)
+    problems = validate_flight_test(ds)
+    assert [(p.file, p.field) for p in problems] == [(LON, field)], problems
+    msg = problems[0].message
+    if column == "nz_g":
+        assert msg.startswith("starts at -1 g (mean over the first 1 s)"), msg
+    else:
+        slope = float(re.search(r"moves (\S+) times the time integral", msg).group(1))
+        assert slope * factor == pytest.approx(1.04, abs=0.02), msg
+
+
+@pytest.mark.parametrize("name, words", [("trims\x00.csv", "(embedded null byte)"),
+                                         ("a" * 3000 + ".csv", "(File name too long)")])
+def test_a_path_the_file_system_cannot_take_is_a_problem_of_the_manifest(ds, capsys, name, words):
+    """A NUL byte or a 3000-character name in trim_file: one line naming the manifest's field (before, the reader
+    raised, and check-data printed the exception as if the data could not be checked)."""
+    _edit_manifest(ds, lambda m: m.update(trim_file=name))
+    line, = _check(ds, capsys)
+    assert line.startswith("error: manifest.json: field 'trim_file': path ") and line.endswith(
+        f"cannot be used as a file name {words}"), line[-200:]
+
+
+def test_a_bug_of_the_reader_is_an_internal_error_not_a_problem_of_the_data(ds, capsys, monkeypatch):
+    """An exception inside the reader is reported by check-data as an internal error (exit 1), never as bad data
+    (exit 2, 'error: ...')."""
+    from pyomo_heli.dataset import reader
+
+    def broken(self, *a, **k):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(reader._Reader, "check_kinematics", broken)
+    assert main(["check-data", str(ds)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("pyomo-heli check-data: internal error: ZeroDivisionError: a bug"), err
+
+
 def test_start_trim_of_a_maneuver_with_a_bad_trim_speed_reports_the_manifest_only(ds):
     _edit_manifest(ds, lambda m: m["maneuvers"][0].update(trim_speed_kt="80"))
     assert [(p.file, p.field) for p in validate_flight_test(ds)] == [("manifest.json", "maneuvers[0].trim_speed_kt")]

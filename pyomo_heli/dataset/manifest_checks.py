@@ -121,7 +121,13 @@ class ManifestChecks:
         if pp.is_absolute() or re.match(r"^[A-Za-z]:", value):
             self.add(MANIFEST_NAME, field, f"path {value!r} must be relative to the dataset folder")
             return None
-        target = (self.root / value).resolve()
+        try:
+            target = (self.root / value).resolve()
+            target.exists()
+        except (OSError, ValueError) as exc:  # a NUL byte, a name too long for the file system
+            self.add(MANIFEST_NAME, field, f"path {value!r} cannot be used as a file name "
+                                           f"({getattr(exc, 'strerror', None) or exc})")
+            return None
         root = self.root.resolve()
         if target != root and root not in target.parents:
             self.add(MANIFEST_NAME, field, f"path {value!r} is outside the dataset folder")

@@ -347,17 +347,21 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png", sta
     responses = read_responses(out)
     truth = read_truth(cfg.dataset)
     est = estimates(result)
-    sets = dict(est)
+    # each estimate in the config's model; "truth" is the model the data were generated with (its effects and every
+    # parameter of truth.json), as the identification report's truth prediction
+    sets = {label: (cfg.model, p) for label, p in est.items()}
     if truth is not None:
-        sets["truth"] = {n: truth[n] for n in result.parameters if n in truth}
+        from ..flighttest.generate import truth_model_of
+
+        sets["truth"] = (truth_model_of(cfg.dataset), {})
     omega = np.geomspace(0.3, 30, 200)
-    curves = {label: model_curves(cfg.model, p, responses, omega) for label, p in sets.items()}
+    curves = {label: model_curves(model, p, responses, omega) for label, (model, p) in sets.items()}
     fig = plot_front_projections(front, result)
     fig.savefig(out / f"front_projections.{figure_format}", dpi=110)
     fig = plot_bode(responses, curves, omega)
     fig.savefig(out / f"bode.{figure_format}", dpi=110)
-    band_curves = {label: [model_curves(cfg.model, p, [r], r.band().omega)[0] for r in responses]
-                   for label, p in sets.items()}
+    band_curves = {label: [model_curves(model, p, [r], r.band().omega)[0] for r in responses]
+                   for label, (model, p) in sets.items()}
     errs = band_errors(responses, band_curves)
     errs.to_csv(out / "band_errors.csv", index=False, float_format="%.6g")
 

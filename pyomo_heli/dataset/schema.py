@@ -36,7 +36,8 @@ TRIM_WINDOW_S = 1.0
 SPACING_TOL = 0.01
 MIN_SAMPLES = 3
 #: plausible sample rates of a maneuver record [Hz]: flight-test data systems record at 10-1000 Hz; outside
-#: 1..10,000 Hz the time column is in another unit (ms, minutes) or corrupt (time stamps 1e300 s apart)
+#: 1..10,000 Hz the time column is in another unit (ms, or minutes above 166 Hz) or corrupt (time stamps 1e300 s
+#: apart). Minutes of a slower record read 600-10,000 Hz: the kinematic check below names those
 SAMPLE_RATE_RANGE_HZ = (1.0, 10_000.0)
 #: a numeric CSV cell: plain ASCII decimal number with optional sign, point and exponent (no '_' digit
 #: separators, no non-ASCII digits such as '٥', which Python's float() would accept)

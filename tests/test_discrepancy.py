@@ -323,3 +323,22 @@ def test_a_lag_state_at_zero_starts_at_what_it_follows(name):
             assert b1.x[s, tt].value == v.value
     if name == "col_delay":  # the collective it follows is 0.11-0.15 rad: far from the old start at 0
         assert min(pyo.value(getattr(m1.trim[i], lag)) for i in m1.trim) > 0.1
+
+
+@pytest.mark.parametrize("order", [("TAS_delay", "TAS_scale"), ("TAS_scale", "TAS_delay")])
+def test_an_output_time_shift_acts_before_a_scale_on_the_same_output_in_either_order(order):
+    """The family's formula: the record holds the lagged output y_d, which the scale then acts on, (1 + c) y_d.
+    With the scale listed first the record read y_d + c y (the lag added its y_d - y to the scaled output). At a
+    60 kt trim with the lag state set to 25 m/s, c_scale 0.1: 27.5 m/s whatever the order."""
+    from pyomo_heli.physics.discrepancy import generic_term
+    from pyomo_heli.physics.model import HelicopterModel
+    from pyomo_heli.simulation.trim import trim_float
+    from pyomo_heli.units import KT
+
+    m = HelicopterModel(extensions=[generic_term(n) for n in order]).with_parameters(c_TAS_scale=0.1,
+                                                                                     c_TAS_delay=0.2)
+    tp = trim_float(m, 60 * KT)
+    x = {**tp.state(), "TAS_delayed": 25.0}
+    ctx = m.evaluate(x, tp.inputs())
+    assert abs(float(ctx.true_outputs["TAS"]) - 25.0) > 5.0
+    assert float(ctx.outputs["TAS"]) == pytest.approx(1.1 * 25.0, rel=1e-12)

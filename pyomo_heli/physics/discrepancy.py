@@ -16,7 +16,8 @@ with ``phi`` a dimensionless regressor of order one over the envelope (:data:`RE
     w                w / 5 m/s                              heave velocity
     q                q / 0.2 rad/s                          pitch rate
     lam              lambda_i / 0.05                        induced inflow (the wake's strength)
-    col, lon         col / 0.2 rad, lon / 0.05 rad          the measured controls
+    col, lon         col / 0.2 rad, lon / 0.05 rad          the controls the rotor sees (after rigging,
+                                                            scale, delay or feedback terms)
 
 Extended family only (``generic_names("extended")``), the speed products of the state and control
 regressors (the classic dimensional form of a derivative, e.g. a pitch damping that grows with V):
@@ -198,6 +199,11 @@ class GenericTerm(Extension):
     @property
     def delays_input(self) -> bool:
         return self.kind == "delay" and self.on_input
+
+    @property
+    def output_stage(self) -> int:
+        """0 for an output's time shift: it runs before the other sensor effects (module docstring)."""
+        return 0 if self.kind == "delay" and self.channel == "sensor" and not self.on_input else 1
 
     def adjust_controls(self, ctx):
         if not self.on_input:

@@ -13,7 +13,9 @@ each extension's hooks at fixed points of the calculation, in this order:
 7. ``state_equations(ctx)``  for extra states: name -> (coef, rhs) meaning
                              coef * d(state)/dt = rhs (``ctx.true_outputs``: the outputs
                              before any sensor effect, e.g. for a sensor lag)
-8. ``adjust_outputs(ctx)``   may change entries of ``ctx.outputs`` (sensors)
+8. ``adjust_outputs(ctx)``   may change entries of ``ctx.outputs`` (sensors); an output's own lag
+                             (``output_stage`` 0) first, so that the other sensor effects act on
+                             what it holds, then the rest in the order of the extensions
 
 The same extension object serves the float simulator, Pyomo collocation and
 trim blocks, because hooks only do arithmetic on what ``ctx`` holds, with
@@ -37,6 +39,9 @@ class Extension:
     strength: str = ""
     #: names of extra differential states this extension adds
     states: tuple[str, ...] = ()
+    #: when ``adjust_outputs`` runs: 0 for the lag of an output (the record holds the lagged value, which a scale
+    #: or bias then acts on), 1 for every other sensor effect
+    output_stage: int = 1
 
     def parameters(self) -> list[ParameterSpec]:
         """Parameter specs this extension adds (the strength first)."""

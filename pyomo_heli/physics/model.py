@@ -108,7 +108,7 @@ def evaluate(x: Mapping, inputs: Mapping, p: Mapping, ops=NUMPY, beta: Sequence 
     ctx.state_eqs = {k: (1.0, v) for k, v in ctx.rates.items()}
     for e in extensions:
         ctx.state_eqs.update(e.state_equations(ctx))
-    for e in extensions:
+    for e in sorted(extensions, key=lambda e: getattr(e, "output_stage", 1)):  # an output's lag first, stable
         e.adjust_outputs(ctx)
     return ctx
 

@@ -313,6 +313,8 @@ def derivative_verdict(truth: tuple[str, np.ndarray], derivatives: dict, what: s
 #: detection: its noncentrality (sum of squares in noise standard deviations) under the chi-square(1) 0.99 quantile
 SIGNATURE_LEFT_MAX = 6.63
 SIGNATURE_DATA = ROOT / "data" / "bo105_synthetic"
+#: its generator config: the template of the full-size held-out flight tests (--data-config's default)
+BUNDLED_TEMPLATE = ROOT / "data" / "bo105_synthetic.toml"
 
 
 @dataclasses.dataclass(frozen=True, eq=False)  # hashed by identity (a cache key)
@@ -339,21 +341,66 @@ class SignatureSetup:
                        [v * KT for v in SPEEDS_KT], list(self.maneuvers))
 
 
-@functools.lru_cache(maxsize=2)
-def signature_setup(config: str = str(CONFIG)) -> SignatureSetup:
-    """The bundled flight test's validation records (as ``config`` prepares them), M0 truth parameters and noise
-    levels: the held-out flight tests share its maneuvers, trims, noise levels and M0 parameters."""
+def signature_setup(config: str = str(CONFIG), template: str | None = None, cache: str | None = None) -> SignatureSetup:
+    """The validation records (as ``config`` prepares them), M0 truth parameters and noise levels of the flight tests
+    the study generates from the generator config ``template`` (its text; None: the bundled flight test's,
+    ``data/bo105_synthetic.toml``). For the bundled template the bundled flight test itself: the held-out flight tests
+    share its maneuvers, trims, noise levels and M0 parameters. For another (the small instance's one 6 s validation
+    record) a flight test generated from it with no effect (seed 20261122) into ``cache/signature_reference``
+    (:func:`signature_cache`): a row's signature is judged on the records its own flight test has."""
+    if template is not None and template == BUNDLED_TEMPLATE.read_text():
+        template, cache = None, None  # one setup (and one cache of its signatures) for the bundled flight test
+    return _signature_setup(str(config), template, cache)
+
+
+@functools.lru_cache(maxsize=4)
+def _signature_setup(config: str, template: str | None, cache: str | None) -> SignatureSetup:
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.dataset import load_flight_test
     from pyomo_heli.nlp.identification import validation_maneuvers
     from pyomo_heli.physics.model import HelicopterModel
 
-    cfg = load_identification_config(config, overrides={"data": {"dataset": str(SIGNATURE_DATA)}})
-    truth = json.loads((SIGNATURE_DATA / "truth.json").read_text())
+    if template is None:
+        data = SIGNATURE_DATA
+    else:
+        if cache is None:
+            raise ValueError("signature_setup: a generator config other than the bundled one needs a cache folder")
+        data = reference_flight_test(Path(cache), template)
+    cfg = load_identification_config(config, overrides={"data": {"dataset": str(data)}})
+    truth = json.loads((data / "truth.json").read_text())
     names = {sp.name for sp in HelicopterModel().parameters.specs()}
-    return SignatureSetup(tuple(validation_maneuvers(cfg, load_flight_test(SIGNATURE_DATA))),
+    return SignatureSetup(tuple(validation_maneuvers(cfg, load_flight_test(data))),
                           {k: v for k, v in truth["parameters"].items() if k in names},
                           truth["sensor_sigma_si"], truth["trim_sigma_si"])
+
+
+def reference_flight_test(cache: Path, template: str) -> Path:
+    """``cache/signature_reference/data``: the flight test of ``template`` with no effect (seed 20261122), generated
+    once. Cases running at once may each ask for it: each generates into a folder of its own and renames it into
+    place, the first one wins (a rename onto a folder that holds files fails)."""
+    import os
+    import tempfile
+
+    ref = cache / "signature_reference"
+    if not (ref / "data" / "truth.json").is_file():
+        cache.mkdir(parents=True, exist_ok=True)
+        mine = Path(tempfile.mkdtemp(dir=cache, prefix="reference_"))
+        generate_case(mine, template, "none", seeds_of(0, 1)[0])
+        try:
+            os.replace(mine, ref)
+        except OSError:  # another case put it there first
+            shutil.rmtree(mine, ignore_errors=True)
+    return ref / "data"
+
+
+def signature_cache(template: str) -> Path:
+    """Where :func:`signature_setup` generates the reference flight test of a generator config other than the
+    bundled one: a folder of the system's temporary directory named by the config's content (never a results
+    folder; the same config finds it again, another never)."""
+    import hashlib
+    import tempfile
+
+    return Path(tempfile.gettempdir()) / f"pyomo_heli_signature_{hashlib.sha256(template.encode()).hexdigest()[:16]}"
 
 
 def signature(extension, strengths: dict, setup: SignatureSetup) -> np.ndarray | None:
@@ -409,6 +456,8 @@ def signature_verdict(truth: np.ndarray | None, sig: np.ndarray | None) -> str:
     signature ``truth``; 'no (left L of T)' otherwise; 'n/a' without both."""
     if truth is None or sig is None or not np.any(sig):
         return "n/a"
+    if float(truth @ truth) < SIGNATURE_LEFT_MAX:  # every term would "leave less" of it: no test
+        return f"n/a (the truth's signature, {float(truth @ truth):.3g}, is below detection)"
     beta = float(truth @ sig / (sig @ sig))
     left = float(np.sum((truth - max(beta, 0.0) * sig) ** 2))
     return "yes" if beta > 0 and left < SIGNATURE_LEFT_MAX else f"no (left {left:.3g} of {float(truth @ truth):.3g})"
@@ -422,7 +471,7 @@ def has_force_derivative(effect: str) -> bool:
     return any(truth_derivative(effect, ch) is not None for ch in "XZM")
 
 
-def match(effect: str, fit: dict | None) -> str:
+def match(effect: str, fit: dict | None, setup: SignatureSetup | None = None) -> str:
     """The shape test of the study criterion, the truth's sign and speed dependence where it has them:
     :func:`shape_match` (the force or moment along the trims) for a truth that adds a steady force or moment;
     :func:`derivative_match` (its derivative along the trims) for a force or moment term where the truth adds one
@@ -434,10 +483,10 @@ def match(effect: str, fit: dict | None) -> str:
         return shape_match(effect, fit)
     if has_force_derivative(effect) and is_force_term(fit["name"]):
         return derivative_match(effect, fit)
-    return signature_match(effect, fit)
+    return signature_match(effect, fit, setup)
 
 
-def model_match(effect: str, fits: list[dict]) -> str:
+def model_match(effect: str, fits: list[dict], setup: SignatureSetup | None = None) -> str:
     """:func:`match` for the kept model of several discovered terms, all at their estimates: for a truth with a steady
     force or moment, the force the model's force and moment terms add together in each channel they touch
     (:func:`steady_force` of them all); for a damping truth, their summed derivative in each channel they touch
@@ -449,7 +498,7 @@ def model_match(effect: str, fits: list[dict]) -> str:
     if effect == "none" or not fits:
         return "n/a" if effect == "none" else "-"
     if len(fits) == 1:
-        return match(effect, fits[0])
+        return match(effect, fits[0], setup)
     terms = [generic_term(f["name"]) for f in fits]
     strengths = {t.strength: f["estimate"] for t, f in zip(terms, fits)}
     forces = [(t, f) for t, f in zip(terms, fits) if is_force_term(f["name"])]
@@ -479,7 +528,7 @@ def model_match(effect: str, fits: list[dict]) -> str:
         if all(v == "yes" for v in verdicts.values()):
             return "yes"
         return "no (" + "; ".join(f"{ch}: {v}" for ch, v in verdicts.items()) + ")"
-    setup = signature_setup()
+    setup = setup or signature_setup()
     return signature_verdict(truth_signature(effect, setup), signature(terms, strengths, setup))
 
 
@@ -723,7 +772,7 @@ def truth_record_change(effect: str, output: str, setup: SignatureSetup | None =
     return {v: float(np.mean(x)) for v, x in per.items()}
 
 
-def record_bias_match(effect: str, tests: dict) -> str:
+def record_bias_match(effect: str, tests: dict, setup: SignatureSetup | None = None) -> str:
     """Does a record-bias shape the residual analysis reports (an output whose records disagree on its bias, with
     each speed's shift against the records' mean, residual = model - data) match the truth's change of that output's
     record means in sign and speed dependence? The data hold the truth's change and the model lacks it, so the
@@ -735,7 +784,7 @@ def record_bias_match(effect: str, tests: dict) -> str:
         return "n/a" if effect == "none" else "-"
     verdicts = []
     for o, t in flagged.items():
-        change = truth_record_change(effect, o)
+        change = truth_record_change(effect, o, setup)
         shift = {round(r["V"], 6): -r["shift"] for r in t["by_speed"]}
         vs = sorted(set(change) & set(shift))
         if len(vs) < 3:
@@ -830,7 +879,7 @@ def input_path_match(effect: str, terms: list, setup: SignatureSetup | None = No
     return f"yes ({c}, corr {corr:+.2f})" if corr > 0.7 else f"no ({c}, corr {corr:+.2f})"
 
 
-def residual_columns(effect: str, fr: dict) -> dict:
+def residual_columns(effect: str, fr: dict, setup: SignatureSetup | None = None) -> dict:
     """The table's columns of a kept model's residual analysis ``fr`` (:func:`final_residual`): the outputs whose
     records disagree on their bias and whether that shape is the truth's, the input error it reports and whether that
     follows the truth's."""
@@ -838,12 +887,14 @@ def residual_columns(effect: str, fr: dict) -> dict:
     terms = (fr.get("input_path") or {}).get("terms") or []
     return {"record biases differ": (", ".join(f"{o} (chi2 {t['chi2']:.3g} on {t['df']})"
                                                for o, t in flagged.items()) or "none"),
-            "record bias shape matches truth": record_bias_match(effect, fr["record_biases"]),
+            "record bias shape matches truth": record_bias_match(effect, fr["record_biases"], setup),
             "input path": format_input_path(terms) if fr.get("input_path") else "-",
-            "input path shape matches truth": input_path_match(effect, terms)}
+            "input path shape matches truth": input_path_match(effect, terms, setup)}
 
 
-def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
+def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG, setup: SignatureSetup | None = None) -> dict:
+    """The table row of a finished loop; ``setup``: the signature setup of the study's flight tests
+    (:func:`signature_setup`; default the bundled flight test's)."""
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.diagnosis.discovery import best_fit
     from pyomo_heli.physics.discrepancy import generic_term
@@ -875,7 +926,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     fr = final_residual(loop, config)
     row = {"truth": effect, "seed": seed, "verdict": "; ".join(decisions),
            "added (kept)": "+".join(ik["extensions"]) or "-", "final residual": fr["status"]}
-    row.update(residual_columns(effect, fr))
+    row.update(residual_columns(effect, fr, setup))
     row["residual analysis of"] = "the loop's kept model" if fr.get("input_path") else fr.get("analysis", "-")
     # iterations that diagnosed the closest front point because the direct Eq. 11 solve failed from every start
     row["direct solve failed"] = ", ".join(str(j) for j, it in enumerate(its)
@@ -925,13 +976,13 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     row["generic term"] = (f"{described['name']}: c = {described['estimate']:.3g} +- {described['se']:.2g}"
                            if described else "-")
     row["kept discovered term"] = disc["name"] if disc else "-"
-    row["shape matches truth"] = match(effect, described)
+    row["shape matches truth"] = match(effect, described, setup)
     # the kept model as a whole: every discovered term it kept, at the kept model's estimates
     ses = ik.get("standard_errors") or {}
     whole = [{"name": fit["name"], "estimate": ik["parameters"][s], "se": ses.get(s, math.nan)}
              for _it, fit in discovered_terms(doc) if (s := generic_term(fit["name"]).strength) in ik["parameters"]]
     row["kept terms"] = format_terms(whole)
-    row["kept model matches truth"] = model_match(effect, whole) if whole else "-"
+    row["kept model matches truth"] = model_match(effect, whole, setup) if whole else "-"
     # "unexplained": the step said so (best generic term significant on its own), the residual analysis did, or the
     # discovered term's step was rejected by the validation rule (the loop stops with its shape reported)
     alpha = doc["settings"].get("alpha", 0.01)
@@ -945,7 +996,7 @@ def evaluate(effect: str, seed: int, loop: Path, config: Path = CONFIG) -> dict:
     # left, not the kept term)
     left = (not_kept[1] if not_kept else best) if row["unexplained verdict"] else None
     row["unexplained shape"] = (f"{left['name']}: c = {left['estimate']:.3g} +- {left['se']:.2g}" if left else "-")
-    row["unexplained shape matches truth"] = match(effect, left) if left else "-"
+    row["unexplained shape matches truth"] = match(effect, left, setup) if left else "-"
     row["criterion met"] = criterion_met(row)
     if effect != "none":
         tf = truth_form_check(effect, loop, config)
@@ -1015,7 +1066,8 @@ def merge(out: Path, sources: list[Path]) -> pd.DataFrame:
     return tab
 
 
-def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataFrame:
+def reanalyse(out: Path, scratch: Path, config: Path, template: str, setup: SignatureSetup | None = None
+              ) -> pd.DataFrame:
     """The residual analysis of the kept model, made with the current analysis, for the rows of ``OUT/held_out.csv``
     whose loops are gone and whose kept model the table holds: M0 (nothing added), or M0 plus the discovered terms
     it kept at the kept model's estimates ("kept terms", 3 significant digits; the analysis allows a shift of every
@@ -1069,7 +1121,7 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
                   "parameters": pars, "made_with": made_with}
             cache.write_text(json.dumps(fr, indent=1))
         r["final residual"] = fr["status"]
-        r.update(residual_columns(effect, fr))
+        r.update(residual_columns(effect, fr, setup))
         r["residual analysis of"] = ("M0 rebuilt from the table" if kept == "-" else
                                      f"M0 + {kept} rebuilt from the table")
         r["wrong acceptance"] = str(r["wrong acceptance"]) == "True"
@@ -1085,20 +1137,22 @@ def reanalyse(out: Path, scratch: Path, config: Path, template: str) -> pd.DataF
     return new
 
 
-def rescore(out: Path) -> pd.DataFrame:
+def rescore(out: Path, setup: SignatureSetup | None = None) -> pd.DataFrame:
     """Re-score ``OUT/held_out.csv`` without its loops: the shape columns and the criterion from the terms the table
-    reports (estimates as printed, 3 significant digits), every other column as it is; rewrites csv and md."""
+    reports (estimates as printed, 3 significant digits), every other column as it is; rewrites csv and md.
+    ``setup``: the signature setup of the study's flight tests (:func:`signature_setup`)."""
     rows = []
     for r in read_rows(out / "held_out.csv"):
         described, left = parse_term(r["generic term"]), parse_term(r["unexplained shape"])
         kept = described["name"] if described and described["name"] in str(r["added (kept)"]).split("+") else "-"
         r["kept discovered term"] = kept
-        r["shape matches truth"] = match(r["truth"], described) if described else "-"
+        r["shape matches truth"] = match(r["truth"], described, setup) if described else "-"
         if str(r.get("kept terms", "")) not in ("", "-", "nan"):
-            r["kept model matches truth"] = model_match(r["truth"], parse_terms(r["kept terms"]))
-        r["unexplained shape matches truth"] = match(r["truth"], left) if left else "-"
+            r["kept model matches truth"] = model_match(r["truth"], parse_terms(r["kept terms"]), setup)
+        r["unexplained shape matches truth"] = match(r["truth"], left, setup) if left else "-"
         if str(r.get("input path", "-")) not in ("-", "", "nan"):
-            r["input path shape matches truth"] = input_path_match(r["truth"], parse_input_path(r["input path"]))
+            r["input path shape matches truth"] = input_path_match(r["truth"], parse_input_path(r["input path"]),
+                                                                   setup)
         r["wrong acceptance"] = str(r["wrong acceptance"]) == "True"
         r["criterion met"] = criterion_met(r)
         rows.append(r)
@@ -1268,10 +1322,15 @@ def main(argv=None) -> int:
             load_identification_config(config)
         except ConfigError as exc:
             ap.error(f"--set: {exc}")
+    template = in_file(ap, a.data_config, "--data-config").read_text()
+
+    def setup():  # the signature setup of the flight tests this study generates
+        return signature_setup(str(config), template, str(signature_cache(template)))
+
     if a.rescore:
         if not (out / "held_out.csv").is_file():
             ap.error(f"--rescore: {out / 'held_out.csv'} not found")
-        rescore(out)
+        rescore(out, setup())
         print((out / "held_out.md").read_text())
         return 0
     if a.rows and not a.reanalyse:
@@ -1291,7 +1350,7 @@ def main(argv=None) -> int:
             ap.error(f"--config {config}: --reanalyse rebuilds the kept parameters {', '.join(PARAMETERS)} from the "
                      f"table; this config frees {', '.join(free)}")
         try:
-            reanalyse(out, Path(a.reanalyse), config, in_file(ap, a.data_config, "--data-config").read_text())
+            reanalyse(out, Path(a.reanalyse), config, template, setup())
         except StudyFolderError as exc:
             ap.error(f"--reanalyse: {exc}")
         print((out / "held_out.md").read_text())
@@ -1302,13 +1361,12 @@ def main(argv=None) -> int:
             if doc.is_file() and json.loads(doc.read_text()).get("stopped"):
                 effect, seed = loop.parent.name.rsplit("_", 1)
                 try:
-                    save_row(loop.parent, evaluate(effect, int(seed), loop, config))
+                    save_row(loop.parent, evaluate(effect, int(seed), loop, config, setup()))
                 except StudyConfigError as exc:
                     ap.error(f"--config: {exc}")
         write_table(out)
         print((out / "held_out.md").read_text())
         return 0
-    gen = in_file(ap, a.data_config, "--data-config")
     if a.bundled:
         run_bundled(out, config, ROOT / "data" / "bo105_synthetic", a.modes)
         return 0
@@ -1317,7 +1375,6 @@ def main(argv=None) -> int:
         ap.error(f"--effects: unknown held-out effect(s) {bad}; choose from {', '.join(HELD_OUT_EFFECTS)} or none")
     from pyomo_heli.parallel import dask_executor, run_tasks
 
-    template = gen.read_text()
     tasks = [(effect, seed, out.resolve(), config.resolve(), template)
              for effect in a.effects for seed in seeds_of(a.first_seed, a.seeds)]
     # one case per task: here one after the other (--workers 0), on a LocalCluster of --workers processes or on the
@@ -1401,7 +1458,7 @@ def case_task(task: tuple) -> tuple[dict | None, int]:
     except StudyFolderError as exc:  # the --out folder given is at fault: one line, the other cases go on
         print(f"held_out_effects.py: error: {exc}", file=sys.stderr, flush=True)
         return None, 2
-    row = evaluate(effect, seed, loop, config)
+    row = evaluate(effect, seed, loop, config, signature_setup(str(config), template, str(signature_cache(template))))
     save_row(loop.parent, row)
     return row, 0
 

@@ -394,6 +394,25 @@ def test_a_time_signature_tells_the_truths_lag_from_another_channels(study):
     assert float(left.split()[2]) > 0.5 * float(s @ s) > 100 * study.SIGNATURE_LEFT_MAX
 
 
+def test_a_signature_is_judged_on_the_validation_records_of_the_rows_own_generator_config(study, tmp_path):
+    """The small instance's generator config has one 6 s validation record (lon_80kt_val), the bundled one twelve:
+    the setup is built from a flight test of the config given (its reference generated into the cache folder), not
+    from the bundled flight test. accelerometer_filter's kept nz_delay (c = 0.0747 s against 0.08) leaves less than
+    SIGNATURE_LEFT_MAX of the truth's signature on the small record ("yes"), 30 of 2.75e4 on the bundled twelve
+    (the small tables were scored on those before); a hover effect's signature on the 80 kt record is below
+    detection, where no term can match ("n/a")."""
+    small = (ROOT / "studies" / "held_out_small_gen.toml").read_text()
+    setup = study.signature_setup(str(ROOT / "studies" / "held_out_small.toml"), small, str(tmp_path))
+    assert [mv.name for mv in setup.maneuvers] == ["lon_80kt_val"]
+    assert (tmp_path / "signature_reference" / "data" / "truth.json").is_file()
+    kept = {"name": "nz_delay", "estimate": 0.0747}
+    assert study.signature_match("accelerometer_filter", kept, setup) == "yes"
+    assert study.signature_match("accelerometer_filter", kept).startswith("no (left 30.2 of 2.75e+04)")
+    assert study.signature_match("pitot_downwash", {"name": "col_delay", "estimate": 0.03}, setup).startswith(
+        "n/a (the truth's signature, 0.00742, is below detection)")
+    assert study.signature_setup(str(study.CONFIG), study.BUNDLED_TEMPLATE.read_text()) is study.signature_setup()
+
+
 def test_the_input_path_shape_is_scored_against_the_truths_own_control_error(study):
     """A cross-feed of collective into the cyclic (control_mixing: the rotor sees lon + 0.05 (col - 0.17)): the
     input error the residual analysis would report with the truth's gain follows the truth's along the validation
@@ -445,7 +464,7 @@ def test_reanalyse_rebuilds_a_kept_m0_from_the_table_and_runs_the_loops_own_resi
                                           "z": 25.0, "p": 1e-90}]}}
 
     monkeypatch.setattr(cl, "residual_verdict", verdict)
-    monkeypatch.setattr(study, "input_path_match", lambda effect, terms: "yes (lon, corr +1.00)"
+    monkeypatch.setattr(study, "input_path_match", lambda effect, terms, setup=None: "yes (lon, corr +1.00)"
                         if terms and effect == "control_mixing" else "-")
     base = {"seed": 20261122, "verdict": "ambiguous", "final residual": "noise only", "record biases differ": "none",
             "record bias shape matches truth": "-", "significant val rise (kept steps)": "none",

@@ -64,10 +64,11 @@ def reanalysed(folder: str, flags: str = "") -> tuple[str, str]:
     """The two commands that follow a held-out study's runs, as the committed tables were made: the residual
     analysis of the kept model made again where the table holds it (``--reanalyse``, with the runs' ``flags``:
     config, data config, family; docs/discovery_results.md, "The input path on the kept models"), then the shape
-    columns and criterion re-scored from the terms the table prints (``--rescore``)."""
+    columns and criterion re-scored from the terms the table prints (``--rescore``, with the same flags: the data config
+    decides the validation records a signature is judged on)."""
     flags = f" {flags}" if flags else ""
     return (f"{HELD_OUT} --reanalyse {{out}}/{folder}/scratch{flags} --out {{out}}/{folder}",
-            f"{HELD_OUT} --rescore --out {{out}}/{folder}")
+            f"{HELD_OUT} --rescore{flags} --out {{out}}/{folder}")
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,10 @@ ROOT = Path(__file__).resolve().parent.parent
     (["score_test_level.py", "--seeds", "1", "--out", "README.md"], "README.md is a file, expected a folder"),
     (["monte_carlo.py", "--seed", "-1"], "argument --seed: must be an integer >= 0"),
     (["monte_carlo.py", "--workers", "-1"], "argument --workers: must be an integer >= 0"),
+    (["monte_carlo.py", "--config", "studies/case1_tri.toml"],
+     "[objectives] use = ['time', 'trim', 'linear'] (the study fits J_time and J_trim)"),
+    (["monte_carlo.py", "--config", "tests/configs/tiny_case1_tri_adaptive.toml"],
+     "[pareto] placement = 'adaptive' (the study solves the uniform grid)"),
     (["close_loop_seeds.py", "--out", "OUT"], "nothing to do: give --seeds and/or --existing"),
     (["close_loop_seeds.py", "--seeds", "1", "--config", "nope.toml", "--out", "OUT"],
      "--config nope.toml: file not found"),
@@ -91,3 +95,22 @@ def test_a_study_runs_as_a_module(tmp_path):
     r = subprocess.run([sys.executable, "-m", "pyomo_heli.studies.monte_carlo", "--seed", "-1", "--out",
                         str(tmp_path / "out")], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "argument --seed: must be an integer >= 0" in r.stderr.strip().splitlines()[-1]
+
+
+def test_monte_carlo_with_no_successful_realization_says_so_and_exits_1(tmp_path, monkeypatch, capsys):
+    """Every realization failed (the stand-in: run_monte_carlo returns two failed rows): the summary is empty, so
+    the study says why on its last line (the first row's status) and exits 1, not 0."""
+    import pandas as pd
+
+    import pyomo_heli.uncertainty.monte_carlo as mc
+    from pyomo_heli.studies.monte_carlo import main
+
+    rows = pd.DataFrame({"realization": [0, 1], "estimator": ["time", "time"], "success": [False, False],
+                         "status": ["error: ValueError: a bug", "error: ValueError: a bug"]})
+    monkeypatch.setattr(mc, "run_monte_carlo", lambda *a, **k: mc.MonteCarloResult(rows, ["Iyy"], {"Iyy": 1.0}))
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "mc"
+    out.mkdir()
+    assert main(["--realizations", "2", "--time-only", "--workers", "0", "--out", str(out)]) == 1
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert last.startswith("monte_carlo: no realization succeeded (2 rows in") and "a bug" in last

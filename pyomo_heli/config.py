@@ -7,6 +7,8 @@ Example: studies/case1.toml.
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -177,6 +179,13 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
         if found is None:
             continue
         spec, fac = found
+        if name in fixed and p.initial is not None and not math.isclose(p.initial * fac, float(fixed[name]),
+                                                                           rel_tol=1e-12, abs_tol=0.0):
+            # two starts: one would be dropped
+            problems.add(where, f"'initial' and [model.parameters] {name} = {fixed[name]!r} (SI) give two values: "
+                                "a free parameter starts at one (drop either; without 'initial' it starts at the "
+                                "[model.parameters] value)")
+            continue
         lo_d, hi_d = spec.bounds or (None, None)
         initial = spec.value if p.initial is None else p.initial * fac
         lower = lo_d if p.lower is None else p.lower * fac
@@ -253,6 +262,18 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
                           f"({len(use) - 1} with [objectives] use = {list(use)}), got {par.points}")
     if isinstance(par.points, list) and "points" in raw.get("linear", {}):
         raise ConfigError(f"{f} [linear]: field 'points': the grid is [pareto] points = {par.points}; give it once")
+    # a field the chosen front does not read is refused, not dropped (only the fields the file gives)
+    given = raw.get("pareto", {}) if isinstance(raw.get("pareto"), dict) else {}
+    # ([pareto] points with placement = "adaptive" is let through: identify --placement adaptive switches a
+    # uniform config's front, whose points the adaptive placement then replaces by max_solves)
+    unread = ([] if par.placement == "adaptive" else [("max_solves", "it applies to placement = 'adaptive'")]) + \
+             ([("cold_check", "the cold solves are made on the uniform bi-objective front only")]
+              if par.cold_check and (par.placement == "adaptive" or len(use) > 2) else []) + \
+             ([("predictor", "it extrapolates warm starts, and warm_start = 'none' has none")]
+              if par.warm_start == "none" else [])
+    for key, why in unread:
+        if key in given:
+            raise ConfigError(f"{f} [pareto]: field '{key}' is not read here: {why}")
     try:
         pareto = ParetoSettings(points=par.points, spacing=par.spacing, warm_start=par.warm_start,
                                 cold_check=par.cold_check, predictor=par.predictor, max_iter=par.max_iter,

@@ -80,6 +80,11 @@ def test_the_base_config_loads(tmp_path):
     (dict(pareto='cold_check = "yes"'), r"^\S+cfg.toml \[pareto\]: field 'cold_check' must be bool"),
     (dict(pareto='placement = "smart"'), r"\[pareto\]: pareto.placement must be one of uniform, adaptive"),
     (dict(pareto='placement = "adaptive"\nmax_solves = 3'), r"\[pareto\]: pareto.max_solves must be 4 to 1000"),
+    # a value given that nothing reads (found by a review: each was accepted and dropped)
+    (dict(pareto='max_solves = 50'), r"\[pareto\]: field 'max_solves' is not read here"),
+    (dict(pareto='warm_start = "none"\npredictor = "none"'), r"\[pareto\]: field 'predictor' is not read here"),
+    (dict(extra="[model]\nparameters = { CL_alpha_HT = 3.0 }"),
+     r"\[parameters.CL_alpha_HT\]: 'initial' and \[model.parameters\] CL_alpha_HT = 3.0 \(SI\) give two values"),
 ])
 def test_bad_config_is_one_clear_error(tmp_path, edit, message):
     with pytest.raises(ConfigError, match=message) as err:
@@ -87,6 +92,14 @@ def test_bad_config_is_one_clear_error(tmp_path, edit, message):
     text = str(err.value)
     assert "\n" not in text and str(tmp_path / "cfg.toml") in text
     assert text.count("[pareto]") <= 1  # the table is named once, not wrapped twice
+
+
+def test_cold_check_on_a_front_that_makes_no_cold_solves_is_refused(tmp_path):
+    """cold_check = true with the adaptive placement (which never reads it): one line naming the field."""
+    path = write(tmp_path, pareto='placement = "adaptive"\ncold_check = true')
+    path.write_text(path.read_text().replace("[pareto]\npoints = 4\n", "[pareto]\n"))
+    with pytest.raises(ConfigError, match=r"\[pareto\]: field 'cold_check' is not read here"):
+        load_identification_config(path)
 
 
 @pytest.mark.parametrize("value, message", [

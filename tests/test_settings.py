@@ -160,10 +160,14 @@ def test_committed_schema_is_the_generated_one(kind):
     assert (ROOT / "schemas" / f"{kind}.schema.json").read_text() == schema_text(kind)
 
 
-def test_cli_schema_prints_json(capsys):
+def test_cli_schema_prints_json(capsys, tmp_path):
     assert main(["schema", "generate"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["$schema"].endswith("2020-12/schema") and set(doc["required"]) == {"dataset", "trims", "maneuvers"}
+    # a kind and --out-dir (which writes every kind): one line, nothing written
+    assert main(["schema", "identify", "--out-dir", str(tmp_path / "s")]) == 2
+    assert capsys.readouterr().err.strip() == ("pyomo-heli schema: error: give a config kind (identify) or --out-dir "
+                                               "(every kind), not both") and not (tmp_path / "s").exists()
 
 
 def _resolve(node: dict, root: dict) -> dict:

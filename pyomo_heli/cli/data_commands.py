@@ -21,6 +21,8 @@ def cmd_generate_data(args) -> int:
 def cmd_schema(args) -> int:
     from ..settings import schema_text, write_schemas
 
+    if args.out_dir and args.kind:  # --out-dir writes every kind: a kind given too would be dropped
+        raise UserError(f"give a config kind ({args.kind}) or --out-dir (every kind), not both")
     if args.out_dir:
         for path in write_schemas(args.out_dir):
             print(path)

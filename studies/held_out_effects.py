@@ -1285,6 +1285,8 @@ def main(argv=None) -> int:
                          "truth's form significant, M0 + noise) as one table -> OUT/summary.md")
     a = ap.parse_args(argv)
     out = out_folder(ap, a.out)
+    if a.modes != ["on", "off"] and not a.bundled:
+        ap.error("--modes: only with --bundled (the loops of the bundled flight test)")
     if a.summary:
         folders = [Path(f) for f in a.summary]
         missing = [str(f / "held_out.csv") for f in folders if not (f / "held_out.csv").is_file()]
@@ -1318,9 +1320,12 @@ def main(argv=None) -> int:
         except ValueError as exc:
             ap.error(f"--set: {exc}")
         config = with_settings(config, sets, out / "config_set.toml")
-        try:
-            load_identification_config(config)
+        try:  # the [loop] table too: the table this study is about, read by close-loop only
+            from pyomo_heli.workflows.close_loop import loop_settings
+
+            loop_settings(load_identification_config(config))
         except ConfigError as exc:
+            config.unlink()  # not left behind as this study's settings
             ap.error(f"--set: {exc}")
     template = in_file(ap, a.data_config, "--data-config").read_text()
 
@@ -1356,6 +1361,8 @@ def main(argv=None) -> int:
         print((out / "held_out.md").read_text())
         return 0
     if a.evaluate_only:
+        if not any(json.loads(d.read_text()).get("stopped") for d in out.glob("*_*/loop/loop.json")):
+            ap.error(f"--evaluate-only: no finished loop in {out} (OUT/<effect>_<seed>/loop/loop.json)")
         for loop in sorted(out.glob("*_*/loop")):
             doc = loop / "loop.json"
             if doc.is_file() and json.loads(doc.read_text()).get("stopped"):

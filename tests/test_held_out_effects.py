@@ -1238,3 +1238,20 @@ def test_a_kept_model_of_several_terms_is_scored_as_a_whole():
     # a row made before the table recorded every kept term: its first term's shape, as before
     assert study.criterion_met({**row, "kept model matches truth": "", "shape matches truth": "yes"}) is True
     assert study.criterion_met({**row, "kept model matches truth": "", "shape matches truth": "no (x)"}) is False
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--set", "loop.alpha=7"], "--set: "),                         # the [loop] table is checked too
+    (["--set", "loop.max_iteratons=5"], "--set: "),
+    (["--evaluate-only"], "--evaluate-only: no finished loop in"),
+    (["--modes", "off", "--rescore"], "--modes: only with --bundled")])
+def test_study_refuses_a_bad_argument_in_one_line_before_any_case(study, tmp_path, capsys, argv, message):
+    """Found by a review: a misspelt or out-of-range [loop] field passed --set (each case would generate its flight
+    test and then fail in close-loop), --evaluate-only on a folder without loops raised KeyError, and --modes
+    without --bundled was dropped."""
+    with pytest.raises(SystemExit) as exc:
+        study.main([*argv, "--out", str(tmp_path / "o")])
+    assert exc.value.code == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert message in last, last
+    assert not list((tmp_path / "o").glob("*_*"))

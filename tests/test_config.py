@@ -162,6 +162,24 @@ def test_close_loop_candidates_named_twice(tmp_path):
         loop_settings(cfg)
 
 
+@pytest.mark.parametrize("loop, message", [
+    ('generic_family = "extended"', "field 'generic_family' is not read here: it is read with discovery = true only"),
+    ('generic_rank = "p"', "field 'generic_rank' is not read here: it is read with discovery = true only"),
+    ('discovery = true\ngeneric = ["dM_mu"]\ngeneric_family = "extended"',
+     "field 'generic_family' is not read here: 'generic' names the terms"),
+    ("validation_rule = false\nvalidation_joint = true", "field 'validation_joint' is not read here"),
+    ('validation_rule = false\nafter_rejection = "stop"', "field 'after_rejection' is not read here"),
+    ('score_inputs = "measured"', "field 'score_inputs' is not read here"),
+])
+def test_a_loop_field_nothing_reads_is_refused(tmp_path, loop, message):
+    """Found by a review: each was accepted and dropped (the base config has no [objectives] input_errors)."""
+    from pyomo_heli.workflows.close_loop import loop_settings
+
+    cfg = load_identification_config(write(tmp_path, extra=f"[loop]\n{loop}"))
+    with pytest.raises(ConfigError, match=r"\[loop\]: " + message.replace("(", r"\(").replace(")", r"\)")):
+        loop_settings(cfg)
+
+
 def test_model_mass_must_match_the_flight_tests(tmp_path):
     """The manifest's mass and air density are the aircraft and day the model must fly; a config whose model
     differs by more than 0.5 % is refused before any solve, unless the parameter is free."""

@@ -292,6 +292,11 @@ BAD_CONFIGS = {
     "unknown top-level table": (lambda s: "[sensor]\nnoise = true\n\n" + s, ["'sensor'"]),
     "unknown sensor channel with noise off": (_sub("noise = true", "noise = false\nsigma = { qq_deg_s = 0.2 }"),
                                               ["[sensors.sigma]", "qq_deg_s"]),
+    # found by a review: accepted although meaningless
+    "sensor sigma in the wrong unit": (_sub("noise = true", "noise = true\nsigma = { q_deg_s = 5000.0 }"),
+                                       ["[sensors.sigma]", "'q_deg_s' = 5000.0 is not a sensor noise sigma"]),
+    "ramp longer than a pulse": (_sub("duration_s = 4", "duration_s = 4\nramp_s = 5"),
+                                 [MAN, "key 'ramp_s' = 5 s is longer than a pulse (step_s = 0.5 s)"]),
 }
 
 

@@ -217,6 +217,15 @@ def test_trim_loop_config_errors(tmp_path):
                    'generic_family = "extended"\n')
     c = load_trim_loop_config(cfg)
     assert c.discovery and c.generic_family == "extended" and c.generic is None
+    # a field nothing reads (found by a review: accepted and dropped)
+    for loop, message in (('generic_family = "extended"', "field 'generic_family' is not read here: it is read with "
+                                                          "discovery = true only"),
+                          ('discovery = true\ngeneric = ["dM_mu"]\ngeneric_family = "extended"',
+                           "field 'generic_family' is not read here: 'generic' names the terms")):
+        cfg.write_text(f'[data]\ndataset = "{BUNDLED}"\n[parameters.f_e]\n[loop]\n{loop}\n')
+        with pytest.raises(TrimLoopError) as err:
+            load_trim_loop_config(cfg)
+        assert f"[loop]: {message}" in str(err.value) and len(str(err.value).splitlines()) == 1, str(err.value)
 
 
 def test_maneuver_identification_refuses_trim_only_data(tmp_path):

@@ -17,6 +17,7 @@ from ..settings.generator import SWEEP_KEYS, GeneratorFile  # noqa: F401 - SWEEP
 from ..dataset.schema import (G_RANGE_M_S2, INPUT_CHANNELS, MANEUVER_QUANTITIES, MASS_RANGE_KG, MIN_SAMPLES,
                               NAME_PATTERN, RHO_RANGE_KG_M3, SAMPLE_RATE_RANGE_HZ, SPEED_RANGE_KT)
 from ..physics.parameters import bo105
+from ..settings.common import SIGMA_MAX_SI
 from ..simulation.inputs import InputSignal, InputSpecError
 from ..units import DEG, KT, SENSOR_SIGMA_KEYS
 from .sensors import DEFAULT_SIGMA, DEFAULT_VIBRATION, SensorConfig
@@ -118,6 +119,8 @@ def _maneuver(mv, problems: Problems, where: str, record_rate: float) -> Maneuve
         if t_start + step > duration:
             bad(f"key 'step_s' = {step:g} s (the sweep length) from t_start_s = {t_start:g} s runs past duration_s = "
                 f"{duration:g} s")
+    elif mv.ramp_s > step:  # (a multistep cut by the record's end is allowed: short test records are)
+        bad(f"key 'ramp_s' = {mv.ramp_s:g} s is longer than a pulse (step_s = {step:g} s)")
     if len(problems.lines) > n0:
         return None
     return ManeuverPlan(name=mv.name, role=mv.role, speed=speed * KT, channel=mv.channel, shape=mv.shape,
@@ -167,6 +170,10 @@ def load_config(path: str | Path) -> GeneratorConfig:
 
     sen = s.sensors
     noise = sen.noise
+    for key, v in sen.sigma.model_dump(exclude_none=True).items():
+        if v * SENSOR_SIGMA_KEYS[key][1] > SIGMA_MAX_SI:
+            problems.add("sensors.sigma", f"'{key}' = {v!r} is not a sensor noise sigma (above {SIGMA_MAX_SI:g} in "
+                                          "SI: rad, rad/s, g or m/s); a unit slip?")
     sigma = dict(DEFAULT_SIGMA) if noise else {}
     vib = dict(DEFAULT_VIBRATION) if noise else {}
     if noise:  # checked with noise = false too (then unused): a misspelt channel must not wait for noise = true

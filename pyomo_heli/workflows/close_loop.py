@@ -130,6 +130,18 @@ def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
             if n not in CANDIDATES:
                 problems.add("loop", f"field 'candidates': unknown candidate {n!r}; choose from "
                                      f"{', '.join(CANDIDATES)}")
+        # a field given that nothing reads is refused, not dropped (the fields the file gives, not the defaults)
+        unread = ([(k, "it is read with discovery = true only") for k in ("generic", "generic_family", "generic_rank")
+                   if not table.discovery]
+                  + ([("generic_family", "'generic' names the terms (give one of the two)")]
+                     if table.discovery and "generic" in raw else [])
+                  + [(k, "it is read with validation_rule = true only") for k in ("validation_joint", "after_rejection")
+                     if not table.validation_rule]
+                  + ([("score_inputs", "it says how the score test treats the input errors, and [objectives] "
+                                       "input_errors has none")] if not cfg.nlp.input_errors else []))
+        for key, why in unread:
+            if key in raw:
+                problems.add("loop", f"field '{key}' is not read here: {why}")
     problems.raise_if_any()
     return LoopSettings(**{k: list(v) if isinstance(v, list) else v for k, v in table.model_dump().items()})
 
@@ -397,6 +409,10 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                 if _reject(doc, record, krec, added, check["message"], rejected, settings, out, progress):
                     return doc
                 cfg, chosen = kcfg, krec["parameters"]
+        elif i > 0 and settings.validation_rule:  # on, with nothing to judge on: said in the record, not silent
+            record["validation_note"] = ("no validation record ([data] validation): the validation rule could not "
+                                         "judge this step")
+            progress(f"  iteration {i}: {record['validation_note']}")
         if not record.get("rejected"):
             kept = (cfg, record)
             kept_models.append(kept)

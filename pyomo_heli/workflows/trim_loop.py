@@ -138,6 +138,12 @@ def load_trim_loop_config(path) -> TrimLoopConfig:
         except ValueError as exc:
             problems.add(where, str(exc))
     loop = s.loop
+    given = loop.model_fields_set  # a field the file gives that nothing reads is refused, not dropped
+    for key in ("generic", "generic_family"):
+        if key in given and not loop.discovery:
+            problems.add("loop", f"field '{key}' is not read here: it is read with discovery = true only")
+    if {"generic", "generic_family"} <= given:
+        problems.add("loop", "field 'generic_family' is not read here: 'generic' names the terms (give one of the two)")
     cands = loop.candidates
     if cands is not None:
         bad = [c for c in cands if c not in CANDIDATES]

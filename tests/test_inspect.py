@@ -176,3 +176,22 @@ def test_cli_inspect_bad_config_path(tmp_path):
     assert "\n" not in err and "Traceback" not in err
     assert err.startswith("pyomo-heli inspect: error:") and "nope.toml" in err and "not found" in err
     assert r.stdout == ""
+
+
+def test_inspect_of_a_three_objective_config_builds_j_linear_and_checks_linear(tmp_path, capsys):
+    """Found by a review: inspect built the two-objective NLP of a three-objective config and never read [linear]. It
+    now builds the J_linear blocks with the coherent bands identify fits (one response, q/lon at 80 kt, 11 bins on
+    the tiny config), and a [linear] identify would refuse (a speed without a record) is one line, exit 2."""
+    from pyomo_heli.cli import main
+
+    tri = ROOT / "tests" / "configs" / "tiny_case1_tri.toml"
+    assert main(["inspect", str(tri), "--no-diagnostics"]) == 0
+    out = capsys.readouterr().out
+    assert "frequency responses (J_linear, 11 coherent bins):" in out and "  q/lon at 80 kt " in out
+    assert "lin[*]." in out  # the linear-model blocks are in the NLP
+    bad = tmp_path / "tri.toml"
+    bad.write_text(tri.read_text().replace("speeds_kt = [80]", "speeds_kt = [40]")
+                   .replace('"../../data', f'"{ROOT / "data"}'))
+    assert main(["inspect", str(bad), "--no-diagnostics"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "[linear] speeds_kt: no response for q/lon at 40 kt" in err[0], err

@@ -129,7 +129,13 @@ def cmd_inspect(args) -> int:
     from ..nlp.inspect import inspect_problem
 
     cfg = load_identification_config(args.config)
-    print(inspect_problem(cfg, diagnostics=not args.no_diagnostics))
+    responses = None
+    if "linear" in cfg.objectives:  # the three-objective NLP, its [linear] checked as identify checks it
+        from ..dataset import load_flight_test
+        from ..workflows.identify_linear import coherent_bands, data_responses
+
+        responses = coherent_bands(cfg, data_responses(cfg, load_flight_test(cfg.dataset)), progress=lambda s: None)
+    print(inspect_problem(cfg, diagnostics=not args.no_diagnostics, responses=responses))
     return 0
 
 

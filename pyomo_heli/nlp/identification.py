@@ -523,13 +523,14 @@ def identification_data(cfg, ft=None) -> IdentificationData:
     return data
 
 
-def build_problem(cfg):
-    """Load the data and build the NLP of a config (no solve). Returns (nlp, data, flight_test)."""
+def build_problem(cfg, responses=None):
+    """Load the data and build the NLP of a config (no solve). Returns (nlp, data, flight_test). ``responses``: the
+    frequency responses' coherent bands of a three-objective config (J_linear), None for none."""
     from ..dataset import load_flight_test
 
     ft = load_flight_test(cfg.dataset)
     data = identification_data(cfg, ft)
-    m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
+    m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp, responses=responses)
     return m, data, ft
 
 

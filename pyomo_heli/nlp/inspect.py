@@ -452,12 +452,17 @@ def _parameter_section(cfg, m) -> list[str]:
 
 
 # ---------------------------------------------------------------- entry point
-def inspect_problem(cfg, diagnostics: bool = True) -> str:
-    """Build the NLP of ``cfg`` (no solve) and return the inspection report as text."""
+def inspect_problem(cfg, diagnostics: bool = True, responses=None) -> str:
+    """Build the NLP of ``cfg`` (no solve) and return the inspection report as text. ``responses``: the coherent
+    bands of a three-objective config's frequency responses (the J_linear blocks are built with them)."""
     from .identification import build_problem
 
-    m, data, _ = build_problem(cfg)
+    m, data, _ = build_problem(cfg, responses)
     out = ["=" * WIDTH, "1. problem"] + ["=" * WIDTH] + _header(cfg, m, data)
+    if responses is not None:
+        out += ["", f"frequency responses (J_linear, {sum(len(r.omega) for r in responses)} coherent bins):"]
+        out += [f"  {r.label:<24} {len(r.omega):>4} bins, {r.omega.min():.2f}..{r.omega.max():.2f} rad/s"
+                for r in responses]
     dof_lines, _, _ = _dof_section(m)
     out += dof_lines
     if diagnostics:

@@ -61,7 +61,7 @@ def data_responses(cfg, ft):
                                                                                  cfg.maneuvers]
         out = frequency_responses(offered, lin.pairs, lin.speeds, lin.spectral)
     # every flight condition asked for must give every pair: one left out silently would leave J_linear a part
-    if lin.speeds is not None and out:
+    if lin.speeds is not None:
         got = {(round(r.speed, 6), r.output, r.input) for r in out}
         missing = [(v, o, i) for v in lin.speeds for o, i in lin.pairs
                    if not any(abs(sp - v) < 1e-3 and (o, i) == (go, gi) for sp, go, gi in got)]
@@ -71,6 +71,22 @@ def data_responses(cfg, ft):
                              + ", ".join(f"{o}/{i} at {v / KT:g} kt" for v, o, i in missing)
                              + f" (no record at that speed moves that input alone; records at {have} kt)")
     return out
+
+
+def coherent_bands(cfg, responses, saved=None, progress=info) -> list:
+    """Each response's coherent band (what J_linear fits), each named with its bins; a response with none is an
+    error naming the config's [linear] (left out, J_linear would hold the other responses alone). ``saved``: the
+    file that holds every bin, named in the error."""
+    band = [r.band() for r in responses]
+    for r in band:
+        progress(f"  frequency response {r.label}: {len(r.omega)} coherent bins"
+                 + (f", {r.omega.min():.2f}..{r.omega.max():.2f} rad/s" if len(r.omega) else ""))
+    empty = [r.label for r in band if not len(r.omega)]
+    if empty:
+        raise ValueError(f"{cfg.path} [linear]: no coherent bin in {', '.join(empty)} (coherence_min, "
+                         f"input_power_min, omega_min..omega_max" + (f"; every bin is in {saved}" if saved else "")
+                         + "): loosen them or leave the pair or speed out")
+    return band
 
 
 def run_tri_identification(cfg, run: RunFolder, progress=info) -> IdentificationResult:
@@ -83,15 +99,7 @@ def run_tri_identification(cfg, run: RunFolder, progress=info) -> Identification
     if not responses:
         raise ValueError(f"{cfg.path} [linear]: no maneuver at speeds_kt moves exactly one input of the pairs")
     save_responses(responses, out / "frequency_responses.csv")
-    band = [r.band() for r in responses]
-    for r in band:
-        progress(f"  frequency response {r.label}: {len(r.omega)} coherent bins"
-                 + (f", {r.omega.min():.2f}..{r.omega.max():.2f} rad/s" if len(r.omega) else ""))
-    empty = [r.label for r in band if not len(r.omega)]
-    if empty:  # left out, J_linear would hold the other responses alone
-        raise ValueError(f"{cfg.path} [linear]: no coherent bin in {', '.join(empty)} (coherence_min, "
-                         f"input_power_min, omega_min..omega_max; every bin is in {out / 'frequency_responses.csv'}): "
-                         "loosen them or leave the pair or speed out")
+    band = coherent_bands(cfg, responses, out / "frequency_responses.csv", progress)
     m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp, responses=band)
     t_build = time.perf_counter() - t0
     progress(built_message(data, f"{sum(len(r.omega) for r in band)} frequency points", t_build))

@@ -48,7 +48,8 @@ def test_commands_map_to_this_interpreter():
 
 def test_held_out_tables_end_reanalysed_and_rescored_with_their_runs_flags():
     """Every held-out table is made as the committed ones were: its runs, then the residual analysis made again on
-    the kept models (``--reanalyse``, with the runs' config, data config and family) and the re-scoring."""
+    the kept models (``--reanalyse``, with the runs' config, data config and family) and the re-scoring (with the
+    same flags)."""
     import shlex
 
     def flags(command):  # the options that choose the config the loop (and so its analysis) was run with
@@ -60,8 +61,10 @@ def test_held_out_tables_end_reanalysed_and_rescored_with_their_runs_flags():
     assert {e.folder for e in tables} == set(R.HELD_OUT_TABLES) | {"held_out_control"}
     for e in tables:
         *runs, again, score = e.commands
-        assert shlex.split(score) == ["python", "studies/held_out_effects.py", "--rescore", "--out",
-                                      f"{{out}}/{e.folder}"], e.folder
+        score_args = shlex.split(score)
+        assert score_args[:3] == ["python", "studies/held_out_effects.py", "--rescore"] and score_args[-2:] == [
+            "--out", f"{{out}}/{e.folder}"], e.folder
+        assert flags(score) == flags(again), e.folder  # the data config decides the records a signature is judged on
         args = shlex.split(again)
         assert args[2:4] == ["--reanalyse", f"{{out}}/{e.folder}/scratch"] and args[-2:] == ["--out",
                                                                                               f"{{out}}/{e.folder}"]
@@ -136,3 +139,7 @@ def test_compare_fails_on_a_difference_over_1e6_and_exits_1(tmp_path, capsys):
     code = R.main(["--compare", "case2", "--out", str(tmp_path / "out"), "--reference", str(tmp_path / "docs_results")])
     out = capsys.readouterr().out
     assert code == 1 and "| case2 | 2 | 7 | 2.00e-06 | front.csv row 1 n_x | FAIL (3) |" in out
+    # a reference root that does not exist is bad input (one line, exit 2), not a folder that "differs"
+    with pytest.raises(SystemExit) as exc:
+        R.main(["--compare", "case2", "--out", str(tmp_path / "out"), "--reference", str(tmp_path / "nope")])
+    assert exc.value.code == 2 and f"--reference {tmp_path / 'nope'}: no such folder" in capsys.readouterr().err

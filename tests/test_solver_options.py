@@ -38,6 +38,7 @@ AUDIT_CASES = [
     ({"max_iter": -5}, "max_iter", "range"),
     ({"print_level": 99}, "print_level", "range"),
     ({"max_iter": 2.5}, "max_iter", "integer"),
+    ({"max_iter": 0}, "max_iter", "at least 1 iteration"),  # Ipopt takes it: no step, every solve "stopped"
 ]
 
 

@@ -127,6 +127,8 @@ def _check_generic(key: str, value) -> None:
         raise ValueError(f"option {key!r} must be a number or a string, got {type(value).__name__} {value!r}")
     if isinstance(value, str) and ("\0" in value or "\n" in value):
         raise ValueError(f"option {key!r} must be a one-line string, got {value!r}")
+    if key == "max_iter" and isinstance(value, (int, float)) and value == 0:  # Ipopt takes 0: no step, "stopped"
+        raise ValueError(f"option 'max_iter' = {_show(value)}: a solve needs at least 1 iteration")
     if key in TOLERANCE_RANGES and isinstance(value, (int, float)):
         lo, hi = TOLERANCE_RANGES[key]
         if not lo <= value <= hi:

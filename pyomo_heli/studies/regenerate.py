@@ -375,6 +375,9 @@ def main(argv=None) -> int:
     ap.add_argument("--reference", default="docs/results",
                     help="committed results root to compare with, relative to the checkout (default docs/results)")
     a = ap.parse_args(argv)
+    reference = Path(a.reference) if Path(a.reference).is_absolute() else ROOT / a.reference
+    if a.compare is not None and not reference.is_dir():  # a missing root is bad input, not "differs"
+        ap.error(f"--reference {a.reference}: no such folder")
     if a.compare and a.run:
         ap.error("--compare: name the folders with --run, or (without --run) with --compare, not both")
     if a.compare is not None and not a.run:

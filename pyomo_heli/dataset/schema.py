@@ -56,7 +56,7 @@ RHO_RANGE_KG_M3 = (0.3, 1.6)
 G_RANGE_M_S2 = (9.7, 9.9)
 #: a manifest trim_speed_kt and a measured airspeed of the same trim (the record's start, see TRIM_WINDOW_S, or
 #: the trims.csv row whose ``source`` is the maneuver) agree within max(TRIM_SPEED_TOL_KT, TRIM_SPEED_TOL_REL x
-#: trim_speed_kt); below PITOT_MIN_KT (both speeds, for a trims.csv row) airspeeds are not compared.  The
+#: trim_speed_kt); below PITOT_MIN_KT (both speeds) airspeeds are not compared.  The
 #: bundled datasets agree exactly (the generator writes both from one number); a start trim tagged with the
 #: wrong maneuver (e.g. 20 kt for an 80 kt maneuver) is far outside.
 TRIM_SPEED_TOL_KT = 5.0

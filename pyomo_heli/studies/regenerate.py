@@ -33,8 +33,8 @@ IDENTIFY_FILES = ("chosen.json", "front.csv", "identifiability.csv", "metrics.js
                   "parameters.md", "pareto_front.png", "report.md", "time_domain.json", "trim_vs_speed.png",
                   "validation.png")
 FRONT_FILES = ("chosen.json", "front.csv", "time_domain.json")
-TRI_FILES = ("band_errors.csv", "bode.png", "chosen.json", "front.csv", "front_projections.png",
-             "parameters_tri.csv", "report_linear.md", "time_domain.json")
+TRI_FILES = ("band_errors.csv", "bode.png", "chosen.json", "front.csv", "frequency_responses.csv",
+             "front_projections.png", "parameters_tri.csv", "report_linear.md", "time_domain.json")
 LOOP_FILES = ("loop.json", "loop_report.md", "shape_*.json", "iter_*/chosen.json", "iter_*/front.csv",
               "iter_*/time_domain.json")
 #: the figures a loop's report shows (``pyomo-heli report-loop`` draws them again from the kept files, no solve)

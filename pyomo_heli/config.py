@@ -211,10 +211,6 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
         if lacking:
             problems.add("objectives.noise_sigma", f"no sigma for {lacking} (every time output and every channel of "
                                                    f"input_errors needs one); keys: {', '.join(SENSOR_SIGMA_KEYS)}")
-        unread = [k for k, (c, _) in SENSOR_SIGMA_KEYS.items() if c in noise_sigma and c not in t_out + in_err]
-        if unread and in_err:  # a sigma nothing uses is refused, not dropped (without input_errors: said above)
-            problems.add("objectives.noise_sigma", f"{', '.join(unread)}: neither a time output nor a channel of "
-                                                   "input_errors; not read")
     # the errors-in-variables refinements: (key, what it needs input_errors for, what it needs the lead-in for)
     for key, without_errors, without_lead_in in (
             ("input_error_ar", "models the input errors", "the errors' model comes from the records' quiet lead-in"),

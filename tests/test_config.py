@@ -199,9 +199,6 @@ def test_model_mass_must_match_the_flight_tests(tmp_path):
                 'nz_g = 0.01, tas_m_s = 0.5, col_deg = inf }'), r"'col_deg' must be a positive number, got inf"),
     (dict(extra='[objectives]\ninput_errors = ["col"]\nnoise_sigma = { q_deg_s = 0.2, theta_deg = 0.1, nx_g = 0.005, '
                 'nz_g = 0.01, tas_m_s = 0.5, col_deg = 1e300 }'), r"'col_deg' = 1e\+300 is not a sensor noise sigma"),
-    (dict(extra='[objectives]\ninput_errors = ["col"]\nnoise_sigma = { q_deg_s = 0.2, theta_deg = 0.1, nx_g = 0.005, '
-                'nz_g = 0.01, tas_m_s = 0.5, col_deg = 0.02, lon_deg = 0.02 }'),
-     r"\[objectives.noise_sigma\]: lon_deg: neither a time output nor a channel of input_errors; not read"),
     (dict(extra='[objectives]\nuse = ["time", "trim", "linear", "linear"]'), r"field 'use' names \['linear'\]"),
     (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\nwindow_s = inf'),
      r"\[linear\]: field 'window_s' must be a finite number"),

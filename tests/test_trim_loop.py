@@ -18,7 +18,7 @@ from pyomo_heli.dataset.schema import KT, TrimConventions
 from pyomo_heli.nlp.parameters import FreeParameter
 from pyomo_heli.physics.conventions import THETA_DATUM, TrimOutputDatum, recorded_trim
 from pyomo_heli.physics.model import HelicopterModel
-from pyomo_heli.simulation.trim import trim_sweep
+from pyomo_heli.simulation.trim import trim_float, trim_sweep
 from pyomo_heli.workflows.trim_loop import (
     TrimLoopConfig,
     TrimLoopError,
@@ -371,3 +371,21 @@ def test_a_parameter_the_trims_do_not_see_has_an_infinite_standard_error(tmp_pat
         scale = math.sqrt(alone["dof"] / blind["dof"])
         assert blind["se"][n] == pytest.approx(alone["se"][n] * scale, rel=1e-6), n
     assert math.isfinite(alone["cond"]) and all(math.isfinite(v) for v in alone["se"].values())
+
+
+def test_the_rms_without_conventions_leaves_out_a_datum_the_manifest_gives(tmp_path):
+    """A manifest that gives the pitch datum as a number (2 deg) makes it a model parameter, which the recorded trim
+    adds whatever the conventions say: the 'without conventions' RMS kept it. It is now the data against the start
+    model's body-axis theta, recomputed here from single float trims at the theta points' speeds."""
+    folder = _generated(tmp_path / "ds", TrimConventions(collective_station=0.0, theta_datum=2 * DEG))
+    doc = run_trim_loop(_config(tmp_path, folder, holdout_every=3, max_iterations=0), tmp_path / "out",
+                        progress=lambda *_: None)
+    pts = pd.DataFrame(doc["points"])
+    m0 = HelicopterModel()
+    for role in ("identification", "validation"):
+        sel = pts[(pts.channel == "theta") & (pts.role == role)]
+        body = np.array([trim_float(m0, v * KT).theta / DEG for v in sel.speed_kt])
+        expected = float(np.sqrt(np.mean((sel.value_deg.to_numpy() - body) ** 2)))
+        got = doc["initial"]["rms_deg_without_conventions"][role]["theta"]
+        assert got == pytest.approx(expected, rel=1e-6), role
+        assert abs(got - doc["initial"]["rms_deg"][role]["theta"]) > 0.5  # the datum's 2 deg is what differs

@@ -236,7 +236,9 @@ def run_trim_loop(cfg: TrimLoopConfig, out, progress=print) -> dict:
     e0 = (data - y0) / DEG
     # the same start read as if the data followed the model's own conventions (col at r_ref, no datum): what
     # the declared conventions change
-    e_raw = (data - predict(start, TrimConventions(), pts["V"], pts["channel"])) / DEG
+    # (a datum the manifest gives is a model parameter, which the recorded trim adds whatever the conventions: zeroed)
+    plain = start.with_parameters(theta_datum=0.0) if "theta_datum" in start.parameters else start
+    e_raw = (data - predict(plain, TrimConventions(), pts["V"], pts["channel"])) / DEG
     import os
 
     # the dataset as the config names it (relative to the config's folder), not this machine's absolute path

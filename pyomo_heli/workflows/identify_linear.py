@@ -73,6 +73,10 @@ def data_responses(cfg, ft):
     return out
 
 
+def _finite(v) -> float | None:
+    return float(v) if v is not None and math.isfinite(v) else None
+
+
 def coherent_bands(cfg, responses, saved=None, progress=info) -> list:
     """Each response's coherent band (what J_linear fits), each named with its bins; a response with none is an
     error naming the config's [linear] (left out, J_linear would hold the other responses alone). ``saved``: the
@@ -124,8 +128,11 @@ def run_tri_identification(cfg, run: RunFolder, progress=info) -> Identification
         from ..uncertainty.front import point_standard_errors
 
         bar = run.progress_bar(cfg.pareto.max_solves + 1, "front points", at_most=True)
+        # each point's standard errors at the weights its solve is stationary for (its J_trim multiplier); the
+        # information holds J_time and J_trim only, J_linear's curvature is left out (docs/results.md)
         placement = AdaptiveFrontN(ps, cfg.pareto.max_solves, lambda p: point_standard_errors(
-            cfg, data, p.parameters, "eps" if p.kind == "C" else p.kind), spacing=cfg.pareto.spacing, progress=progress)
+            cfg, data, p.parameters, "eps" if p.kind == "C" else p.kind, multiplier=_finite(p.multiplier_trim)),
+            spacing=cfg.pareto.spacing, progress=progress)
         placement.run()
         ps.eps_trim, ps.eps_linear = ps.axes
     else:

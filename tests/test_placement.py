@@ -162,6 +162,18 @@ def _run(solver, max_solves):
     return ada, ada.run()
 
 
+@pytest.mark.parametrize("max_solves", [6, 9])
+def test_a_placement_stopped_by_its_cap_reports_the_chosen_point_the_front_ends_with(no_snapshot, max_solves):
+    """Found by a review: the cap can stop a round after a probe that becomes the Eq. 11 choice; the summary's last
+    round still named the chosen point before it (and its bracket). A final look names the front's own choice."""
+    ps = AnalyticFront(se=0.05)
+    ada, points = _run(ps, max_solves)
+    s = ada.summary
+    assert s.stop == f"cap of {max_solves} front solves reached" and not s.converged
+    c = points[chosen_point(normalise([[p.J_time, p.J_trim] for p in points], U, N))]
+    assert s.rounds[-1].chosen == c.index
+
+
 def test_refinement_stops_within_one_standard_error_of_the_known_choice(no_snapshot):
     """The Eq. 11 point is f2 = 0.1 (theta = log 0.1). Refinement stops because the chosen point's
     neighbours lie within one standard error, and the chosen point is then within one standard error of it."""
@@ -260,3 +272,14 @@ def test_placement_flag_reaches_the_config(tmp_path, monkeypatch):
         main(["identify", str(TINY), "--placement", "adaptive", "--out", str(tmp_path / "out")])
     assert seen["pareto"].placement == "adaptive" and seen["pareto"].max_solves == 14
     assert build_parser().parse_args(["demo", "--placement", "adaptive"]).placement == "adaptive"
+
+
+def test_a_solve_that_raised_is_left_out_of_the_mean_iteration_count():
+    """A solve that raised records -1 iterations (no count): the mean of the interior points leaves it out."""
+    import pandas as pd
+
+    from pyomo_heli.report.identification import mean_interior_iterations
+    from pyomo_heli.workflows.identify import _mean
+
+    front = pd.DataFrame({"kind": ["A", "eps", "eps", "eps", "B"], "iterations": [20, 6, -1, 10, 30]})
+    assert mean_interior_iterations(front) == _mean(front.loc[front.kind == "eps", "iterations"]) == 8.0

@@ -423,11 +423,15 @@ class AdaptiveFront:
             if not probes:
                 s.stop = "the chosen point's edges cannot be split further"
                 return
+            placed = False
             for e in probes:
                 if len(ps.points) >= self.max_solves:
                     s.stop = f"cap of {self.max_solves} front solves reached"
+                    if placed:  # the summary's last round must name the chosen point of the front as it ends
+                        self._look(previous)
                     return
                 self._place(e)
+                placed = True
             if from_model:
                 model_point = ps.points[-1].index
 

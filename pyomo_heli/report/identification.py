@@ -234,8 +234,10 @@ def nadir_rule_line(choices) -> str | None:
 
 
 def mean_interior_iterations(front: pd.DataFrame) -> float | None:
-    eps = front[front["kind"] == "eps"]
-    return float(eps["iterations"].mean()) if len(eps) else None
+    """Mean Ipopt iterations of the interior front points; a solve that raised records -1 (no count): left out."""
+    its = pd.to_numeric(front.loc[front["kind"] == "eps", "iterations"], errors="coerce")
+    its = its[its >= 0]
+    return float(its.mean()) if len(its) else None
 
 
 def mean_cold_iterations(front: pd.DataFrame) -> float | None:

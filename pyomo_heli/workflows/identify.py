@@ -45,7 +45,9 @@ def _point_dict(p) -> dict:
 
 
 def _mean(series):
+    """The mean iteration count; a solve that raised records -1 (no count), which is left out, not averaged."""
     series = pd.to_numeric(series, errors="coerce").dropna()
+    series = series[series >= 0]
     return float(series.mean()) if len(series) else None
 
 

@@ -244,3 +244,16 @@ def test_the_coarse_grid_leaves_the_last_objectives_free_in_their_first_position
     row0 = [p for p in ps.seen if p.kind == "eps" and p.grid and p.grid[1] == 0]
     assert row0 and all(p.epsilon["f3"] == math.inf and math.isfinite(p.epsilon["f2"]) for p in row0)
     assert all(math.isfinite(p.epsilon["f3"]) for p in ps.seen if p.kind == "eps" and p.grid and p.grid[1] > 0)
+
+
+def test_uncertainty_refuses_a_three_objective_folder(tmp_path, capsys):
+    """Found by a review: on a three-objective folder `uncertainty` fitted the direct solve's weights to the time
+    and trim gradients alone (twist SE about 5.7 rad/m). Its information holds no J_linear: refused in one line."""
+    from pyomo_heli.cli import main
+
+    cfg = Path(__file__).parent / "configs" / "tiny_case1_tri_adaptive.toml"
+    assert main(["identify", str(cfg), "--out", str(tmp_path / "o"), "--no-report"]) == 0
+    capsys.readouterr()
+    assert main(["uncertainty", str(cfg), "--results", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a three-objective front; its standard errors leave J_linear's information out" in err[0]

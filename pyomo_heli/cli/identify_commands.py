@@ -76,6 +76,10 @@ def cmd_uncertainty(args) -> int:
     if result.chosen is None:
         raise UserError(f"{Path(args.results) / 'chosen.json'}: no chosen point (no front point converged); "
                         f"no standard errors to compute")
+    if "linear" in (result.info.get("objectives") or cfg.objectives):
+        # the information holds J_time and J_trim only: a point stationary for J_linear too gets wrong weights
+        raise UserError(f"{args.results}: a three-objective front; its standard errors leave J_linear's information "
+                        "out (report-linear gives them at the two-objective choice's weights, docs/linear.md)")
     data = identification_data(cfg)
     for note in notes:
         _warning("uncertainty")(note)

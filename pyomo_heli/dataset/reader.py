@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.integrate import cumulative_trapezoid
 
 from .schema import (
     DEG,
@@ -179,7 +180,7 @@ class _Reader(ManifestChecks, TableChecks):
                                             "format's n_z is positive up, about +1 g at a trim; a record of the "
                                             "opposite sign must be negated")
         if "q" in cols and "theta" in cols:
-            integral = np.concatenate([[0.0], np.cumsum(0.5 * (cols["q"][1:] + cols["q"][:-1]) * np.diff(t))])
+            integral = cumulative_trapezoid(cols["q"], t, initial=0.0)
             rise = cols["theta"] - cols["theta"][0]
             if np.ptp(integral) > 0 and np.ptp(rise) > 0:
                 r = float(np.corrcoef(integral, rise)[0, 1])

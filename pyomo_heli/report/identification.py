@@ -233,19 +233,19 @@ def nadir_rule_line(choices) -> str | None:
         f"distance {_fmt(c['distance'], 4)}" for rule, c in choices.items())
 
 
-def mean_interior_iterations(front: pd.DataFrame) -> float | None:
-    """Mean Ipopt iterations of the interior front points; a solve that raised records -1 (no count): left out."""
-    its = pd.to_numeric(front.loc[front["kind"] == "eps", "iterations"], errors="coerce")
+def mean_interior_iterations(front: pd.DataFrame, column: str = "iterations") -> float | None:
+    """Mean Ipopt iterations (``column``) of the interior front points, None without any; a solve that raised
+    records -1 (no count), which is left out."""
+    if column not in front:
+        return None
+    its = pd.to_numeric(front.loc[front["kind"] == "eps", column], errors="coerce").dropna()
     its = its[its >= 0]
     return float(its.mean()) if len(its) else None
 
 
 def mean_cold_iterations(front: pd.DataFrame) -> float | None:
     """Mean iterations of the cold re-solves of the interior points ([pareto] cold_check), None without them."""
-    if "cold_iterations" not in front:
-        return None
-    v = pd.to_numeric(front.loc[front["kind"] == "eps", "cold_iterations"], errors="coerce").dropna()
-    return float(v.mean()) if len(v) else None
+    return mean_interior_iterations(front, "cold_iterations")
 
 
 def _mean_col(front: pd.DataFrame, col: str) -> float | None:

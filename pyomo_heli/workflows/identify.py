@@ -23,6 +23,7 @@ from ..pareto.steps import starts_note
 from ..pareto.store import fingerprint
 from ..provenance import provenance_info
 from .run_folder import RunFolder
+from ..report.identification import mean_cold_iterations, mean_interior_iterations
 
 
 #: what the anchors define: unreliable when one of them did not converge (chosen.json info.unreliable)
@@ -42,13 +43,6 @@ def _point_dict(p) -> dict:
     d = asdict(p)
     d["epsilon"] = None if not math.isfinite(d["epsilon"]) else d["epsilon"]
     return d
-
-
-def _mean(series):
-    """The mean iteration count; a solve that raised records -1 (no count), which is left out, not averaged."""
-    series = pd.to_numeric(series, errors="coerce").dropna()
-    series = series[series >= 0]
-    return float(series.mean()) if len(series) else None
 
 
 def built_message(data, what: str, seconds: float) -> str:
@@ -192,8 +186,8 @@ def _run_identification(cfg, run: RunFolder, progress, uncertainty) -> Identific
               # resumed points solved by other code (the package changed since they were stored): said, not hidden
               **({"resumed_from_other_code": True}
                  if store.other_code and any(getattr(p, "from_disk", False) for p in points) else {}),
-              "mean_iterations_front": _mean(front.loc[front.kind == "eps", "iterations"]),
-              "mean_iterations_front_cold": _mean(front.loc[front.kind == "eps", "cold_iterations"]),
+              "mean_iterations_front": mean_interior_iterations(front),
+              "mean_iterations_front_cold": mean_cold_iterations(front),
               **({"placement": placement.summary.to_dict()} if placement is not None else {}),
               **provenance_info(cfg)})  # the config by content, the data's hash, the model: checked by readers
     result.save(out)

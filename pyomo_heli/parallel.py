@@ -29,6 +29,14 @@ def _add_paths(paths) -> None:
             sys.path.insert(0, p)
 
 
+def check_dask_flags(workers: int | None, scheduler: str | None) -> None:
+    """Refuse a worker count beside a scheduler address: the scheduler's cluster has its own workers, so the
+    count would be dropped without a word. ValueError naming both options."""
+    if scheduler is not None and workers:
+        raise ValueError(f"--workers {workers} and --scheduler {scheduler}: the scheduler's cluster brings its own "
+                         f"workers; give one of the two")
+
+
 @contextlib.contextmanager
 def dask_executor(workers: int = 0, scheduler: str | None = None, paths: Iterable[str] = (),
                   processes: bool = True):
@@ -39,6 +47,7 @@ def dask_executor(workers: int = 0, scheduler: str | None = None, paths: Iterabl
     their task functions unpickle there). processes: False runs the LocalCluster's workers as threads of
     this process (quick to start; only for tasks that share nothing).
     """
+    check_dask_flags(workers, scheduler)
     if scheduler is None and not workers:
         yield None
         return

@@ -78,6 +78,7 @@ from pyomo_heli.cli.options import nonneg_int  # noqa: E402
 from pyomo_heli.flighttest.held_out_effects import HELD_OUT_EFFECTS, HELD_OUT_STRENGTHS  # noqa: E402
 from pyomo_heli.physics.discrepancy import FAMILIES, is_force_term  # noqa: E402
 from pyomo_heli.studies.args import in_file, out_folder, positive_int  # noqa: E402
+from pyomo_heli.parallel import check_dask_flags  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 PARAMETERS = ("theta_twist", "CL_alpha_HT", "Iyy")
@@ -1284,6 +1285,10 @@ def main(argv=None) -> int:
                     help="run nothing: the tallies of these studies' held_out.csv (wrong acceptances, criterion met, "
                          "truth's form significant, M0 + noise) as one table -> OUT/summary.md")
     a = ap.parse_args(argv)
+    try:
+        check_dask_flags(a.workers, a.scheduler)
+    except ValueError as exc:
+        ap.error(str(exc))
     out = out_folder(ap, a.out)
     if a.modes != ["on", "off"] and not a.bundled:
         ap.error("--modes: only with --bundled (the loops of the bundled flight test)")

@@ -656,6 +656,16 @@ def test_merging_a_rerun_row_replaces_that_row_alone(tmp_path):
     assert exc.value.code == 2
 
 
+def test_the_study_refuses_a_worker_count_beside_a_scheduler(tmp_path, capsys):
+    """`--workers 2 --scheduler ADDRESS`: the cluster has its own workers; refused before anything runs."""
+    study = _study()
+    with pytest.raises(SystemExit) as exc:
+        study.main(["--effects", "none", "--seeds", "1", "--workers", "2", "--scheduler", "tcp://127.0.0.1:9",
+                    "--out", str(tmp_path / "o")])
+    assert exc.value.code == 2 and "--workers 2 and --scheduler tcp://127.0.0.1:9" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
 def test_a_constant_term_does_not_match_a_speed_dependent_truth():
     """shape_match of a constant nose-down dM against the fuselage download (a nose-up moment bump at hover): a
     constant has no speed dependence, so it is "no" whatever the rounding of its estimate (the table's three

@@ -88,3 +88,37 @@ def test_cli_multistart_sends_the_starts_to_a_scheduler(tmp_path):
     a, b = MultistartResult.load(tmp_path / "remote"), MultistartResult.load(tmp_path / "here")
     cols = [c for c in a.starts.columns if c != "wall_time"]
     pd.testing.assert_frame_equal(a.starts[cols], b.starts[cols], check_exact=True)
+
+
+def test_a_worker_count_beside_a_scheduler_address_is_refused(tmp_path, capsys):
+    """`--workers N --scheduler ADDRESS`: the cluster behind the address has its own workers, so N would be dropped
+    without a word; every command and study taking both refuses it in one line naming both, before connecting."""
+    import sys
+
+    from pyomo_heli.cli import main
+    from pyomo_heli.studies import close_loop_seeds, monte_carlo, score_test_level
+
+    address = "tcp://127.0.0.1:9"  # nothing listens there: a refusal after connecting would hang or fail otherwise
+    with pytest.raises(ValueError, match=r"--workers 2 and --scheduler tcp://127\.0\.0\.1:9"):
+        with dask_executor(2, address):
+            pass
+    out = tmp_path / "ms"
+    assert main(["multistart", str(CONFIGS / "tiny_case1_noisy.toml"), "--starts", "2", "--out", str(out),
+                 "--workers", "2", "--scheduler", address]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--workers 2 and --scheduler" in err[0] and not out.exists()
+    for run in (lambda: monte_carlo.main(["--workers", "2", "--scheduler", address, "--out", str(tmp_path / "mc")]),
+                lambda: score_test_level.main(["--seeds", "1", "--workers", "2", "--scheduler", address,
+                                               "--out", str(tmp_path / "st")])):
+        with pytest.raises(SystemExit) as exc:
+            run()
+        assert exc.value.code == 2 and "--workers 2 and --scheduler" in capsys.readouterr().err
+    argv = sys.argv
+    sys.argv = ["close_loop_seeds", "--seeds", "1", "--workers", "2", "--scheduler", address,
+                "--out", str(tmp_path / "cl")]
+    try:
+        with pytest.raises(SystemExit) as exc:
+            close_loop_seeds.main()
+    finally:
+        sys.argv = argv
+    assert exc.value.code == 2 and "--workers 2 and --scheduler" in capsys.readouterr().err

@@ -96,7 +96,10 @@ def cmd_uncertainty(args) -> int:
 
 def cmd_multistart(args) -> int:
     from ..config import load_identification_config
+    from ..parallel import check_dask_flags
     from ..workflows.multistart import run_multistart
+
+    check_dask_flags(args.workers, args.scheduler)  # before any file is read or written
 
     _check_out_dir(args.out)
     _check_out_not_foreign(args.out, "multi-start")

@@ -39,6 +39,7 @@ from pyomo_heli.studies.commands import run_command
 from pyomo_heli.config import load_identification_config
 from pyomo_heli.dataset import load_flight_test
 from pyomo_heli.nlp.identification import validation_maneuvers
+from pyomo_heli.parallel import check_dask_flags
 from pyomo_heli.provenance import ResultsMismatchError
 from pyomo_heli.report.identification import VALIDATION_OUTPUTS, read_truth
 from pyomo_heli.report.loop import JOINT, iterations_validation_change, truth_replay_errors
@@ -168,6 +169,10 @@ def main() -> None:
     ap.add_argument("--scheduler", metavar="ADDRESS", help="run the seeds on the Dask cluster of this scheduler "
                                                           "(its workers must see --out)")
     a = ap.parse_args()
+    try:
+        check_dask_flags(a.workers, a.scheduler)
+    except ValueError as exc:
+        ap.error(str(exc))
     for p in a.existing:
         if not (p / "loop.json").is_file():
             ap.error(f"--existing {p}: no loop.json there (a close-loop results folder is needed)")

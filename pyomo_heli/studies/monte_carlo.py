@@ -14,8 +14,7 @@ once; running the same command again continues where it stopped.
 
 Realizations run in worker processes (``--workers``). With a Dask cluster,
 ``--scheduler ADDRESS`` (or ``--scheduler local`` for a ``LocalCluster``; ``--dask`` is the older name) hands the same
-tasks to ``distributed.Client(...).get_executor()`` instead; Dask is optional
-(``pip install distributed``).
+tasks to that cluster (``--workers`` then counts only for ``local``).
 """
 from __future__ import annotations
 
@@ -33,6 +32,7 @@ def main(argv=None) -> int:
     from pyomo_heli.report.monte_carlo import plot_monte_carlo, summary_markdown
     from pyomo_heli.uncertainty.monte_carlo import ProblemSpec, run_monte_carlo
     from pyomo_heli.flighttest.config import flight_test_noise
+    from pyomo_heli.parallel import check_dask_flags, dask_executor
 
     from .args import nonneg_int, out_folder
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -41,7 +41,8 @@ def main(argv=None) -> int:
                     help="flight-test generator config whose sensor and trim noise levels are used")
     ap.add_argument("--realizations", type=int, default=20)
     ap.add_argument("--seed", type=nonneg_int, default=2026)
-    ap.add_argument("--workers", type=nonneg_int, default=2, help="worker processes (0: run in this process)")
+    ap.add_argument("--workers", type=nonneg_int, default=None,
+                    help="worker processes (default 2; 0: run in this process)")
     ap.add_argument("--time-only", action="store_true", help="time-domain estimates only (no front)")
     ap.add_argument("--scheduler", "--dask", dest="scheduler", metavar="ADDRESS",
                     help="run on a Dask cluster: its scheduler's address, or 'local' for a LocalCluster of --workers "
@@ -49,6 +50,12 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="results/monte_carlo")
     a = ap.parse_args(argv)
     out_folder(ap, a.out)
+    if a.scheduler != "local":
+        try:
+            check_dask_flags(a.workers, a.scheduler)
+        except ValueError as exc:
+            ap.error(str(exc))
+    workers = 2 if a.workers is None else a.workers
     if a.realizations < 2:
         print(f"monte_carlo: --realizations must be at least 2, got {a.realizations}", file=sys.stderr)
         return 2
@@ -71,26 +78,16 @@ def main(argv=None) -> int:
         return 2
     sigma = {o: sigma[o] for o in cfg.nlp.time_outputs}
     trim_sigma = {o: trim_sigma[o] for o in cfg.nlp.trim_outputs}
-    executor = client = None
-    if a.scheduler:
-        try:
-            from distributed import Client, LocalCluster
-        except ImportError:
-            print("monte_carlo: --scheduler needs the distributed package (pip install distributed)", file=sys.stderr)
-            return 2
-        client = Client(LocalCluster(n_workers=max(a.workers, 1), threads_per_worker=1)) if a.scheduler == "local" \
-            else Client(a.scheduler)
-        executor = client.get_executor()
     truth = dict(bo105())  # the clean data are M0 at the nominal table (data/bo105_clean.toml)
+    # --scheduler local: a LocalCluster of --workers processes; an address: that cluster; none: run_monte_carlo's own
+    local = a.scheduler == "local"
     try:
-        res = run_monte_carlo(ProblemSpec.make(a.config), a.realizations, a.seed, sigma, trim_sigma, truth,
-                              out=a.out, multi_objective=not a.time_only, workers=a.workers, executor=executor)
+        with dask_executor(max(workers, 1) if local else 0, None if local else a.scheduler) as executor:
+            res = run_monte_carlo(ProblemSpec.make(a.config), a.realizations, a.seed, sigma, trim_sigma, truth,
+                                  out=a.out, multi_objective=not a.time_only, workers=workers, executor=executor)
     except ResultsMismatchError as exc:  # --out holds another run's realizations
         print(f"monte_carlo: {exc}", file=sys.stderr)
         return 2
-    finally:
-        if client is not None:
-            client.close()
     out = Path(a.out)
     plot_monte_carlo(res, out / "monte_carlo.png")
     (out / "summary.md").write_text(summary_markdown(res) + "\n")

@@ -48,6 +48,7 @@ from pyomo_heli.diagnosis.attribution import SEGMENT_S, Attribution, attribute
 from pyomo_heli.diagnosis.candidates import make_candidate
 from pyomo_heli.workflows.identify import run_identification
 from pyomo_heli.nlp.identification import RESAMPLE_INPUTS, identification_data
+from pyomo_heli.parallel import check_dask_flags
 
 from . import small_instances as T
 from .args import nonneg_int, out_folder, positive_float
@@ -184,6 +185,10 @@ def main(argv=None) -> int:
     ap.add_argument("--rescore", action="store_true",
                     help="score the finished seeds again at their saved identified points (no identification)")
     a = ap.parse_args(argv)
+    try:
+        check_dask_flags(a.workers, a.scheduler)
+    except ValueError as exc:
+        ap.error(str(exc))
     try:
         seeds = seeds_of(a.seeds)
     except ValueError as exc:

@@ -274,6 +274,9 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
     for key, why in unread:
         if key in given:
             raise ConfigError(f"{f} [pareto]: field '{key}' is not read here: {why}")
+    if "resample_inputs" in (raw.get("data") or {}) and not data.resample_hz:
+        raise ConfigError(f"{f} [data]: field 'resample_inputs' is not read here: it says how the inputs reach "
+                          f"the grid of resample_hz, and none is given (the records are fitted as recorded)")
     try:
         pareto = ParetoSettings(points=par.points, spacing=par.spacing, warm_start=par.warm_start,
                                 cold_check=par.cold_check, predictor=par.predictor, max_iter=par.max_iter,

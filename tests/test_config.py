@@ -94,6 +94,17 @@ def test_bad_config_is_one_clear_error(tmp_path, edit, message):
     assert text.count("[pareto]") <= 1  # the table is named once, not wrapped twice
 
 
+def test_resample_inputs_without_a_resampled_grid_is_refused(tmp_path):
+    """[data] resample_inputs says how the inputs reach the resample_hz grid: without resample_hz the records are
+    fitted as recorded and the field would be dropped; one line naming it. With resample_hz it loads."""
+    path = write(tmp_path, data='resample_inputs = "record"')
+    assert load_identification_config(path).resample_inputs == "record"
+    path.write_text(path.read_text().replace("resample_hz = 25\n", ""))
+    with pytest.raises(ConfigError, match=r"\[data\]: field 'resample_inputs' is not read here") as err:
+        load_identification_config(path)
+    assert "\n" not in str(err.value) and str(path) in str(err.value)
+
+
 def test_cold_check_on_a_front_that_makes_no_cold_solves_is_refused(tmp_path):
     """cold_check = true with the adaptive placement (which never reads it): one line naming the field."""
     path = write(tmp_path, pareto='placement = "adaptive"\ncold_check = true')

@@ -20,7 +20,7 @@ from .pareto.front import ParetoSettings
 from .physics.model import HelicopterModel
 from .settings import ConfigError, Problems, validate
 from .settings.common import SIGMA_MAX_SI  # noqa: F401 - re-exported
-from .settings.identification import OBJECTIVE_SETS, IdentificationFile, LinearTable
+from .settings.identification import OBJECTIVE_SETS, IdentificationFile, LinearTable, LoopTable
 from .units import SENSOR_SIGMA_KEYS
 from .solvers import validate_solver_options
 
@@ -284,12 +284,47 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
                                 solver_options=solver_options)
     except ValueError as exc:
         raise ConfigError(f"{f} [pareto]: {exc}") from None
+    if "loop" in raw:  # close-loop's table: checked here too, so that identify and diagnose refuse a bad one
+        loop_table(raw["loop"], path, nlp.input_errors)
     return IdentificationConfig(path=path, dataset=ds, maneuvers=mans, validation=val,
                                 resample_hz=float(data.resample_hz) if data.resample_hz else None,
                                 max_duration=float(data.max_duration_s) if data.max_duration_s else None,
                                 model=model, free=free, nlp=nlp, pareto=pareto, raw=raw, objectives=use,
                                 linear=linear, input_reference_s=float(in_ref), resample_inputs=data.resample_inputs,
                                 diagnosis=diagnosis)
+
+
+def loop_table(raw, path, input_errors) -> LoopTable:
+    """The ``[loop]`` table of an identification config (close-loop's settings, declared by
+    :class:`pyomo_heli.settings.identification.LoopTable`), checked: its fields, the candidate names and every
+    field given that nothing reads (refused, not dropped). ``input_errors``: the config's [objectives]
+    input_errors. Checked when the config is read, so ``identify`` and ``diagnose`` refuse a bad [loop] too."""
+    from .diagnosis.candidates import CANDIDATES
+
+    problems = Problems(str(path), ConfigError)
+    if not isinstance(raw, dict):
+        problems.add("loop", "must be a table")
+        problems.raise_if_any()
+    table = validate(LoopTable, raw, problems, "loop")
+    if table is not None:
+        for n in table.candidates or ():
+            if n not in CANDIDATES:
+                problems.add("loop", f"field 'candidates': unknown candidate {n!r}; choose from "
+                                     f"{', '.join(CANDIDATES)}")
+        # a field given that nothing reads is refused, not dropped (the fields the file gives, not the defaults)
+        unread = ([(k, "it is read with discovery = true only") for k in ("generic", "generic_family", "generic_rank")
+                   if not table.discovery]
+                  + ([("generic_family", "'generic' names the terms (give one of the two)")]
+                     if table.discovery and "generic" in raw else [])
+                  + [(k, "it is read with validation_rule = true only") for k in ("validation_joint", "after_rejection")
+                     if not table.validation_rule]
+                  + ([("score_inputs", "it says how the score test treats the input errors, and [objectives] "
+                                       "input_errors has none")] if not input_errors else []))
+        for key, why in unread:
+            if key in raw:
+                problems.add("loop", f"field '{key}' is not read here: {why}")
+    problems.raise_if_any()
+    return table
 
 
 def _input_errors(table, problems: Problems, in_ref, name: str, key: str) -> tuple[tuple, dict | None]:

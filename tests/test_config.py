@@ -8,6 +8,7 @@ reaching the Pareto front's normalisation).
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -166,11 +167,8 @@ def test_cli_param_outside_its_domain_is_exit_2(param, capsys):
 
 
 def test_close_loop_candidates_named_twice(tmp_path):
-    from pyomo_heli.workflows.close_loop import loop_settings
-
-    cfg = load_identification_config(write(tmp_path, extra='[loop]\ncandidates = ["cg_offset", "cg_offset"]'))
     with pytest.raises(ConfigError, match=r"\[loop\]: field 'candidates' names \['cg_offset'\] more than once"):
-        loop_settings(cfg)
+        load_identification_config(write(tmp_path, extra='[loop]\ncandidates = ["cg_offset", "cg_offset"]'))
 
 
 @pytest.mark.parametrize("loop, message", [
@@ -183,12 +181,24 @@ def test_close_loop_candidates_named_twice(tmp_path):
     ('score_inputs = "measured"', "field 'score_inputs' is not read here"),
 ])
 def test_a_loop_field_nothing_reads_is_refused(tmp_path, loop, message):
-    """Found by a review: each was accepted and dropped (the base config has no [objectives] input_errors)."""
-    from pyomo_heli.workflows.close_loop import loop_settings
-
-    cfg = load_identification_config(write(tmp_path, extra=f"[loop]\n{loop}"))
+    """Found by a review: each was accepted and dropped (the base config has no [objectives] input_errors). The
+    config is refused when it is read, so by identify and diagnose too, not only when close-loop reads [loop]."""
     with pytest.raises(ConfigError, match=r"\[loop\]: " + message.replace("(", r"\(").replace(")", r"\)")):
-        loop_settings(cfg)
+        load_identification_config(write(tmp_path, extra=f"[loop]\n{loop}"))
+
+
+def test_identify_refuses_a_bad_loop_table(tmp_path, capsys):
+    """A [loop] typo (an unknown key, an unknown candidate) in a config given to identify (diagnose reads its config
+    through the same loader): one line naming the table, exit 2, nothing written, instead of being accepted until
+    close-loop reads the same file."""
+    for loop, message in (("max_iteration = 3", r"\[loop\]: unknown f.*max_iteration"),
+                          ('candidates = ["cg_ofset"]', r"\[loop\]: field 'candidates': unknown candidate 'cg_ofset'")):
+        path = write(tmp_path, extra=f"[loop]\n{loop}")
+        out = tmp_path / "out"
+        assert main(["identify", str(path), "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and re.search(message, err[0]) and str(path) in err[0], err
+        assert not out.exists()
 
 
 def test_model_mass_must_match_the_flight_tests(tmp_path):

@@ -395,7 +395,7 @@ class IdentificationFile(Table):
     solver: IdentificationSolverTable = Field(default_factory=IdentificationSolverTable)
     linear: Optional[LinearTable] = None
     diagnosis: Optional[DiagnosisTable] = None
-    #: checked when close-loop reads it (:func:`pyomo_heli.workflows.close_loop.loop_settings`)
+    #: checked when the config is read (:func:`pyomo_heli.config.loop_table`)
     loop: dict[str, Any] = Field(default_factory=dict, description="close-loop settings (read by pyomo-heli "
                                                                    "close-loop; declared by LoopTable)")
     study: dict[str, Any] = Field(default_factory=dict, description="free notes of a study (not read)")

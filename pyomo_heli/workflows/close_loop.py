@@ -63,7 +63,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..config import ConfigError, IdentificationConfig, config_of_result  # noqa: F401 - re-exported
+from ..config import ConfigError, IdentificationConfig, config_of_result, loop_table  # noqa: F401 - re-exported
 from ..dataset import load_flight_test
 from ..diagnosis import attribution as attr
 from ..diagnosis.candidates import CANDIDATES, make_candidate
@@ -74,8 +74,6 @@ from ..nlp.identification import identification_data, validation_maneuvers
 from ..pareto.result import write_json
 from ..pareto.store import read_checkpoint
 from ..provenance import source_sha256
-from ..settings import Problems, validate
-from ..settings.identification import LoopTable
 from ..report.loop import LOOP_FILE, limit_statement, load_loop, rejected_discovery, unexplained_statement  # noqa: F401 - load_loop re-exported (studies)
 from .loop_steps import (_with_candidate, _without, backward_check, errors_of,  # noqa: F401 (tests)
                          select_shape, validation_check)
@@ -118,31 +116,9 @@ class LoopSettings:
 
 def loop_settings(cfg: IdentificationConfig) -> LoopSettings:
     """The ``[loop]`` table of an identification config (declared by
-    :class:`pyomo_heli.settings.identification.LoopTable`), checked; every error names its field."""
-    raw = cfg.raw.get("loop", {})
-    problems = Problems(str(cfg.path))
-    if not isinstance(raw, dict):
-        problems.add("loop", "must be a table")
-        problems.raise_if_any()
-    table = validate(LoopTable, raw, problems, "loop")
-    if table is not None:
-        for n in table.candidates or ():
-            if n not in CANDIDATES:
-                problems.add("loop", f"field 'candidates': unknown candidate {n!r}; choose from "
-                                     f"{', '.join(CANDIDATES)}")
-        # a field given that nothing reads is refused, not dropped (the fields the file gives, not the defaults)
-        unread = ([(k, "it is read with discovery = true only") for k in ("generic", "generic_family", "generic_rank")
-                   if not table.discovery]
-                  + ([("generic_family", "'generic' names the terms (give one of the two)")]
-                     if table.discovery and "generic" in raw else [])
-                  + [(k, "it is read with validation_rule = true only") for k in ("validation_joint", "after_rejection")
-                     if not table.validation_rule]
-                  + ([("score_inputs", "it says how the score test treats the input errors, and [objectives] "
-                                       "input_errors has none")] if not cfg.nlp.input_errors else []))
-        for key, why in unread:
-            if key in raw:
-                problems.add("loop", f"field '{key}' is not read here: {why}")
-    problems.raise_if_any()
+    :class:`pyomo_heli.settings.identification.LoopTable`, checked by :func:`pyomo_heli.config.loop_table` when
+    the config is read)."""
+    table = loop_table(cfg.raw.get("loop", {}), cfg.path, cfg.nlp.input_errors)
     return LoopSettings(**{k: list(v) if isinstance(v, list) else v for k, v in table.model_dump().items()})
 
 

@@ -75,10 +75,13 @@ def _batch_test(d_records: list[np.ndarray], n_segment, min_batches: int, name: 
         batches += [d[i:j] for i, j in zip(edges[:-1], edges[1:])]
     d = np.concatenate(d_records)
     mean = float(d.mean())
-    se = (sum(float((s - mean).sum()) ** 2 for s in batches) / d.size**2) ** 0.5
+    # the batch-means variance of the grand mean, B / (B - 1) sum_b (S_b - n_b mean)^2 / N^2 (S_b: batch b's sum):
+    # for equal batches var(batch means, ddof=1) / B, so that z is t-distributed on B - 1 df for normal batches
+    nb = len(batches)
+    se = (nb / max(nb - 1, 1) * sum(float((s - mean).sum()) ** 2 for s in batches) / d.size**2) ** 0.5
     z = mean / se if se > 0 else (np.inf if mean > 0 else 0.0)
-    p = float(student_t.sf(z, df=max(len(batches) - 1, 1)))
-    return mean, se, float(z), len(batches), p
+    p = float(student_t.sf(z, df=max(nb - 1, 1)))
+    return mean, se, float(z), nb, p
 
 
 def mean_square_change(r0, r1, n_segment: int | list[int] | None = None, alpha: float = 0.01,

@@ -188,3 +188,75 @@ def test_a_verdict_whose_tests_could_not_run_is_not_noise_only():
         v = diagnose(bad, n_mc=500).verdict
         assert v["noise_only"] is False and verdict_status(v) == "not fully tested", case
         assert any(case in u for u in v["untested"]), (case, v["untested"])
+    # the tests that could not run are named, not counted as white (a review found "white in all 4 tests" when 3
+    # ran, and a summary row "white" for an output never tested)
+    d = diagnose(dataclasses.replace(r, time=no_data), n_mc=500)
+    line = next(f for f in d.findings if f.startswith("identification maneuvers:"))
+    n_ran = sum(1 for w in d.whiteness if w["role"] == "identification") - 1  # q of the first record: no p
+    assert f"white in all {n_ran} tests" in line and "1 not tested" in line, line
+    from pyomo_heli.diagnosis.analysis import summary_rows
+
+    q_row = next(s for s in summary_rows(d) if s["data"] == "time (identification)" and s["channel"] == "q")
+    assert q_row["verdict"].endswith("1 not tested") and q_row["verdict"] != "white", q_row
+
+
+def test_a_record_whose_innovations_failed_is_untested_not_white():
+    """Innovations (the input noise taken out) for q on every identification record but one, whose computation
+    failed: that record has no whiteness test of q, so the verdict is "not fully tested" naming it, never "noise
+    only" (a review: the record was left out of the table and of the verdict without a word)."""
+    import dataclasses
+
+    import numpy as np
+    import pandas as pd
+
+    from pyomo_heli.diagnosis.analysis import verdict_status
+
+    res = IdentificationResult.load(M0_NOISE)
+    cfg = load_identification_config(find_config(M0_NOISE, res))
+    r = compute_residuals(cfg, res.chosen["parameters"], "C", roles=("identification",))
+    names = list(dict.fromkeys(r.time["maneuver"]))
+    rng = np.random.default_rng(5)
+    frames = []
+    for name in names[1:]:
+        t = r.time.loc[r.time["maneuver"] == name, "t"].to_numpy()[::2]
+        frames.append(pd.DataFrame({"maneuver": name, "role": "identification", "t": t,
+                                    "inn_q": rng.standard_normal(t.size)}))
+    inn = pd.concat(frames, ignore_index=True)
+    rate = 1.0 / float(np.median(np.diff(frames[0]["t"])))
+    ok = dataclasses.replace(r, innovations=inn, info={**r.info, "innovations": {
+        "outputs": ["q"], "test_rate_hz": rate, "failed": []}})
+    failed = dataclasses.replace(r, innovations=inn, info={**r.info, "innovations": {
+        "outputs": ["q"], "test_rate_hz": rate, "failed": [{"maneuver": names[0], "role": "identification"}]}})
+    assert verdict_status(diagnose(ok, n_mc=500).verdict) == "noise only"
+    v = diagnose(failed, n_mc=500).verdict
+    assert verdict_status(v) == "not fully tested"
+    assert any(names[0] in u and "innovations failed" in u for u in v["untested"]), v["untested"]
+
+
+def test_the_report_prints_the_identification_bound(tmp_path):
+    """The report's "bound ... for identification" is alpha over the identification tests, not the smallest bound of
+    both roles (a review found the validation role's, which has more tests)."""
+    import re
+
+    from pyomo_heli.report.diagnosis import write_diagnosis_report
+
+    res = IdentificationResult.load(M0_NOISE)
+    cfg = load_identification_config(find_config(M0_NOISE, res))
+    import dataclasses
+
+    import numpy as np
+
+    r = compute_residuals(cfg, res.chosen["parameters"], "C")
+    # one identification record, one of its outputs without data: fewer identification tests than validation ones
+    t = r.time
+    first = t.loc[t["role"] == "identification", "maneuver"].iloc[0]
+    t = t[(t["role"] == "validation") | (t["maneuver"] == first)].reset_index(drop=True)
+    t.loc[t["maneuver"] == first, "res_q"] = np.nan
+    r = dataclasses.replace(r, time=t)
+    d = diagnose(r, n_mc=200)
+    n_id = sum(1 for w in d.whiteness if w["role"] == "identification" and w["p"] is not None and w["p"] == w["p"])
+    n_val = sum(1 for w in d.whiteness if w["role"] == "validation")
+    assert n_val > n_id > 0  # the case the old code got wrong
+    text = write_diagnosis_report(tmp_path, r, d).read_text()
+    got = float(re.search(r"bound ([0-9.e-]+) for identification", text).group(1))
+    assert got == pytest.approx(d.settings["alpha"] / n_id, rel=0.01)

@@ -177,10 +177,15 @@ def _findings(d: Diagnosis, shapes: dict, white: pd.DataFrame, coh: pd.DataFrame
         w = white[white["role"] == role] if len(white) else white
         if not len(w):
             continue
+        untested = int(w["p"].isna().sum())  # a Ljung-Box p of NaN (too few samples, no data): neither verdict
+        w = w[w["p"].notna()]
         bad = w[~w["white"].astype(bool)]
         inn = d.settings.get("innovations")
         how = (f" (innovations of {', '.join(inn['outputs'])}: the measured inputs' noise taken out)" if inn else "")
-        if bad.empty:
+        how += f"; {untested} not tested (no p-value)" if untested else ""
+        if not len(w):
+            out.append(f"{role} maneuvers: no whiteness test ran{how}")
+        elif bad.empty:
             out.append(f"{role} maneuvers: residuals white in all {len(w)} tests (Ljung-Box at "
                        f"{d.settings['test_rate_hz']:g} Hz, family-wise alpha {d.settings['alpha']:g}){how}")
         else:
@@ -318,6 +323,9 @@ def diagnose(res: Residuals, alpha: float = 0.01, test_rate_hz: float = TEST_RAT
                          for r in w[w["p"].isna()].to_dict(orient="records")] if len(w) else []
             untested += [f"the identification record {r['maneuver']} (not replayed)"
                          for r in res.info.get("not_replayed", []) if r["role"] == "identification"]
+            inn_info = res.info.get("innovations", {})
+            untested += [f"whiteness of {', '.join(inn_info.get('outputs', []))} in {r['maneuver']} (its innovations "
+                         "failed)" for r in inn_info.get("failed", []) if r["role"] == "identification"]
     if biases:
         verdict["record_biases_agree"] = all(t.consistent for t in biases.values())
     path = InputPathTest.from_dict(res.info["innovations"]["input_path"]) \
@@ -366,9 +374,13 @@ def summary_rows(d: Diagnosis) -> list[dict]:
                 continue
             unit, fac = DISPLAY[o]
             r = rms[(rms["kind"] == "time") & (rms["role"] == role) & (rms["channel"] == o)]["rms"]
+            ran = g[g["p"].notna()]  # a test without a p-value is neither white nor not
+            n_bad = int((~ran["white"].astype(bool)).sum())
+            untested = f", {len(g) - len(ran)} not tested" if len(ran) < len(g) else ""
             rows.append({"data": f"time ({role})", "channel": o, "unit": unit,
                          "RMS": float(r.iloc[0]) * fac if len(r) else np.nan,
-                         "verdict": "white" if g["white"].astype(bool).all() else
-                         f"not white in {int((~g['white'].astype(bool)).sum())}/{len(g)} maneuvers",
-                         "p": float(g["p"].min())})
+                         "verdict": "not tested" if ran.empty else
+                         (f"white in {len(ran)}/{len(g)} maneuvers{untested}" if untested else "white")
+                         if n_bad == 0 else f"not white in {n_bad}/{len(ran)} maneuvers{untested}",
+                         "p": float(ran["p"].min()) if len(ran) else np.nan})
     return rows

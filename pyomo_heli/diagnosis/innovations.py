@@ -162,8 +162,9 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     identification maneuvers, as in the NLP). An output without a known sigma (not in the
     ``noise_sigma`` table, or no noise in the lead-in) is left out and named in ``problems``; a maneuver
     whose computation fails likewise. Returns ``(table, settings)``: columns ``maneuver, role, t,
-    inn_<o>``, and the channels and sigmas used, with ``record_biases``: per maneuver its role, trim speed and
-    output biases with their standard errors (:func:`maneuver_innovations`), and ``input_path``: the stepwise
+    inn_<o>``, and the channels and sigmas used, with ``failed``: the maneuvers (and roles) whose innovations
+    failed (absent from the table: their whiteness is untested), ``record_biases``: per maneuver its role, trim
+    speed and output biases with their standard errors (:func:`maneuver_innovations`), and ``input_path``: the stepwise
     regression of the input errors on the generic dictionary (:mod:`.input_path`), a shift of ``parameters`` (the
     identified ones) allowed. ``records``: maneuver name -> the same maneuver at the record's rate, whose recorded
     inputs drive the replay the residuals are taken against (``[diagnosis] replay = "record"``).
@@ -176,14 +177,17 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     sigma = noise_sigmas(sigma_from, input_errors, noise_sigma, input_record=True)
     outs = []
     for o in outputs:
-        if not all(o in mv.data for _, mv in maneuvers):
+        missing = [mv.name for _, mv in maneuvers if o not in mv.data]
+        if missing:
+            problems.append(f"innovations: output {o} left out (not recorded in {', '.join(missing)}): its "
+                            "residuals are tested as they are")
             continue
         try:
             sigma.update(noise_sigmas(sigma_from, [o], noise_sigma))
             outs.append(o)
         except ValueError as exc:
             problems.append(f"innovations: output {o} left out ({exc})")
-    frames, biases, path = [], [], []
+    frames, biases, path, failed = [], [], [], []
     widths = play_widths(sigma) if input_path_family == "extended" else None
     models = input_error_models(sigma_from, input_errors, input_error_ar, input_record=True)
     for role, mv in maneuvers:
@@ -193,6 +197,7 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
         except Exception as exc:  # noqa: BLE001 - the raw residual tests stay available
             why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             problems.append(f"maneuver {mv.name}: innovations failed ({why})")
+            failed.append({"maneuver": mv.name, "role": role})
             continue
         df.insert(0, "role", role)
         df.insert(0, "maneuver", mv.name)
@@ -202,7 +207,8 @@ def innovations(model: HelicopterModel, maneuvers, sigma_from, outputs, input_er
     settings = {"outputs": outs, "input_errors": input_errors, "test_rate_hz": float(test_rate_hz),
                 "input_error_ar": {c: [float(x) for x in a] for c, (a, _) in models.items()},
                 "replay": "record" if records else "fit",
-                "sigma": {c: float(v) for c, v in sigma.items()}, "record_biases": biases}
+                "sigma": {c: float(v) for c, v in sigma.items()}, "record_biases": biases,
+                "failed": failed}
     if input_errors and path:
         test = input_path_test(path)
         test.play_widths = dict(widths or {})

@@ -302,9 +302,11 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
                 "projected off; docs/diagnosis.md), residuals with the per-maneuver nuisance removed for any "
                 "other output"
                 if inn else "residuals with the per-maneuver nuisance removed")
+        ib = w.loc[w["role"] == "identification", "bound"]
+        ident_bound = _fmt(float(ib.iloc[0]), 2) if len(ib) else "none"
         L += [f"Ljung-Box p-values ({what}, at {s['test_rate_hz']:g} Hz; "
-              f"white when p > alpha / number of tests of the role, bound {_fmt(w['bound'].min(), 2)} for "
-              "identification):", "", markdown_table(piv, digits=2), "",
+              f"white when p > alpha / number of tests of the role, bound {ident_bound} for identification):", "",
+              markdown_table(piv, digits=2), "",
               f"![time residuals](diagnosis_time.{figure_format})", ""]
     if diag.record_biases:
         L += ["### Record biases", "", "Do the records agree on each output's bias (generalised least-squares bias per "

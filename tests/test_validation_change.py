@@ -243,3 +243,32 @@ def test_the_change_table_says_when_the_two_models_pooled_other_records():
     assert tab.loc["id q [deg/s]", "note"] == note and pd.isna(tab.loc["trim col [deg]", "note"])
     same = {"iterations": [it(0, 0.02), it(1, 0.005)], "final_iteration": 1}
     assert "note" not in change_table(same).columns
+
+
+def test_an_output_some_records_lack_is_tested_on_the_others():
+    """beta_0 is optional per record: six validation records, one without it, the second model far worse on beta_0
+    in every record. The table tests beta_0 on the five records that have it (a significant rise, the record left
+    out named) and the joint row over the outputs every record has (a review: one record without beta_0 dropped
+    the output from the validation rule without a word)."""
+    from types import SimpleNamespace as NS
+
+    import pandas as pd
+
+    from pyomo_heli.report.loop import JOINT, validation_change_table
+
+    rng = np.random.default_rng(0)
+    outs = ["q", "theta", "n_x", "n_z", "TAS", "beta_0"]
+    mans, p0, p1 = [], {}, {}
+    for k in range(6):
+        t = np.arange(0, 20, 0.02)
+        cols = outs if k != 5 else outs[:-1]
+        mans.append(NS(name=f"m{k}", data=pd.DataFrame({"t": t, **{o: rng.standard_normal(t.size) for o in cols}}),
+                       t=t))
+        p0[f"m{k}"] = pd.DataFrame({o: np.zeros(t.size) for o in outs})
+        p1[f"m{k}"] = pd.DataFrame({**{o: np.zeros(t.size) for o in outs}, "beta_0": np.full(t.size, 0.5)})
+    tab = validation_change_table(NS(maneuvers=p0), NS(maneuvers=p1), mans).set_index("output")
+    assert "beta_0" in tab.index and bool(tab.loc["beta_0", "significant rise"])
+    assert tab.loc["beta_0", "records without it"] == "m5" and tab.loc["beta_0", "segments"] == 10  # 5 records, 2 each
+    assert tab.loc["beta_0", "change [%]"] == pytest.approx(100 * ((1 + 0.25) ** 0.5 - 1), abs=3)
+    assert not tab.loc[["q", "theta", "n_x", "n_z", "TAS"], "significant rise"].astype(bool).any()
+    assert JOINT in tab.index and pd.isna(tab.loc["q", "records without it"])

@@ -138,33 +138,38 @@ def validation_change_table(pred0, pred1, val_mans, segment_s: float | None = No
     (Diebold-Mariano with batch means, :mod:`pyomo_heli.diagnosis.validation_change`: whole records as batches by
     default, or ``segment_s`` segments). A last row, :data:`JOINT`, tests all these outputs at once (each output's
     squared error in units of model 0's mean square, summed: :func:`~pyomo_heli.diagnosis.validation_change.
-    joint_mean_square_change`); its RMS columns are empty and its change is that of the standardised RMS."""
+    joint_mean_square_change`, over the outputs every record has); its RMS columns are empty and its change is that
+    of the standardised RMS. An output some records lack is tested on the others (column ``records without it``)."""
     import numpy as np
 
     from ..diagnosis.validation_change import joint_mean_square_change, mean_square_change
 
     rows, r0s, r1s, seg_all = [], {}, {}, []
     for o in VALIDATION_OUTPUTS:
-        r0, r1, seg = [], [], []
+        # each output on the records that have it (beta_0 is optional per record): a record without it is named in
+        # the row, not a reason to leave the output out of the test
+        r0, r1, seg, without = [], [], [], []
         for mv in val_mans:
             a, b = pred0.maneuvers.get(mv.name), pred1.maneuvers.get(mv.name)
             if a is None or b is None or o not in mv.data or o not in a or o not in b:
-                break
+                without.append(mv.name)
+                continue
             y = mv.data[o].to_numpy(dtype=float)
             r0.append(y - a[o].to_numpy(dtype=float))
             r1.append(y - b[o].to_numpy(dtype=float))
             if segment_s is not None:
                 seg.append(max(int(round(segment_s / float(np.median(np.diff(mv.t))))), 1))
-        else:
-            if not r0:
-                continue
-            c = mean_square_change(r0, r1, seg or None, alpha)
+        if not r0:
+            continue
+        c = mean_square_change(r0, r1, seg or None, alpha)
+        if not without:  # the joint test needs the same records for every output
             r0s[o], r1s[o], seg_all = r0, r1, seg
-            unit = plots.UNITS[o][0]
-            rows.append({"output": o, "RMS before": float(plots.shown(o, c.ms0**0.5)),
-                         "RMS after": float(plots.shown(o, c.ms1**0.5)), "unit": unit,
-                         "change [%]": c.rms_change_pct, "z": c.z, "p (rise)": c.p_rise, "segments": c.segments,
-                         "significant rise": c.rise_significant})
+        unit = plots.UNITS[o][0]
+        rows.append({"output": o, "RMS before": float(plots.shown(o, c.ms0**0.5)),
+                     "RMS after": float(plots.shown(o, c.ms1**0.5)), "unit": unit,
+                     "change [%]": c.rms_change_pct, "z": c.z, "p (rise)": c.p_rise, "segments": c.segments,
+                     "significant rise": c.rise_significant,
+                     **({"records without it": ", ".join(without)} if without else {})})
     if len(r0s) > 1:
         c = joint_mean_square_change(r0s, r1s, seg_all or None, alpha)
         rows.append({"output": JOINT, "RMS before": None, "RMS after": None, "unit": "",

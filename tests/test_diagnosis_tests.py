@@ -141,3 +141,14 @@ def test_diagnosis_records_keep_small_p_values(tmp_path):
     recs = json.loads(json.dumps(_records(df)))
     assert [r["p"] for r in recs] == [2.2359e-11, 1e-300, 0.5, None]
     assert [r["white"] for r in recs] == [False, False, True, True] and recs[0]["n"] == 76
+
+
+def test_a_small_alpha_can_still_find_a_trim_shape():
+    """A 1 deg lon offset at 20 times the trim noise: structured at alpha 0.01 and at alpha 0.0005 alike. The Monte
+    Carlo p cannot fall below 1 / (n_mc + 1), so with 4000 draws and four shapes any alpha below 0.001 put the
+    Bonferroni level under the smallest p and called every residual noise (a review); the draws now follow alpha."""
+    e = 1.0 * DEG + np.random.default_rng(0).normal(0, 0.05 * DEG, len(V))
+    for alpha in (0.01, 0.0005):
+        t = trim_shape_test(V, e, "lon", alpha=alpha, n_mc=4000)
+        assert t.structured, (alpha, t.p_values)
+        assert min(t.p_values.values()) < alpha / len(t.p_values)

@@ -193,7 +193,8 @@ def trim_shape_test(V, e, channel: str = "", alpha: float = 0.01, n_mc: int = 40
     model too: the trim sensitivities of the identified parameters, so that the
     test asks for structure *beyond what those parameters can absorb*
     (re-weighting of the trade-off between time and trim data moves the trims
-    along these directions, without any missing physics).
+    along these directions, without any missing physics). ``n_mc``: draws of the null distribution, raised to
+    10 x shapes / alpha when fewer (the smallest p they give is 1 / (n_mc + 1)).
     """
     V = np.asarray(V, dtype=float)
     e = np.asarray(e, dtype=float)
@@ -208,6 +209,9 @@ def trim_shape_test(V, e, channel: str = "", alpha: float = 0.01, n_mc: int = 40
     if not designs:
         raise ValueError(f"trim shape test of {channel or 'a channel'}: every shape is absorbed by the nuisance")
     k_lin = {"constant": 1, "V^2": 2, "bump": 2, "V^2+bump": 3}
+    # the smallest Monte Carlo p is 1 / (n_mc + 1): at least ten draws per Bonferroni level, so that a small alpha
+    # can still find structure (the default 4000 at alpha 0.01 and four shapes)
+    n_mc = max(int(n_mc), math.ceil(10 * len(designs) / alpha))
 
     def F_of(rss0, rss, k):
         return ((rss0 - rss) / k) / np.maximum(rss / (n - k - p_n), 1e-300)

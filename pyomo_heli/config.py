@@ -225,7 +225,8 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
     use, linear = _objectives_use(s, raw, problems)
     diagnosis = None
     if s.diagnosis is not None:
-        chans, sigma = _input_errors(s.diagnosis, problems, in_ref, "diagnosis", "input_noise")
+        # input_noise without its own sigmas takes [objectives.noise_sigma] where given (docs/diagnosis.md)
+        chans, sigma = _input_errors(s.diagnosis, problems, in_ref, "diagnosis", "input_noise", noise_sigma)
         ar = 0
         if "input_noise" not in (raw.get("diagnosis") or {}) and s.diagnosis.noise_sigma is None:
             # a [diagnosis] table of other settings: the identification's model
@@ -327,14 +328,22 @@ def loop_table(raw, path, input_errors) -> LoopTable:
     return table
 
 
-def _input_errors(table, problems: Problems, in_ref, name: str, key: str) -> tuple[tuple, dict | None]:
+def _input_errors(table, problems: Problems, in_ref, name: str, key: str,
+                  fallback: dict | None = None) -> tuple[tuple, dict | None]:
     """[objectives] input_errors (errors in variables) and the optional [objectives.noise_sigma] table; the
     same for [diagnosis] input_noise and [diagnosis.noise_sigma] (``name``, ``key``): the channels and the
-    sigmas in SI."""
+    sigmas in SI. ``fallback``: the sigmas [SI] taken when the table gives none ([objectives.noise_sigma] for
+    the diagnosis), which must cover the channels; else the records' lead-in."""
     chans = tuple(getattr(table, key))
     given = table.noise_sigma
     if given is not None and not chans:
         problems.add(name, f"noise_sigma is only used with {key}")
+    if chans and given is None and fallback is not None:
+        lacking = [c for c in chans if c not in fallback]
+        if lacking:
+            problems.add(name, f"{key} {list(chans)} takes its sigmas from [objectives.noise_sigma], which has "
+                               f"none for {lacking}; give [{name}.noise_sigma]")
+        return chans, fallback
     if chans and given is None and not in_ref > 0:
         problems.add(name, f"{key} takes the noise sigmas from the records' quiet lead-in; set [data] "
                            f"input_reference_s > 0 or give [{name}.noise_sigma]")

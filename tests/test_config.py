@@ -335,3 +335,21 @@ def test_third_audit_close_loop_info_of_the_wrong_type_is_named(tmp_path, key, v
     (res / "chosen.json").write_text(json.dumps(doc))
     assert main(["diagnose", str(res), "--out", str(tmp_path / "d"), "--no-residuals"]) == 2
     assert f"chosen.json: key 'info.{key}' must be" in capsys.readouterr().err
+
+
+def test_diagnosis_input_noise_takes_the_objectives_sigmas(tmp_path):
+    """[diagnosis] input_noise without its own noise_sigma takes [objectives.noise_sigma] (docs/diagnosis.md), not
+    the records' lead-in (a review: the identification's sigmas were dropped); a channel that table lacks is refused
+    in one line."""
+    from pyomo_heli.units import DEG
+
+    sig = "noise_sigma = { q_deg_s = 0.2, theta_deg = 0.1, nx_g = 0.005, nz_g = 0.01, tas_m_s = 0.5, col_deg = 0.03 }"
+    obj = f'[objectives]\ninput_errors = ["col"]\n{sig}\n'
+    cfg = load_identification_config(write(tmp_path, extra=obj + '[diagnosis]\ninput_noise = ["col"]\nreplay = "fit"'))
+    got = cfg.diagnosis_settings.noise_sigma
+    assert got is not None and got["col"] == pytest.approx(0.03 * DEG) and got["q"] == pytest.approx(0.2 * DEG)
+    assert got == cfg.nlp.noise_sigma
+    with pytest.raises(ConfigError, match=r"\[diagnosis\]: input_noise \['lon'\] takes its sigmas from "
+                                          r"\[objectives.noise_sigma\], which has none for \['lon'\]") as err:
+        load_identification_config(write(tmp_path, extra=obj + '[diagnosis]\ninput_noise = ["lon"]'))
+    assert "\n" not in str(err.value)

@@ -66,6 +66,10 @@ from ..units import DEG
 
 #: a parameter counts as at a bound when it is this many scales (or less) from it
 BOUND_TOL = 1e-4
+#: ... or when it is this many scales (or less) from it and the Newton step of the objective the point is stationary
+#: for goes past it (the interior-point solver stops about mu / z inside an active bound, which can exceed
+#: BOUND_TOL when the bound's multiplier z is small)
+NEAR_BOUND_TOL = 1e-2
 #: trim residual variance floor [rad^2], so noise-free data give huge, finite information
 TRIM_FLOOR = (1e-6) ** 2
 #: an epsilon point whose Newton step towards one objective's optimum is below this many standard
@@ -73,18 +77,43 @@ TRIM_FLOOR = (1e-6) ** 2
 STATIONARY_SE = 1e-3
 
 
-def active_bounds(values: dict, free, tol: float = BOUND_TOL) -> dict:
-    """name -> "lower", "upper" or "" for each free parameter (FreeParameter list)."""
+def active_bounds(values: dict, free, tol: float = BOUND_TOL, step: dict | None = None) -> dict:
+    """name -> "lower", "upper" or "" for each free parameter (FreeParameter list): within ``tol`` scales of
+    the bound, or, with ``step`` (name -> the unconstrained Newton step [SI] of the objective), within
+    NEAR_BOUND_TOL scales and the step goes past the bound (the objective pushes against it)."""
     out = {}
     for f in free:
-        v = values[f.name]
-        if v - f.lower <= tol * f.scale:
+        v, d = values[f.name], (step or {}).get(f.name, 0.0)
+        near = NEAR_BOUND_TOL * f.scale
+        if v - f.lower <= tol * f.scale or (v - f.lower <= near and v + d < f.lower):
             out[f.name] = "lower"
-        elif f.upper - v <= tol * f.scale:
+        elif f.upper - v <= tol * f.scale or (f.upper - v <= near and v + d > f.upper):
             out[f.name] = "upper"
         else:
             out[f.name] = ""
     return out
+
+
+def _bounds_held(info: "PointInformation", free, kind: str, multiplier: float | None, weights) -> dict:
+    """:func:`active_bounds` at ``info``'s estimate, the near-bound test made with the Gauss-Newton step of the
+    weighted objective the point is stationary for (over the parameters not at a bound; repeated until no
+    parameter is added)."""
+    names = info.names
+    bounds = active_bounds(info.values, free)
+    for _ in range(len(names)):
+        idx = [i for i, n in enumerate(names) if not bounds[n]]
+        if not idx:
+            break
+        a, b = weights if weights is not None else objective_weights(info, kind, idx, multiplier)
+        H = a * info.fisher_time()[np.ix_(idx, idx)] + b * info.hessian_trim()[np.ix_(idx, idx)]
+        g = a * info.grad_time()[idx] + b * info.grad_trim()[idx]
+        d = -_pseudo_inverse(H) @ g
+        new = active_bounds(info.values, free, step={names[i]: float(d[k]) for k, i in enumerate(idx)})
+        new = {n: bounds[n] or new[n] for n in names}
+        if new == bounds:
+            break
+        bounds = new
+    return bounds
 
 
 @dataclass
@@ -366,7 +395,7 @@ def cramer_rao(info: PointInformation, free, kind: str = "A", weights: tuple | N
     b/a from its solve (:func:`objective_weights`).
     """
     names = info.names
-    bounds = active_bounds(info.values, free)
+    bounds = _bounds_held(info, free, kind, multiplier, weights)
     idx = [i for i, n in enumerate(names) if not bounds[n]]
     n = len(names)
     a, b = weights if weights is not None else objective_weights(info, kind, idx, multiplier)

@@ -214,11 +214,13 @@ class Progress:
 
 
 # ---------------------------------------------------------------- display units
-def format_parameters(values: dict, parameters=None, digits: int = 6) -> str:
+def format_parameters(values: dict, parameters=None, digits: int = 6, se: dict | None = None,
+                      notes: dict | None = None) -> str:
     """``name=value unit`` for each parameter, in the display unit of the config files (deg, deg/m, ...).
 
     parameters: a :class:`~pyomo_heli.physics.parameters.ParameterSet` giving each name's units; a name it
-    does not know is shown as given (SI).
+    does not know is shown as given (SI). se: name -> standard error [SI], shown as ``value+-se unit``. notes:
+    name -> a text shown instead of the value where it is not empty (e.g. "at lower bound").
     """
     parts = []
     for name, v in values.items():
@@ -230,8 +232,13 @@ def format_parameters(values: dict, parameters=None, digits: int = 6) -> str:
                 spec = None
             if spec is not None:
                 unit, factor = spec.display if spec.display is not None else (spec.unit, 1.0)
+        if (notes or {}).get(name):
+            parts.append(f"{name} {notes[name]}")
+            continue
         try:
             shown = f"{float(v) * factor:.{digits}g}"
+            if se is not None and name in se:
+                shown += f"+-{float(se[name]) * abs(factor):.3g}"
         except (TypeError, ValueError):
             shown = str(v)
         parts.append(f"{name}={shown}" + (f" {unit}" if unit and unit != "-" else ""))

@@ -140,3 +140,29 @@ def test_a_point_that_did_not_converge_is_not_shown_as_an_estimate():
     assert tab["Eq. 11 direct"].isna().all() and tab["Eq. 11 direct error %"].isna().all()
     assert tab["multi-objective"].notna().all()
     assert "NOT CONVERGED (Maximum_Iterations_Exceeded)" in str(res.result)
+
+
+def test_the_console_standard_errors_are_in_display_units(tmp_path):
+    """The "standard errors, point k" console lines show values and SEs in the config's units (deg/m for the twist),
+    as every other console line, and name a parameter the solver left at its bound (a review: the line was in SI
+    without units, the twist of point A -0.174527+-5.55 next to -9.99964 deg/m on the line before)."""
+    import re
+
+    lines = []
+    res = ph.identify(HERE / "configs" / "tiny_case1_noisy.toml", tmp_path / "o", uncertainty="chosen",
+                      progress=lines.append)
+    se_lines = [ln for ln in lines if "standard errors, point" in ln]
+    assert se_lines
+    chosen = json.loads((tmp_path / "o" / "chosen.json").read_text())["chosen"]
+    k = int(chosen["index"])
+    line = next(ln for ln in se_lines if re.search(rf"point +{k}:", ln))
+    u = chosen["uncertainty"]
+    if u["at_bound"]["theta_twist"]:
+        assert f"theta_twist at {u['at_bound']['theta_twist']} bound" in line
+    else:
+        m = re.search(r"theta_twist=(\S+)\+-(\S+) deg/m", line)
+        assert m, line
+        assert float(m.group(1)) == pytest.approx(chosen["parameters"]["theta_twist"] * 180 / math.pi, rel=1e-5)
+        assert float(m.group(2)) == pytest.approx(u["se"]["theta_twist"] * 180 / math.pi, rel=5e-3)  # 3 digits
+    assert re.search(r"CL_alpha_HT=\S+\+-\S+ 1/rad", line), line
+    assert res is not None

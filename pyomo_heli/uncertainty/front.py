@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ..log import info
+from ..log import format_parameters, info
 from ..pareto.eq11 import utopia_distance_weights
 from .cramer_rao import cramer_rao, point_information
 from .identifiability import identifiability
@@ -98,9 +98,9 @@ def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "a
         for k, v in u.row().items():
             front.at[i, k] = v
         by_index[int(r["index"])] = (u, info)
-        progress(f"  standard errors, point {int(r['index']):>2}: "
-                 + " ".join(f"{n}={u.values[n]:.6g}+-{u.se[n]:.3g}" if not u.at_bound[n]
-                            else f"{n} at {u.at_bound[n]} bound" for n in names))
+        progress(f"  standard errors, point {int(r['index']):>2}: "  # display units, as every console line
+                 + format_parameters({n: u.values[n] for n in names}, cfg.model.parameters, se=u.se,
+                                     notes={n: f"at {u.at_bound[n]} bound" if u.at_bound[n] else "" for n in names}))
     for point in (result.time_domain, result.chosen):
         if point and int(point["index"]) in by_index:
             point["uncertainty"] = by_index[int(point["index"])][0].to_dict()

@@ -125,6 +125,38 @@ def test_parmest_through_the_labelled_model_reaches_point_a():
     assert obj * pe.value(labelled.J_time_scale) == pytest.approx(a.J_time, rel=1e-8)
 
 
+def test_parmest_measurement_errors_come_from_the_lead_in_and_weight_the_fit():
+    """An output-error config with a quiet lead-in: each output's measurement_error is the pooled lead-in sigma
+    (computed here from the records), so parmest's "SSE_weighted" lands near point A (a review: with the labels
+    None, parmest's fits summed rad/s, rad, g and m/s unweighted and put both parameters at their bounds)."""
+    import numpy as np
+    from pyomo.contrib.parmest.parmest import Estimator
+
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.nlp.identification import build_identification_nlp, identification_data
+    from pyomo_heli.nlp.parmest_experiment import IdentificationExperiment
+    from pyomo_heli.pareto.front import ParetoSolver
+
+    cfg = load_identification_config(ROOT / "tests" / "configs" / "small_case1_noisy.toml", overrides={
+        "data": {"maneuvers": ["lon3211_80kt_a"], "max_duration_s": 3.0, "input_reference_s": 0.8}})
+    data = identification_data(cfg)
+    exp = IdentificationExperiment(cfg, data)
+    labelled = exp.get_labeled_model()
+    for o in cfg.nlp.time_outputs:
+        ss = dof = 0
+        for mv in data.maneuvers:
+            x = mv.data[o].to_numpy()[mv.data["t"].to_numpy() <= mv.data["t"].iloc[0] + 0.8 + 1e-9]
+            ss, dof = ss + np.sum((x - x.mean()) ** 2), dof + len(x) - 1
+        assert labelled.measurement_error[labelled.y_hat[0, o]] == pytest.approx((ss / dof) ** 0.5, rel=1e-9), o
+    m = build_identification_nlp(data, cfg.model, cfg.free, cfg.nlp)
+    a = ParetoSolver(m, cfg.pareto).point_a()
+    est = Estimator([exp], obj_function="SSE_weighted", solver_options={"tol": 1e-8})
+    with as_ipopt():
+        _, theta = est.theta_est()
+    for f in cfg.free:
+        assert theta[f"theta_s[{f.name}]"] * f.scale == pytest.approx(a.parameters[f.name], rel=0.05), f.name
+
+
 @pytest.mark.slow
 def test_idaes_scaled_point_a_reaches_the_same_estimate():
     """The IDAES Scaler's scaled copy of the NLP (Pyomo's core.scale_model, the NL route: a second way to apply

@@ -149,6 +149,27 @@ def test_a_parameter_the_solver_left_just_inside_an_active_bound_is_projected_ou
         np.testing.assert_allclose([u.se[f"p{i}"] for i in keep], np.sqrt(np.diag(cov)), rtol=1e-10)
 
 
+def test_an_undetermined_parameter_keeps_its_infinite_se_through_save_and_load():
+    """Two parameters the time data see only through their sum: their SEs are infinite (not determined), a third's
+    finite. Saved (JSON has no infinity: null, and named under "undetermined") and loaded, they are infinite again,
+    told apart from a missing SE (NaN), and the table says so (a review: they came back NaN)."""
+    import json
+
+    info = _linear_info(np.random.default_rng(6))
+    for o, S in info.S_time.items():
+        S[:, 1] = S[:, 0]
+    info.S_trim = {"col": np.zeros_like(info.S_trim["col"])}
+    u = cramer_rao(info, _free(3), kind="A")
+    assert u.se["p0"] == math.inf and u.se["p1"] == math.inf and math.isfinite(u.se["p2"])
+    d = json.loads(json.dumps(u.to_dict()))
+    assert d["se"]["p0"] is None and d["undetermined"] == ["p0", "p1"]
+    again = type(u).from_dict(d)
+    assert again.se["p0"] == math.inf and again.se["p2"] == u.se["p2"]
+    assert "not determined" in again.table().set_index("parameter").loc["p0", "note"]
+    d.pop("undetermined")
+    assert math.isnan(type(u).from_dict(d).se["p0"])  # a file without the list: unknown, as before
+
+
 def test_weights_of_an_interior_front_point_make_it_stationary():
     """For an epsilon point the weights found from the gradients satisfy a g_time + b g_trim = 0."""
     rng = np.random.default_rng(5)

@@ -291,14 +291,19 @@ class ParameterUncertainty:
         def clean(x):
             return None if (isinstance(x, float) and not math.isfinite(x)) else x
 
+        # an infinite SE (a direction the data do not determine) is null as a missing one, and named apart
+        undetermined = [k for k, v in self.se.items() if v == math.inf]
         return {"names": list(self.names), "values": self.values, "se": {k: clean(v) for k, v in self.se.items()},
+                **({"undetermined": undetermined} if undetermined else {}),
                 "at_bound": self.at_bound, "correlation": [[clean(float(x)) for x in r] for r in self.correlation],
                 "combination": self.combination, "weights": list(self.weights)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "ParameterUncertainty":
         nan = float("nan")
-        return cls(names=d["names"], values=d["values"], se={k: nan if v is None else v for k, v in d["se"].items()},
+        return cls(names=d["names"], values=d["values"],
+                   se={k: (math.inf if k in d.get("undetermined", ()) else nan) if v is None else v
+                       for k, v in d["se"].items()},
                    at_bound=d["at_bound"], correlation=[[nan if x is None else x for x in r] for r in d["correlation"]],
                    combination=d["combination"], weights=tuple(d["weights"]))
 
@@ -309,7 +314,8 @@ class ParameterUncertainty:
             rows.append({"parameter": n, "estimate": v,
                          "standard error": s if math.isfinite(s) else float("nan"),
                          "relative %": 100 * s / abs(v) if (math.isfinite(s) and v != 0) else float("nan"),
-                         "note": f"at {self.at_bound[n]} bound, projected out" if self.at_bound[n] else ""})
+                         "note": f"at {self.at_bound[n]} bound, projected out" if self.at_bound[n] else
+                         "not determined by the data (infinite standard error)" if s == math.inf else ""})
         return pd.DataFrame(rows)
 
     def __str__(self) -> str:

@@ -85,6 +85,21 @@ def test_monte_carlo_counts_a_parameter_at_its_bound_by_name():
     assert s.loc["theta_twist", "at bound"] == 2 and s.loc["a", "at bound"] == 1
 
 
+def test_a_realization_without_a_chosen_point_keeps_its_point_a(monkeypatch):
+    """No front point converged, so Eq. 11 chooses nothing (ParetoSolver.choose returns None): the multi-objective
+    row fails saying so, and the converged point A stays a successful time-domain row (a review: the exception
+    marked both rows failed, leaving a realization out of the time-domain summary)."""
+    from pyomo_heli.pareto.front import ParetoSolver
+    from pyomo_heli.uncertainty.monte_carlo import RealizationTask, run_realization
+
+    monkeypatch.setattr(ParetoSolver, "choose", lambda self, rule=None: (None, np.zeros(0)))
+    spec = ProblemSpec.make(CONFIGS / "tiny_case1_noisy.toml")
+    rows = run_realization(RealizationTask(spec, 0, 11, tuple(SIGMA.items()), (), multi_objective=True, crb=False))
+    assert [r["estimator"] for r in rows] == ["time", "multi"]
+    assert rows[0]["success"] and rows[0]["kind"] == "A"
+    assert not rows[1]["success"] and "no front point converged" in rows[1]["status"]
+
+
 def _linear_info(rng, n=3, N=200, M=12):
     S_t = {"y1": rng.normal(size=(N, n)), "y2": rng.normal(size=(N, n))}
     S_r = {"col": rng.normal(size=(M, n))}

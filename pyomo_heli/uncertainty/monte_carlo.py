@@ -130,6 +130,10 @@ def _run_realization(task: RealizationTask) -> list[dict]:
         a = points[0]
         rows = [_row(task, "time", a, cfg, noisy, t0)]
         chosen, _ = ps.choose()
+        if chosen is None:  # no front point converged: the multi-objective row fails, point A's row stands
+            rows.append({"realization": task.k, "estimator": "multi", "success": False,
+                         "status": "no front point converged: nothing to choose"})
+            return rows
         multi = _row(task, "multi", chosen, cfg, noisy, t0)
         failed = ps.anchor_failures()  # utopia and nadir of an unconverged anchor: the choice is not to be trusted
         if failed:

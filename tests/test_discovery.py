@@ -542,7 +542,8 @@ def _stubbed_step(monkeypatch, p_values, LM, screen, rejected=(), generic=("col_
 
     names = ["lon_rigging", *generic, *rejected]
     scores = pd.DataFrame({"name": names, "p_value": p_values, "LM": LM,
-                           "LM_white": LM if LM_white is None else LM_white, "df": [np.inf] * len(names)})
+                           "LM_white": LM if LM_white is None else LM_white, "df": [np.inf] * len(names),
+                           "kappa_hat": [1e-3] * len(names)})
     monkeypatch.setattr(discovery.attr, "attribute",
                         lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
 
@@ -849,6 +850,103 @@ def test_a_significant_term_whose_fit_failed_is_not_read_as_nothing_significant(
         "pairs": {}})
     assert out["decision"] == "none" and out["unexplained"] and out["significant_unfitted"] == ["col_delay"]
     assert out["message"].startswith("not decided: the NLP fit of col_delay failed"), out["message"]
+
+
+def test_a_failed_fit_under_the_likelihood_ratio_is_flagged_by_its_score_test(monkeypatch):
+    """Input errors on and the base solve fine: the likelihood ratio decides. col_delay's fit failed (no LR, p nan),
+    its score test p = 1e-8: the step names it as significant but unfitted and leaves the residual unexplained (a
+    review: its nan p read as "not significant", and the step said nothing significant over the library)."""
+    fits = {"lon_rigging": _fit("lon_rigging", False, 1.0, -0.002, "lon offset"),
+            "col_delay": {"name": "col_delay", "generic": True, "success": False, "LR": float("nan"),
+                          "p": float("nan"), "J": float("nan"), "estimate": 0.03, "formula": "col_delay",
+                          "shape": {}}}
+    out = _stubbed_step(monkeypatch, [0.5, 1e-8], [1.0, 80.0],
+                        lambda pairs: {"J0": J0, "base_success": True, "fits": fits, "pairs": {}})
+    assert out["criterion"] == "likelihood ratio"
+    assert out["decision"] == "none" and out["unexplained"] and out["significant_unfitted"] == ["col_delay"]
+    assert out["message"].startswith("not decided: the NLP fit of col_delay failed"), out["message"]
+
+
+def test_generic_significant_looks_at_every_generic_fit_under_the_raw_lr_ranking(monkeypatch):
+    """generic_rank = "likelihood_ratio": the best generic term by raw LR (dM_one, LR 30, corrected by the residuals'
+    colour to 6: p = 0.014) is not significant at 0.01 / 3, another (dM_mu2, LR 25, p = 6e-7) is. The name check asks
+    whether any generic term is significant: yes (a review: only the raw-LR best was asked, "no")."""
+    fits = {"lon_rigging": _fit("lon_rigging", False, 1.0, -0.002, "lon offset"),
+            "dM_one": _fit("dM_one", True, 30.0, 0.003, "dM_one"),
+            "dM_mu2": _fit("dM_mu2", True, 25.0, 0.002, "dM_mu2")}
+    out = _stubbed_step(monkeypatch, [0.5, 0.01, 6e-7], [1.0, 6.0, 25.0],
+                        lambda pairs: {"J0": J0, "base_success": True, "fits": fits, "pairs": {}},
+                        generic=("dM_one", "dM_mu2"), LM_white=[1.0, 30.0, 25.0], rank="likelihood_ratio")
+    assert fits["dM_one"]["p"] > out["level"] > fits["dM_mu2"]["p"]
+    assert out["best_generic_fit"]["name"] == "dM_one" and out["generic_significant"] is True
+
+
+def test_a_physical_candidate_significant_outside_the_screen_is_named(monkeypatch):
+    """Four physical candidates, the screen estimates the best three by LM; the fourth (nx_bias: LM 20 on df 60,
+    score test p = 3.5e-5 < 0.01 / 5) has a smaller p than those three (LM 23-25 on df 1.5, p about 0.07): never
+    estimated, it is named in the "none" step instead of "nothing significant over the whole library"."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+    from scipy import stats
+
+    from pyomo_heli.diagnosis import discovery
+
+    names = ["cg_offset", "lon_rigging", "col_rigging", "nx_bias", "dM_one"]
+    LM, df = [25.0, 24.0, 23.0, 20.0, 1.0], [1.5, 1.5, 1.5, 60.0, 10.0]
+    scores = pd.DataFrame({"name": names, "LM": LM, "LM_white": LM, "df": df, "kappa_hat": [1e-3] * 5,
+                           "p_value": [float(stats.f(1, d).sf(lm)) for lm, d in zip(LM, df)]})
+    monkeypatch.setattr(discovery.attr, "attribute",
+                        lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
+    fits = {n: _fit(n, n == "dM_one", 1.0, 0.001, n) for n in ["cg_offset", "lon_rigging", "col_rigging", "dM_one"]}
+    monkeypatch.setattr(discovery, "nlp_screen", lambda cfg, start, terms, pairs=(), **kw: {
+        "J0": J0, "fits": {n: dict(fits[n]) for n in terms}, "pairs": {}})
+    cfg = SimpleNamespace(free=[SimpleNamespace(name="Iyy")],
+                          nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=()))
+    model = SimpleNamespace(extensions=(), parameters={"Omega": 44.4, "R": 4.91})
+    out = discovery.discovery_step(cfg, model, {}, None, physical=names[:4], generic=["dM_one"],
+                                   progress=lambda s: None)
+    assert "nx_bias" not in out["screen"]["fits"] and out["decision"] == "none"
+    assert out["significant_unscreened"] == ["nx_bias"] and "nx_bias (p = 3.5e-05)" in out["message"]
+
+
+def test_of_two_named_candidates_from_separate_nlps_the_lower_j_against_its_own_base_is_named(monkeypatch):
+    """The screen ran as separate NLPs (the joint base failed): cg_offset and lon_rigging both encompass the
+    significant dM_one. cg_offset's fit is lower in raw J (-110 against -108) but on a base 10 lower: against its
+    own base lon_rigging is the better fit (LR 36 against 20) and is named, as where no generic term is significant
+    (a review: the raw J across NLPs chose cg_offset)."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from pyomo_heli.diagnosis import discovery
+
+    names = ["cg_offset", "lon_rigging", "dM_one"]
+    scores = pd.DataFrame({"name": names, "LM": [50.0] * 3, "LM_white": [50.0] * 3, "df": [np.inf] * 3,
+                           "p_value": [1e-10] * 3, "kappa_hat": [1e-3] * 3})
+    monkeypatch.setattr(discovery.attr, "attribute",
+                        lambda *a, **k: SimpleNamespace(scores=scores, to_dict=lambda: {}, __str__=lambda s: ""))
+    base = {"cg_offset": -100.0, "lon_rigging": -90.0, "dM_one": -95.0}  # each term's own NLP base
+    single = {"cg_offset": -110.0, "lon_rigging": -108.0, "dM_one": -110.0}  # LR 20, 36, 30
+
+    def screen(cfg, start, terms, pairs=(), **kw):
+        fits = {n: {"name": n, "generic": n == "dM_one", "success": True, "J": single[n], "J0": base[n],
+                    "LR": 2 * (base[n] - single[n]), "p": 0.0, "estimate": 0.01, "formula": n, "shape": {}}
+                for n in terms}
+        # the pair NLP on P's base: the singles solved there too (G adds nothing to P, P adds much to G)
+        both = {f"{a}+{b}": {"J": single[a] - 0.5, "success": True, "J0": base[a],
+                             "single_J": {a: single[a], b: base[a] - 5.0}} for a, b in pairs(fits)}
+        return {"J0": -100.0, "base_success": False, "fits": fits, "pairs": both, "separate": {}}
+
+    monkeypatch.setattr(discovery, "nlp_screen", screen)
+    monkeypatch.setattr(discovery, "deciding_criterion", lambda cfg, screen: "likelihood ratio")
+    cfg = SimpleNamespace(free=[SimpleNamespace(name="Iyy")],
+                          nlp=SimpleNamespace(time_outputs=["q"], trim_outputs=["lon"], input_errors=("col",)))
+    model = SimpleNamespace(extensions=(), parameters={"Omega": 44.4, "R": 4.91})
+    out = discovery.discovery_step(cfg, model, {}, None, physical=["cg_offset", "lon_rigging"], generic=["dM_one"],
+                                   progress=lambda s: None)
+    assert {r["candidate"] for r in out["encompassing"] if r["encompasses"]} == {"cg_offset", "lon_rigging"}
+    assert out["decision"] == "named" and out["added"] == "lon_rigging", out["message"]
 
 
 def test_a_term_significant_by_the_score_test_that_the_screen_did_not_estimate_is_named(monkeypatch):
@@ -1194,6 +1292,25 @@ def test_the_backward_check_removes_at_the_level_the_terms_entered_at():
     assert row["significant"] is None and "not tested" in row["note"]
 
 
+def test_the_backward_check_removes_the_least_significant_term():
+    """Three terms added before the last, two no longer significant: the one of largest Wald p goes (dZ_mu2, p 0.84),
+    not the oldest (dM_one, p 0.0027), as stepwise regression removes (a review: the oldest went, and a dropped term
+    is never offered again). None when every tested term stays or none was tested."""
+    from types import SimpleNamespace
+
+    from pyomo_heli.workflows.loop_steps import backward_check, term_to_drop
+
+    ext = [SimpleNamespace(name=n, strength=f"c_{n}") for n in ("dM_one", "dZ_mu2", "dM_q", "dX_mu4")]
+    cfg = SimpleNamespace(model=SimpleNamespace(extensions=ext))
+    record = {"parameters": {"c_dM_one": 3.0e-3, "c_dZ_mu2": 2e-4, "c_dM_q": 0.05, "c_dX_mu4": 0.01},
+              "standard_errors": {"c_dM_one": 1e-3, "c_dZ_mu2": 1e-3, "c_dM_q": 1e-3, "c_dX_mu4": 1e-3}}
+    rows = backward_check(cfg, record, [], 0.01 / 60)
+    assert [r["significant"] for r in rows] == [False, False, True]
+    assert term_to_drop(rows)["name"] == "dZ_mu2"
+    assert term_to_drop([r for r in rows if r["name"] != "dZ_mu2"])["name"] == "dM_one"
+    assert term_to_drop([rows[2]]) is None and term_to_drop([]) is None
+
+
 # slow (108 s; CI time): four identifications and three screens. The default run has the check's levels and
 # decisions (test_the_backward_check_removes_at_the_level_the_terms_entered_at above)
 @pytest.mark.slow
@@ -1277,3 +1394,17 @@ def test_the_name_check_runs_after_a_backward_check_drop_and_goes_back_to_before
     assert all(it["extensions"] == ["dM_one"] for it in its[4:])
     assert doc["final_iteration"] in (1, *(it["iteration"] for it in its[4:]))
     assert "nx_bias" not in its[doc["final_iteration"]]["extensions"]
+
+
+def test_the_loop_report_names_the_test_that_decided_the_step():
+    """The structure step's heading in loop_report.md says which test decided: the likelihood ratio (errors in
+    variables) or the score test (output error, or a failed base); a review found it always said the likelihood
+    ratio."""
+    from pyomo_heli.report.loop import discovery_section
+
+    for criterion, words in (("likelihood ratio", "the likelihood ratio of the NLP decides"),
+                             ("score test", "the score test decides")):
+        text = "\n".join(discovery_section({"discovery": {"library_size": 60, "level": 0.01 / 60,
+                                                          "criterion": criterion, "decision": "none",
+                                                          "message": "nothing"}}))
+        assert f"{words} at p < 0.000167" in text, text

@@ -40,9 +40,11 @@ One step of the closed loop with ``[loop] discovery = true`` (docs/discovery.md)
    encompasses it, taken (lowest J) if the two are equivalent, nothing added otherwise ("ambiguous", with
    the best generic term reported as what is left).
 4. **Nothing significant**: nothing is added; the best generic term's NLP estimate is still reported
-   as the shape of what is left. A generic term the score test finds significant that the screen did not
-   estimate (below the best ``SCREEN_GENERIC`` by LM) is named (``significant_unscreened``): the step then says
-   "nothing significant among the terms estimated", not "over the whole library".
+   as the shape of what is left. A term the score test finds significant that the screen did not estimate
+   (below the best ``SCREEN_GENERIC`` generic terms or ``SCREEN_PHYSICAL`` physical candidates by LM) is named
+   (``significant_unscreened``): the step then says "nothing significant among the terms estimated", not "over
+   the whole library". A significant term whose fit failed is named too (``significant_unfitted``; under the
+   likelihood ratio, which such a fit lacks, by its score test).
 
 The backward check (a term added earlier that is no longer significant once the new one is in), the
 validation rule (a step that makes validation significantly worse on any output is rejected) and the name check
@@ -455,18 +457,28 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
     p_sig = [f for f in fits.values() if not f["generic"] and f["success"] and f["p"] < level]
     # the family's best term at this model and whether it is significant, whatever is decided (the loop's check of
     # a physical candidate it added: it must leave the generic family nothing significant, rejected terms included)
-    out.update(generic_significant=bool(G is not None and G["p"] < level), best_generic_fit=G)
+    # (any generic fit significant, not only the best by the ranking: with generic_rank = "likelihood_ratio" the best
+    # by raw LR can have a larger p than another term)
+    out.update(generic_significant=any(f["generic"] and f["success"] and f.get("p", math.nan) < level
+                                       for f in fits.values()), best_generic_fit=G)
     if rejected_generic:
         out["rejected_generic"] = list(rejected_generic)
     # a term the deciding test finds significant whose NLP fit failed (no estimate, no likelihood ratio): best_fit
     # leaves it out, so the step must not read "nothing significant" as if the library had been tested in full
-    unfitted = sorted((f for f in fits.values() if not f["success"] and f.get("p", math.nan) < level),
+    # (under the likelihood ratio a failed fit has no p of its own: its score test's p stands in)
+    def p_or_score(f):
+        p = f.get("p", math.nan)
+        return float(rows_by.loc[f["name"], "p_value"]) if math.isnan(p) else p
+
+    unfitted = sorted((dict(f, p=p_or_score(f)) for f in fits.values() if not f["success"] and p_or_score(f) < level),
                       key=lambda f: f["p"])
     if unfitted:
         out["significant_unfitted"] = [f["name"] for f in unfitted]
     # generic terms that may be added, significant by the score test's own p, but below the screen's best by LM:
     # never estimated, so "nothing significant" holds only for the terms that were
-    unscreened = [n for n in ranked if is_generic(n) and n not in rejected_generic and n not in fits
+    # (physical candidates likewise: the screen takes the best SCREEN_PHYSICAL by LM, and a candidate of larger df
+    # can have a smaller p with a smaller LM)
+    unscreened = [n for n in ranked if n not in rejected_generic and n not in fits
                   and rows_by.loc[n, "p_value"] < level]
     if unscreened:
         out["significant_unscreened"] = unscreened
@@ -482,7 +494,8 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
                               f"library of {len(names)} terms: p < {level:.2g}); not estimated, significant by the "
                               "score test: " + ", ".join(f"{n} (p = {rows_by.loc[n, 'p_value']:.2g})"
                                                          for n in unscreened)
-                              + f" (the NLP estimates the best {SCREEN_GENERIC} generic terms by LM)"
+                              + f" (the NLP estimates the best {SCREEN_GENERIC} generic terms and "
+                                f"{SCREEN_PHYSICAL} physical candidates by LM)"
                               if unscreened else
                               f"nothing significant over the whole library of {len(names)} terms ({criterion}, "
                               f"Bonferroni: p < {level:.2g})")
@@ -544,7 +557,7 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
                    f"looks like {describe_fit(G)}, p = {G['p']:.2g}")
         return out
     if named:
-        best = min(named, key=lambda r: r["J_P"])
+        best = min(named, key=lambda r: _lowest_J(r, "J_P"))
         out.update(decision="named", added=best["candidate"], initial=float(best["estimate"]),
                    message=f"{best['candidate']} encompasses the "
                            + ("generic term rejected earlier " if G["name"] in rejected_generic else "discovered ")

@@ -412,8 +412,9 @@ def discovery_section(it: dict) -> list[str]:
     L = ([f"Step rejected: back to the model of iteration {back['iteration']}; its structure determination again "
           f"without {', '.join(back['without'])} (`[loop] after_rejection`).", ""] if back else [])
     L += [f"Structure determination over a library of {d['library_size']} terms (physical candidates and generic "
-          f"discrepancy terms; the score test below ranks them, the likelihood ratio of the NLP decides at p < "
-          f"{d['level']:.3g}, Bonferroni over the library):", ""]
+          f"discrepancy terms; the score test below ranks them, "
+          + ("the likelihood ratio of the NLP" if d.get("criterion", "likelihood ratio") == "likelihood ratio"
+             else f"the {d['criterion']}") + f" decides at p < {d['level']:.3g}, Bonferroni over the library):", ""]
     sc = d.get("screen") or {}
     fits = sc.get("fits", {})
     if fits:

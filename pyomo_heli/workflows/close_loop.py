@@ -76,7 +76,7 @@ from ..pareto.store import read_checkpoint
 from ..provenance import source_sha256
 from ..report.loop import LOOP_FILE, limit_statement, load_loop, rejected_discovery, unexplained_statement  # noqa: F401 - load_loop re-exported (studies)
 from .loop_steps import (_with_candidate, _without, backward_check, errors_of,  # noqa: F401 (tests)
-                         select_shape, validation_check)
+                         select_shape, term_to_drop, validation_check)
 from .run_folder import RunFolder
 
 
@@ -403,16 +403,15 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
                     if settings.discovery and not record.get("rejected") else [])
         if backward:
             record["backward_check"] = backward
-        dropped = [b["name"] for b in backward if b["significant"] is False]  # None: not tested
-        if dropped:  # past the iteration limit too; the validation rule judges the model without it as any step
-            b = next(b for b in backward if b["name"] == dropped[0])
-            record["decision"] = {"decision": "dropped", "name": dropped[0],
-                                  "message": f"backward check: {dropped[0]} no longer "
+        b = term_to_drop(backward)
+        if b is not None:  # past the iteration limit too; the validation rule judges the model without it as any step
+            record["decision"] = {"decision": "dropped", "name": b["name"],
+                                  "message": f"backward check: {b['name']} no longer "
                                   f"significant (Wald p = {b['p']:.2g} >= {b['level']:.2g})"}
             write_json(out / LOOP_FILE, doc)
             progress(record["decision"]["message"] + "; removed, not offered again")
-            rejected.append(dropped[0])
-            cfg = _without(cfg, chosen, dropped[0])
+            rejected.append(b["name"])
+            cfg = _without(cfg, chosen, b["name"])
             added_shape, added = None, None
             i += 1
             continue

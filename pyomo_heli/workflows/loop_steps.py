@@ -110,6 +110,14 @@ def backward_check(cfg: IdentificationConfig, record: dict, base_names, level: f
     return rows
 
 
+def term_to_drop(backward: list[dict]) -> dict | None:
+    """The row of :func:`backward_check` whose term the loop removes: of those no longer significant, the least
+    significant (largest p), as stepwise regression removes; None when every tested term stays (or none was
+    tested)."""
+    out = [b for b in backward if b["significant"] is False]
+    return max(out, key=lambda b: b["p"]) if out else None
+
+
 def select_shape(cfg: IdentificationConfig, cand, file: Path, alpha: float,
                  progress=info) -> tuple[IdentificationConfig, dict]:
     """The shape rule: a candidate's shape parameters from the time series, tested against their defaults.

@@ -73,7 +73,7 @@ class Results:
 
         model = HelicopterModel()
         if name not in model.parameters:
-            from .workflows.close_loop import model_with_candidates
+            from .diagnosis.candidates import model_with_candidates
 
             model = model_with_candidates(model, self.result.info.get("extensions", []))
         spec = model.parameters.spec(name)

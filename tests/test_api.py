@@ -166,3 +166,17 @@ def test_the_console_standard_errors_are_in_display_units(tmp_path):
         assert float(m.group(2)) == pytest.approx(u["se"]["theta_twist"] * 180 / math.pi, rel=5e-3)  # 3 digits
     assert re.search(r"CL_alpha_HT=\S+\+-\S+ 1/rad", line), line
     assert res is not None
+
+
+def test_estimates_of_a_loop_iteration_with_a_candidate_strength():
+    """A closed-loop iteration's folder (the wake's k_wt free beside the model's parameters): ``estimates()`` gives
+    every free parameter in display units, the candidate strength as chosen.json has it (a review: the import of
+    the candidate model had moved, and every folder with a candidate strength raised ImportError)."""
+    folder = HERE.parent / "docs" / "results" / "close_loop" / "iter_1"
+    chosen = json.loads((folder / "chosen.json").read_text())["chosen"]
+    est = ph.load_results(folder).estimates()
+    c = est[est.point == "C"].set_index("parameter")
+    assert "k_wt" in c.index and c.loc["k_wt", "unit"] == "-"
+    assert c.loc["k_wt", "estimate"] == pytest.approx(chosen["parameters"]["k_wt"], rel=1e-12)
+    assert c.loc["theta_twist", "estimate"] == pytest.approx(chosen["parameters"]["theta_twist"] * 180 / math.pi,
+                                                             rel=1e-12)

@@ -199,7 +199,11 @@ def test_display_units_agree_with_the_parameter_table():
     from pyomo_heli.diagnosis.candidates import CANDIDATES, make_candidate
     from pyomo_heli.units import display_unit
 
-    specs = list(bo105().specs()) + [s for n in CANDIDATES for s in make_candidate(n).parameters()]
+    from pyomo_heli.physics.discrepancy import FAMILIES, generic_names, generic_term
+
+    generic = sorted({n for f in FAMILIES for n in generic_names(f)})
+    specs = (list(bo105().specs()) + [s for n in CANDIDATES for s in make_candidate(n).parameters()]
+             + [s for n in generic for s in generic_term(n).parameters()])  # beta0_bias [rad] was shown in rad
     assert any(s.display for s in specs)
     for s in specs:
         unit, factor = display_unit(s.unit)

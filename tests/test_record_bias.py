@@ -100,6 +100,16 @@ def test_the_report_shows_the_records_that_disagree(pitot_error, tmp_path):
     assert "### Record biases" in text
     assert "TAS: residual bias (model - data) of the records at each trim speed against their mean" in text
     assert "theta: residual bias" not in text  # only the output whose records disagree
+    # the common bias in each output's display unit, labelled (a review: it was SI, rad beside deg, unlabelled)
+    from pyomo_heli.diagnosis.residuals import DISPLAY
+
+    d = diagnose(pitot_error)
+    for o, t in d.record_biases.items():
+        unit, fac = DISPLAY[o]
+        section = text.split("### Record biases", 1)[1].splitlines()
+        row = next(ln for ln in section if ln.startswith(f"| {o} |"))
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        assert float(cells[cells.index(unit) - 1]) == pytest.approx(t["common"] * fac, rel=2e-3, abs=1e-12), row
 
 
 def test_level_study_writes_each_seed_and_resumes(tmp_path):

@@ -389,3 +389,43 @@ def test_the_rms_without_conventions_leaves_out_a_datum_the_manifest_gives(tmp_p
         got = doc["initial"]["rms_deg_without_conventions"][role]["theta"]
         assert got == pytest.approx(expected, rel=1e-6), role
         assert abs(got - doc["initial"]["rms_deg"][role]["theta"]) > 0.5  # the datum's 2 deg is what differs
+
+
+def test_the_report_shows_a_missing_shape_value_as_a_dash(tmp_path):
+    """A channel with a single trim point has no step, no means around it and no trend: the report's remaining-
+    residual row shows "-" there, not +0.00 (a review: a missing value read as zero); the score table's estimate is
+    labelled SI."""
+    import numpy as np
+    import pandas as pd
+
+    from pyomo_heli.diagnosis.trim_attribution import residual_shape
+    from pyomo_heli.report.trim_loop import write_trim_loop_report
+    from pyomo_heli.units import KT
+
+    pts = pd.DataFrame({"channel": ["col", "lon", "lon", "theta", "theta"], "V": np.array([40, 20, 60, 20, 60]) * KT,
+                        "role": ["identification"] * 5})
+    e = np.array([0.5, 0.1, -0.3, 0.2, 0.4])
+    shape = residual_shape(pts, e)
+    rms = {"identification": {"col": 0.5, "lon": 0.2, "theta": 0.3}, "validation": {}}
+    it = {"iteration": 0, "extensions": [], "solve": {"J_trim": 1.0, "status": "ok", "iterations": 3},
+          "J_trim_float": 1.0, "residual_sigma_deg": 0.5, "dof": 2, "parameters": {},
+          "score_test": {"n_testable": 0, "level": 0.01, "decision": "none", "message": "-", "scores": []},
+          "rms_deg": rms, "residual_shape": shape, "model_deg": [0.0] * 5}
+    flat = {"speed_kt": [0, 80], "col": [0, 0], "lon": [0, 0], "theta": [0, 0]}
+    doc = {"points": {"channel": list(pts.channel), "role": list(pts.role), "speed_kt": list(pts.V / KT),
+                      "value_deg": list(e)},
+           "curves": {"before": flat, "after": flat},
+           "initial": {"model_deg": [0.0] * 5, "rms_deg": rms, "rms_deg_without_conventions": rms},
+           "iterations": [it], "final_iteration": 0, "aircraft": "x", "dataset": "d", "front": "f",
+           "conventions": {"collective_station": None, "model_r_ref": 0.7, "lon_sign": 1,
+                           "theta_datum_estimated": False, "theta_datum_deg": 0.0}, "mass_kg": 2200,
+           "rho_kg_m3": 1.225,
+           "counts": {"identification": {"col": 1, "lon": 2, "theta": 2}, "validation": {"col": 0, "lon": 0,
+                                                                                         "theta": 0}},
+           "holdout_every": 0, "stopped": "x"}
+    text = write_trim_loop_report(doc, "c.toml", tmp_path).read_text()
+    col = next(ln for ln in text.splitlines() if ln.startswith("| col | 0.500"))
+    assert col == "| col | 0.500 | - | - | - / - | - |", col
+    lon = next(ln for ln in text.split("## Remaining residual", 1)[1].splitlines() if ln.startswith("| lon |"))
+    assert "- / -" not in lon  # two points: a step and its means
+    assert "| estimate [SI] |" in text

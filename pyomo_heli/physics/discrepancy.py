@@ -58,6 +58,7 @@ it (:mod:`pyomo_heli.diagnosis.discovery`).
 from __future__ import annotations
 
 from ..channels import INPUTS
+from ..units import DEG
 from .extensions import Extension
 from .parameters import ParameterSpec
 
@@ -176,7 +177,8 @@ class GenericTerm(Extension):
         lo, hi, scale = BOUNDS[self.kind]
         unit = {"bias": "rad", "delay": "s"}.get(self.kind, "-")
         return [ParameterSpec(self.strength, 0.0, unit, f"generic discrepancy coefficient: {self.formula()}",
-                              "discrepancy family", (lo, hi), scale)]
+                              "discrepancy family", (lo, hi), scale,
+                              display=("deg", 1.0 / DEG) if unit == "rad" else None)]
 
     def value(self, ctx):
         """The force [N] or moment [N m] this term adds at ``ctx`` (0 for a sensor or control-path term)."""

@@ -222,24 +222,41 @@ def record_bias_shapes(record_biases: dict) -> list[str]:
     return L
 
 
+def record_bias_table(diag: Diagnosis) -> pd.DataFrame:
+    """The record-bias tests with each output's common bias in its display unit (deg, deg/s, g, kt), the unit in a
+    column beside it."""
+    tab = diag.table("record_biases")
+    if tab.empty:
+        return tab
+    units = [DISPLAY[o] for o in tab["output"]]
+    tab["common"] = [c * fac for c, (_, fac) in zip(tab["common"], units)]
+    tab.insert(list(tab.columns).index("common") + 1, "unit", [u for u, _ in units])
+    return tab
+
+
 def implied_forces_section(forces: ImpliedForces | dict, figure: str | None) -> list[str]:
     """The report section of the steady force and moment the trims ask for (one model, or label -> model); the
     figure's file name, or None where no figure was drawn."""
     many = forces if isinstance(forces, dict) else {forces.label: forces}
-    first = next(iter(many.values()))
+
+    def sigmas(f):
+        return f"{f.sigma_source}: " + ", ".join(f"{c} {math.degrees(v):.3g} deg" for c, v in f.sigma.items())
+
+    # each model's standard errors use its own noise estimate: one line for one model, else per model below
     L = ["## Steady force and moment the trims ask for", "",
          "At each recorded trim point, the force and moment the model would need to balance at the recorded "
          "controls and attitude (equation error at the trims; no library of effects): zero where the model "
          "trims as recorded. Standard errors from the trim channels' noise "
-         f"({first.sigma_source}: " + ", ".join(f"{c} {math.degrees(v):.3g} deg" for c, v in first.sigma.items())
-         + "); `pyomo_heli/diagnosis/trim_forces.py`, docs/diagnosis.md. chi2 = sum (value / SE)^2 over the "
+         + (f"({sigmas(next(iter(many.values())))})" if len(many) == 1 else "(each model's, below)")
+         + "; `pyomo_heli/diagnosis/trim_forces.py`, docs/diagnosis.md. chi2 = sum (value / SE)^2 over the "
          "points; `beyond parameters`: after the least-squares fit of a shift of the identified parameters (what "
          "the trade-off of the Pareto choice leaves without any missing physics). The parameters were fitted to "
          "the same trims, so these p are pointers.", ""]
     if figure is not None:
         L += [f"![steady force and moment the trims ask for]({figure})", ""]
     for lab, f in many.items():
-        L += [f"{lab}:", "", markdown_table(f.summary(), digits=4), ""]
+        L += [f"{lab}" + (f" (noise {sigmas(f)})" if len(many) > 1 else "") + ":", "",
+              markdown_table(f.summary(), digits=4), ""]
     return L
 
 
@@ -311,7 +328,7 @@ def write_diagnosis_report(out_dir, res: Residuals, diag: Diagnosis, results_dir
     if diag.record_biases:
         L += ["### Record biases", "", "Do the records agree on each output's bias (generalised least-squares bias per "
               "record under the innovations' covariance; chi-square of their spread, Bonferroni over the outputs; "
-              "docs/diagnosis.md)?", "", markdown_table(diag.table("record_biases"), digits=3), ""]
+              "docs/diagnosis.md)?", "", markdown_table(record_bias_table(diag), digits=3), ""]
         L += record_bias_shapes(diag.record_biases)
     if diag.input_path:
         ip = diag.input_path

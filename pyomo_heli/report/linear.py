@@ -391,6 +391,14 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png", sta
                          if d is not None])
     shown = front.drop(columns=[c for c in front.columns if c.startswith("cold_") or c in ("warm_start",)],
                        errors="ignore")
+    # the parameters in display units with their unit in the header, as every table of the report; a point that
+    # did not converge has no estimate (its last iterate is no value to read)
+    ok = shown["success"].astype(bool) if "success" in shown else pd.Series(True, index=shown.index)
+    for name in result.parameters:
+        if name in shown:
+            unit, fac = _display(cfg.model, name)
+            shown[name] = (shown[name].astype(float) * fac).where(ok)
+            shown = shown.rename(columns={name: f"{name} [{unit}]"})
     text = [f"# Tri-objective identification: {cfg.path.name}", "",
             f"Objectives {', '.join(result.info['objectives'])}; grid {result.info['grid'][0]} (J_trim) x "
             f"{result.info['grid'][1]} (J_linear); total time {result.info['total_time']:.0f} s; "

@@ -135,7 +135,7 @@ def write_trim_loop_report(doc: dict, config_path, out) -> Path:
         L += ["", f"{head}: **{st['decision']}**: {st['message']}" if not d else
               f"{head}, structure determination over the candidates and the generic discrepancy family: "
               f"**{d['decision']}**: {d['message']}", ""]
-        L += ["| candidate | LM | df | p | estimate | kept | note |", "|---|---|---|---|---|---|---|"]
+        L += ["| candidate | LM | df | p | estimate [SI] | kept | note |", "|---|---|---|---|---|---|---|"]
         top = {r["name"] for r in [r for r in st["scores"] if r["testable"]][:TOP_ROWS]}
         shown = [r for r in st["scores"] if not d or r["name"] in top or not is_generic(r["name"])]
         for r in shown:
@@ -162,12 +162,15 @@ def write_trim_loop_report(doc: dict, config_path, out) -> Path:
     L += ["", "## Remaining residual (final model, all points)", "",
           "| channel | RMS | largest step | between [kt] | mean below / above | trend [deg/10 kt] |",
           "|---|---|---|---|---|---|"]
+    def cell(x, fmt):  # a shape value the channel has not (a single point: no step, no trend): "-", not 0
+        return "-" if x is None else format(x, fmt)
+
     for ch, s in last["residual_shape"].items():
         between = s.get("step_between_kt")  # no step with a single point of the channel
-        L.append(f"| {ch} | {s['rms_deg']:.3f} | {s.get('step_deg', 0):+.2f} | "
+        L.append(f"| {ch} | {s['rms_deg']:.3f} | {cell(s.get('step_deg'), '+.2f')} | "
                  + (f"{between[0]:.1f}-{between[1]:.1f}" if between else "-") + " | "
-                 f"{s.get('mean_below_step_deg', 0):+.2f} / {s.get('mean_above_step_deg', 0):+.2f} | "
-                 f"{s.get('trend_deg_per_10kt', 0):+.3f} |")
+                 f"{cell(s.get('mean_below_step_deg'), '+.2f')} / {cell(s.get('mean_above_step_deg'), '+.2f')} | "
+                 f"{cell(s.get('trend_deg_per_10kt'), '+.3f')} |")
     d = last["score_test"].get("discovery")
     if d and not d["added"]:
         L += ["", "Nothing in the library, generic terms included, is significant on the remaining residual "

@@ -65,8 +65,12 @@ def main(argv=None) -> int:
     a.out.mkdir(parents=True, exist_ok=True)
     rows, tests = [], []
     for name, model, params, shift in cases(cfg, a.loop):
-        for series, nlp in (("innovations", cfg.nlp), ("plain", dataclasses.replace(cfg.nlp, input_errors=()))):
-            c = dataclasses.replace(cfg, model=model, nlp=nlp)
+        # the plain test: no input noise in the residual analysis (its [diagnosis] settings too, which a config's
+        # [diagnosis] table fixes at load: replacing the NLP's input errors alone left the innovations in)
+        plain = dataclasses.replace(cfg.diagnosis_settings, input_noise=())
+        for series, nlp, diag in (("innovations", cfg.nlp, cfg.diagnosis),
+                                  ("plain", dataclasses.replace(cfg.nlp, input_errors=()), plain)):
+            c = dataclasses.replace(cfg, model=model, nlp=nlp, diagnosis=diag)
             d = diagnose(compute_residuals(c, params, label=name, trim_sensitivities=shift))
             w = pd.DataFrame(d.whiteness)
             w = w[w["p"].notna()]  # the tests that ran (a NaN p: too few samples)

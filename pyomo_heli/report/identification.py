@@ -202,17 +202,28 @@ def markdown_table(df: pd.DataFrame, digits: int = 6, formats: dict | None = Non
     return "\n".join(lines)
 
 
+def parameters_in_display_units(frame: pd.DataFrame, model: HelicopterModel, names,
+                                keep: pd.Series | None = None) -> tuple[pd.DataFrame, list[str]]:
+    """A copy of ``frame`` (a front's rows) with each parameter column of ``names`` in its display unit and the
+    unit in its header (``name [unit]``), and those headers; rows where ``keep`` is False get no value (a point
+    that did not converge has no estimate)."""
+    out, headers = frame.copy(), []
+    for name in names:
+        if name in out:
+            unit, fac = _display(model, name)
+            col = out[name].astype(float) * fac
+            out[name] = col if keep is None else col.where(keep)
+            headers.append(f"{name} [{unit}]")
+            out = out.rename(columns={name: headers[-1]})
+    return out, headers
+
+
 def front_table(result: IdentificationResult, model: HelicopterModel) -> pd.DataFrame:
     """front.csv with parameters in display units."""
-    f = result.front
-    cols = {c: f[c] for c in ("index", "kind", "epsilon", "J_time", "J_trim") if c in f}
-    for name in result.parameters:
-        unit, fac = _display(model, name)
-        cols[f"{name} [{unit}]"] = f[name] * fac
-    for c in ("success", "status", "iterations", "wall_time", "utopia_distance"):
-        if c in f:
-            cols["wall time [s]" if c == "wall_time" else c] = f[c]
-    return pd.DataFrame(cols)
+    f, params = parameters_in_display_units(result.front, model, result.parameters)
+    cols = ([c for c in ("index", "kind", "epsilon", "J_time", "J_trim") if c in f] + params
+            + [c for c in ("success", "status", "iterations", "wall_time", "utopia_distance") if c in f])
+    return f[cols].rename(columns={"wall_time": "wall time [s]"})
 
 
 def utopia_distance_of(result: IdentificationResult, point: dict) -> float | None:

@@ -17,8 +17,8 @@ from ..dataset.frequency_response import load_responses
 from ..pareto.result import IdentificationResult, ResultFileError, check_point_record, is_number
 from ..physics.model import INPUTS, OUTPUTS
 from ..simulation.linearize import linearize_float
-from .identification import (_display, markdown_table, nadir_rule_line, placement_line, read_truth,
-                             read_truth_effects)
+from .identification import (_display, markdown_table, nadir_rule_line, parameters_in_display_units,
+                             placement_line, read_truth, read_truth_effects)
 from .linearization import gain_unit
 
 ESTIMATES = (("time-domain (A)", "C0", "--"), ("bi-objective", "C2", "-."), ("tri-objective", "C3", "-"))
@@ -393,12 +393,8 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png", sta
                        errors="ignore")
     # the parameters in display units with their unit in the header, as every table of the report; a point that
     # did not converge has no estimate (its last iterate is no value to read)
-    ok = shown["success"].astype(bool) if "success" in shown else pd.Series(True, index=shown.index)
-    for name in result.parameters:
-        if name in shown:
-            unit, fac = _display(cfg.model, name)
-            shown[name] = (shown[name].astype(float) * fac).where(ok)
-            shown = shown.rename(columns={name: f"{name} [{unit}]"})
+    shown, _ = parameters_in_display_units(shown, cfg.model, result.parameters,
+                                           keep=shown["success"].astype(bool) if "success" in shown else None)
     text = [f"# Tri-objective identification: {cfg.path.name}", "",
             f"Objectives {', '.join(result.info['objectives'])}; grid {result.info['grid'][0]} (J_trim) x "
             f"{result.info['grid'][1]} (J_linear); total time {result.info['total_time']:.0f} s; "

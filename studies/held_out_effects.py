@@ -9,8 +9,8 @@ For every held-out effect (pyomo_heli/flighttest/held_out_effects.py, at its nom
 (20261122 + k, k = FIRST..FIRST+SEEDS-1): the bundled flight test's generator config with its truth effect
 replaced by the held-out one (same maneuvers, trims and noise levels) -> ``OUT/<effect>_<seed>/data``; the
 closed loop with ``[loop] discovery = true`` (CONFIG) -> ``OUT/<effect>_<seed>/loop``; its table row ->
-``OUT/<effect>_<seed>/row.json``. A finished loop is not rerun (a stopped one resumes), so a rerun of the same
-command resumes row by row. ``--workers N`` runs the cases on N local processes (``--scheduler ADDRESS``: on a Dask
+``OUT/<effect>_<seed>/row.json``. A finished loop is not rerun (an interrupted one resumes), so a rerun of the same
+command resumes row by row; a finished loop made from another config text (other flags) is refused. ``--workers N`` runs the cases on N local processes (``--scheduler ADDRESS``: on a Dask
 cluster whose workers see OUT); the rows are the same as one after the other.
 ``--effects none`` is M0 plus noise only; ``--first-seed K`` starts at seed 20261122 + K; ``--evaluate-only`` runs
 nothing and re-evaluates every finished loop in OUT (rows and table); ``--rescore`` runs nothing and re-scores
@@ -126,9 +126,18 @@ def generate_case(case: Path, template: str, effect: str, seed: int) -> Path:
 
 
 def run_case(effect: str, seed: int, out: Path, config: Path, template: str) -> Path:
+    """The closed loop of ``config`` on the flight test of ``effect`` and ``seed``, run unless ``OUT/<case>/loop``
+    holds it finished from the same config and flight test (:func:`~pyomo_heli.workflows.close_loop.finished_loop`:
+    another config's loop is refused); the loop folder."""
+    from pyomo_heli.workflows.close_loop import LoopMismatchError, finished_loop
+
     case = out / f"{effect}_{seed}"
     data, loop = generate_case(case, template, effect, seed), case / "loop"
-    if not (loop / "loop.json").is_file() or not json.loads((loop / "loop.json").read_text()).get("stopped"):
+    try:
+        done = finished_loop(loop, config, data)  # a loop not stopped resumes
+    except LoopMismatchError as exc:  # one of another config or flight test: this OUT is another study's
+        raise StudyFolderError(str(exc)) from None
+    if not done:
         t0 = time.perf_counter()
         run_command(["close-loop", str(config), "--dataset", str(data), "--out", str(loop)])
         print(f"{effect} {seed}: loop done in {time.perf_counter() - t0:.0f} s", flush=True)
@@ -1181,6 +1190,7 @@ def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> 
 
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.report.loop import final_index
+    from pyomo_heli.workflows.close_loop import LoopMismatchError, finished_loop
 
     base = out / "bundled"
     base.mkdir(parents=True, exist_ok=True)
@@ -1194,14 +1204,23 @@ def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> 
     text = re.sub(r"(?m)^discovery\s*=.*\n", "", config.read_text())
     truth = json.loads((dataset / "truth.json").read_text())["parameters"]
     for mode in modes:
-        loop = base / mode / "loop"
-        if mode not in cost or not (loop / "loop.json").is_file():
-            cfg = base / mode / "loop.toml"
-            cfg.parent.mkdir(parents=True, exist_ok=True)
-            flag = "true" if mode == "on" else "false"
-            cfg.write_text(text.replace("\n[loop]\n", f"\n[loop]\ndiscovery = {flag}\n", 1))
+        loop, cfg = base / mode / "loop", base / mode / "loop.toml"
+        flag = "true" if mode == "on" else "false"
+        wanted = text.replace("\n[loop]\n", f"\n[loop]\ndiscovery = {flag}\n", 1)
+        if mode in cost and (loop / "loop.json").is_file() and cfg.is_file() and cfg.read_text() != wanted:
+            raise StudyFolderError(f"{loop}: its timed loop was made from another config ({cfg}); give this study "
+                                   "another folder")
+        cfg.parent.mkdir(parents=True, exist_ok=True)
+        if not cfg.is_file() or cfg.read_text() != wanted:
+            cfg.write_text(wanted)
+        try:
+            done = mode in cost and finished_loop(loop, cfg, dataset)
+        except LoopMismatchError as exc:
+            raise StudyFolderError(str(exc)) from None
+        if not done:
             load0, t0, c0 = os.getloadavg()[0], time.perf_counter(), _cpu()
-            run_command(["close-loop", str(cfg), "--dataset", str(dataset), "--out", str(loop)])
+            # timed from the start: a loop interrupted before its time was recorded is run again whole
+            run_command(["close-loop", str(cfg), "--dataset", str(dataset), "--out", str(loop), "--restart"])
             cost[mode] = {"wall_s": time.perf_counter() - t0, "cpu_s": _cpu() - c0,
                           "load_start": load0, "load_end": os.getloadavg()[0]}
             cost = merged({mode: cost[mode]})
@@ -1380,7 +1399,10 @@ def main(argv=None) -> int:
         print((out / "held_out.md").read_text())
         return 0
     if a.bundled:
-        run_bundled(out, config, ROOT / "data" / "bo105_synthetic", a.modes)
+        try:
+            run_bundled(out, config, ROOT / "data" / "bo105_synthetic", a.modes)
+        except StudyFolderError as exc:
+            ap.error(f"--bundled: {exc}")
         return 0
     bad = [e for e in a.effects if e != "none" and e not in HELD_OUT_EFFECTS]
     if bad:

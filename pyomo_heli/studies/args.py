@@ -33,3 +33,40 @@ def in_file(ap: argparse.ArgumentParser, path, option: str) -> Path:
     if not p.is_file():
         ap.error(f"{option} {path}: {'is a folder, expected a file' if p.is_dir() else 'file not found'}")
     return p
+
+
+#: the record of what a study's results folder was made from (:func:`claim_inputs`)
+INPUTS_FILE = "study_inputs.json"
+
+
+def claim_inputs(ap: argparse.ArgumentParser, out: Path, **inputs) -> None:
+    """Refuse ``out`` when its finished work (seeds, generated flight tests, realizations) was made from other
+    inputs: the SHA-256 of each named input file (``--config=path`` as ``config=path``; None: not given) and each
+    plain value (a flag's setting) are kept in ``OUT/study_inputs.json`` on the first run and compared on every
+    rerun, which resumes only on equal inputs. One argparse error line names the option at fault."""
+    import hashlib
+    import json
+
+    now = {}
+    for k, v in inputs.items():
+        if isinstance(v, Path):
+            now[k] = hashlib.sha256(v.read_bytes()).hexdigest()
+        else:
+            now[k] = v
+    f = Path(out) / INPUTS_FILE
+    if f.is_file():
+        try:
+            old = json.loads(f.read_text())
+        except ValueError:
+            old = None
+        if isinstance(old, dict):
+            diff = [k for k in now if k in old and old[k] != now[k]]
+            if diff:
+                k = diff[0]
+                what = f"the content of --{k.replace('_', '-')} {inputs[k]}" if isinstance(inputs[k], Path) \
+                    else f"--{k.replace('_', '-')} {inputs[k]!r} (it has {old[k]!r})"
+                ap.error(f"--out {out}: its finished results were made from other inputs than {what}; give another "
+                         f"--out or remove it")
+            now = {**old, **now}
+    Path(out).mkdir(parents=True, exist_ok=True)
+    f.write_text(json.dumps(now, indent=1))

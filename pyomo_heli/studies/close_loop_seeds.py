@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -44,6 +45,7 @@ from pyomo_heli.provenance import ResultsMismatchError
 from pyomo_heli.report.identification import VALIDATION_OUTPUTS, read_truth
 from pyomo_heli.report.loop import JOINT, iterations_validation_change, truth_replay_errors
 from pyomo_heli.workflows.check_effect import loop_dataset
+from pyomo_heli.workflows.close_loop import LoopMismatchError, finished_loop
 
 ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, data/
 WAKE = "rotor_wake_on_tail"
@@ -58,7 +60,7 @@ def run_seed(seed: int, out: Path, config: Path, data_config: Path) -> Path:
         t0 = time.perf_counter()
         run_command(["generate-data", "--config", str(data_config), "--seed", str(seed), "--out", str(data)])
         print(f"seed {seed}: data generated in {time.perf_counter() - t0:.0f} s", flush=True)
-    if not (loop / "loop.json").is_file() or "stopped" not in json.loads((loop / "loop.json").read_text()):
+    if not finished_loop(loop, config, data):  # a loop not stopped resumes; one of another config is refused
         t0 = time.perf_counter()
         run_command(["close-loop", str(config), "--dataset", str(data), "--out", str(loop)])
         print(f"seed {seed}: loop done in {time.perf_counter() - t0:.0f} s", flush=True)
@@ -72,6 +74,9 @@ def seed_task(task: tuple):
         return run_seed(*task), 0
     except SystemExit as exc:
         return None, int(exc.code) if isinstance(exc.code, int) else 1
+    except LoopMismatchError as exc:  # --out holds another config's loop: one line, the other seeds go on
+        print(f"close_loop_seeds: error: {exc}", file=sys.stderr, flush=True)
+        return None, 2
 
 
 def evaluate(name: str, loop: Path, config: Path) -> dict:
@@ -156,7 +161,7 @@ def markdown(tab: pd.DataFrame) -> str:
 
 
 def main() -> None:
-    from .args import in_file, nonneg_int, out_folder
+    from .args import claim_inputs, in_file, nonneg_int, out_folder
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=nonneg_int, nargs="*", default=[])
     ap.add_argument("--out", type=Path, required=True)
@@ -182,6 +187,8 @@ def main() -> None:
         in_file(ap, a.config, "--config")
         in_file(ap, a.data_config, "--data-config")
     out_folder(ap, a.out).mkdir(parents=True, exist_ok=True)
+    if a.seeds:  # OUT/data_<seed> are generated once: refused when --data-config has changed since
+        claim_inputs(ap, a.out, data_config=a.data_config)
     loops = [(str(p), p) for p in a.existing]
     from pyomo_heli.log import configure_console
     from pyomo_heli.parallel import dask_executor, run_tasks

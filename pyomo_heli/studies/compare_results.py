@@ -37,7 +37,8 @@ IGNORED = frozenset((
     "wall_time", "setup_time", "cold_wall_time", "build_time", "solver_setup_time", "total_time",
     "uncertainty_time", "cpu_time", "time_s", "elapsed",  # timings [s]
     "dataset", "config", "results_dir", "path", "paths",  # paths of this checkout
-    "fingerprint", "model_fingerprint", "extension_forms", "config_sha256", "dataset_sha256", "config_text",
+    "fingerprint", "model_fingerprint", "extension_forms", "config_sha256", "dataset_sha256", "source_sha256",
+    "config_text",
     "versions", "version", "python", "platform", "host", "hostname", "date", "created", "started", "finished",
     "provenance",  # hashes and copies of the inputs and the code, versions, dates
 ))

@@ -87,9 +87,11 @@ def evaluate(loop: Path, data: Path) -> pd.DataFrame:
 
 def evaluate_saved(loop: Path, data: Path, folder: Path) -> pd.DataFrame:
     """:func:`evaluate`, each loop's rows written to ``folder`` as soon as they are done and read back by a rerun
-    while the loop's ``loop.json`` and the flight test's ``manifest.json`` are the same (a SHA-256 of each in
-    the file name), so that an interrupted study resumes."""
-    key = hashlib.sha256((loop / "loop.json").read_bytes() + (data / "manifest.json").read_bytes()).hexdigest()[:16]
+    while the loop's ``loop.json`` and the flight test's files are the same (a SHA-256 of both in the file name;
+    the manifest alone is the same for every seed), so that an interrupted study resumes."""
+    from pyomo_heli.provenance import dataset_sha256
+
+    key = hashlib.sha256((loop / "loop.json").read_bytes() + dataset_sha256(data).encode()).hexdigest()[:16]
     name = "_".join(p for p in Path(loop).parts if p not in ("/", ".", ".."))
     f = folder / f"{name}_{key}.csv"
     if f.is_file():
@@ -141,7 +143,7 @@ def _table(df: pd.DataFrame) -> list[str]:
 
 
 def main(argv=None) -> int:
-    from .args import in_file, out_folder
+    from .args import claim_inputs, in_file, out_folder
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loops", type=Path, nargs="+", required=True, help="close-loop results folders")
     ap.add_argument("--out", type=Path, required=True)
@@ -155,6 +157,8 @@ def main(argv=None) -> int:
     if a.data is None and not (data / "manifest.json").is_file():
         in_file(ap, a.data_config, "--data-config")
     out_folder(ap, a.out).mkdir(parents=True, exist_ok=True)
+    if a.data is None:  # OUT/data is generated once: refused when --data-config has changed since
+        claim_inputs(ap, a.out, data_config=in_file(ap, a.data_config, "--data-config"))
     if a.data is None and not (data / "manifest.json").is_file():
         run_command(["generate-data", "--config", str(a.data_config), "--out", str(data)])
     if not (data / "manifest.json").is_file():

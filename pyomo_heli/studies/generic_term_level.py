@@ -58,7 +58,7 @@ from pyomo_heli.physics.discrepancy import generic_names
 from pyomo_heli.report.identification import markdown_table
 from pyomo_heli.units import SENSOR_SIGMA_KEYS
 
-from .args import in_file, nonneg_int, out_folder
+from .args import claim_inputs, in_file, nonneg_int, out_folder
 from .score_test_level import seeds_of
 from .seeded import ROOT, m0_noise_data
 
@@ -264,7 +264,7 @@ def main(argv=None) -> int:
                    + (["input_reference_error"] if a.input_reference_error else [])
                    + ([f"output_error_ar{a.output_error_ar}"] if a.output_error_ar is not None else []))
     out = out_folder(ap, a.out) / sub
-    out.mkdir(parents=True, exist_ok=True)
+    claim_inputs(ap, out, config=config, data_config=data_config)  # finished seeds are kept for a rerun
     docs = []
     for s in seeds:
         docs.append(one_seed(s, a.terms, config.resolve(), data_config.resolve(), out, a.exact_inputs,

@@ -51,7 +51,7 @@ from pyomo_heli.nlp.identification import RESAMPLE_INPUTS, identification_data
 from pyomo_heli.parallel import check_dask_flags
 
 from . import small_instances as T
-from .args import nonneg_int, out_folder, positive_float
+from .args import claim_inputs, nonneg_int, out_folder, positive_float
 
 EIV = '\n[objectives]\ninput_errors = ["col", "lon"]\n'
 
@@ -194,7 +194,8 @@ def main(argv=None) -> int:
     except ValueError as exc:
         ap.error(f"--seeds: {exc}")
     out = out_folder(ap, a.out) / (a.identification if a.truth == "m0" else f"{a.identification}_wake")
-    out.mkdir(parents=True, exist_ok=True)
+    # finished seeds are kept for a rerun (--rescore scores them again): refused when made with other inputs
+    claim_inputs(ap, out, resample_inputs=a.resample_inputs)
     docs = []
     from pyomo_heli.log import configure_console
     from pyomo_heli.parallel import dask_executor, run_tasks

@@ -15,7 +15,7 @@ from pyomo_heli.flighttest.config import load_config
 from pyomo_heli.flighttest.generate import generate
 from pyomo_heli.report.identification import markdown_table
 
-from .args import in_file, out_folder
+from .args import claim_inputs, in_file, out_folder
 from .score_test_level import seeds_of
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -75,7 +75,8 @@ def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
         except ValueError as exc:  # only the study's own check: a ValueError from loading is no usage error
             ap.error(str(exc))
     out = out_folder(ap, a.out)
-    out.mkdir(parents=True, exist_ok=True)
+    # the seeds and OUT/data are kept for a rerun: refused when made from other configs
+    claim_inputs(ap, out, config=config, data_config=data_config)
     docs = []
     for s in seeds:
         args = (s, config.resolve(), data_config.resolve(), out) + ((overrides,) if data_overrides else ())

@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from ..config import load_identification_config
-from ..provenance import ResultsMismatchError, config_sha256
+from ..provenance import ResultsMismatchError, config_sha256, dataset_sha256
 from ..dataset import load_flight_test
 from ..nlp.identification import build_identification_nlp, identification_data, set_measurements
 from ..pareto.front import ParetoSolver
@@ -197,8 +197,8 @@ class MonteCarloResult:
 
 def _check_same_run(out: Path, run: dict) -> None:
     """Realizations stored in ``out`` are resumed only by the run that made them: the same config (path and content),
-    overrides, seed, noise sigmas, estimators and standard errors (``monte_carlo.json``'s ``info``; a key it lacks is
-    not compared). ResultsMismatchError, one line naming what differs, otherwise."""
+    overrides, flight test (by content), seed, noise sigmas, estimators and standard errors (``monte_carlo.json``'s
+    ``info``; a key it lacks is not compared). ResultsMismatchError, one line naming what differs, otherwise."""
     f = out / "monte_carlo.json"
     if not f.is_file():
         raise ResultsMismatchError(f"{out / 'realizations.csv'} has no monte_carlo.json beside it, so it cannot be "
@@ -235,6 +235,7 @@ def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: d
     params = [f.name for f in cfg.free]
     csv = Path(out) / "realizations.csv" if out is not None else None
     run = {"config": problem.config, "config_sha256": config_sha256(problem.config),
+           "dataset_sha256": dataset_sha256(cfg.dataset),  # the noise-free records the realizations perturb
            "overrides": json.loads(problem.overrides), "seed": seed, "sigma": dict(sigma),
            "trim_sigma": dict(trim_sigma), "multi_objective": multi_objective, "crb": crb}
     rows: list[dict] = []

@@ -67,7 +67,7 @@ from ..config import ConfigError, IdentificationConfig, config_of_result, loop_t
 from ..dataset import load_flight_test
 from ..diagnosis import attribution as attr
 from ..diagnosis.candidates import CANDIDATES, make_candidate
-from ..log import info
+from ..log import get_logger, info
 from ..physics.discrepancy import generic_names
 from .identify import identification_fingerprint, run_identification, shape_values
 from ..nlp.identification import identification_data, validation_maneuvers
@@ -78,6 +78,8 @@ from ..report.loop import LOOP_FILE, limit_statement, load_loop, rejected_discov
 from .loop_steps import (_with_candidate, _without, backward_check, errors_of,  # noqa: F401 (tests)
                          select_shape, term_to_drop, validation_check)
 from .run_folder import RunFolder
+
+warning = get_logger(__name__).warning
 
 
 @dataclass
@@ -155,11 +157,14 @@ def _finished(cfg: IdentificationConfig, folder: Path):
         return None
     meta = folder / "checkpoint.json"  # written by every identification run (copies in docs/ may lack it)
     fingerprinted = meta.is_file()
+    other_code = False
     if fingerprinted:
         from .identify import identification_fingerprint
 
-        if read_checkpoint(meta).get("fingerprint") != identification_fingerprint(cfg):
+        checkpoint = read_checkpoint(meta)
+        if checkpoint.get("fingerprint") != identification_fingerprint(cfg):
             return None  # another config, data or setting (e.g. resample_inputs): not the same identification
+        other_code = checkpoint.get("source") not in (None, source_sha256())
     try:
         res = IdentificationResult.load(folder)
     except (FileNotFoundError, ValueError, KeyError):
@@ -183,6 +188,10 @@ def _finished(cfg: IdentificationConfig, folder: Path):
             check_results_match(cfg, res, folder, warn=lambda msg: None)
         except ResultsMismatchError:
             return None
+    if same and other_code:  # as identify does on resuming points: said, and marked in the record
+        warning(f"{folder}: the finished identification was solved by other code (the package changed since); "
+                f"reused as stored: rerun with --restart for results of this code alone")
+        res.info["resumed_from_other_code"] = True
     return res if same else None
 
 
@@ -259,6 +268,49 @@ def close_loop(cfg: IdentificationConfig, out, settings: LoopSettings | None = N
             return _close_loop(cfg, run, settings, progress, ft, id_data, val_mans)
 
 
+class LoopMismatchError(ValueError):
+    """A finished loop in the folder was made from another config or flight test (the folder given is at fault)."""
+
+
+def loop_inputs(config: str | Path, dataset: str | Path) -> dict:
+    """What ``loop.json`` records of its inputs by content: the config file's text, the flight test's files and
+    the package's sources (SHA-256 each; :mod:`pyomo_heli.provenance`)."""
+    from ..provenance import config_sha256, dataset_sha256
+
+    return {"config_sha256": config_sha256(config), "dataset_sha256": dataset_sha256(dataset),
+            "source_sha256": source_sha256()}
+
+
+def finished_loop(folder: str | Path, config: str | Path, dataset: str | Path) -> bool:
+    """Whether ``folder`` holds a loop that stopped (``loop.json`` with its ``stopped`` message) made from this
+    config file and flight test, both compared by content: what a study may reuse instead of running the loop.
+
+    A loop not yet stopped (interrupted, or still running) is False: running close-loop again resumes it. A stopped
+    loop made from another config text or flight test raises :class:`LoopMismatchError` naming the folder: reusing
+    it would report another study's result. One made by other package sources is reused with a warning; one
+    written before these records existed is reused with a warning that it was not checked."""
+    doc_file = Path(folder) / LOOP_FILE
+    if not doc_file.is_file():
+        return False
+    doc = json.loads(doc_file.read_text())
+    if not doc.get("stopped"):
+        return False
+    now = loop_inputs(config, dataset)
+    if "config_sha256" not in doc:
+        warning(f"{folder}: a finished loop written before loops recorded their inputs; reused without checking "
+                f"that it was made from {config} and {dataset}")
+        return True
+    for key, name, what, path in (("config_sha256", "config", "config", config),
+                                  ("dataset_sha256", "dataset", "flight test", dataset)):
+        if doc.get(key) != now[key]:
+            raise LoopMismatchError(f"{folder}: its finished loop was made from another {what} ({doc.get(name)}), "
+                                    f"not the content of {path}; give another output folder or remove it")
+    if doc.get("source_sha256") != now["source_sha256"]:
+        warning(f"{folder}: its finished loop was made by other package sources (the code changed since); reused as "
+                f"it is: remove the folder for a result of this code")
+    return True
+
+
 #: where the structure steps of a discovery loop are kept (:func:`stored_step`)
 STEPS_DIR = "steps"
 
@@ -325,8 +377,9 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
     out, restart = run.root, run.restart
     run.mark()
     trims = ft.trims.reset_index(drop=True)
-    doc = {"config": str(cfg.path), "dataset": str(cfg.dataset), "settings": dataclasses.asdict(settings),
-           "units": "SI (rad, rad/s, m/s, g)", "iterations": [], "stopped": None}
+    doc = {"config": str(cfg.path), "dataset": str(cfg.dataset), **loop_inputs(cfg.path, cfg.dataset),
+           "settings": dataclasses.asdict(settings), "units": "SI (rad, rad/s, m/s, g)", "iterations": [],
+           "stopped": None}
     i = 0
     added_shape = None  # the shape rule's record for the candidate added last
     bar = run.progress_bar(settings.max_iterations + 1, "loop iterations", at_most=True)
@@ -369,6 +422,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             "point": which, "J_time": point["J_time"], "J_trim": point["J_trim"],
             # Cramer-Rao standard errors at the diagnosed point (None: not computed, or at a bound)
             "standard_errors": (point.get("uncertainty") or {}).get("se"),
+            **({"resumed_from_other_code": True} if result.info.get("resumed_from_other_code") else {}),
             **errs}
         doc["iterations"].append(record)
         # the validation rule: a step whose model validates significantly worse on any output is rejected

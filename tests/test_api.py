@@ -165,7 +165,7 @@ def test_the_console_standard_errors_are_in_display_units(tmp_path):
         assert float(m.group(1)) == pytest.approx(chosen["parameters"]["theta_twist"] * 180 / math.pi, rel=1e-5)
         assert float(m.group(2)) == pytest.approx(u["se"]["theta_twist"] * 180 / math.pi, rel=5e-3)  # 3 digits
     assert re.search(r"CL_alpha_HT=\S+\+-\S+ 1/rad", line), line
-    assert res is not None
+    assert res.result.chosen["index"] == k  # the returned result is the one on disk
 
 
 def test_estimates_of_a_loop_iteration_with_a_candidate_strength():

@@ -43,7 +43,7 @@ def test_quick_json_structure(quick):
         assert sum(s["setup_breakdown"].values()) == pytest.approx(s["setup_time"], rel=0.05)
     # the repeated problem has the same optimum (the same residuals twice)
     for n, v in one["point_a"]["parameters"].items():
-        assert two["point_a"]["parameters"][n] == pytest.approx(v, rel=1e-3, abs=1e-3), n
+        assert two["point_a"]["parameters"][n] == pytest.approx(v, rel=1e-5, abs=1e-5), n
     assert two["point_a"]["J_time"] == pytest.approx(2 * one["point_a"]["J_time"], rel=1e-6)
     f = one["front"]
     assert f["n_points"] == 3 and f["all_success"]

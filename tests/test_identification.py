@@ -122,7 +122,7 @@ def test_epsilon_points_record_the_fronts_slope(noisy_case1):
     so the standard errors are the same either way. A's bound is inactive: 0."""
     from pyomo_heli.nlp.identification import identification_data
     from pyomo_heli.uncertainty.cramer_rao import cramer_rao
-    from pyomo_heli.uncertainty.front import _information
+    from pyomo_heli.uncertainty.front import config_information
 
     cfg, out, res = noisy_case1
     f = pd.read_csv(out / "front.csv").sort_values("J_trim").reset_index(drop=True)
@@ -134,7 +134,7 @@ def test_epsilon_points_record_the_fronts_slope(noisy_case1):
         steeper = -(f.J_time[r] - f.J_time[r - 1]) / (f.J_trim[r] - f.J_trim[r - 1])
         flatter = -(f.J_time[r + 1] - f.J_time[r]) / (f.J_trim[r + 1] - f.J_trim[r])
         assert flatter <= k <= steeper, (r, k, flatter, steeper)
-        info = _information(cfg, data, {n: float(f.loc[r, n]) for n in res.parameters})
+        info = config_information(cfg, data, {n: float(f.loc[r, n]) for n in res.parameters})
         a, b = cramer_rao(info, cfg.free, kind="eps").weights
         assert k == pytest.approx(b / a, rel=1e-3)
         assert cramer_rao(info, cfg.free, kind="eps", multiplier=k).weights == pytest.approx((a, b), rel=1e-3)

@@ -35,7 +35,7 @@ def test_rows_jacobian_and_hessian_equal_the_nl_route(case, first):
     bundled = str(HERE.parent / "data" / "bo105_synthetic")
     cfg = load_identification_config(CONFIGS[case], {"data": {"dataset": bundled}})
     m, _, _ = build_problem(cfg)
-    ParetoSolver(m, cfg.pareto)._set_objective("time")  # the objective every front point solves
+    ParetoSolver(m, cfg.pareto).set_objective("time")  # the objective every front point solves
     nl, pr = _solver(m, False), _solver(m, True, first)
     assert pr._assembly is not None and nl._assembly is None
     assert len(pr._assembly.constraints) > 0.5 * len(pr.constraints), "most rows are point-described"

@@ -50,15 +50,24 @@ def test_pitch_rate_sensitivity_to_inertia_right_after_the_input():
 
 def test_one_sided_difference_at_a_lower_bound_matches_a_secant():
     """A parameter at its lower bound gets a one-sided derivative, consistent with a finite secant."""
-    m = HelicopterModel().with_parameters(theta_twist=0.0)  # twist's upper bound is 0; lower -10 deg/m
-    lo = m.parameters.spec("K_beta").bounds[0]
+    lo = HelicopterModel().parameters.spec("K_beta").bounds[0]
     m0 = HelicopterModel().with_parameters(K_beta=lo)
     s = sensitivities(m0, ["K_beta"], trim_speeds=[40.0], trim_out=["lon"])
     h = 50.0
     secant = (sensitivities(m0.with_parameters(K_beta=lo + h), [], trim_speeds=[40.0], trim_out=["lon"]).y_trim["lon"]
               - s.y_trim["lon"]) / h
     assert s.trim["lon"][0, 0] == pytest.approx(secant[0], rel=1e-2)
-    assert m is not None
+
+
+def test_one_sided_difference_at_an_upper_bound_matches_a_backward_secant():
+    """twist at its upper bound 0: the derivative steps inward (down), consistent with a backward secant."""
+    m = HelicopterModel().with_parameters(theta_twist=0.0)
+    assert m.parameters.spec("theta_twist").bounds[1] == 0.0
+    s = sensitivities(m, ["theta_twist"], trim_speeds=[40.0], trim_out=["col"])
+    h = 1e-3  # rad/m
+    secant = (s.y_trim["col"] - sensitivities(m.with_parameters(theta_twist=-h), [], trim_speeds=[40.0],
+                                              trim_out=["col"]).y_trim["col"]) / h
+    assert s.trim["col"][0, 0] == pytest.approx(secant[0], rel=1e-2)
 
 
 def test_trims_from_the_nominal_trim_match_the_continuation_from_hover(monkeypatch):

@@ -235,12 +235,12 @@ def test_weights_from_the_gradients_are_eq11s_at_its_direct_solve():
     for a J_time + b J_trim with a, b proportional to (J_k - U_k) / (N_k - U_k)^2: known in closed form. The
     weights found from the float model's gradients alone agree with them, and so the standard errors."""
     from pyomo_heli.pareto.result import IdentificationResult
-    from pyomo_heli.uncertainty.front import _information, eq11_weights
+    from pyomo_heli.uncertainty.front import config_information, eq11_weights
 
     cfg = load_identification_config(CONFIGS / "case1.toml")
     res = IdentificationResult.load(HERE / "results" / "case1")
     exact = eq11_weights(res.direct, res.utopia, res.nadir)
-    info = _information(cfg, identification_data(cfg), res.direct["parameters"])
+    info = config_information(cfg, identification_data(cfg), res.direct["parameters"])
     found = cramer_rao(info, cfg.free, kind="direct")
     assert found.combination == "weighted"
     assert found.weights[1] / found.weights[0] == pytest.approx(exact[1] / exact[0], rel=0.01)
@@ -252,7 +252,7 @@ def test_weights_of_the_front_points_lie_between_the_fronts_slopes():
     multiplier b/a is -dJ_time/dJ_trim along the front (envelope theorem), so it lies between the slopes of the
     chords to its two neighbours (the front is convex there). The multiplier found from the gradients does."""
     from pyomo_heli.pareto.result import IdentificationResult
-    from pyomo_heli.uncertainty.front import _information
+    from pyomo_heli.uncertainty.front import config_information
 
     cfg = load_identification_config(CONFIGS / "case1.toml")
     res = IdentificationResult.load(HERE / "results" / "case1")
@@ -262,7 +262,7 @@ def test_weights_of_the_front_points_lie_between_the_fronts_slopes():
     for r in range(1, len(f) - 1):
         if f.loc[r, "kind"] != "eps":
             continue
-        info = _information(cfg, data, {n: float(f.loc[r, n]) for n in res.parameters})
+        info = config_information(cfg, data, {n: float(f.loc[r, n]) for n in res.parameters})
         a, b = cramer_rao(info, cfg.free, kind="eps").weights
         steeper = -(f.J_time[r] - f.J_time[r - 1]) / (f.J_trim[r] - f.J_trim[r - 1])
         flatter = -(f.J_time[r + 1] - f.J_time[r]) / (f.J_trim[r + 1] - f.J_trim[r])

@@ -221,12 +221,12 @@ def standard_errors(cfg, est: dict[str, dict], data=None) -> dict[str, dict]:
     """
     from ..nlp.identification import identification_data
     from ..uncertainty.cramer_rao import cramer_rao
-    from ..uncertainty.front import _information
+    from ..uncertainty.front import config_information
 
     data = data if data is not None else identification_data(cfg)
     out, weights = {}, None
     for label, p in est.items():
-        info = _information(cfg, data, p)
+        info = config_information(cfg, data, p)
         if label == "time-domain (A)":
             u = cramer_rao(info, cfg.free, kind="A")
         elif label == "bi-objective":

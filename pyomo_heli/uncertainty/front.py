@@ -23,7 +23,9 @@ from .cramer_rao import cramer_rao, point_information
 from .identifiability import identifiability
 
 
-def _information(cfg, data, parameters):
+def config_information(cfg, data, parameters):
+    """:func:`~pyomo_heli.uncertainty.cramer_rao.point_information` at ``parameters`` with everything else as the
+    identification config ``cfg`` sets it up (free parameters, records ``data``, outputs, input errors, noise)."""
     return point_information(cfg.model, cfg.free, parameters, data.maneuvers, data.trims, cfg.nlp.time_outputs,
                              cfg.nlp.trim_outputs, input_errors=cfg.nlp.input_errors, noise_sigma=cfg.nlp.noise_sigma,
                              input_error_ar=cfg.nlp.input_error_ar)
@@ -48,7 +50,7 @@ def approximations(cfg) -> list[str]:
 def point_standard_errors(cfg, data, parameters: dict, kind: str = "eps", multiplier: float | None = None) -> dict:
     """name -> Cramer-Rao standard error (SI; nan at a bound) of a front point with these parameter values
     (``multiplier``: its solve's -dJ_time/dJ_trim, :func:`~.cramer_rao.objective_weights`)."""
-    return dict(cramer_rao(_information(cfg, data, parameters), cfg.free, kind=kind, multiplier=multiplier).se)
+    return dict(cramer_rao(config_information(cfg, data, parameters), cfg.free, kind=kind, multiplier=multiplier).se)
 
 
 def eq11_weights(point: dict, utopia, nadir) -> tuple | None:
@@ -93,7 +95,7 @@ def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "a
         if not bool(r["success"]) or (points == "chosen" and int(r["index"]) not in wanted):
             continue
         params = {n: float(r[n]) for n in names}
-        info = _information(cfg, data, params)
+        info = config_information(cfg, data, params)
         u = cramer_rao(info, cfg.free, kind=str(r["kind"]), multiplier=_multiplier(r))
         for k, v in u.row().items():
             front.at[i, k] = v
@@ -105,7 +107,7 @@ def add_uncertainty(result, cfg, data, out=None, progress=info, points: str = "a
         if point and int(point["index"]) in by_index:
             point["uncertainty"] = by_index[int(point["index"])][0].to_dict()
     if result.direct and result.direct.get("success"):
-        u = cramer_rao(_information(cfg, data, result.direct["parameters"]), cfg.free, kind="direct",
+        u = cramer_rao(config_information(cfg, data, result.direct["parameters"]), cfg.free, kind="direct",
                        weights=eq11_weights(result.direct, result.utopia, result.nadir))
         result.direct["uncertainty"] = u.to_dict()
     ident = None

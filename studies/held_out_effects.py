@@ -10,8 +10,9 @@ For every held-out effect (pyomo_heli/flighttest/held_out_effects.py, at its nom
 replaced by the held-out one (same maneuvers, trims and noise levels) -> ``OUT/<effect>_<seed>/data``; the
 closed loop with ``[loop] discovery = true`` (CONFIG) -> ``OUT/<effect>_<seed>/loop``; its table row ->
 ``OUT/<effect>_<seed>/row.json``. A finished loop is not rerun (an interrupted one resumes), so a rerun of the same
-command resumes row by row; a finished loop made from another config text (other flags) is refused. ``--workers N`` runs the cases on N local processes (``--scheduler ADDRESS``: on a Dask
-cluster whose workers see OUT); the rows are the same as one after the other.
+command resumes row by row; a finished loop made from another config text (other flags) is refused. ``--workers N``
+runs the cases on N local processes (``--scheduler ADDRESS``: on a Dask cluster whose workers see OUT); the rows are
+the same as one after the other.
 ``--effects none`` is M0 plus noise only; ``--first-seed K`` starts at seed 20261122 + K; ``--evaluate-only`` runs
 nothing and re-evaluates every finished loop in OUT (rows and table); ``--rescore`` runs nothing and re-scores
 ``OUT/held_out.csv`` alone (shape columns and criterion, from the terms the table reports); ``--merge FOLDER...`` runs

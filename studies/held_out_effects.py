@@ -406,12 +406,15 @@ def reference_flight_test(cache: Path, template: str) -> Path:
 
 def signature_cache(template: str) -> Path:
     """Where :func:`signature_setup` generates the reference flight test of a generator config other than the
-    bundled one: a folder of the system's temporary directory named by the config's content (never a results
-    folder; the same config finds it again, another never)."""
+    bundled one: a folder of the system's temporary directory named by the config's content and the package's
+    sources (never a results folder; the same config and code find it again, another config or generator never)."""
     import hashlib
     import tempfile
 
-    return Path(tempfile.gettempdir()) / f"pyomo_heli_signature_{hashlib.sha256(template.encode()).hexdigest()[:16]}"
+    from pyomo_heli.provenance import source_sha256
+
+    key = hashlib.sha256((source_sha256() + template).encode()).hexdigest()[:16]
+    return Path(tempfile.gettempdir()) / f"pyomo_heli_signature_{key}"
 
 
 def signature(extension, strengths: dict, setup: SignatureSetup) -> np.ndarray | None:

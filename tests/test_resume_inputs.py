@@ -248,3 +248,15 @@ def test_the_monte_carlo_resumes_only_on_the_same_flight_test(tmp_path):
     with pytest.raises(ResultsMismatchError, match=r"another run \(it differs in: dataset_sha256\)"):
         run_monte_carlo(spec, 1, seed=11, sigma={}, trim_sigma={}, truth={}, out=out, workers=0,
                         progress=lambda *_: None)
+
+
+def test_the_held_out_signature_cache_is_named_by_the_config_and_the_code(monkeypatch):
+    """The reference flight test of a generator config is kept in a temporary folder across runs: named by the
+    config's text alone, it outlived a change of the generator's code."""
+    import pyomo_heli.provenance as provenance
+
+    study = _held_out_study()
+    a = study.signature_cache("[sensors]\n")
+    assert study.signature_cache("[sensors]\n") == a and study.signature_cache("[sensors]\nx = 1\n") != a
+    monkeypatch.setattr(provenance, "source_sha256", lambda: "0" * 64)
+    assert study.signature_cache("[sensors]\n") != a

@@ -862,12 +862,42 @@ def input_path_history(terms: list, setup: SignatureSetup) -> dict:
 INPUT_PATH_SMOOTH_S = 0.2
 
 
+def input_error_signature(errors: dict, setup: SignatureSetup) -> np.ndarray | None:
+    """What an input error {maneuver: {"col": array, "lon": array}} [rad] (at the records' samples) does to the
+    validation records, in noise standard deviations: M0 at the truth parameters replayed with its inputs moved by it,
+    minus M0's replay (the records' outputs stacked, as :func:`signature_of` stacks them); None if a replay fails. For
+    the truth's own error (:func:`truth_input_error`, the controls its rotor saw along its own replay) this is the
+    truth's signature on the records."""
+    from dataclasses import replace
+
+    from pyomo_heli.physics.model import HelicopterModel
+    from pyomo_heli.simulation.replay import predict
+
+    moved = []
+    for mv in setup.maneuvers:
+        e, data = errors[mv.name], mv.data.copy()
+        rec = None if mv.inputs_record is None else mv.inputs_record.copy()
+        for c in ("col", "lon"):
+            data[c] = data[c].to_numpy(dtype=float) + e[c]
+            if rec is not None:
+                rec[c] = rec[c].to_numpy(dtype=float) + np.interp(rec["t"].to_numpy(dtype=float), mv.t, e[c])
+        moved.append(replace(mv, data=data, inputs_record=rec))
+    pred = predict("input error", HelicopterModel().with_parameters(**setup.m0), {}, [], moved)
+    base = setup.base
+    if pred.problems or base.problems:
+        return None
+    return np.concatenate([(pred.maneuvers[mv.name][o].to_numpy() - base.maneuvers[mv.name][o].to_numpy())
+                           / setup.sigma[o] for mv in setup.maneuvers for o in OUTPUTS])
+
+
 def input_path_match(effect: str, terms: list, setup: SignatureSetup | None = None) -> str:
     """Does the input error the residual analysis reports match the truth's in shape? Along the validation records,
     each record's mean taken out of both (a constant is a rigging offset, not this test's business) and both smoothed
-    over INPUT_PATH_SMOOTH_S, the channel where
-    the truth's error is largest: 'yes (channel, corr r)' when their correlation is > 0.7; 'no (...)' otherwise,
-    also for a truth that leaves the control path alone; '-' when nothing is reported."""
+    over INPUT_PATH_SMOOTH_S, the channel where the truth's error is largest: their correlation must be > 0.7, and
+    what the two errors do to the records (:func:`input_error_signature`) must pass :func:`signature_verdict`, the
+    test a kept control-path term passes (a correlated error of another form, e.g. a loss of cyclic gain against a
+    washed-out rate feedback, correlates on a doublet but leaves much of the truth's signature). 'yes (channel, corr
+    r)', 'no (...)' otherwise, also for a truth that leaves the control path alone; '-' when nothing is reported."""
     if effect == "none" or not terms:
         return "n/a" if effect == "none" else "-"
     setup = setup or signature_setup()
@@ -890,7 +920,10 @@ def input_path_match(effect: str, terms: list, setup: SignatureSetup | None = No
     if not np.any(np.abs(b) > 0):
         return f"no (nothing reported on {c}, where the truth acts)"
     corr = float(np.corrcoef(a, b)[0, 1])
-    return f"yes ({c}, corr {corr:+.2f})" if corr > 0.7 else f"no ({c}, corr {corr:+.2f})"
+    if corr <= 0.7:
+        return f"no ({c}, corr {corr:+.2f})"
+    verdict = signature_verdict(input_error_signature(truth, setup), input_error_signature(rep, setup))
+    return f"yes ({c}, corr {corr:+.2f})" if verdict == "yes" else f"no ({c}, corr {corr:+.2f}; signature {verdict})"
 
 
 def residual_columns(effect: str, fr: dict, setup: SignatureSetup | None = None) -> dict:

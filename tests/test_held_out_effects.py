@@ -440,6 +440,30 @@ def test_the_input_path_shape_is_scored_against_the_truths_own_control_error(stu
     assert study.format_input_path([]) == "none" and study.parse_input_path("none") == []
 
 
+def test_an_input_error_of_another_form_does_not_match_even_when_it_correlates(study):
+    """A review: on a doublet q follows lon, so a loss of cyclic gain (``lon += c x lon``, c < 0) correlates with
+    the pitch-rate damper's washed-out rate feedback, and the correlation alone passed it whatever c was. What the
+    two errors do to the records differs (the test a kept control-path term passes): 'no'. The truth's own error,
+    replayed the same way, is the truth's signature on the records (its replay with the controls its rotor saw)."""
+    import dataclasses
+
+    full = study.signature_setup()
+    mvs = tuple(dataclasses.replace(mv, data=mv.data[mv.data["t"] <= mv.data["t"].iloc[0] + 6.0])
+                for mv in full.maneuvers if mv.name in ("londoublet_80kt_val", "londoublet_20kt_val"))
+    setup = study.SignatureSetup(mvs, full.m0, full.sigma, full.trim_sigma)
+    truth = study.truth_input_error("pitch_rate_damper", setup)
+    sig = study.input_error_signature(truth, setup)
+    pred = study.truth_prediction("pitch_rate_damper", setup)
+    direct = np.concatenate([(pred.maneuvers[mv.name][o].to_numpy() - setup.base.maneuvers[mv.name][o].to_numpy())
+                             / setup.sigma[o] for mv in mvs for o in study.OUTPUTS])
+    # to the sampling of the controls the rotor saw (linear between samples in the replay): 1 % of the largest
+    assert np.max(np.abs(sig - direct)) < 0.02 * np.max(np.abs(direct))
+    gain_loss = [{"channel": "lon", "signal": "lon", "estimate": c, "se": 0.01} for c in (-0.271,)]
+    verdict = study.input_path_match("pitch_rate_damper", gain_loss, setup)
+    corr = float(verdict.split("corr ")[1].split(";")[0].rstrip(")"))
+    assert corr > 0.7 and verdict.startswith("no (lon") and "signature no (left" in verdict, verdict
+
+
 def test_reanalyse_rebuilds_a_kept_m0_from_the_table_and_runs_the_loops_own_residual_analysis(tmp_path, study,
                                                                                                monkeypatch):
     """--reanalyse: for a row whose loop kept M0 (its loop gone), the flight test is generated again for its truth

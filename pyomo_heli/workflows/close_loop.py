@@ -277,8 +277,11 @@ def loop_inputs(config: str | Path, dataset: str | Path) -> dict:
     the package's sources (SHA-256 each; :mod:`pyomo_heli.provenance`)."""
     from ..provenance import config_sha256, dataset_sha256
 
-    return {"config_sha256": config_sha256(config), "dataset_sha256": dataset_sha256(dataset),
-            "source_sha256": source_sha256()}
+    try:
+        text = config_sha256(config)
+    except OSError:  # a config no longer on disk (a run goes on from the parsed one): nothing to record
+        text = None
+    return {"config_sha256": text, "dataset_sha256": dataset_sha256(dataset), "source_sha256": source_sha256()}
 
 
 def finished_loop(folder: str | Path, config: str | Path, dataset: str | Path) -> bool:

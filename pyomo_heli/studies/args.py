@@ -44,15 +44,11 @@ def claim_inputs(ap: argparse.ArgumentParser, out: Path, **inputs) -> None:
     inputs: the SHA-256 of each named input file (``--config=path`` as ``config=path``; None: not given) and each
     plain value (a flag's setting) are kept in ``OUT/study_inputs.json`` on the first run and compared on every
     rerun, which resumes only on equal inputs. One argparse error line names the option at fault."""
-    import hashlib
     import json
 
-    now = {}
-    for k, v in inputs.items():
-        if isinstance(v, Path):
-            now[k] = hashlib.sha256(v.read_bytes()).hexdigest()
-        else:
-            now[k] = v
+    from pyomo_heli.provenance import config_sha256
+
+    now = {k: config_sha256(v) if isinstance(v, Path) else v for k, v in inputs.items()}
     f = Path(out) / INPUTS_FILE
     if f.is_file():
         try:

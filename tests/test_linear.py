@@ -318,3 +318,31 @@ def test_one_spectral_segment_in_all_is_refused_by_name(clean_responses):
     assert len(hover) >= 2
     pair = [mv for mv in hover if mv.n_samples >= one.n_samples][:2]
     estimate(pair, "q", "lon", SpectralSettings(window_s=(min(m.n_samples for m in pair) - 1) / one.sample_rate))
+
+
+def test_committed_linear_checks_regenerate(tmp_path, monkeypatch):
+    """docs/results/linear_checks (the tables of docs/linear.md, sections 1-3) is what its regenerate command writes
+    (every number to 1e-6); its section-2 errors are those of the finite-difference test above (< 1e-5), and
+    J_linear alone, which sees no twist, runs the twist to a bound."""
+    from pyomo_heli.studies import regenerate as R
+    from pyomo_heli.studies.compare_results import compare_folder
+    from pyomo_heli.studies.linear_checks import main as linear_checks
+
+    e = R.BY_NAME["linear_checks"]
+    monkeypatch.chdir(R.ROOT)  # the command's paths are the checkout's
+    assert linear_checks(R.argv_of(e.commands[0], str(tmp_path))[2:]) == 0
+    ref = Path(__file__).resolve().parents[1] / "docs" / "results" / "linear_checks"
+    c = compare_folder(ref, tmp_path / "linear_checks", e.keep)
+    assert c.ok and c.files == 2, c.mismatches
+    import json
+    doc = json.loads((tmp_path / "linear_checks" / "linear_checks.json").read_text())
+    assert max(r[k] for r in doc["linearisation"] for k in "ABCD") < 1e-5
+    assert [f["at_bound"] for f in doc["J_linear_alone"]] == [[], ["theta_twist"]]
+
+
+def test_linear_checks_refuses_a_folder_without_a_flight_test(tmp_path, capsys):
+    from pyomo_heli.studies.linear_checks import main as linear_checks
+
+    with pytest.raises(SystemExit) as exc:
+        linear_checks(["--dataset", str(tmp_path), "--out", str(tmp_path / "o")])
+    assert exc.value.code == 2 and f"--dataset {tmp_path}: no manifest.json" in capsys.readouterr().err

@@ -106,6 +106,8 @@ ENTRIES: tuple[Entry, ...] = (
           TRI_FILES + ("tri_vs_bi.txt", "timing/tri_vs_bi.json"), minutes=20, stdout={0: "tri_vs_bi.txt"}),
     Entry("case2_tri", ("pyomo-heli identify studies/case2_tri.toml --out {out}/case2_tri --restart",), TRI_FILES,
           minutes=15),
+    Entry("linear_checks", ("python studies/linear_checks.py --dataset data/bo105_clean --out {out}/linear_checks",),
+          ("linear_checks.md", "linear_checks.json"), minutes=0.2),
     Entry("close_loop", ("pyomo-heli close-loop studies/close_loop.toml --out {out}/close_loop --restart",),
           LOOP_FILES + LOOP_FIGURES, minutes=9),
     Entry("close_loop_eiv", ("pyomo-heli close-loop studies/close_loop_eiv.toml --out {out}/close_loop_eiv "

@@ -259,6 +259,18 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("bo105_flight_trims", ("pyomo-heli trim-loop studies/bo105_flight_trims.toml "
                                  "--out {out}/bo105_flight_trims",),
           ("report.md", "trim_curves.png", "trim_loop.json", "trim_residuals.png"), minutes=2),
+    # docs/performance.md, "Scaling": iterations unscaled against scaled (the IDAES Scaler), three instances and the
+    # whole Case 1 front (its unscaled run is docs/results/case1/front.csv)
+    Entry("scaling", (
+        f"{BENCH} --no-front --no-shooting --compare-scaling --out {{out}}/scaling/scaling_case1.json",
+        f"{BENCH} --config tests/configs/small_case1_noisy.toml --no-front --no-shooting --compare-scaling "
+        "--out {out}/scaling/scaling_small_noisy.json",
+        f"{BENCH} --quick --compare-scaling --scaling-points 4 --out {{out}}/scaling/scaling_quick.json",
+        "pyomo-heli identify studies/case1_scaled.toml --out {out}/scaling/case1_scaled --cold-check --restart "
+        "--no-report --uncertainty none"),
+        ("scaling_case1.json", "scaling_case1.txt", "scaling_small_noisy.json", "scaling_small_noisy.txt",
+         "scaling_quick.json", "scaling_quick.txt", "case1_scaled/front.csv", "case1_scaled/chosen.json"),
+        minutes=8, stdout={0: "scaling_case1.txt", 1: "scaling_small_noisy.txt", 2: "scaling_quick.txt"}),
     Entry("benchmark", (
         f"{BENCH} --size 1,2,4,8 --repeat 3 --shooting rk4 --shooting-max-sims 0 --compare-nl-route "
         "--out {out}/benchmark/benchmark_case1_all.json",

@@ -33,6 +33,27 @@ def test_pyomo_trim_equals_float_trim(speed_kt):
     assert row["lambda_i"] == pytest.approx(ref.lambda_i, abs=1e-9)
 
 
+def test_a_trim_block_re_solves_at_another_speed_by_its_param_alone():
+    """Built once at 80 kt, the trim block re-solved at 60 and 120 kt by changing only the mutable Param
+    ``V_target`` (no rebuild) agrees with the float trim (``trim_float``, Newton on the float equations) to 1e-10
+    in col, lon, theta, lambda_i and the three flapping angles."""
+    from pyomo_heli.nlp.trim_block import trim_block_values
+
+    model = HelicopterModel()
+    m = pyo.ConcreteModel()
+    pmap = add_parameters(m, model.parameters, [])
+    m.trim = pyo.Block()
+    build_trim_block(m.trim, model, pmap, 80 * KT)
+    m.obj = pyo.Objective(expr=0.0)
+    solver = make_solver(m, "casadi-ipopt", {"tol": 1e-12})
+    for kt in (80.0, 60.0, 120.0):
+        m.trim.V_target.set_value(kt * KT)
+        assert solver.solve().success, kt
+        got, ref = trim_block_values(m.trim), trim_float(model, kt * KT)
+        for k in ("col", "lon", "theta", "lambda_i", "beta_0", "beta_1c", "beta_1s"):
+            assert got[k] == pytest.approx(getattr(ref, k), abs=1e-10), (kt, k)
+
+
 @pytest.mark.parametrize("speed_kt", [0.0, 80.0])
 def test_simulator_started_at_pyomo_trim_stays_at_trim(speed_kt):
     model = HelicopterModel()

@@ -40,6 +40,11 @@ def test_study_writes_both_versions_of_a_seed_and_resumes(tmp_path, capsys):
     head = (out / "summary.md").read_text().splitlines()[0]
     tw = {v: doc[v]["error_percent"]["theta_twist"] for v in ("bundled", "no_input_noise")}
     assert f"{tw['bundled']:+.1f} to {tw['bundled']:+.1f} % with the inputs' noise" in head
+    # the noise-free rows (the config's inputs are projected, the default): the truth, as in the test above
+    free = json.loads((out / "no_noise.json").read_text())
+    assert [free[k]["resample_inputs"] for k in ("config", "project")] == ["project", "project"]
+    assert max(abs(e) for e in free["project"]["error_percent"].values()) < 0.25
+    assert f"{free['project']['error_percent']['theta_twist']:+.2f} % with the inputs by 'project'" in head
     (out / "seed_5.json").write_text(json.dumps({**doc, "marker": 1}))
     assert main(args) == 0  # the finished seed is read back, not solved again
     assert json.loads((out / "seed_5.json").read_text())["marker"] == 1
@@ -51,3 +56,14 @@ def test_a_dataset_without_an_effect_strength_is_refused_by_name(tmp_path):
     generate(dataclasses.replace(g, effects={}), data, force=True)
     with pytest.raises(ValueError, match="truth.json: no effect strength"):
         anchor_a(CONFIG, data)
+
+
+def test_a_data_config_whose_noise_cannot_be_switched_off_is_refused_by_name(tmp_path):
+    from pyomo_heli.studies.input_noise_check import noise_free_flight_test
+
+    gen = tmp_path / "gen.toml"
+    gen.write_text(GEN.read_text().replace("noise = true", "noise = true  # on"))
+    noise_free_flight_test(gen, tmp_path / "a")  # a comment after the value is fine
+    gen.write_text(GEN.read_text().replace("noise = true", "noise=true"))
+    with pytest.raises(ValueError, match=f"--data-config {gen}: expected one 'noise = true' line"):
+        noise_free_flight_test(gen, tmp_path / "b")

@@ -12,7 +12,12 @@ anchor A (min J_time) of ``--config`` (the loop's: Case 2 parameters) with the *
 the truth's effects at their true geometry, the first effect parameter that is not fixed geometry (the strength,
 K_lamT for the wake on the tail) freed from 1.0. So the form is exactly right and only the noise is left.
 
-Each finished seed is ``OUT/seed_<seed>.json`` (a rerun reuses it; the generated data are deleted once it is done).
+Once, and the same for every seed, the flight test without any noise (``[sensors] noise = false``: exact samples of
+the truth simulator, no filter) is solved the same way twice: with the config's ``[data] resample_inputs`` and with
+``"project"``. What error is left there is the resampling's and the discretisation's (docs/model_nlp.md 10.3).
+
+Each finished seed is ``OUT/seed_<seed>.json``, the noise-free rows ``OUT/no_noise.json`` (a rerun reuses them; the
+generated data are deleted once they are done).
 Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per seed and data, the solver status and the errors of the
 free parameters against truth.
 """
@@ -50,15 +55,35 @@ def flight_test(seed: int, data_config: Path, out: Path, input_noise: bool) -> P
     return data
 
 
-def anchor_a(config: Path, data: Path) -> dict:
-    """Anchor A of ``config`` on ``data`` with the truth's model form, its strength free: status and errors."""
+def noise_free_flight_test(data_config: Path, out: Path) -> Path:
+    """``OUT/data/no_noise``: ``data_config``'s flight test with ``[sensors] noise = false``."""
+    from pyomo_heli.flighttest.config import load_config
+    from pyomo_heli.flighttest.generate import generate
+
+    data = out / "data" / "no_noise"
+    if not (data / "truth.json").is_file():
+        text = Path(data_config).read_text()
+        if text.count("noise = true") != 1:
+            raise ValueError(f"--data-config {data_config}: expected one 'noise = true' line to switch the noise off")
+        gen = out / "data" / "no_noise.toml"
+        gen.parent.mkdir(parents=True, exist_ok=True)
+        gen.write_text(text.replace("noise = true", "noise = false"))
+        generate(load_config(gen), data, force=True)
+        gen.unlink()
+    return data
+
+
+def anchor_a(config: Path, data: Path, resample_inputs: str | None = None) -> dict:
+    """Anchor A of ``config`` on ``data`` with the truth's model form, its strength free: status and errors.
+    ``resample_inputs`` replaces the config's ``[data] resample_inputs``."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.flighttest.generate import truth_model_of
     from pyomo_heli.nlp.identification import build_problem
     from pyomo_heli.nlp.parameters import FreeParameter, free_parameter_values
     from pyomo_heli.pareto.front import ParetoSolver
 
-    cfg = load_identification_config(config, overrides={"data": {"dataset": str(data.resolve())}})
+    over = {"dataset": str(data.resolve()), **({"resample_inputs": resample_inputs} if resample_inputs else {})}
+    cfg = load_identification_config(config, overrides={"data": over})
     truth = json.loads((data / "truth.json").read_text())
     strengths = [n for e in truth["effects"].values() for n in e if n in STRENGTHS]
     if not strengths:
@@ -70,6 +95,7 @@ def anchor_a(config: Path, data: Path) -> dict:
     a = ParetoSolver(m, dataclasses.replace(cfg.pareto, cold_check=False)).point_a()
     est = free_parameter_values(m)
     return {"status": a.status, "iterations": a.iterations, "J_time": a.J_time,
+            "resample_inputs": cfg.resample_inputs,
             "estimate": {n: float(v) for n, v in est.items()},
             "truth": {n: float(truth["parameters"][n]) for n in est},
             "error_percent": {n: float(100 * (est[n] - truth["parameters"][n]) / abs(truth["parameters"][n]))
@@ -90,24 +116,45 @@ def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
     return doc
 
 
+def noise_free(config: Path, data_config: Path, out: Path) -> dict:
+    """Anchor A on the noise-free flight test with the config's input resampling and projected (read back from
+    ``OUT/no_noise.json``)."""
+    f = out / "no_noise.json"
+    if f.is_file():
+        return json.loads(f.read_text())
+    data = noise_free_flight_test(data_config, out)
+    doc = {"config": anchor_a(config, data), "project": anchor_a(config, data, resample_inputs="project")}
+    shutil.rmtree(data, ignore_errors=True)
+    f.write_text(json.dumps(doc, indent=1))
+    return doc
+
+
+def _row(seed, data: str, r: dict) -> dict:
+    return {"seed": seed, "data": data, "inputs": r["resample_inputs"], "status": r["status"], "J_time A": r["J_time"],
+            **{f"{n} error [%]": e for n, e in r["error_percent"].items()}}
+
+
 def summary(docs: list[dict]) -> tuple[pd.DataFrame, str]:
-    rows = []
-    for d in docs:
-        for v in VARIANTS:
-            r = d[v]
-            rows.append({"seed": d["seed"], "data": v, "status": r["status"], "J_time A": r["J_time"],
-                         **{f"{n} error [%]": e for n, e in r["error_percent"].items()}})
+    rows = [_row(d["seed"], v, d[v]) for d in docs for v in VARIANTS]
+    rows += [_row("-", "no_noise", d) for d in docs[0]["no_noise"].values()]
     tab = pd.DataFrame(rows)
     span = {v: tab[tab["data"] == v]["theta_twist error [%]"] for v in VARIANTS}
+    free = {r["inputs"]: r["theta_twist error [%]"] for r in rows if r["data"] == "no_noise"}
     header = (f"Anchor A with the truth's model form on {len(docs)} noise realisations: the twist error spans "
               f"{span['bundled'].min():+.1f} to {span['bundled'].max():+.1f} % with the inputs' noise and "
               f"{span['no_input_noise'].min():+.1f} to {span['no_input_noise'].max():+.1f} % without it "
-              f"(every other channel's noise the same).")
+              f"(every other channel's noise the same); without any noise "
+              + ", ".join(f"{e:+.2f} % with the inputs by {k!r}" for k, e in free.items()) + ".")
     return tab, header
 
 
 def main(argv=None) -> int:
-    return seeded_study_main(__doc__.split("\n\n")[0], argv, one_seed, summary, seeds_example="20261122,20261125")
+    def with_noise_free(seed, config, data_config, out):
+        doc = one_seed(seed, config, data_config, out)
+        return {**doc, "no_noise": noise_free(config, data_config, out)}
+
+    return seeded_study_main(__doc__.split("\n\n")[0], argv, with_noise_free, summary,
+                             seeds_example="20261122,20261125")
 
 
 if __name__ == "__main__":

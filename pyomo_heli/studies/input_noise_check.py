@@ -31,7 +31,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from .seeded import cached_seed, seeded_study_main
+from .seeded import cached_seed, seed_flight_test, seeded_study_main
 
 #: the two versions of every seed's flight test: the input channels' noise as configured, and set to zero
 VARIANTS = ("bundled", "no_input_noise")
@@ -41,18 +41,8 @@ STRENGTHS = {"K_lamT": (1.0, 0.0, 5.0, 1.0)}
 
 def flight_test(seed: int, data_config: Path, out: Path, input_noise: bool) -> Path:
     """``OUT/data/<seed>[_no_input_noise]``: ``data_config``'s flight test (truth effects kept) with ``seed``."""
-    from pyomo_heli.channels import INPUTS
-    from pyomo_heli.flighttest.config import load_config
-    from pyomo_heli.flighttest.generate import generate
-
-    data = out / "data" / (str(seed) if input_noise else f"{seed}_no_input_noise")
-    if not (data / "truth.json").is_file():
-        g = load_config(data_config)
-        if not input_noise:
-            sigma = {k: 0.0 if k in INPUTS else v for k, v in g.sensors.sigma.items()}
-            g = dataclasses.replace(g, sensors=dataclasses.replace(g.sensors, sigma=sigma))
-        generate(dataclasses.replace(g, seed=seed), data, force=True)
-    return data
+    folder = out / "data" / (str(seed) if input_noise else f"{seed}_no_input_noise")
+    return seed_flight_test(seed, data_config, folder, input_noise=input_noise)
 
 
 def noise_free_flight_test(data_config: Path, out: Path) -> Path:

@@ -106,18 +106,24 @@ def cached_seed(out: Path, seed: int, overrides: dict | None = None) -> dict | N
     return None
 
 
-def m0_noise_data(seed: int, data_config: Path, out: Path, input_noise: bool = True) -> Path:
-    """``OUT/data/<seed>``: the flight test of ``data_config`` generated from M0 with sensor noise only (its truth
-    effects removed, its seed replaced); kept if it is already there. ``input_noise=False``: the recorded inputs
-    without their noise, every other draw (outputs, trims) unchanged."""
-    data = out / "data" / str(seed)
+def seed_flight_test(seed: int, data_config: Path, data: Path, input_noise: bool = True,
+                     truth_effects: bool = True) -> Path:
+    """``data``: the flight test of ``data_config`` with its seed replaced; kept if it is already there.
+    ``input_noise=False``: the recorded inputs without their noise, every other draw (outputs, trims) unchanged (the
+    generator draws every channel's noise whatever its sigma). ``truth_effects=False``: M0 with sensor noise only."""
     if not (data / "truth.json").is_file():
         g = load_config(data_config)
         if not input_noise:
             sigma = {k: 0.0 if k in INPUTS else v for k, v in g.sensors.sigma.items()}
             g = dataclasses.replace(g, sensors=dataclasses.replace(g.sensors, sigma=sigma))
-        generate(dataclasses.replace(g, seed=seed, effects={}), data, force=True)
+        generate(dataclasses.replace(g, seed=seed, **({} if truth_effects else {"effects": {}})), data, force=True)
     return data
+
+
+def m0_noise_data(seed: int, data_config: Path, out: Path, input_noise: bool = True) -> Path:
+    """``OUT/data/<seed>``: :func:`seed_flight_test` from M0 with sensor noise only (``data_config``'s truth effects
+    removed)."""
+    return seed_flight_test(seed, data_config, out / "data" / str(seed), input_noise, truth_effects=False)
 
 
 def truth_residuals(seed: int, config: Path, data_config: Path, out: Path, overrides: dict | None = None):

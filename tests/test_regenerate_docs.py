@@ -7,6 +7,7 @@ them, pruning to the committed files, the command mapping); the slow check parse
 from __future__ import annotations
 
 import json
+import shutil
 import sys
 
 import pytest
@@ -143,3 +144,26 @@ def test_compare_fails_on_a_difference_over_1e6_and_exits_1(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         R.main(["--compare", "case2", "--out", str(tmp_path / "out"), "--reference", str(tmp_path / "nope")])
     assert exc.value.code == 2 and f"--reference {tmp_path / 'nope'}: no such folder" in capsys.readouterr().err
+
+
+def test_a_benchmark_rerun_is_compared_on_its_iterations_and_estimates_not_its_timings(tmp_path):
+    """docs/results/scaling (benchmark JSON): another machine's timings, load and command line pass; one more Ipopt
+    iteration or another estimate fails."""
+    ref = R.ROOT / "docs" / "results" / "scaling"
+    new = tmp_path / "scaling"
+    shutil.copytree(ref, new)
+    f = new / "scaling_case1.json"
+    doc = json.loads(f.read_text())
+    doc["sizes"][0]["a_solve_time"] *= 1.5
+    doc["sizes"][0]["setup_breakdown"]["nl_write"] *= 2
+    doc["command"] = doc["command"].replace("--out ", "--out /elsewhere/")
+    doc["ratios"]["scaled_front_time_ratio"] *= 2
+    doc["machine"]["load_average_start"] = [9.0, 9.0, 9.0]
+    f.write_text(json.dumps(doc))
+    c = compare_folder(ref, new, R.BY_NAME["scaling"].keep)
+    assert c.ok and c.numbers > 100, c.mismatches
+    doc["ratios"]["scaled_front_iterations_ratio"] *= 1 + 1e-3
+    f.write_text(json.dumps(doc))
+    c = compare_folder(ref, new, R.BY_NAME["scaling"].keep)
+    assert c.mismatches == ["scaling_case1.json.ratios.scaled_front_iterations_ratio: "
+                            + c.mismatches[0].split(": ", 1)[1]] and not c.ok

@@ -36,7 +36,16 @@ ATOL = 1e-9
 IGNORED = frozenset((
     "wall_time", "setup_time", "cold_wall_time", "build_time", "solver_setup_time", "total_time",
     "uncertainty_time", "cpu_time", "time_s", "elapsed",  # timings [s]
-    "dataset", "config", "results_dir", "path", "paths",  # paths of this checkout
+    # the benchmark's timings, their ratios and breakdowns, and the targets judged on them (its iterations and
+    # estimates are compared)
+    "clock_time", "solve_time", "a_solve_time", "a_solve_times", "a_time_per_iteration", "a_time_ratio",
+    "front_time_ratio", "scaled_a_time_ratio", "scaled_front_time_ratio", "interior_cold_time", "interior_warm_time",
+    "warm_over_cold_time", "front_over_cold_a", "front_end_to_end_over_a_end_to_end", "setup_share_of_front",
+    "setup_time_exponent", "solve_time_exponent", "time_per_iteration_exponent", "shooting_over_a_solve_only",
+    "shooting_over_full_discretization", "nl_route_a_solve_over_point_rows_a_solve",
+    "nl_route_setup_over_point_rows_setup", "cpu_ratio", "wall_ratio", "cpu_s", "wall_s", "setup_breakdown",
+    "a_solve_breakdown", "targets", "load_average_start", "load_average_end", "machine", "date_utc", "cpus",
+    "dataset", "config", "results_dir", "path", "paths", "command", "out",  # paths of this checkout, command lines
     "fingerprint", "model_fingerprint", "extension_forms", "config_sha256", "dataset_sha256", "source_sha256",
     "config_text",
     "versions", "version", "python", "platform", "host", "hostname", "date", "created", "started", "finished",

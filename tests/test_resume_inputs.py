@@ -213,6 +213,31 @@ def test_claim_inputs_records_on_the_first_run_and_compares_on_a_rerun(tmp_path)
         claim_inputs(ap, tmp_path / "out", config=cfg, resample_inputs="sample")
 
 
+def test_a_seeded_study_refuses_the_out_folder_of_another_study(tmp_path, capsys):
+    """Two seeded studies with the same configs keep other things under the same names (OUT/data/<seed>,
+    seed_<n>.json): the folder records which study made it."""
+    from pyomo_heli.studies.seeded import seeded_study_main
+
+    def one_seed(seed, config, data_config, out):
+        return {"seed": seed}
+
+    def summary(docs):
+        import pandas as pd
+        return pd.DataFrame(docs), "seeds"
+
+    out = tmp_path / "out"
+    args = ["--seeds", "1", "--config", str(TESTS / "configs" / "m0_noise_small.toml"), "--out", str(out)]
+    one_seed.__module__ = "pyomo_heli.studies.one"
+    assert seeded_study_main("a", args, one_seed, summary) == 0
+    assert seeded_study_main("a", args, one_seed, summary) == 0  # the same study resumes
+    one_seed.__module__ = "pyomo_heli.studies.other"
+    with pytest.raises(SystemExit) as exc:
+        seeded_study_main("b", args, one_seed, summary)
+    assert exc.value.code == 2
+    assert f"--out {out}: its finished results are another study's (pyomo_heli.studies.one)" in \
+        capsys.readouterr().err
+
+
 def test_the_envelope_study_keys_saved_rows_on_the_flight_test_content(tmp_path, monkeypatch):
     """Its saved rows were keyed on manifest.json, which is the same for every seed of a generator config: a
     loop evaluated on one realisation was read back for another."""

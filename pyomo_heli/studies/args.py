@@ -42,8 +42,9 @@ INPUTS_FILE = "study_inputs.json"
 def claim_inputs(ap: argparse.ArgumentParser, out: Path, **inputs) -> None:
     """Refuse ``out`` when its finished work (seeds, generated flight tests, realizations) was made from other
     inputs: the SHA-256 of each named input file (``--config=path`` as ``config=path``; None: not given) and each
-    plain value (a flag's setting) are kept in ``OUT/study_inputs.json`` on the first run and compared on every
-    rerun, which resumes only on equal inputs. One argparse error line names the option at fault."""
+    plain value (a flag's setting; ``study``: the study's name) are kept in ``OUT/study_inputs.json`` on the first
+    run and compared on every rerun, which resumes only on equal inputs. One argparse error line names the option at
+    fault, or the other study."""
     import json
 
     from pyomo_heli.provenance import config_sha256
@@ -57,6 +58,9 @@ def claim_inputs(ap: argparse.ArgumentParser, out: Path, **inputs) -> None:
             old = None
         if isinstance(old, dict):
             diff = [k for k in now if k in old and old[k] != now[k]]
+            if "study" in diff:
+                ap.error(f"--out {out}: its finished results are another study's ({old['study']}); give another "
+                         f"--out or remove it")
             if diff:
                 k = diff[0]
                 what = f"the content of --{k.replace('_', '-')} {inputs[k]}" if isinstance(inputs[k], Path) \

@@ -5,21 +5,24 @@
 
 Evaluation only: it reads the generated flight tests' ``truth.json`` (the identification and the loop never do).
 Every seed generates the flight test of ``--data-config`` (its truth effects kept, its seed replaced) twice, into
-``OUT/data/<seed>`` and ``OUT/data/<seed>_no_input_noise``: as configured (sensor noise on every channel, the
-control positions col and lon included), and with the inputs' sigma set to 0. The generator draws every channel's
-noise whatever its sigma, so every other channel keeps exactly the same noise. On each it solves the time-domain
-anchor A (min J_time) of ``--config`` (the loop's: Case 2 parameters) with the **truth's own model form**: M0 plus
-the truth's effects at their true geometry, the first effect parameter that is not fixed geometry (the strength,
-K_lamT for the wake on the tail) freed from 1.0. So the form is exactly right and only the noise is left.
+``OUT/data/<seed>_truth`` and ``OUT/data/<seed>_truth_no_input_noise``: as configured (sensor noise on every
+channel, the control positions col and lon included), and with the inputs' sigma set to 0. The generator draws every
+channel's noise whatever its sigma, so every other channel keeps exactly the same noise. On each it solves the
+time-domain anchor A (min J_time) of ``--config`` (the loop's: Case 2 parameters, output error) with the **truth's
+own model form**: M0 plus the truth's effects at their true geometry, the effect's strength (K_lamT for the wake on
+the tail) freed from 1.0. So the form is exactly right and only the noise is left. On the first version it also
+solves anchor A with the inputs' errors estimated (``[objectives] input_errors = ["col", "lon"]``, their sigma from
+the config's quiet lead-in). Every row has two standard errors: the Cramer-Rao bound from simulated sensitivities
+(with input errors, those eliminated) and the inverse reduced Hessian of the NLP.
 
 Once, and the same for every seed, the flight test without any noise (``[sensors] noise = false``: exact samples of
-the truth simulator, no filter) is solved the same way twice: with the config's ``[data] resample_inputs`` and with
+the truth simulator, no filter) is solved the same way with the config's ``[data] resample_inputs`` and with
 ``"project"``. What error is left there is the resampling's and the discretisation's (docs/model_nlp.md 10.3).
 
 Each finished seed is ``OUT/seed_<seed>.json``, the noise-free rows ``OUT/no_noise.json`` (a rerun reuses them; the
-generated data are deleted once they are done).
-Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per seed and data, the solver status and the errors of the
-free parameters against truth.
+generated data are deleted once they are done). Written: ``OUT/summary.csv`` and ``OUT/summary.md``: per seed and
+data, the solver status, the errors of the free parameters against truth and the twist's standard errors, all in %
+of truth.
 """
 from __future__ import annotations
 
@@ -33,15 +36,31 @@ import pandas as pd
 
 from .seeded import cached_seed, seed_flight_test, seeded_study_main
 
-#: the two versions of every seed's flight test: the input channels' noise as configured, and set to zero
-VARIANTS = ("bundled", "no_input_noise")
+#: the rows of every seed: anchor A on its flight test, on the same without the inputs' noise, and on the first with
+#: the inputs' errors estimated
+VARIANTS = ("bundled", "no_input_noise", "input_errors")
 #: the strength freed with the configured parameters (initial, lower, upper, scale), per truth effect parameter
 STRENGTHS = {"K_lamT": (1.0, 0.0, 5.0, 1.0)}
+#: what ``--data-config`` says to switch the noise off for the noise-free rows
+NOISE_ON = "noise = true"
+
+
+def check_data_config(data_config: Path) -> None:
+    """ValueError naming ``--data-config`` unless it has an effect whose strength this study frees and one
+    ``noise = true`` line (checked before any work)."""
+    from pyomo_heli.flighttest.config import load_config
+
+    g = load_config(data_config)
+    if not any(n in STRENGTHS for e in g.effects.values() for n in e):
+        raise ValueError(f"--data-config {data_config}: no truth effect with a strength this study frees "
+                         f"({', '.join(STRENGTHS)})")
+    if Path(data_config).read_text().count(NOISE_ON) != 1:
+        raise ValueError(f"--data-config {data_config}: expected one '{NOISE_ON}' line to switch the noise off")
 
 
 def flight_test(seed: int, data_config: Path, out: Path, input_noise: bool) -> Path:
-    """``OUT/data/<seed>[_no_input_noise]``: ``data_config``'s flight test (truth effects kept) with ``seed``."""
-    folder = out / "data" / (str(seed) if input_noise else f"{seed}_no_input_noise")
+    """``OUT/data/<seed>_truth[_no_input_noise]``: ``data_config``'s flight test (truth effects kept) with ``seed``."""
+    folder = out / "data" / (f"{seed}_truth" if input_noise else f"{seed}_truth_no_input_noise")
     return seed_flight_test(seed, data_config, folder, input_noise=input_noise)
 
 
@@ -53,87 +72,125 @@ def noise_free_flight_test(data_config: Path, out: Path) -> Path:
     data = out / "data" / "no_noise"
     if not (data / "truth.json").is_file():
         text = Path(data_config).read_text()
-        if text.count("noise = true") != 1:
-            raise ValueError(f"--data-config {data_config}: expected one 'noise = true' line to switch the noise off")
+        if text.count(NOISE_ON) != 1:
+            raise ValueError(f"--data-config {data_config}: expected one '{NOISE_ON}' line to switch the noise off")
         gen = out / "data" / "no_noise.toml"
         gen.parent.mkdir(parents=True, exist_ok=True)
-        gen.write_text(text.replace("noise = true", "noise = false"))
+        gen.write_text(text.replace(NOISE_ON, "noise = false"))
         generate(load_config(gen), data, force=True)
         gen.unlink()
     return data
 
 
-def anchor_a(config: Path, data: Path, resample_inputs: str | None = None) -> dict:
-    """Anchor A of ``config`` on ``data`` with the truth's model form, its strength free: status and errors.
-    ``resample_inputs`` replaces the config's ``[data] resample_inputs``."""
+def anchor_a(config: Path, data: Path, resample_inputs: str | None = None, input_errors: bool = False) -> dict:
+    """Anchor A of ``config`` on ``data`` with the truth's model form, its strength free: status, errors and standard
+    errors (Cramer-Rao and reduced Hessian), in % of truth. ``resample_inputs`` replaces the config's ``[data]
+    resample_inputs``; ``input_errors`` estimates the errors of col and lon."""
     from pyomo_heli.config import load_identification_config
     from pyomo_heli.flighttest.generate import truth_model_of
     from pyomo_heli.nlp.identification import build_problem
     from pyomo_heli.nlp.parameters import FreeParameter, free_parameter_values
     from pyomo_heli.pareto.front import ParetoSolver
+    from pyomo_heli.uncertainty.front import point_standard_errors
+    from pyomo_heli.uncertainty.reduced_hessian import reduced_hessian_covariance
 
-    over = {"dataset": str(data.resolve()), **({"resample_inputs": resample_inputs} if resample_inputs else {})}
-    cfg = load_identification_config(config, overrides={"data": over})
+    over = {"data": {"dataset": str(data.resolve()), **({"resample_inputs": resample_inputs} if resample_inputs
+                                                           else {})}}
+    if input_errors:
+        over["objectives"] = {"input_errors": ["col", "lon"]}
+    cfg = load_identification_config(config, overrides=over)
     truth = json.loads((data / "truth.json").read_text())
     strengths = [n for e in truth["effects"].values() for n in e if n in STRENGTHS]
     if not strengths:
         raise ValueError(f"{data / 'truth.json'}: no effect strength this study frees ({', '.join(STRENGTHS)})")
-    model = truth_model_of(data)
     free = list(cfg.free) + [FreeParameter(n, *STRENGTHS[n]) for n in strengths]
-    cfg = dataclasses.replace(cfg, model=model, free=free)
-    m, _, _ = build_problem(cfg)
-    a = ParetoSolver(m, dataclasses.replace(cfg.pareto, cold_check=False)).point_a()
+    cfg = dataclasses.replace(cfg, model=truth_model_of(data), free=free)
+    m, ident, _ = build_problem(cfg)
+    ps = ParetoSolver(m, dataclasses.replace(cfg.pareto, cold_check=False))
+    a = ps.point_a()
     est = free_parameter_values(m)
+    t = {n: float(truth["parameters"][n]) for n in est}
+
+    def percent(values: dict) -> dict:
+        return {n: float(100 * values[n] / abs(t[n])) for n in est}
+
+    se = {}
+    if a.success:
+        se = {"cramer_rao": percent(point_standard_errors(cfg, ident, est, kind="A")),
+              "reduced_hessian": percent(reduced_hessian_covariance(m, ps.solver, 1.0 / ps.s_time)["se"])}
     return {"status": a.status, "iterations": a.iterations, "J_time": a.J_time,
-            "resample_inputs": cfg.resample_inputs,
-            "estimate": {n: float(v) for n, v in est.items()},
-            "truth": {n: float(truth["parameters"][n]) for n in est},
-            "error_percent": {n: float(100 * (est[n] - truth["parameters"][n]) / abs(truth["parameters"][n]))
-                              for n in est}}
+            "resample_inputs": cfg.resample_inputs, "input_errors": list(cfg.nlp.input_errors),
+            "estimate": {n: float(v) for n, v in est.items()}, "truth": t,
+            "error_percent": percent({n: est[n] - t[n] for n in est}), "se_percent": se}
 
 
 def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
-    """Anchor A on both versions of one seed's flight test (read back from ``OUT/seed_<seed>.json``)."""
+    """The rows of one seed (read back from ``OUT/seed_<seed>.json``)."""
     done = cached_seed(out, seed)
     if done is not None:
         return done
     doc = {"seed": seed}
-    for v in VARIANTS:
-        data = flight_test(seed, data_config, out, input_noise=(v == "bundled"))
-        doc[v] = anchor_a(config, data)
-        shutil.rmtree(data, ignore_errors=True)
-    (out / f"seed_{seed}.json").write_text(json.dumps(doc, indent=1))
+    data = flight_test(seed, data_config, out, input_noise=True)
+    doc["bundled"] = anchor_a(config, data)
+    doc["input_errors"] = anchor_a(config, data, input_errors=True)
+    shutil.rmtree(data, ignore_errors=True)
+    data = flight_test(seed, data_config, out, input_noise=False)
+    doc["no_input_noise"] = anchor_a(config, data)
+    shutil.rmtree(data, ignore_errors=True)
+    _write(out / f"seed_{seed}.json", doc)
     return doc
+
+
+def _write(f: Path, doc: dict) -> None:
+    """``doc`` as JSON, whole or not at all (a kill leaves no half-written file to resume from)."""
+    tmp = f.with_suffix(".tmp")
+    tmp.write_text(json.dumps(doc, indent=1))
+    tmp.replace(f)
 
 
 def noise_free(config: Path, data_config: Path, out: Path) -> dict:
     """Anchor A on the noise-free flight test with the config's input resampling and projected (read back from
-    ``OUT/no_noise.json``)."""
+    ``OUT/no_noise.json``; one solve when the config projects already)."""
     f = out / "no_noise.json"
     if f.is_file():
-        return json.loads(f.read_text())
+        try:
+            return json.loads(f.read_text())
+        except ValueError:
+            pass  # cut short: solved again
     data = noise_free_flight_test(data_config, out)
-    doc = {"config": anchor_a(config, data), "project": anchor_a(config, data, resample_inputs="project")}
+    doc = {"config": anchor_a(config, data)}
+    if doc["config"]["resample_inputs"] != "project":
+        doc["project"] = anchor_a(config, data, resample_inputs="project")
     shutil.rmtree(data, ignore_errors=True)
-    f.write_text(json.dumps(doc, indent=1))
+    _write(f, doc)
     return doc
 
 
 def _row(seed, data: str, r: dict) -> dict:
-    return {"seed": seed, "data": data, "inputs": r["resample_inputs"], "status": r["status"], "J_time A": r["J_time"],
-            **{f"{n} error [%]": e for n, e in r["error_percent"].items()}}
+    se = r["se_percent"]
+    return {"seed": seed, "data": data, "inputs": r["resample_inputs"],
+            "input errors": ", ".join(r["input_errors"]) or "-", "status": r["status"], "J_time A": r["J_time"],
+            **{f"{n} error [%]": e for n, e in r["error_percent"].items()},
+            "twist SE Cramer-Rao [%]": se.get("cramer_rao", {}).get("theta_twist"),
+            "twist SE reduced Hessian [%]": se.get("reduced_hessian", {}).get("theta_twist")}
 
 
 def summary(docs: list[dict]) -> tuple[pd.DataFrame, str]:
-    rows = [_row(d["seed"], v, d[v]) for d in docs for v in VARIANTS]
+    rows = [_row(d["seed"], "bundled" if v == "input_errors" else v, d[v]) for d in docs for v in VARIANTS]
     rows += [_row("-", "no_noise", d) for d in docs[0]["no_noise"].values()]
     tab = pd.DataFrame(rows)
-    span = {v: tab[tab["data"] == v]["theta_twist error [%]"] for v in VARIANTS}
+
+    def span(data: str, errors: bool, col: str = "theta_twist error [%]") -> str:
+        x = tab[(tab["data"] == data) & ((tab["input errors"] != "-") == errors)][col]
+        return f"{x.min():+.1f} to {x.max():+.1f} %"
+
     free = {r["inputs"]: r["theta_twist error [%]"] for r in rows if r["data"] == "no_noise"}
     header = (f"Anchor A with the truth's model form on {len(docs)} noise realisations: the twist error spans "
-              f"{span['bundled'].min():+.1f} to {span['bundled'].max():+.1f} % with the inputs' noise and "
-              f"{span['no_input_noise'].min():+.1f} to {span['no_input_noise'].max():+.1f} % without it "
-              f"(every other channel's noise the same); without any noise "
+              f"{span('bundled', False)} with the inputs' noise and {span('no_input_noise', False)} without it "
+              f"(every other channel's noise the same); with the input errors estimated {span('bundled', True)}, "
+              f"its reduced-Hessian standard error "
+              f"{span('bundled', True, 'twist SE reduced Hessian [%]').replace('+', '')} (output error, "
+              f"Cramer-Rao: {span('bundled', False, 'twist SE Cramer-Rao [%]').replace('+', '')}); without any noise "
               + ", ".join(f"{e:+.2f} % with the inputs by {k!r}" for k, e in free.items()) + ".")
     return tab, header
 
@@ -143,8 +200,10 @@ def main(argv=None) -> int:
         doc = one_seed(seed, config, data_config, out)
         return {**doc, "no_noise": noise_free(config, data_config, out)}
 
+    with_noise_free.__module__ = __name__
     return seeded_study_main(__doc__.split("\n\n")[0], argv, with_noise_free, summary,
-                             seeds_example="20261122,20261125")
+                             seeds_example="20261122,20261125", check_data_config=check_data_config,
+                             default_config="studies/close_loop.toml")
 
 
 if __name__ == "__main__":

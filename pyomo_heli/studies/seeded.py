@@ -24,7 +24,8 @@ ROOT = Path(__file__).resolve().parents[2]
 def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
                       summarise: Callable[[list], tuple], seeds_example: str = "20261122-20261147",
                       check_config: Callable | None = None, data_overrides: bool = False,
-                      input_path_family: bool = False) -> int:
+                      input_path_family: bool = False, check_data_config: Callable | None = None,
+                      default_config: str = "studies/held_out_discovery.toml") -> int:
     """Parse ``--seeds --config --data-config --out`` (both configs checked before any work), run ``one_seed(seed,
     config, data_config, out)`` for every seed (printing each as it ends); ``summarise(docs)`` gives the summary
     table and the sentence above it: ``OUT/summary.csv``, ``OUT/summary.md``, printed. ``OUT/data`` is removed when
@@ -32,10 +33,13 @@ def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
     study needs of the loop config, a ValueError naming ``--config`` otherwise. ``data_overrides``: the study also
     takes ``--resample-inputs`` and ``--replay`` (replace the config's ``[data] resample_inputs`` and ``[diagnosis]
     replay``; with ``input_path_family`` also ``--input-path-family``, its ``[diagnosis] input_path_family``) and
-    passes ``one_seed`` the config's overrides as a fifth argument (a dict, empty without them)."""
+    passes ``one_seed`` the config's overrides as a fifth argument (a dict, empty without them).
+    ``check_data_config(path)``: what the study needs of the generator config, a ValueError naming
+    ``--data-config`` otherwise. ``default_config``: ``--config``'s default, relative to the checkout. OUT records
+    the study (``one_seed``'s module) with the inputs: another study's OUT is refused."""
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--seeds", required=True, help=f"e.g. {seeds_example}")
-    ap.add_argument("--config", default=str(ROOT / "studies" / "held_out_discovery.toml"))
+    ap.add_argument("--config", default=str(ROOT / default_config))
     ap.add_argument("--data-config", default=str(ROOT / "data" / "bo105_synthetic.toml"))
     ap.add_argument("--out", required=True)
     if data_overrides:
@@ -69,14 +73,15 @@ def seeded_study_main(description: str, argv, one_seed: Callable[..., dict],
         cfg = load_identification_config(config, overrides=overrides)
     except ConfigError as exc:
         ap.error(str(exc))
-    if check_config:
-        try:
-            check_config(cfg)
-        except ValueError as exc:  # only the study's own check: a ValueError from loading is no usage error
-            ap.error(str(exc))
+    for check, arg in ((check_config, cfg), (check_data_config, data_config)):
+        if check:
+            try:
+                check(arg)
+            except ValueError as exc:  # only the study's own check: a ValueError from loading is no usage error
+                ap.error(str(exc))
     out = out_folder(ap, a.out)
     # the seeds and OUT/data are kept for a rerun: refused when made from other configs
-    claim_inputs(ap, out, config=config, data_config=data_config)
+    claim_inputs(ap, out, study=one_seed.__module__, config=config, data_config=data_config)
     docs = []
     for s in seeds:
         args = (s, config.resolve(), data_config.resolve(), out) + ((overrides,) if data_overrides else ())

@@ -57,13 +57,13 @@ def test_nlp_linearization_matches_finite_differences(nlp_linearizations, speed_
     Relative per entry; entries below 1e-6 of their matrix's largest entry (structural zeros,
     round-off of the finite differences) are compared absolutely at 1e-5 * 1e-6 of that maximum.
     """
+    from pyomo_heli.studies.linear_checks import max_relative_error
+
     model, mats = nlp_linearizations
     fd = linearize_float(model, speed_kt * KT)
     for k in "ABCD":
-        E, F = mats[speed_kt][k], getattr(fd, k)
-        floor = 1e-6 * np.abs(F).max()
-        rel = np.abs(E - F) / np.maximum(np.abs(F), floor)
-        assert rel.max() < 1e-5, (k, rel.max())
+        err = max_relative_error(mats[speed_kt][k], getattr(fd, k))
+        assert err < 1e-5, (k, err)
 
 
 def _poles_of_the_flow(model, V, dt=0.1):
@@ -369,9 +369,13 @@ def test_committed_linear_checks_regenerate(tmp_path, monkeypatch):
     assert [f["at_bound"] for f in doc["J_linear_alone"]] == [[], ["theta_twist"]]
 
 
-def test_linear_checks_refuses_a_folder_without_a_flight_test(tmp_path, capsys):
+def test_linear_checks_refuses_a_folder_that_is_not_m0_itself(tmp_path, capsys):
+    """Its reference is the nominal model: a folder without a flight test, or one whose truth has an effect
+    (the bundled synthetic flight test), is refused in one line naming --dataset."""
     from pyomo_heli.studies.linear_checks import main as linear_checks
 
-    with pytest.raises(SystemExit) as exc:
-        linear_checks(["--dataset", str(tmp_path), "--out", str(tmp_path / "o")])
-    assert exc.value.code == 2 and f"--dataset {tmp_path}: no manifest.json" in capsys.readouterr().err
+    synthetic = DATA.parent / "bo105_synthetic"
+    for folder, message in ((tmp_path, "no manifest.json"), (synthetic, "its truth has effects (wake_on_tail)")):
+        with pytest.raises(SystemExit) as exc:
+            linear_checks(["--dataset", str(folder), "--out", str(tmp_path / "o")])
+        assert exc.value.code == 2 and f"--dataset {folder}: {message}" in capsys.readouterr().err

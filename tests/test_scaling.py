@@ -279,3 +279,15 @@ def test_scaling_is_an_adapter_option():
         validate_solver_options("pounce", {"scaling": True})
     with pytest.raises(ValueError, match="'scaling' must be true or false"):
         validate_solver_options("casadi-ipopt", {"scaling": "yes"})
+
+
+def test_the_scaled_case1_config_is_case1_with_scaling_on():
+    """studies/case1_scaled.toml (docs/results/scaling) differs from studies/case1.toml in the solver option alone,
+    so that the comparison with docs/results/case1 is of scaling only."""
+    import tomllib
+    from pathlib import Path
+
+    studies = Path(__file__).resolve().parents[1] / "studies"
+    plain, scaled = (tomllib.loads((studies / f).read_text()) for f in ("case1.toml", "case1_scaled.toml"))
+    assert scaled["solver"]["options"].pop("scaling") is True
+    assert scaled == plain

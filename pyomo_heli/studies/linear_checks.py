@@ -8,8 +8,8 @@
    truth, against those finite differences: largest relative entry error of A, B, C, D, and J_linear there.
 3. J_linear alone from 30 % off: CL_alpha_HT and Iyy free, then with theta_twist free too.
 
-The dataset must be M0 itself (``bo105_clean``): the reference is the nominal model. Writes
-``OUT/linear_checks.md`` (the three tables) and ``OUT/linear_checks.json``.
+The dataset must be M0 itself without noise (``bo105_clean``; another is refused): the reference is the nominal
+model. Writes ``OUT/linear_checks.md`` (the three tables) and ``OUT/linear_checks.json``.
 """
 from __future__ import annotations
 
@@ -122,6 +122,25 @@ def markdown(dataset: Path, resp: list[dict], lin: list[dict], fits: list[dict],
     return "\n".join(out) + "\n"
 
 
+def not_m0_itself(dataset: Path) -> str | None:
+    """Why ``dataset`` is not M0 itself without noise (its ``truth.json``: effects, noise, parameters off the
+    nominal table), None when it is."""
+    from pyomo_heli.physics.model import HelicopterModel
+
+    f = dataset / "truth.json"
+    if not f.is_file():
+        return "no truth.json (measured data)"
+    truth = json.loads(f.read_text())
+    if truth.get("effects"):
+        return f"its truth has effects ({', '.join(truth['effects'])})"
+    if truth.get("noise", True):
+        return "its records have noise"
+    nominal = HelicopterModel().parameters.to_dict()
+    off = [n for n, v in truth.get("parameters", {}).items() if n in nominal
+           and not np.isclose(v, nominal[n], rtol=1e-12, atol=0.0)]
+    return f"its truth's parameters differ from the nominal ones ({', '.join(off)})" if off else None
+
+
 def main(argv=None) -> int:
     from pyomo_heli.studies.args import out_folder
 
@@ -133,6 +152,9 @@ def main(argv=None) -> int:
     out = out_folder(ap, a.out)
     if not (a.dataset / "manifest.json").is_file():
         ap.error(f"--dataset {a.dataset}: no manifest.json there; give a flight-test folder")
+    problem = not_m0_itself(a.dataset)
+    if problem:
+        ap.error(f"--dataset {a.dataset}: {problem}; the checks' reference is the nominal model (data/bo105_clean)")
 
     from pyomo_heli.dataset import load_flight_test
     from pyomo_heli.dataset.frequency_response import frequency_responses

@@ -83,7 +83,7 @@ def noise_free_flight_test(data_config: Path, out: Path) -> Path:
 
 
 #: the standard errors of a row: the Cramer-Rao bound (sensitivities by simulation) and the inverse reduced Hessian
-#: of the NLP (:mod:`pyomo_heli.uncertainty.reduced_hessian`; its sparse LU takes about 10 GB at full size)
+#: of the NLP (:mod:`pyomo_heli.uncertainty.reduced_hessian`; about 11 GB resident at full size)
 STANDARD_ERRORS = ("cramer_rao", "reduced_hessian")
 
 

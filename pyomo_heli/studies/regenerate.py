@@ -146,7 +146,7 @@ ENTRIES: tuple[Entry, ...] = (
     # the time-domain twist with the truth's model form, with and without the noise on the measured inputs
     Entry("input_noise_check", ("python studies/input_noise_check.py --seeds 20261122,20261125,20261126,20261127 "
                                 "--config studies/close_loop.toml --out {out}/input_noise_check",),
-          ("summary.csv", "summary.md"), minutes=17),
+          ("summary.csv", "summary.md"), minutes=70),
     # the record-bias test's level as configured and against the record-rate replay
     *(Entry(f"record_bias_level{suffix}", (f"python studies/record_bias_level.py --seeds 20261122-20261161{flag} "
                                            f"--out {{out}}/record_bias_level{suffix}",),

@@ -8,6 +8,7 @@ line can say which file could not be written (exit status 1).
 from __future__ import annotations
 
 import errno
+import os
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -28,6 +29,22 @@ def writing(path):
     except OSError as exc:
         if exc.filename is None and not isinstance(exc, OutputError):
             raise OutputError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+        raise
+
+
+def atomic_write(path: Path, write) -> None:
+    """Write ``path`` by ``write(binary file)`` through a temporary name unique to this process, then rename it (a kill
+    leaves the whole file or none; two processes never share a temporary file)."""
+    path = Path(path)
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        with writing(tmp), open(tmp, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
         raise
 
 

@@ -51,7 +51,7 @@ import numpy as np
 import pyomo.environ as pyo
 
 from .. import interrupts
-from ..ioerrors import writing
+from ..ioerrors import atomic_write, writing
 
 
 class StoreMismatchError(ValueError):
@@ -262,21 +262,6 @@ def fingerprint(raw_config: dict, dataset: str | Path | None = None, **settings)
     return h.hexdigest()
 
 
-def _atomic_write(path: Path, write) -> None:
-    """Write ``path`` through a temporary name unique to this process, then rename it (a kill leaves the whole
-    file or none; two processes never share a temporary file)."""
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    try:
-        with writing(tmp), open(tmp, "wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def _variables(m):
     return list(m.component_data_objects(pyo.Var, descend_into=True))
 
@@ -358,7 +343,7 @@ class PointStore:
                 arrays.update(_duals(m))
         elif values is not None:
             arrays["values"] = np.asarray(values, dtype=float)
-        _atomic_write(self._path(key), lambda fh: np.savez(fh, **arrays))
+        atomic_write(self._path(key), lambda fh: np.savez(fh, **arrays))
 
     def record(self, key: str) -> dict:
         with np.load(self._path(key)) as z:

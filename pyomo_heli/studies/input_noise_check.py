@@ -54,8 +54,16 @@ def check_data_config(data_config: Path) -> None:
     if not any(n in STRENGTHS for e in g.effects.values() for n in e):
         raise ValueError(f"--data-config {data_config}: no truth effect with a strength this study frees "
                          f"({', '.join(STRENGTHS)})")
-    if Path(data_config).read_text().count(NOISE_ON) != 1:
+    noise_off_text(data_config)
+
+
+def noise_off_text(data_config: Path) -> str:
+    """``data_config``'s text with its one ``noise = true`` line switched off; ValueError naming ``--data-config``
+    without exactly one."""
+    text = Path(data_config).read_text()
+    if text.count(NOISE_ON) != 1:
         raise ValueError(f"--data-config {data_config}: expected one '{NOISE_ON}' line to switch the noise off")
+    return text.replace(NOISE_ON, "noise = false")
 
 
 def flight_test(seed: int, data_config: Path, out: Path, input_noise: bool) -> Path:
@@ -71,12 +79,10 @@ def noise_free_flight_test(data_config: Path, out: Path) -> Path:
 
     data = out / "data" / "no_noise"
     if not (data / "truth.json").is_file():
-        text = Path(data_config).read_text()
-        if text.count(NOISE_ON) != 1:
-            raise ValueError(f"--data-config {data_config}: expected one '{NOISE_ON}' line to switch the noise off")
+        text = noise_off_text(data_config)
         gen = out / "data" / "no_noise.toml"
         gen.parent.mkdir(parents=True, exist_ok=True)
-        gen.write_text(text.replace(NOISE_ON, "noise = false"))
+        gen.write_text(text)
         generate(load_config(gen), data, force=True)
         gen.unlink()
     return data
@@ -150,9 +156,9 @@ def one_seed(seed: int, config: Path, data_config: Path, out: Path) -> dict:
 
 def _write(f: Path, doc: dict) -> None:
     """``doc`` as JSON, whole or not at all (a kill leaves no half-written file to resume from)."""
-    tmp = f.with_suffix(".tmp")
-    tmp.write_text(json.dumps(doc, indent=1))
-    tmp.replace(f)
+    from pyomo_heli.ioerrors import atomic_write
+
+    atomic_write(f, lambda fh: fh.write(json.dumps(doc, indent=1).encode()))
 
 
 def noise_free(config: Path, data_config: Path, out: Path) -> dict:

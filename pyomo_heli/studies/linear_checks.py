@@ -64,32 +64,37 @@ def j_linear_runs(model, ft, responses) -> tuple[list[dict], list[dict], float]:
     from pyomo_heli.units import KT
 
     P = model.parameters
-    lin_rows, fits, j_truth = [], [], float("nan")
+    # one NLP with the largest set free; a set leaves the others held at the truth by their bounds
+    free = [FreeParameter.from_spec(P, n, initial=P[n] * START) for n in FREE_SETS[-1]]
+    data = IdentificationData(maneuvers=[], trims=ft.trims.iloc[0:0])
+    m = build_identification_nlp(data, model, free, NLPOptions(), responses=[r.band() for r in responses])
+
+    def hold(names) -> None:
+        """Bounds and start: ``names`` free from ``START`` times the truth, the others held at the truth."""
+        for f in free:
+            at = P[f.name] / f.scale
+            m.theta_s[f.name].setlb(f.lower / f.scale if f.name in names else at)
+            m.theta_s[f.name].setub(f.upper / f.scale if f.name in names else at)
+            m.theta_s[f.name].set_value(f.initial / f.scale if f.name in names else at)
+
+    hold(())  # section 2: every parameter at the truth
+    set_objective(m, 0.0 * m.J_linear)
+    res = make_solver(m, "casadi-ipopt", {"tol": 1e-12}).solve()
+    if not res.success:
+        raise RuntimeError(f"the trim and linearisation blocks at the truth did not solve: {res.status}")
+    lin_rows = [{"speed_kt": round(V / KT, 6), **{k: max_relative_error(matrices(m.lin[i])[k],
+                                                                         getattr(linearize_float(model, V), k))
+                                                   for k in "ABCD"}}
+                for i, V in enumerate(m.lin_speed_values)]
+    j_truth = float(pyo.value(m.J_linear))
+    set_objective(m, m.J_linear)
+    fits = []
     for names in FREE_SETS:
-        free = [FreeParameter.from_spec(P, n, initial=P[n] * START) for n in names]
-        data = IdentificationData(maneuvers=[], trims=ft.trims.iloc[0:0])
-        m = build_identification_nlp(data, model, free, NLPOptions(), responses=[r.band() for r in responses])
-        if not lin_rows:  # section 2, once: the parameters held at the truth by their bounds
-            for n in m.free_parameters:
-                m.theta_s[n].setlb(P[n] / m.theta_scale[n])
-                m.theta_s[n].setub(P[n] / m.theta_scale[n])
-            set_objective(m, 0.0 * m.J_linear)
-            res = make_solver(m, "casadi-ipopt", {"tol": 1e-12}).solve()
-            if not res.success:
-                raise RuntimeError(f"the trim and linearisation blocks at the truth did not solve: {res.status}")
-            for i, V in enumerate(m.lin_speed_values):
-                M, fd = matrices(m.lin[i]), linearize_float(model, V)
-                lin_rows.append({"speed_kt": round(V / KT, 6),
-                                 **{k: max_relative_error(M[k], getattr(fd, k)) for k in "ABCD"}})
-            j_truth = float(pyo.value(m.J_linear))
-            for f in free:
-                m.theta_s[f.name].setlb(f.lower / f.scale)
-                m.theta_s[f.name].setub(f.upper / f.scale)
-                m.theta_s[f.name].set_value(f.initial / f.scale)
-        set_objective(m, m.J_linear)
+        hold(names)
         res = make_solver(m, "casadi-ipopt", {"tol": 1e-10}).solve()
         est = free_parameter_values(m)
-        at_bound = [f.name for f in free if min(abs(est[f.name] - f.lower), abs(est[f.name] - f.upper))
+        at_bound = [f.name for f in free if f.name in names and min(abs(est[f.name] - f.lower),
+                                                                    abs(est[f.name] - f.upper))
                     <= 1e-6 * max(abs(f.lower), abs(f.upper), 1.0)]
         fits.append({"free": list(names), "status": str(res.status), "J_linear": float(pyo.value(m.J_linear)),
                      "truth": {n: float(P[n]) for n in names}, "estimate": {n: float(est[n]) for n in names},

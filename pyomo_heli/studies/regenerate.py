@@ -52,6 +52,10 @@ BENCH = "python studies/benchmark.py"
 HELD_OUT_TABLES = ("held_out_small", "held_out_small_blind4", "held_out_small_extended", "noise_only", "held_out",
                    "held_out_blind3", "held_out_blind4", "held_out_extended")
 HELD_OUT = "python studies/held_out_effects.py"
+#: the held-out rows of the extended family's table that seed 20261123's collective gain (col_scale) describes
+SEED23_COL_SCALE = "skewed_inflow_gradient vertical_drag advancing_blade_compressibility"
+#: record-rate measured inputs with AR(4) input errors and each record's reference error (docs/generic_term_level.md)
+RECORD_INPUTS = "data.resample_inputs=record objectives.input_error_ar=4 objectives.input_reference_error=true"
 SMALL = "--config studies/held_out_small.toml --data-config studies/held_out_small_gen.toml"
 
 
@@ -250,6 +254,14 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("held_out_blind4", (f"{HELD_OUT} --seeds 3 --effects {H17_H19} {RECORD_P} --workers 2 "
                               "--out {out}/held_out_blind4", *reanalysed("held_out_blind4", RECORD_P)),
           ("held_out.csv", "held_out.md"), minutes=140),
+    # docs/generic_term_level.md, "Why the study configs keep projected inputs": the extended family's seed-23 rows
+    # that col_scale describes, with the study configs' projected inputs and with record-rate inputs, AR(4) input
+    # errors and each record's reference error, one run beside the other
+    Entry("record_inputs", tuple(
+        f"{HELD_OUT} --seeds 1 --first-seed 1 --effects {SEED23_COL_SCALE} none --generic-family extended{flags} "
+        f"--workers 2 --out {{out}}/record_inputs/{name}"
+        for name, flags in (("projected", f" {RECORD_P}"), ("record", f" {RECORD_P} {RECORD_INPUTS}"))),
+        tuple(f"{t}/held_out.{x}" for t in ("projected", "record") for x in ("csv", "md")), minutes=70),
     # the input path's extended dictionary on the kept models of the standard family's full-size rows, reanalysed
     Entry("input_path_extended", tuple(
         f"{HELD_OUT} --reanalyse {{out}}/input_path_extended/scratch --rows "

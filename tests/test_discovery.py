@@ -39,6 +39,14 @@ def _loop(tmp_path, effect_table: str, seed: int, extra: str = "", max_iteration
     return cfg, json.loads((tmp_path / "loop" / "loop.json").read_text())
 
 
+def test_the_deciding_test_study_runs_this_library():
+    """docs/results/deciding_test (docs/discovery.md, "Which test decides") measures the tests' level on these
+    small instances with this library."""
+    from pyomo_heli.studies.regenerate import TEST_GENERIC
+
+    assert TEST_GENERIC.split() == GENERIC
+
+
 def test_noise_only_nothing_is_accepted(tmp_path, monkeypatch, flight_test_cache):
     """M0 plus sensor noise: no term of the library (10 physical + 9 generic) is significant, nothing is added.
     A rerun into the same folder reads the finished step back (the screen's solves are not done again)."""

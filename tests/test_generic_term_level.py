@@ -32,6 +32,30 @@ def test_summary_gives_the_estimates_and_z_moments_over_the_seeds():
     assert list(per_seed(docs, ["col_scale"])["col_scale z"]) == [-3.4, 0.5, -2.1, 9.0]
 
 
+def test_where_the_score_test_decides_the_tables_add_what_the_corrected_lr_would_have():
+    """Output error (the score test's own p decides): the summary adds z_LR's moments and the per-seed table each
+    term's z_LR and, over the terms, the largest |z_p| and |z_LR| with their term (a failed fit left out); with the
+    corrected LR deciding (z_p is z_LR) neither is added."""
+    from pyomo_heli.studies.generic_term_level import per_seed, summary
+
+    def fit(c, z_p, z_lr, ok=True, criterion="score test"):
+        return {"estimate": c, "z": z_lr, "LR": z_lr * z_lr, "z_p": z_p, "z_LR": z_lr, "success": ok,
+                "criterion": criterion}
+    docs = [{"seed": 1, "fits": {"dM_one": fit(0.01, 1.5, 4.0), "dZ_one": fit(-0.02, -2.5, -3.0)}},
+            {"seed": 2, "fits": {"dM_one": fit(-0.01, -0.5, -1.0), "dZ_one": fit(0.3, 9.0, 9.0, ok=False)}}]
+    row = summary(docs, ["dM_one", "dZ_one"]).set_index("term").loc["dM_one"]
+    assert row["mean z_LR"] == pytest.approx(1.5) and row["z_LR beyond +-2 [%]"] == pytest.approx(50.0)
+    tab = per_seed(docs, ["dM_one", "dZ_one"])
+    assert list(tab["largest |z_p| term"]) == ["dZ_one", "dM_one"] and list(tab["largest |z_p|"]) == [2.5, 0.5]
+    assert list(tab["largest |z_LR| term"]) == ["dM_one", "dM_one"] and list(tab["largest |z_LR|"]) == [4.0, 1.0]
+    assert list(tab["dZ_one z_LR"]) == [-3.0, 9.0]
+    for d in docs:
+        for f in d["fits"].values():
+            f["criterion"] = "likelihood ratio"
+    assert "z_LR beyond +-2 [%]" not in summary(docs, ["dM_one"]).columns
+    assert not [c for c in per_seed(docs, ["dM_one"]).columns if "z_LR" in c]
+
+
 def _seed_7(out) -> list:
     """The study's arguments for seed 7 of the small held-out flight test into ``out``."""
     return ["--seeds", "7", "--config", str(ROOT / "studies" / "held_out_small.toml"),
@@ -79,6 +103,13 @@ def test_level_study_with_the_measured_inputs_taken_as_exact_fits_again(tmp_path
     oe = json.loads((tmp_path / "oe" / "seed_7.json").read_text())
     assert oe["identification"] == "oe" and oe["J0"] != pytest.approx(doc["J0"], rel=1e-3)
     assert all(f["success"] and abs(f["z"]) < 4.0 for f in oe["fits"].values())
+    # in output error the score test's own p decides; z_LR is the corrected LR's p, referred to F(1, df), as with
+    # input errors, where it is z_p itself
+    for f in oe["fits"].values():
+        assert f["criterion"] == "score test"
+        p_lr = stats.f(1, f["df"]).sf(f["LR_robust"]) if math.isfinite(f["df"]) else stats.chi2(1).sf(f["LR_robust"])
+        assert f["p_LR"] == pytest.approx(p_lr, rel=1e-9) and 2 * stats.norm.sf(abs(f["z_LR"])) == pytest.approx(p_lr)
+    assert all(f["z_LR"] == f["z_p"] for f in doc["fits"].values())
 
 
 def test_exact_inputs_keep_every_other_draw_and_give_the_generator_sigmas(tmp_path):

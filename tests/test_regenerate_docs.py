@@ -59,7 +59,8 @@ def test_held_out_tables_end_reanalysed_and_rescored_with_their_runs_flags():
 
     tables = [e for e in R.ENTRIES if e.commands[0].startswith(R.HELD_OUT)
               and not any(x in e.commands[0] for x in ("--reanalyse", "--summary"))]
-    assert {e.folder for e in tables} == set(R.HELD_OUT_TABLES) | {"held_out_control"}
+    assert {e.folder for e in tables} == set(R.HELD_OUT_TABLES) | {"held_out_control", "record_inputs/projected",
+                                                                   "record_inputs/record"}
     for e in tables:
         *runs, again, score = e.commands
         score_args = shlex.split(score)

@@ -52,6 +52,8 @@ BENCH = "python studies/benchmark.py"
 HELD_OUT_TABLES = ("held_out_small", "held_out_small_blind4", "held_out_small_extended", "noise_only", "held_out",
                    "held_out_blind3", "held_out_blind4", "held_out_extended")
 HELD_OUT = "python studies/held_out_effects.py"
+#: the short generic library of tests/test_discovery.py (its small instances)
+TEST_GENERIC = "dM_one dM_mu2 dM_bump00 dM_bump05 dM_bump10 dX_mu4 dZ_one dZ_bump00 TAS_scale"
 #: the held-out rows of the extended family's table that seed 20261123's collective gain (col_scale) describes
 SEED23_COL_SCALE = "skewed_inflow_gradient vertical_drag advancing_blade_compressibility"
 #: record-rate measured inputs with AR(4) input errors and each record's reference error (docs/generic_term_level.md)
@@ -163,6 +165,13 @@ ENTRIES: tuple[Entry, ...] = (
       for suffix, flag in (("", ""), ("_sample", " --resample-inputs sample"), ("_record", " --replay record"),
                            ("_extended", " --input-path-family extended"),
                            ("_extended_record", " --input-path-family extended --replay record"))),
+    # docs/discovery.md, "Which test decides": the test library's generic terms on the small instance's M0 + noise,
+    # with the input errors estimated (the corrected LR decides) and in output error (the score test's own p does)
+    Entry("deciding_test", tuple(
+        f"python studies/generic_term_level.py --seeds 21-30 --terms {TEST_GENERIC} --config "
+        f"studies/held_out_small.toml --data-config studies/held_out_small_gen.toml{flag} --out {{out}}/deciding_test"
+        for flag in ("", " --identification oe")),
+        ("summary.csv", "summary.md", "oe/summary.csv", "oe/summary.md"), minutes=4),
     # the input scale factors' NLP estimates when nothing is missing (the held-out rows' col_scale)
     Entry("generic_term_level", (
         "python studies/generic_term_level.py --seeds 20261122-20261141 --out {out}/generic_term_level",
@@ -257,11 +266,12 @@ ENTRIES: tuple[Entry, ...] = (
     # docs/generic_term_level.md, "Why the study configs keep projected inputs": the extended family's seed-23 rows
     # that col_scale describes, with the study configs' projected inputs and with record-rate inputs, AR(4) input
     # errors and each record's reference error, one run beside the other
-    Entry("record_inputs", tuple(
-        f"{HELD_OUT} --seeds 1 --first-seed 1 --effects {SEED23_COL_SCALE} none --generic-family extended{flags} "
-        f"--workers 2 --out {{out}}/record_inputs/{name}"
-        for name, flags in (("projected", f" {RECORD_P}"), ("record", f" {RECORD_P} {RECORD_INPUTS}"))),
-        tuple(f"{t}/held_out.{x}" for t in ("projected", "record") for x in ("csv", "md")), minutes=70),
+    *(Entry(f"record_inputs/{name}", (
+        f"{HELD_OUT} --seeds 1 --first-seed 1 --effects {SEED23_COL_SCALE} none --generic-family extended "
+        f"{flags} --workers 2 --out {{out}}/record_inputs/{name}",
+        *reanalysed(f"record_inputs/{name}", f"--generic-family extended {flags}")),
+        ("held_out.csv", "held_out.md"), minutes=40)
+      for name, flags in (("projected", RECORD_P), ("record", f"{RECORD_P} {RECORD_INPUTS}"))),
     # the input path's extended dictionary on the kept models of the standard family's full-size rows, reanalysed
     Entry("input_path_extended", tuple(
         f"{HELD_OUT} --reanalyse {{out}}/input_path_extended/scratch --rows "

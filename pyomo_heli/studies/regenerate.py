@@ -264,8 +264,8 @@ ENTRIES: tuple[Entry, ...] = (
                               "--out {out}/held_out_blind4", *reanalysed("held_out_blind4", RECORD_P)),
           ("held_out.csv", "held_out.md"), minutes=140),
     # docs/generic_term_level.md, "Why the study configs keep projected inputs": the extended family's seed-23 rows
-    # that col_scale describes, with the study configs' projected inputs and with record-rate inputs, AR(4) input
-    # errors and each record's reference error, one run beside the other
+    # that col_scale describes (and M0 + noise of that seed), with the study configs' projected inputs and with
+    # record-rate inputs, AR(4) input errors and each record's reference error; both ranked by the deciding p
     *(Entry(f"record_inputs/{name}", (
         f"{HELD_OUT} --seeds 1 --first-seed 1 --effects {SEED23_COL_SCALE} none --generic-family extended "
         f"{flags} --workers 2 --out {{out}}/record_inputs/{name}",

@@ -165,6 +165,10 @@ ENTRIES: tuple[Entry, ...] = (
       for suffix, flag in (("", ""), ("_sample", " --resample-inputs sample"), ("_record", " --replay record"),
                            ("_extended", " --input-path-family extended"),
                            ("_extended_record", " --input-path-family extended --replay record"))),
+    # docs/real_data.md: the trim-only score test's level and power on synthetic trim sets like the real ones
+    Entry("trim_score_level", ("python studies/score_test_level.py --trims --seeds 0-19 --truth m0",
+                               "python studies/score_test_level.py --trims --seeds 0-9 --truth wake"),
+          ("m0.txt", "wake.txt"), minutes=1, stdout={0: "m0.txt", 1: "wake.txt"}),
     # docs/discovery.md, "Which test decides": the test library's generic terms on the small instance's M0 + noise,
     # with the input errors estimated (the corrected LR decides) and in output error (the score test's own p does)
     Entry("deciding_test", tuple(

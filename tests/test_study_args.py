@@ -64,6 +64,11 @@ ROOT = Path(__file__).resolve().parent.parent
     (["generic_term_level.py", "--seeds", "1", "--output-error-ar", "9", "--out", "OUT"],
      "[objectives]: field 'output_error_ar' must be an integer 0..8"),
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
+    (["innovation_check.py", "--config", "nope.toml"], "--config nope.toml: file not found"),
+    (["innovation_check.py", "--config", "studies/case1.toml"], "input_errors is empty; the innovations need it"),
+    (["innovation_check.py", "--dataset", "tests"], "--dataset tests: no flight test there"),
+    (["innovation_check.py", "--dataset", "data/bo105_synthetic", "data/bo105_synthetic", "--loop", "tests"],
+     "--loop: a loop belongs to one dataset"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path, monkeypatch, capsys):
     """In-process through the study's ``main(argv)`` (a subprocess per case cost 5 s of imports each), as a

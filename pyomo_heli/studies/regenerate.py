@@ -134,6 +134,14 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("innovation_check", ("python studies/innovation_check.py --loop {out}/close_loop_eiv "
                                "--out {out}/innovation_check",), ("summary.csv",), needs=("close_loop_eiv",),
           minutes=2),
+    # docs/diagnosis.md: the truth model's innovations on the bundled flight test and the seeds studies' five other
+    # noise realisations of it, pooled
+    Entry("innovation_check_seeds", (
+        *(f"pyomo-heli generate-data --config data/bo105_synthetic.toml --seed {s} "
+          f"--out {{out}}/innovation_check_seeds/data/{s} --force" for s in SEEDS.split()),
+        "python studies/innovation_check.py --dataset data/bo105_synthetic "
+        + " ".join(f"{{out}}/innovation_check_seeds/data/{s}" for s in SEEDS.split())
+        + " --out {out}/innovation_check_seeds"), ("summary.csv", "pooled.csv"), minutes=12),
     Entry("score_test_level", (
         "python studies/score_test_level.py --seeds 101-200 --out {out}/score_test_level",
         "python studies/score_test_level.py --seeds 101-200 --identification oe --out {out}/score_test_level",

@@ -69,6 +69,8 @@ ROOT = Path(__file__).resolve().parent.parent
     (["innovation_check.py", "--dataset", "tests"], "--dataset tests: no flight test there"),
     (["innovation_check.py", "--dataset", "data/bo105_synthetic", "data/bo105_synthetic", "--loop", "tests"],
      "--loop: a loop belongs to one dataset"),
+    (["innovation_check.py", "--dataset", "data/bo105_synthetic", "data/bo105_synthetic"],
+     "--dataset: two datasets in folders named 'bo105_synthetic'"),
 ])
 def test_study_script_bad_argument_is_one_line_exit_2(argv, message, tmp_path, monkeypatch, capsys):
     """In-process through the study's ``main(argv)`` (a subprocess per case cost 5 s of imports each), as a

@@ -73,6 +73,10 @@ def main(argv=None) -> int:
     missing = [d for d in a.dataset or () if not (d / "manifest.json").is_file()]
     if missing:
         ap.error(f"--dataset {missing[0]}: no flight test there (no manifest.json)")
+    names = [d.name for d in a.dataset or ()]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:  # the tables name a dataset by its folder
+        ap.error(f"--dataset: two datasets in folders named {twice[0]!r}; give each its own folder name")
     a.out.mkdir(parents=True, exist_ok=True)
     rows, tests = [], []
     for dataset in a.dataset or [cfg.dataset]:

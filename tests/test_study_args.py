@@ -69,6 +69,9 @@ ROOT = Path(__file__).resolve().parent.parent
     (["innovation_check.py", "--dataset", "tests"], "--dataset tests: no flight test there"),
     (["innovation_check.py", "--dataset", "data/bo105_synthetic", "data/bo105_synthetic", "--loop", "tests"],
      "--loop: a loop belongs to one dataset"),
+    (["innovation_check.py", "--loop", "tests"], "--loop tests: no loop.json there"),
+    (["innovation_check.py", "--dataset", "data/bo105_flight_trims_padfield1996"],
+     "--dataset data/bo105_flight_trims_padfield1996: no truth.json"),
     (["innovation_check.py", "--dataset", "data/bo105_synthetic", "data/bo105_synthetic"],
      "--dataset: two datasets in folders named 'bo105_synthetic'"),
 ])

@@ -99,7 +99,7 @@ def one_seed(seed: int, terms: list[str], config: Path, data_config: Path, out: 
         except ValueError:
             doc = None
         if (doc and doc.get("config") == str(config) and set(terms) <= set(doc["fits"])
-                and all("z_p" in doc["fits"][n] for n in terms)
+                and all("z_LR" in doc["fits"][n] for n in terms)
                 and doc.get("input_sigma_scale", 1.0) == input_sigma_scale
                 and doc.get("resample_inputs") == resample_inputs and doc.get("input_error_ar") == input_error_ar
                 and doc.get("input_reference_error", False) == input_reference_error
@@ -212,7 +212,7 @@ def parted(docs: list[dict], terms: list[str]) -> bool:
 def per_seed(docs: list[dict], terms: list[str]) -> pd.DataFrame:
     """One row per seed: each term's estimate, z and z_p; where z_p and z_LR part (:func:`parted`) also each term's
     z_LR and, over the terms, the largest |z_p| and |z_LR| with their term (a family-wise test at level a compares
-    them with Phi^-1(1 - a / 2))."""
+    them with Phi^-1(1 - a / 2); a one-sided term's, the lags', with Phi^-1(1 - a))."""
     both = parted(docs, terms)
     keys = ("estimate", "z", "z_p") + (("z_LR",) if both else ())
     rows = []

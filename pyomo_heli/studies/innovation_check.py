@@ -41,15 +41,10 @@ def cases(cfg, loop: Path | None) -> list[tuple[str, HelicopterModel, dict, bool
     """(name, model, parameters, shift): the truth model at its parameters (no parameter shift in the trim
     shape test: nothing was identified), and each loop iteration at its diagnosed point (the shift of its
     free parameters allowed, as the loop's own verdict does)."""
-    if read_truth(cfg.dataset) is None:
-        raise SystemExit(f"{cfg.dataset}: no truth.json; this study needs the truth simulator's parameters")
     tm = truth_model_of(cfg.dataset)
     out = [("truth model", tm, tm.parameters.to_dict(), False)]
     if loop is not None:
-        f = loop / "loop.json"
-        if not f.is_file():
-            raise SystemExit(f"--loop {loop}: no loop.json there")
-        for it in json.loads(f.read_text())["iterations"]:
+        for it in json.loads((loop / "loop.json").read_text())["iterations"]:
             out.append((f"loop iteration {it['iteration']}", iteration_model(cfg.model, it), it["parameters"], True))
     return out
 
@@ -73,6 +68,11 @@ def main(argv=None) -> int:
     missing = [d for d in a.dataset or () if not (d / "manifest.json").is_file()]
     if missing:
         ap.error(f"--dataset {missing[0]}: no flight test there (no manifest.json)")
+    if a.loop and not (a.loop / "loop.json").is_file():
+        ap.error(f"--loop {a.loop}: no loop.json there")
+    no_truth = [d for d in a.dataset or [cfg.dataset] if read_truth(d) is None]
+    if no_truth:
+        ap.error(f"--dataset {no_truth[0]}: no truth.json; this study needs the truth simulator's parameters")
     names = [d.name for d in a.dataset or ()]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:  # the tables name a dataset by its folder

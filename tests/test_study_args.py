@@ -66,7 +66,7 @@ ROOT = Path(__file__).resolve().parent.parent
     (["benchmark.py", "--quick", "--out", "tests"], "--out tests: is a folder, expected a file name"),
     (["innovation_check.py", "--config", "nope.toml"], "--config nope.toml: file not found"),
     (["innovation_check.py", "--config", "studies/case1.toml"], "input_errors is empty; the innovations need it"),
-    (["innovation_check.py", "--dataset", "tests"], "--dataset tests: no flight test there"),
+    (["innovation_check.py", "--dataset", "tests"], "--dataset tests: no manifest.json there"),
     (["innovation_check.py", "--dataset", "data/bo105_synthetic", "data/bo105_synthetic", "--loop", "tests"],
      "--loop: a loop belongs to one dataset"),
     (["innovation_check.py", "--loop", "tests"], "--loop tests: no loop.json there"),

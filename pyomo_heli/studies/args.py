@@ -35,6 +35,14 @@ def in_file(ap: argparse.ArgumentParser, path, option: str) -> Path:
     return p
 
 
+def flight_test_folder(ap: argparse.ArgumentParser, path, option: str) -> Path:
+    """An input flight-test folder (one holding manifest.json)."""
+    p = Path(path)
+    if not (p / "manifest.json").is_file():
+        ap.error(f"{option} {path}: no manifest.json there; give a flight-test folder")
+    return p
+
+
 #: the record of what a study's results folder was made from (:func:`claim_inputs`)
 INPUTS_FILE = "study_inputs.json"
 

@@ -143,7 +143,7 @@ def _table(df: pd.DataFrame) -> list[str]:
 
 
 def main(argv=None) -> int:
-    from .args import claim_inputs, in_file, out_folder
+    from .args import claim_inputs, flight_test_folder, in_file, out_folder
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loops", type=Path, nargs="+", required=True, help="close-loop results folders")
     ap.add_argument("--out", type=Path, required=True)
@@ -161,8 +161,7 @@ def main(argv=None) -> int:
         claim_inputs(ap, a.out, data_config=in_file(ap, a.data_config, "--data-config"))
     if a.data is None and not (data / "manifest.json").is_file():
         run_command(["generate-data", "--config", str(a.data_config), "--out", str(data)])
-    if not (data / "manifest.json").is_file():
-        ap.error(f"--data {data}: not a flight-test folder (no manifest.json)")
+    flight_test_folder(ap, data, "--data")
     tab = pd.concat([evaluate_saved(p, data, a.out / "loops") for p in a.loops], ignore_index=True)
     tab.to_csv(a.out / "envelope_validation.csv", index=False)
     text = markdown(tab, data)

@@ -32,7 +32,7 @@ from pyomo_heli.physics.model import HelicopterModel
 from pyomo_heli.report.identification import read_truth
 from pyomo_heli.report.loop import iteration_model
 
-from .args import in_file
+from .args import flight_test_folder, in_file
 
 ROOT = Path(__file__).resolve().parents[2]  # the checkout: studies/, data/
 
@@ -65,31 +65,28 @@ def main(argv=None) -> int:
         ap.error(f"--config {a.config}: [objectives] input_errors is empty; the innovations need it")
     if a.dataset and len(a.dataset) > 1 and a.loop:
         ap.error("--loop: a loop belongs to one dataset; give one --dataset with it")
-    missing = [d for d in a.dataset or () if not (d / "manifest.json").is_file()]
-    if missing:
-        ap.error(f"--dataset {missing[0]}: no flight test there (no manifest.json)")
+    datasets = [flight_test_folder(ap, d, "--dataset") for d in a.dataset] if a.dataset else [Path(cfg.dataset)]
     if a.loop and not (a.loop / "loop.json").is_file():
         ap.error(f"--loop {a.loop}: no loop.json there")
-    no_truth = [d for d in a.dataset or [cfg.dataset] if read_truth(d) is None]
+    no_truth = [d for d in datasets if read_truth(d) is None]
     if no_truth:
         ap.error(f"--dataset {no_truth[0]}: no truth.json; this study needs the truth simulator's parameters")
-    names = [d.name for d in a.dataset or ()]
+    names = [d.name for d in datasets]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:  # the tables name a dataset by its folder
         ap.error(f"--dataset: two datasets in folders named {twice[0]!r}; give each its own folder name")
     a.out.mkdir(parents=True, exist_ok=True)
     rows, tests = [], []
-    for dataset in a.dataset or [cfg.dataset]:
-        one = dataclasses.replace(cfg, dataset=dataset)
-        r, t = diagnose_dataset(one, a.loop)
-        rows += [{"dataset": Path(dataset).name, **x} for x in r]
-        tests += [x.assign(dataset=Path(dataset).name) for x in t]
+    for dataset in datasets:
+        r, t = diagnose_dataset(dataclasses.replace(cfg, dataset=dataset), a.loop)
+        rows += [{"dataset": dataset.name, **x} for x in r]
+        tests += [x.assign(dataset=dataset.name) for x in t]
     summary = pd.DataFrame(rows)
     summary.to_csv(a.out / "summary.csv", index=False)
     every = pd.concat(tests, ignore_index=True)
     every.to_csv(a.out / "whiteness.csv", index=False, float_format="%.6g")
     print(summary.drop(columns="failing").to_string(index=False))
-    if a.dataset and len(a.dataset) > 1:
+    if len(datasets) > 1:
         pooled = pooled_table(summary, every)
         pooled.to_csv(a.out / "pooled.csv", index=False)
         print(pooled.to_string(index=False))

@@ -147,7 +147,7 @@ def not_m0_itself(dataset: Path) -> str | None:
 
 
 def main(argv=None) -> int:
-    from pyomo_heli.studies.args import out_folder
+    from pyomo_heli.studies.args import flight_test_folder, out_folder
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--dataset", type=Path, default=ROOT / "data" / "bo105_clean",
@@ -155,8 +155,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="results/linear_checks")
     a = ap.parse_args(argv)
     out = out_folder(ap, a.out)
-    if not (a.dataset / "manifest.json").is_file():
-        ap.error(f"--dataset {a.dataset}: no manifest.json there; give a flight-test folder")
+    flight_test_folder(ap, a.dataset, "--dataset")
     problem = not_m0_itself(a.dataset)
     if problem:
         ap.error(f"--dataset {a.dataset}: {problem}; the checks' reference is the nominal model (data/bo105_clean)")

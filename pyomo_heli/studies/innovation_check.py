@@ -70,7 +70,8 @@ def main(argv=None) -> int:
         ap.error(f"--loop {a.loop}: no loop.json there")
     no_truth = [d for d in datasets if read_truth(d) is None]
     if no_truth:
-        ap.error(f"--dataset {no_truth[0]}: no truth.json; this study needs the truth simulator's parameters")
+        where = f"--dataset {no_truth[0]}" if a.dataset else f"--config {a.config}: its dataset {no_truth[0]}"
+        ap.error(f"{where}: no truth.json; this study needs the truth simulator's parameters")
     names = [d.name for d in datasets]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:  # the tables name a dataset by its folder

@@ -475,6 +475,33 @@ def test_a_rejected_discovered_term_is_reported_unexplained_with_its_shape(tmp_p
     assert rejected_discovery({"iterations": [its[0], {**its[1], "rejected": None}], "final_iteration": 1}) is None
 
 
+def test_a_kept_term_without_its_own_standard_error_says_whose_the_report_quotes(tmp_path):
+    """Where the kept model has no standard error of a discovered term (``[loop] uncertainty = "none"``, a bound),
+    the report quotes the structure step's and says so; with its own, it quotes that."""
+    from types import SimpleNamespace
+
+    from pyomo_heli.report.loop import SCREEN_SE, discovery_summary, term_estimate, unexplained_statement
+
+    fit = {"name": "dX_mu4", "formula": "dX = c m g (mu/0.3)^4", "strength": "c_dX_mu4", "estimate": -0.0148,
+           "se": 0.00095}
+    its = [{"iteration": 0, "extensions": [], "parameters": {"Iyy": 4900.0},
+            "discovery": {"decision": "discovered", "added": "dX_mu4", "discovered": fit}},
+           {"iteration": 1, "extensions": ["dX_mu4"], "parameters": {"Iyy": 4890.0, "c_dX_mu4": -0.0221},
+            "standard_errors": None}]
+    doc = {"iterations": its, "final_iteration": 1}
+    cfg = SimpleNamespace(model=HelicopterModel())
+    assert term_estimate(its[1], fit) == (-0.0221, 0.00095, False)
+    text = "\n".join(discovery_summary(doc, cfg, tmp_path, figures=False))
+    assert f"c = -0.0221 +- 0.00095 (the kept model's estimate; {SCREEN_SE})" in text
+    assert SCREEN_SE in unexplained_statement(its[1], fit)
+    its[1]["standard_errors"] = {"c_dX_mu4": float("nan")}  # at a bound
+    assert term_estimate(its[1], fit) == (-0.0221, 0.00095, False)
+    its[1]["standard_errors"] = {"c_dX_mu4": 0.0018}
+    assert term_estimate(its[1], fit) == (-0.0221, 0.0018, True)
+    text = "\n".join(discovery_summary(doc, cfg, tmp_path, figures=False))
+    assert "c = -0.0221 +- 0.0018 (the kept model's estimate and standard error)" in text and SCREEN_SE not in text
+
+
 def test_at_the_iteration_limit_the_stop_message_reports_the_term_left_unexplained():
     """The loop stops at its iteration limit after a step that discovered dX_mu4: the stop message says the residual
     stays unexplained and gives that term's formula, estimate, standard error and p against the step's level; after

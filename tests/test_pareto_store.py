@@ -279,3 +279,34 @@ def test_close_loop_dataset_without_manifest_is_refused_before_out_is_created(co
     if which == "results":
         assert "front.csv" in line
     assert not out.exists()
+
+
+def test_close_loop_adds_the_standard_errors_a_stopped_iteration_lacks(config, tmp_path):
+    """identify saves its front before the standard errors: a loop stopped between the two left a finished
+    iteration without them, which a rerun reused as it was (the kept terms read "+- nan" in the held-out tables,
+    the report quoted the structure step's standard error as the kept model's). The rerun now computes them: the
+    same numbers as the uninterrupted run's."""
+    import dataclasses
+
+    import pyomo_heli.workflows.close_loop as cl
+    from pyomo_heli.config import load_identification_config
+
+    cfg = load_identification_config(config)
+    settings = dataclasses.replace(cl.loop_settings(cfg), max_iterations=0)
+    assert settings.uncertainty == "chosen"
+    out = tmp_path / "loop"
+    first = cl.close_loop(cfg, out, settings, progress=lambda s: None)["iterations"][0]["standard_errors"]
+    assert first and all(v > 0 for v in first.values())
+    chosen = out / "iter_0" / "chosen.json"
+    doc = json.loads(chosen.read_text())
+    for point in ("chosen", "direct"):
+        doc[point].pop("uncertainty", None)
+    chosen.write_text(json.dumps(doc))  # as the identification left it before its standard errors
+    a = out / "iter_0" / "time_domain.json"
+    a.write_text(json.dumps({k: v for k, v in json.loads(a.read_text()).items() if k != "uncertainty"}))
+    lines = []
+    again = cl.close_loop(cfg, out, settings, progress=lines.append)["iterations"][0]
+    assert any("reusing the finished identification" in s for s in lines)
+    assert any("has no standard errors (stopped before them): computing them" in s for s in lines)
+    assert again["standard_errors"] == pytest.approx(first, rel=1e-9)
+    assert "uncertainty" in json.loads(chosen.read_text())["chosen"]  # saved: a third run reuses them

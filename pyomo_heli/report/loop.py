@@ -508,17 +508,26 @@ def rejected_discovery(doc: dict) -> tuple[dict, dict] | None:
     return found[0] if found else None
 
 
-def term_estimate(it: dict, fit: dict) -> tuple[float, float]:
-    """(estimate, standard error) of a discovered term in iteration ``it``; the discovery step's when it has none."""
+def term_estimate(it: dict, fit: dict) -> tuple[float, float, bool]:
+    """(estimate, standard error, whether the standard error is iteration ``it``'s own) of a discovered term in
+    ``it``; the structure step's fit's standard error where ``it`` has none (``[loop] uncertainty = "none"``, or at a
+    bound), which the report then says."""
     c = it["parameters"].get(fit["strength"], fit["estimate"])
-    return c, (it.get("standard_errors") or {}).get(fit["strength"]) or fit["se"]
+    se = (it.get("standard_errors") or {}).get(fit["strength"])
+    own = se is not None and math.isfinite(se)
+    return c, se if own else fit["se"], own
+
+
+#: what a report line adds when a term's standard error is not its iteration's own (:func:`term_estimate`)
+SCREEN_SE = "standard error of the structure step's fit: the iteration's own was not computed"
 
 
 def unexplained_statement(rejected: dict, fit: dict) -> str:
     """One line: the residual stays unexplained, with the shape of the discovered term that was not kept."""
-    c, se = term_estimate(rejected, fit)
+    c, se, own = term_estimate(rejected, fit)
     return (f"the residual stays unexplained: not explained by any library effect; discovered {fit['formula']}, "
-            f"c = {c:.4g} +- {se:.2g} (estimate of the rejected iteration {rejected['iteration']}), not kept")
+            f"c = {c:.4g} +- {se:.2g} (estimate of the rejected iteration {rejected['iteration']}"
+            f"{'' if own else '; ' + SCREEN_SE}), not kept")
 
 
 def limit_statement(record: dict) -> str:
@@ -548,15 +557,16 @@ def discovery_summary(doc: dict, cfg, out, figures: bool = True) -> list[str]:
         model = iteration_model(cfg.model, kept)
         L += ["## Discovered, not explained by any library effect", ""]
         for it, fit in found:
-            c, se = term_estimate(kept, fit)
+            c, se, own = term_estimate(kept, fit)
+            whose = "the kept model's estimate and standard error" if own else f"the kept model's estimate; {SCREEN_SE}"
             L += [f"- iteration {it['iteration']}: not explained by any library effect; discovered {fit['formula']}, "
-                  f"c = {c:.4g} +- {se:.2g} (the kept model's estimate and standard error)", ""]
+                  f"c = {c:.4g} +- {se:.2g} ({whose})", ""]
             L += _discovered_figure(model, kept["parameters"], fit, c, se, out, figures)
         L += _total_figure(model, kept["parameters"], [fit for _, fit in found], out, figures)
     if rejected:
         L += ["## Discovered, not kept (validation rule): the residual stays unexplained", ""]
         for it, fit in rejected:
-            c, se = term_estimate(it, fit)
+            c, se, _ = term_estimate(it, fit)
             L += [f"- {unexplained_statement(it, fit)}; rejected because adding it {it['rejected']}", ""]
             L += _discovered_figure(iteration_model(cfg.model, it), it["parameters"], fit, c, se, out, figures)
     if found or rejected:

@@ -401,6 +401,15 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
         reused = result is not None
         if result is not None:
             progress(f"  iteration {i}: reusing the finished identification in {out / f'iter_{i}'}")
+            if settings.uncertainty != "none" and result.chosen is not None and "uncertainty" not in result.chosen:
+                # stopped between the front and its standard errors (identify saves the front first): add them now,
+                # or the kept model would go on without them (its terms "+- nan", the report the screen's)
+                from ..uncertainty.front import add_uncertainty
+
+                progress(f"  iteration {i}: the stored identification has no standard errors (stopped before "
+                         f"them): computing them")
+                add_uncertainty(result, cfg, identification_data(cfg, ft), out / f"iter_{i}",
+                                lambda s: progress("  " + s), points=settings.uncertainty)
         else:
             result = run_identification(cfg, out / f"iter_{i}", progress=lambda s: progress("  " + s),
                                         restart=restart,

@@ -1347,6 +1347,33 @@ def test_the_backward_check_removes_the_least_significant_term():
     assert term_to_drop([rows[2]]) is None and term_to_drop([]) is None
 
 
+def test_the_model_without_a_removed_term_is_the_one_its_iteration_record_rebuilds():
+    """The backward check removes dM_lon from M0 + dM_lon + dM_q: the model the loop identifies next is the one every
+    reader of that iteration rebuilds from its record (``config_of_result``: the config plus the extensions its
+    results list), so check-effect, uncertainty and the held-out study's evaluation accept the folder (a review:
+    the removed term's strength stayed in the model, fixed at 0, and each refused the folder: "the model differs")."""
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from pyomo_heli.config import config_of_result
+    from pyomo_heli.provenance import model_fingerprint, model_record
+    from pyomo_heli.workflows.loop_steps import _with_candidate, _without
+
+    cfg = load_identification_config(Path(__file__).resolve().parent / "configs" / "m0_noise_small.toml")
+    start = {f.name: f.initial for f in cfg.free}
+    both = _with_candidate(_with_candidate(cfg, start, "dM_lon", 1e-3), {**start, "c_dM_lon": 1e-3}, "dM_q", 2e-3)
+    after = _without(both, {**start, "c_dM_lon": 1e-3, "c_dM_q": 2e-3}, "dM_lon")
+    assert [e.name for e in after.model.extensions] == ["dM_q"] and "c_dM_lon" not in after.model.parameters
+    assert [f.name for f in after.free] == [*start, "c_dM_q"] and after.free[-1].initial == 2e-3
+    record = SimpleNamespace(info={"extensions": ["dM_q"], "shape_parameters": {}},
+                             parameters=[f.name for f in after.free])
+    rebuilt = config_of_result(cfg, record)
+    assert model_fingerprint(model_record(rebuilt)) == model_fingerprint(model_record(after))
+    # a term's own parameters go with it, a shape parameter included; the base model's stay
+    shaped = _without(_with_candidate(cfg, start, "dX_bump10", 1e-3), start, "dX_bump10")
+    assert list(shaped.model.parameters) == list(cfg.model.parameters)
+
+
 # slow (108 s; CI time): four identifications and three screens. The default run has the check's levels and
 # decisions (test_the_backward_check_removes_at_the_level_the_terms_entered_at above)
 @pytest.mark.slow
@@ -1380,6 +1407,10 @@ def test_a_term_the_backward_check_rejects_is_removed_past_the_iteration_limit(t
     assert check[0]["level"] == pytest.approx(0.01 / 3) == its[1]["discovery"]["level"]
     assert its[2]["decision"]["decision"] == "dropped" and ">= 0.0033" in its[2]["decision"]["message"]
     assert doc["final_iteration"] == 3 and "dM_one" not in offered[-1]
+    # the iteration after the removal is the model its record rebuilds (check-effect and uncertainty read it)
+    from pyomo_heli.workflows.check_effect import loop_iteration
+
+    assert [e.name for e in loop_iteration(tmp_path / "loop", 3)[2].model.extensions] == ["dZ_one"]
 
 
 # slow (CI time): four identifications and four screens. The default run has the name check's decision at its step

@@ -190,6 +190,13 @@ class ParameterSet(Mapping[str, float]):
         new = [s for s in specs if s.name not in self._specs]
         return ParameterSet(self.specs() + new)
 
+    def without(self, names: Iterable[str]) -> "ParameterSet":
+        """A copy without the parameters ``names`` (those of a model extension taken out); unknown names raise
+        KeyError."""
+        names = set(names)
+        self.check_names(names)
+        return ParameterSet(s for s in self.specs() if s.name not in names)
+
     def to_dict(self) -> dict[str, float]:
         return {k: s.value for k, s in self._specs.items()}
 

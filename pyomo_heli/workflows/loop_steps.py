@@ -44,11 +44,14 @@ def _with_candidate(cfg: IdentificationConfig, chosen: dict, name: str, kappa: f
 
 
 def _without(cfg: IdentificationConfig, chosen: dict, name: str) -> IdentificationConfig:
-    """``cfg`` without the loop-added effect ``name`` (backward check); the other free parameters start at
-    ``chosen``."""
+    """``cfg`` without the loop-added effect ``name`` (backward check), its parameters gone too: the model the
+    iteration's record rebuilds (:func:`pyomo_heli.config.config_of_result`, the record's extensions); the other
+    free parameters start at ``chosen``."""
     exts = tuple(e for e in cfg.model.extensions if e.name != name)
     gone = next(e for e in cfg.model.extensions if e.name == name)
-    model = HelicopterModel(parameters=cfg.model.parameters, extensions=exts).with_parameters(**{gone.strength: 0.0})
+    still = {s.name for e in exts for s in e.parameters()}
+    own = [s.name for s in gone.parameters() if s.name not in still]
+    model = HelicopterModel(parameters=cfg.model.parameters.without(own), extensions=exts)
     free = [dataclasses.replace(f, initial=min(max(chosen[f.name], f.lower), f.upper)) for f in cfg.free
             if f.name != gone.strength]
     return dataclasses.replace(cfg, model=model, free=free)

@@ -1369,9 +1369,10 @@ def test_the_model_without_a_removed_term_is_the_one_its_iteration_record_rebuil
                              parameters=[f.name for f in after.free])
     rebuilt = config_of_result(cfg, record)
     assert model_fingerprint(model_record(rebuilt)) == model_fingerprint(model_record(after))
-    # a term's own parameters go with it, a shape parameter included; the base model's stay
-    shaped = _without(_with_candidate(cfg, start, "dX_bump10", 1e-3), start, "dX_bump10")
-    assert list(shaped.model.parameters) == list(cfg.model.parameters)
+    # a term's own parameters go with it, its shape parameters included; the base model's stay
+    shaped = _with_candidate(cfg, start, "rotor_wake_on_tail", 0.5)
+    assert {"z_ht", "n_wt"} <= set(shaped.model.parameters)
+    assert list(_without(shaped, start, "rotor_wake_on_tail").model.parameters) == list(cfg.model.parameters)
 
 
 # slow (108 s; CI time): four identifications and three screens. The default run has the check's levels and

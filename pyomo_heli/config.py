@@ -313,7 +313,7 @@ def loop_table(raw, path, input_errors) -> LoopTable:
                 problems.add("loop", f"field 'candidates': unknown candidate {n!r}; choose from "
                                      f"{', '.join(CANDIDATES)}")
         # a field given that nothing reads is refused, not dropped (the fields the file gives, not the defaults)
-        unread = ([(k, "it is read with discovery = true only") for k in ("generic", "generic_family", "generic_rank")
+        unread = ([(k, "it is read with discovery = true only") for k in DISCOVERY_ONLY_LOOP_FIELDS
                    if not table.discovery]
                   + ([("generic_family", "'generic' names the terms (give one of the two)")]
                      if table.discovery and "generic" in raw else [])
@@ -373,6 +373,10 @@ def _objectives_use(s, raw: dict, problems: Problems):
     except (TypeError, ValueError) as exc:
         problems.add("linear", str(exc))
         return order, None
+
+
+#: the [loop] fields read with ``discovery = true`` only (a config without discovery that gives one is refused)
+DISCOVERY_ONLY_LOOP_FIELDS = ("generic", "generic_family", "generic_rank")
 
 
 def config_of_result(cfg: IdentificationConfig, result) -> IdentificationConfig:

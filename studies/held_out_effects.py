@@ -1225,6 +1225,7 @@ def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> 
     at the same time: the file is merged on every write). Returns the cost record with the wake-naming check."""
     import os
 
+    from pyomo_heli.config import DISCOVERY_ONLY_LOOP_FIELDS
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.report.loop import final_index
     from pyomo_heli.workflows.close_loop import LoopMismatchError, finished_loop
@@ -1244,6 +1245,8 @@ def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> 
         loop, cfg = base / mode / "loop", base / mode / "loop.toml"
         flag = "true" if mode == "on" else "false"
         wanted = text.replace("\n[loop]\n", f"\n[loop]\ndiscovery = {flag}\n", 1)
+        if mode == "off":  # the fields only discovery reads (a generic_rank pin, a --set): refused without it
+            wanted = re.sub(rf"(?m)^({'|'.join(DISCOVERY_ONLY_LOOP_FIELDS)})\s*=.*\n", "", wanted)
         if mode in cost and (loop / "loop.json").is_file() and cfg.is_file() and cfg.read_text() != wanted:
             raise StudyFolderError(f"{loop}: its timed loop was made from another config ({cfg}); give this study "
                                    "another folder")

@@ -1217,6 +1217,19 @@ def _cpu() -> float:
     return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
 
 
+def bundled_config_text(text: str, mode: str) -> str:
+    """The loop config of ``--bundled``'s ``mode`` ("on"/"off") from the study config's ``text``: ``[loop] discovery``
+    set; off, without the fields only discovery reads (a ``generic_rank`` pin, a ``--set``), which [loop] refuses
+    without it."""
+    from pyomo_heli.config import DISCOVERY_ONLY_LOOP_FIELDS
+
+    text = re.sub(r"(?m)^discovery\s*=.*\n", "", text)
+    text = text.replace("\n[loop]\n", f"\n[loop]\ndiscovery = {'true' if mode == 'on' else 'false'}\n", 1)
+    if mode == "off":
+        text = re.sub(rf"(?m)^({'|'.join(DISCOVERY_ONLY_LOOP_FIELDS)})\s*=.*\n", "", text)
+    return text
+
+
 def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> dict:
     """The bundled flight test through the closed loop of ``config`` twice in this one process: discovery on and
     off (the config's text with ``[loop] discovery`` set), each timed (wall and CPU seconds, load average).
@@ -1225,7 +1238,6 @@ def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> 
     at the same time: the file is merged on every write). Returns the cost record with the wake-naming check."""
     import os
 
-    from pyomo_heli.config import DISCOVERY_ONLY_LOOP_FIELDS
     from pyomo_heli.diagnosis.candidates import CANDIDATES
     from pyomo_heli.report.loop import final_index
     from pyomo_heli.workflows.close_loop import LoopMismatchError, finished_loop
@@ -1239,14 +1251,10 @@ def run_bundled(out: Path, config: Path, dataset: Path, modes=("on", "off")) -> 
         return {**old, **mine}
 
     cost = merged({})
-    text = re.sub(r"(?m)^discovery\s*=.*\n", "", config.read_text())
     truth = json.loads((dataset / "truth.json").read_text())["parameters"]
     for mode in modes:
         loop, cfg = base / mode / "loop", base / mode / "loop.toml"
-        flag = "true" if mode == "on" else "false"
-        wanted = text.replace("\n[loop]\n", f"\n[loop]\ndiscovery = {flag}\n", 1)
-        if mode == "off":  # the fields only discovery reads (a generic_rank pin, a --set): refused without it
-            wanted = re.sub(rf"(?m)^({'|'.join(DISCOVERY_ONLY_LOOP_FIELDS)})\s*=.*\n", "", wanted)
+        wanted = bundled_config_text(config.read_text(), mode)
         if mode in cost and (loop / "loop.json").is_file() and cfg.is_file() and cfg.read_text() != wanted:
             raise StudyFolderError(f"{loop}: its timed loop was made from another config ({cfg}); give this study "
                                    "another folder")

@@ -924,6 +924,23 @@ def test_the_study_sets_config_fields_through_a_copy(tmp_path):
         study.main(["--set", "objectives.input_error_ar=99", "--effects", "none", "--out", str(tmp_path / "o")])
 
 
+def test_the_bundled_cost_loops_configs_are_read_with_the_studys_settings(tmp_path):
+    """--bundled runs the study config with discovery on and off: both copies are read (the off one without the fields
+    only discovery reads, a generic_rank pin and a --set alike; a review: its loop stopped with "field 'generic_rank'
+    is not read here"), and every other setting is the study's."""
+    from pyomo_heli.config import load_identification_config
+    from pyomo_heli.workflows.close_loop import loop_settings
+
+    study = _study()
+    src = study.with_settings(study.CONFIG, [study.parse_set("loop.generic_rank=p")], tmp_path / "c.toml")
+    for mode in ("on", "off"):
+        path = tmp_path / f"{mode}.toml"
+        path.write_text(study.bundled_config_text(src.read_text(), mode))
+        loop = loop_settings(load_identification_config(path))
+        assert loop.discovery == (mode == "on") and loop.max_iterations == 3
+        assert (loop.generic_rank == "p") if mode == "on" else "generic_rank" not in path.read_text()
+
+
 def test_a_case_folder_of_another_generator_config_is_refused(tmp_path):
     """The small and the full-size study generate the same effect and seed from other templates: a scratch folder
     that holds one is never taken for the other."""

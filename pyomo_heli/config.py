@@ -20,7 +20,8 @@ from .pareto.front import ParetoSettings
 from .physics.model import HelicopterModel
 from .settings import ConfigError, Problems, validate
 from .settings.common import SIGMA_MAX_SI  # noqa: F401 - re-exported
-from .settings.identification import OBJECTIVE_SETS, IdentificationFile, LinearTable, LoopTable
+from .settings.identification import (OBJECTIVE_SETS, IdentificationFile, LinearTable, LoopTable,
+                                      unread_discovery_fields)
 from .units import SENSOR_SIGMA_KEYS
 from .solvers import validate_solver_options
 
@@ -313,10 +314,7 @@ def loop_table(raw, path, input_errors) -> LoopTable:
                 problems.add("loop", f"field 'candidates': unknown candidate {n!r}; choose from "
                                      f"{', '.join(CANDIDATES)}")
         # a field given that nothing reads is refused, not dropped (the fields the file gives, not the defaults)
-        unread = ([(k, "it is read with discovery = true only") for k in DISCOVERY_ONLY_LOOP_FIELDS
-                   if not table.discovery]
-                  + ([("generic_family", "'generic' names the terms (give one of the two)")]
-                     if table.discovery and "generic" in raw else [])
+        unread = (unread_discovery_fields(raw, table.discovery)
                   + [(k, "it is read with validation_rule = true only") for k in ("validation_joint", "after_rejection")
                      if not table.validation_rule]
                   + ([("score_inputs", "it says how the score test treats the input errors, and [objectives] "
@@ -373,10 +371,6 @@ def _objectives_use(s, raw: dict, problems: Problems):
     except (TypeError, ValueError) as exc:
         problems.add("linear", str(exc))
         return order, None
-
-
-#: the [loop] fields read with ``discovery = true`` only (a config without discovery that gives one is refused)
-DISCOVERY_ONLY_LOOP_FIELDS = ("generic", "generic_family", "generic_rank")
 
 
 def config_of_result(cfg: IdentificationConfig, result) -> IdentificationConfig:

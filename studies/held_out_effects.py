@@ -1221,7 +1221,7 @@ def bundled_config_text(text: str, mode: str) -> str:
     """The loop config of ``--bundled``'s ``mode`` ("on"/"off") from the study config's ``text``: ``[loop] discovery``
     set; off, without the fields only discovery reads (a ``generic_rank`` pin, a ``--set``), which [loop] refuses
     without it."""
-    from pyomo_heli.config import DISCOVERY_ONLY_LOOP_FIELDS
+    from pyomo_heli.settings.identification import DISCOVERY_ONLY_LOOP_FIELDS
 
     text = re.sub(r"(?m)^discovery\s*=.*\n", "", text)
     text = text.replace("\n[loop]\n", f"\n[loop]\ndiscovery = {'true' if mode == 'on' else 'false'}\n", 1)

@@ -317,6 +317,21 @@ GenericTerms = Optional[Names(generic_names("control"), empty=NON_EMPTY,
 GENERIC_MESSAGES = {"generic": ("field 'generic' must be a non-empty list of names", None),
                     "generic_family": "field 'generic_family' must be \"standard\", \"extended\" or \"control\", "
                                       "got {v!r}"}
+#: the [loop] fields read with ``discovery = true`` only (a config without discovery that gives one is refused)
+DISCOVERY_ONLY_LOOP_FIELDS = ("generic", "generic_family", "generic_rank")
+
+
+def unread_discovery_fields(given, discovery: bool) -> list[tuple[str, str]]:
+    """The discovery fields of a [loop] table that nothing reads, as (field, why): every one of
+    :data:`DISCOVERY_ONLY_LOOP_FIELDS` given without discovery, and ``generic_family`` given beside ``generic``.
+    ``given``: the field names the file gives (not the defaults). One rule for every [loop] table (close-loop and
+    trim-loop), so a field given that nothing reads is refused, not dropped."""
+    given = set(given)
+    if not discovery:
+        return [(k, "it is read with discovery = true only") for k in DISCOVERY_ONLY_LOOP_FIELDS if k in given]
+    if {"generic", "generic_family"} <= given:
+        return [("generic_family", "'generic' names the terms (give one of the two)")]
+    return []
 
 
 class LoopTable(Table):

@@ -45,6 +45,7 @@ from ..dataset import load_flight_test
 from ..dataset.schema import KT, TRIM_CHANNELS, TrimConventions
 from ..nlp.parameters import FreeParameter
 from ..settings import ConfigError
+from ..settings.identification import unread_discovery_fields
 from ..physics.conventions import THETA_DATUM, TrimOutputDatum
 from ..physics.model import HelicopterModel
 from ..physics.parameters import DEG
@@ -139,11 +140,8 @@ def load_trim_loop_config(path) -> TrimLoopConfig:
             problems.add(where, str(exc))
     loop = s.loop
     given = loop.model_fields_set  # a field the file gives that nothing reads is refused, not dropped
-    for key in ("generic", "generic_family"):
-        if key in given and not loop.discovery:
-            problems.add("loop", f"field '{key}' is not read here: it is read with discovery = true only")
-    if {"generic", "generic_family"} <= given:
-        problems.add("loop", "field 'generic_family' is not read here: 'generic' names the terms (give one of the two)")
+    for key, why in unread_discovery_fields(given, loop.discovery):
+        problems.add("loop", f"field '{key}' is not read here: {why}")
     cands = loop.candidates
     if cands is not None:
         bad = [c for c in cands if c not in CANDIDATES]

@@ -24,6 +24,7 @@ import fnmatch
 import shlex
 import subprocess
 import sys
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -397,6 +398,7 @@ def run(entries: list[Entry], out: str) -> None:
     import shutil
 
     for e in entries:
+        start = time.perf_counter()
         folder = (Path(out) if Path(out).is_absolute() else ROOT / out) / e.folder
         if folder.is_dir():  # written afresh: `uncertainty --out` refuses a folder holding other results
             shutil.rmtree(folder)
@@ -410,6 +412,7 @@ def run(entries: list[Entry], out: str) -> None:
                 proc = subprocess.run(argv_of(command, out), cwd=ROOT)
             if proc.returncode != 0:
                 raise SystemExit(f"[{e.folder}] failed with exit status {proc.returncode}: {command.format(out=out)}")
+        print(f"[{e.folder}] done in {(time.perf_counter() - start) / 60:.1f} min (estimate {e.minutes:g})", flush=True)
     for e in entries:  # last, so that later entries could read the loops and data of earlier ones
         removed = prune((Path(out) if Path(out).is_absolute() else ROOT / out) / e.folder, e.keep)
         print(f"[{e.folder}] kept the committed files, removed {len(removed)} others", flush=True)

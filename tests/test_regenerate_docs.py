@@ -168,3 +168,51 @@ def test_a_benchmark_rerun_is_compared_on_its_iterations_and_estimates_not_its_t
     c = compare_folder(ref, new, R.BY_NAME["scaling"].keep)
     assert c.mismatches == ["scaling_case1.json.ratios.scaled_front_iterations_ratio: "
                             + c.mismatches[0].split(": ", 1)[1]] and not c.ok
+
+
+# appends one "x" to OUT/<folder>/runs.txt, then exits with the status given after the folder
+COUNT = ('python -c "import pathlib, sys; f = pathlib.Path(sys.argv[1]) / \'runs.txt\'; '
+         'f.parent.mkdir(parents=True, exist_ok=True); f.write_text((f.read_text() if f.exists() else \'\') + \'x\'); '
+         'sys.exit(int(sys.argv[2]))" {out}/%s %d')
+
+
+def test_resume_skips_finished_entries_and_keeps_the_interrupted_folder(tmp_path, capsys):
+    out = str(tmp_path)
+    a, b_fails = R.Entry("a", (COUNT % ("a", 0),), ("runs.txt",)), R.Entry("b", (COUNT % ("b", 3),), ("runs.txt",))
+    with pytest.raises(SystemExit, match=r"\[b\] failed with exit status 3"):
+        R.run([a, b_fails], out)
+    assert json.loads((tmp_path / R.PROGRESS).read_text()) == {"a": list(a.commands)}
+    b = R.Entry("b", (COUNT % ("b", 0),), ("runs.txt",))
+    R.run([a, b], out, resume=True)
+    assert (tmp_path / "a" / "runs.txt").read_text() == "x"  # finished before: not run again
+    assert (tmp_path / "b" / "runs.txt").read_text() == "xx"  # run into its folder as the failed run left it
+    assert not (tmp_path / R.PROGRESS).exists()  # a finished run leaves no progress file
+    assert "[a] finished by the interrupted run: skipped (--resume)" in capsys.readouterr().out
+    R.run([a, b], out, resume=True)  # nothing unfinished: everything runs, into the folders as they are
+    assert (tmp_path / "a" / "runs.txt").read_text() == "xx"
+    R.run([a, b], out)  # without --resume every folder is written afresh
+    assert (tmp_path / "a" / "runs.txt").read_text() == (tmp_path / "b" / "runs.txt").read_text() == "x"
+
+
+def test_resume_needs_run(capsys):
+    with pytest.raises(SystemExit) as exc:
+        R.main(["--resume"])
+    assert exc.value.code == 2 and "--resume: give --run" in capsys.readouterr().err
+
+
+def test_compare_reads_printed_output_without_timings_line_by_line(tmp_path):
+    ref, new = tmp_path / "ref", tmp_path / "new"
+    for d in (ref, new):
+        d.mkdir()
+    lines = "seed 0: none; p: cg_offset {}, lon_rigging 0.0321\nseed 1: {}\n"
+    (ref / "m0.txt").write_text(lines.format("0.227", "none; p: cg_offset 0.81"))
+    (ref / "timing.txt").write_text("A solve 8.7 s\n")
+    (new / "timing.txt").write_text("A solve 9.9 s\n")  # not among `text`: never compared
+    (new / "m0.txt").write_text(lines.format("0.228", "none; p: cg_offset 0.81"))
+    c = compare_folder(ref, new, ("*.txt",), text=("m0.txt",))
+    assert c.ok and c.files == 1 and c.numbers == 5  # 0.227 -> 0.228: one unit of the last printed digit
+    (new / "m0.txt").write_text(lines.format("0.229", "lon_rigging; p: x"))
+    assert compare_folder(ref, new, ("*.txt",), text=("m0.txt",)).mismatches == [
+        "m0.txt line 1: 0.227 -> 0.229 (rel. 4.41e-03)",
+        "m0.txt line 2: 'seed #: none; p: cg_offset #' -> 'seed #: lon_rigging; p: x'"]
+    assert compare_folder(ref, new, ("*.txt",)).files == 0  # without `text` printed outputs are skipped

@@ -202,8 +202,23 @@ def compare_md(ref: Path, new: Path, name: str, c: Comparison) -> None:
     c.added += [f"{name} table '{' | '.join(h)[:60]}'" for h, left in pool.items() for _ in left]
 
 
-def compare_folder(ref: Path, new: Path, keep: tuple[str, ...]) -> Comparison:
-    """Compare every kept (committed) file of ``ref`` with the same file of ``new``."""
+def compare_text(ref: Path, new: Path, name: str, c: Comparison) -> None:
+    """A printed output line by line: the words must agree, the numbers to the tolerance or their last digit."""
+    r, n = ref.read_text().splitlines(), new.read_text().splitlines()
+    if len(r) != len(n):
+        c.mismatches.append(f"{name}: {len(r)} lines -> {len(n)}")
+    for i, (a, b) in enumerate(zip(r, n), start=1):
+        at = f"{name} line {i}"
+        ta, tb = _NUMBER.findall(a), _NUMBER.findall(b)
+        c.text(_NUMBER.sub("#", a), _NUMBER.sub("#", b), at)
+        if len(ta) == len(tb):
+            for x, y in zip(ta, tb):
+                c.number(float(x), float(y), at, slack=max(_last_digit_unit(x), _last_digit_unit(y)))
+
+
+def compare_folder(ref: Path, new: Path, keep: tuple[str, ...], text: tuple[str, ...] = ()) -> Comparison:
+    """Compare every kept (committed) file of ``ref`` with the same file of ``new``: JSON, CSV and Markdown tables,
+    and the printed outputs (``.txt``) that match a glob of ``text`` (those whose numbers hold no timings)."""
     from .regenerate import prune_matches
 
     c = Comparison()
@@ -215,8 +230,8 @@ def compare_folder(ref: Path, new: Path, keep: tuple[str, ...]) -> Comparison:
             c.mismatches.append(f"{extra}: not in the committed folder")
     for rel in ref_files:
         suffix = Path(rel).suffix
-        if suffix not in (".json", ".csv", ".md"):
-            continue  # figures, the benchmark's printed output
+        if suffix not in (".json", ".csv", ".md") and not (suffix == ".txt" and prune_matches(rel, text)):
+            continue  # figures, printed outputs with timings (the benchmark's)
         if rel not in new_files:
             c.mismatches.append(f"{rel}: missing")
             continue
@@ -225,8 +240,10 @@ def compare_folder(ref: Path, new: Path, keep: tuple[str, ...]) -> Comparison:
             compare_json(json.loads((ref / rel).read_text()), json.loads((new / rel).read_text()), rel, c)
         elif suffix == ".csv":
             compare_csv(ref / rel, new / rel, rel, c)
-        else:
+        elif suffix == ".md":
             compare_md(ref / rel, new / rel, rel, c)
+        else:
+            compare_text(ref / rel, new / rel, rel, c)
     return c
 
 

@@ -5,6 +5,7 @@
     python studies/regenerate_docs.py --run case1 case2     # run these entries into docs/results (their inputs first)
     python studies/regenerate_docs.py --run all --out results/docs_results   # everything, elsewhere (hours)
     python studies/regenerate_docs.py --run case1 --out /tmp/r --compare    # and compare it with docs/results
+    python studies/regenerate_docs.py --run held_out --resume   # after an interruption: go on where it stopped
 
 ``--compare`` checks every number of the kept files against the committed folder to 1e-6 relative
 (``pyomo_heli.studies.compare_results``), prints a table per entry and exits 1 if any differs.
@@ -88,6 +89,7 @@ class Entry:
     needs: tuple[str, ...] = ()
     minutes: float = 1.0
     stdout: dict = field(default_factory=dict)  # command index -> file (in the folder) for its printed output
+    text: tuple[str, ...] = ()  # printed outputs (globs) holding no timings: --compare reads them line by line
 
 
 ENTRIES: tuple[Entry, ...] = (
@@ -177,7 +179,8 @@ ENTRIES: tuple[Entry, ...] = (
     # docs/real_data.md: the trim-only score test's level and power on synthetic trim sets like the real ones
     Entry("trim_score_level", ("python studies/score_test_level.py --trims --seeds 0-19 --truth m0",
                                "python studies/score_test_level.py --trims --seeds 0-9 --truth wake"),
-          ("m0.txt", "wake.txt"), minutes=1, stdout={0: "m0.txt", 1: "wake.txt"}),
+          ("m0.txt", "wake.txt"), minutes=1.5, stdout={0: "m0.txt", 1: "wake.txt"},
+          text=("*.txt",)),
     # docs/discovery.md, "Which test decides": the test library's generic terms on the small instance's M0 + noise,
     # with the input errors estimated (the corrected LR decides) and in output error (the score test's own p does)
     Entry("deciding_test", tuple(
@@ -394,13 +397,31 @@ def prune(folder: Path, keep: tuple[str, ...]) -> list[Path]:
     return removed
 
 
-def run(entries: list[Entry], out: str) -> None:
+PROGRESS = ".regenerate_progress.json"  # in the --out root while a --run is unfinished: the entries it finished
+
+
+def run(entries: list[Entry], out: str, resume: bool = False) -> None:
+    """Run ``entries`` into ``out``, then prune each folder to its committed files. Each finished entry is recorded
+    (with its commands) in ``out/.regenerate_progress.json``, which the last prune removes. With ``resume`` a
+    recorded entry with the same commands is skipped and the others run into their folders as an interrupted run
+    left them, so that each study skips the cases it finished; without it every folder is written afresh."""
+    import json
     import shutil
 
+    root = Path(out) if Path(out).is_absolute() else ROOT / out
+    progress = root / PROGRESS
+    try:
+        finished = json.loads(progress.read_text()) if resume and progress.is_file() else {}
+    except ValueError:
+        raise SystemExit(f"--resume: {progress} is damaged; remove it (or run without --resume)") from None
     for e in entries:
         start = time.perf_counter()
-        folder = (Path(out) if Path(out).is_absolute() else ROOT / out) / e.folder
-        if folder.is_dir():  # written afresh: `uncertainty --out` refuses a folder holding other results
+        folder = root / e.folder
+        if resume and finished.get(e.folder) == list(e.commands):
+            print(f"[{e.folder}] finished by the interrupted run: skipped (--resume)", flush=True)
+            continue
+        finished.pop(e.folder, None)
+        if folder.is_dir() and not resume:  # written afresh: `uncertainty --out` refuses a folder of other results
             shutil.rmtree(folder)
         for i, command in enumerate(e.commands):
             print(f"[{e.folder}] {command.format(out=out)}", flush=True)
@@ -413,14 +434,22 @@ def run(entries: list[Entry], out: str) -> None:
             if proc.returncode != 0:
                 raise SystemExit(f"[{e.folder}] failed with exit status {proc.returncode}: {command.format(out=out)}")
         print(f"[{e.folder}] done in {(time.perf_counter() - start) / 60:.1f} min (estimate {e.minutes:g})", flush=True)
+        finished[e.folder] = list(e.commands)
+        root.mkdir(parents=True, exist_ok=True)
+        progress.write_text(json.dumps(finished, indent=1))
     for e in entries:  # last, so that later entries could read the loops and data of earlier ones
-        removed = prune((Path(out) if Path(out).is_absolute() else ROOT / out) / e.folder, e.keep)
+        removed = prune(root / e.folder, e.keep)
         print(f"[{e.folder}] kept the committed files, removed {len(removed)} others", flush=True)
+    progress.unlink(missing_ok=True)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--run", nargs="+", metavar="FOLDER", help="run these entries (or 'all') with their inputs")
+    ap.add_argument("--resume", action="store_true",
+                    help="with --run: skip the entries an interrupted run into the same --out finished and run the "
+                         "others into their folders as left (each study skips its finished cases); without it "
+                         "every folder is written afresh")
     ap.add_argument("--check", action="store_true", help="also check that every named config and script exists")
     ap.add_argument("--out", default="docs/results",
                     help="results root, relative to the checkout (default docs/results)")
@@ -433,6 +462,8 @@ def main(argv=None) -> int:
     reference = Path(a.reference) if Path(a.reference).is_absolute() else ROOT / a.reference
     if a.compare is not None and not reference.is_dir():  # a missing root is bad input, not "differs"
         ap.error(f"--reference {a.reference}: no such folder")
+    if a.resume and not a.run:
+        ap.error("--resume: give --run with the entries to resume")
     if a.compare and a.run:
         ap.error("--compare: name the folders with --run, or (without --run) with --compare, not both")
     if a.compare is not None and not a.run:
@@ -458,7 +489,7 @@ def main(argv=None) -> int:
         print("\n".join(missing), file=sys.stderr)
         return 2
     if a.run:
-        run(entries, a.out)
+        run(entries, a.out, resume=a.resume)
         if a.compare is not None:
             return compare([BY_NAME[n] for n in a.run] if "all" not in a.run else list(ENTRIES), a.out, a.reference)
     return 0
@@ -471,7 +502,8 @@ def compare(entries: list[Entry], out: str, reference: str) -> int:
     def root(p: str) -> Path:
         return Path(p) if Path(p).is_absolute() else ROOT / p
 
-    results = {e.folder: compare_folder(root(reference) / e.folder, root(out) / e.folder, e.keep) for e in entries}
+    results = {e.folder: compare_folder(root(reference) / e.folder, root(out) / e.folder, e.keep, e.text)
+               for e in entries}
     print(table(results), flush=True)
     return 0 if all(c.ok for c in results.values()) else 1
 

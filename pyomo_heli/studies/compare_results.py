@@ -171,6 +171,16 @@ def _md_tables(p: Path) -> list[tuple[tuple[str, ...], list[list[str]]]]:
     return out
 
 
+def compare_printed(a: str, b: str, at: str, c: Comparison) -> None:
+    """Two printed strings (a table cell, a line): the words must agree, each number to the tolerance or within
+    one unit of its last printed digit."""
+    ta, tb = _NUMBER.findall(a), _NUMBER.findall(b)
+    c.text(_NUMBER.sub("#", a), _NUMBER.sub("#", b), at)
+    if len(ta) == len(tb):
+        for x, y in zip(ta, tb):
+            c.number(float(x), float(y), at, slack=max(_last_digit_unit(x), _last_digit_unit(y)))
+
+
 def compare_md(ref: Path, new: Path, name: str, c: Comparison) -> None:
     """Each table of ``ref`` against the table of ``new`` with the same header (the n-th of that header);
     a table the committed file does not have (newer report code) is listed, not compared."""
@@ -193,12 +203,7 @@ def compare_md(ref: Path, new: Path, name: str, c: Comparison) -> None:
             for col, a, b in zip(h, rr, nn):
                 if _ignored_header(col):
                     continue
-                at = f"{name} row {i} {col}"
-                ta, tb = _NUMBER.findall(a), _NUMBER.findall(b)
-                c.text(_NUMBER.sub("#", a), _NUMBER.sub("#", b), at)
-                if len(ta) == len(tb):
-                    for x, y in zip(ta, tb):
-                        c.number(float(x), float(y), at, slack=max(_last_digit_unit(x), _last_digit_unit(y)))
+                compare_printed(a, b, f"{name} row {i} {col}", c)
     c.added += [f"{name} table '{' | '.join(h)[:60]}'" for h, left in pool.items() for _ in left]
 
 
@@ -208,12 +213,7 @@ def compare_text(ref: Path, new: Path, name: str, c: Comparison) -> None:
     if len(r) != len(n):
         c.mismatches.append(f"{name}: {len(r)} lines -> {len(n)}")
     for i, (a, b) in enumerate(zip(r, n), start=1):
-        at = f"{name} line {i}"
-        ta, tb = _NUMBER.findall(a), _NUMBER.findall(b)
-        c.text(_NUMBER.sub("#", a), _NUMBER.sub("#", b), at)
-        if len(ta) == len(tb):
-            for x, y in zip(ta, tb):
-                c.number(float(x), float(y), at, slack=max(_last_digit_unit(x), _last_digit_unit(y)))
+        compare_printed(a, b, f"{name} line {i}", c)
 
 
 def compare_folder(ref: Path, new: Path, keep: tuple[str, ...], text: tuple[str, ...] = ()) -> Comparison:

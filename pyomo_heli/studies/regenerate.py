@@ -156,7 +156,7 @@ ENTRIES: tuple[Entry, ...] = (
         "python studies/score_test_level.py --seeds 101-200 --variance white_offsets --out {out}/score_test_level",
         "python studies/score_test_level.py --seeds 101-140 --truth wake --variance white_offsets "
         "--out {out}/score_test_level"),
-        ("*/summary*.csv",), minutes=30),
+        ("*/summary*.csv",), minutes=50),
     Entry("validation_test_level", ("python studies/validation_test_level.py --seeds 20261122-20261147 "
                                     "--out {out}/validation_test_level",),
           ("summary.csv", "summary.md"), minutes=30),
@@ -167,7 +167,7 @@ ENTRIES: tuple[Entry, ...] = (
     # the record-bias test's level as configured and against the record-rate replay
     *(Entry(f"record_bias_level{suffix}", (f"python studies/record_bias_level.py --seeds 20261122-20261161{flag} "
                                            f"--out {{out}}/record_bias_level{suffix}",),
-            ("summary.csv", "summary.md"), minutes=30)
+            ("summary.csv", "summary.md"), minutes=20)
       for suffix, flag in (("", ""), ("_record", " --replay record"))),
     # the input path's level as configured, with the inputs picked, and against the record-rate replay
     *(Entry(f"input_path_level{suffix}", (f"python studies/input_path_level.py --seeds 20261122-20261161{flag} "

@@ -216,3 +216,15 @@ def test_compare_reads_printed_output_without_timings_line_by_line(tmp_path):
         "m0.txt line 1: 0.227 -> 0.229 (rel. 4.41e-03)",
         "m0.txt line 2: 'seed #: none; p: cg_offset #' -> 'seed #: lon_rigging; p: x'"]
     assert compare_folder(ref, new, ("*.txt",)).files == 0  # without `text` printed outputs are skipped
+
+
+def test_compare_reads_a_path_under_the_regenerated_root_as_under_the_committed_one(tmp_path):
+    ref, new = tmp_path / "ref", tmp_path / "new"
+    for d, root in ((ref, "docs/results"), (new, "/tmp/r")):
+        d.mkdir()
+        (d / "seeds.csv").write_text(f"realisation,err %\n{root}/close_loop,1.5\n{root}x/loop,2\n")
+    roots = ("docs/results", "/tmp/r")
+    c = compare_folder(ref, new, ("seeds.csv",), roots=roots)
+    # only a path under the root is mapped: "/tmp/rx/loop" is another folder
+    assert c.mismatches == ["seeds.csv row 2 realisation: 'docs/resultsx/loop' -> '/tmp/rx/loop'"]
+    assert len(compare_folder(ref, new, ("seeds.csv",)).mismatches) == 2  # without roots both differ

@@ -64,6 +64,7 @@ class Comparison:
     where: str = ""
     mismatches: list[str] = field(default_factory=list)
     added: list[str] = field(default_factory=list)  # JSON keys the committed file does not have yet
+    roots: tuple[str, str] | None = None  # (committed root, regenerated root) as given: a path names its own root
 
     @property
     def ok(self) -> bool:
@@ -84,6 +85,8 @@ class Comparison:
             self.worst, self.where = rel, where
 
     def text(self, ref, new, where: str) -> None:
+        if self.roots and isinstance(new, str) and new.startswith(self.roots[1] + "/"):  # `--existing OUT/loop`
+            new = self.roots[0] + new[len(self.roots[1]):]
         if ref != new:
             self.mismatches.append(f"{where}: {ref!r} -> {new!r}")
 
@@ -216,12 +219,15 @@ def compare_text(ref: Path, new: Path, name: str, c: Comparison) -> None:
         compare_printed(a, b, f"{name} line {i}", c)
 
 
-def compare_folder(ref: Path, new: Path, keep: tuple[str, ...], text: tuple[str, ...] = ()) -> Comparison:
+def compare_folder(ref: Path, new: Path, keep: tuple[str, ...], text: tuple[str, ...] = (),
+                   roots: tuple[str, str] | None = None) -> Comparison:
     """Compare every kept (committed) file of ``ref`` with the same file of ``new``: JSON, CSV and Markdown tables,
-    and the printed outputs (``.txt``) that match a glob of ``text`` (those whose numbers hold no timings)."""
+    and the printed outputs (``.txt``) that match a glob of ``text`` (those whose numbers hold no timings).
+    ``roots``: the committed and the regenerated results root as the commands were given them; a string that is a
+    path under the regenerated root is compared with that root replaced by the committed one."""
     from .regenerate import prune_matches
 
-    c = Comparison()
+    c = Comparison(roots=roots)
     ref_files = sorted(p.relative_to(ref).as_posix() for p in ref.rglob("*") if p.is_file()
                        and prune_matches(p.relative_to(ref).as_posix(), keep))
     new_files = sorted(p.relative_to(new).as_posix() for p in new.rglob("*") if p.is_file()) if new.is_dir() else []

@@ -118,12 +118,12 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("linear_checks", ("python studies/linear_checks.py --dataset data/bo105_clean --out {out}/linear_checks",),
           ("linear_checks.md", "linear_checks.json"), minutes=0.2),
     Entry("close_loop", ("pyomo-heli close-loop studies/close_loop.toml --out {out}/close_loop --restart",),
-          LOOP_FILES + LOOP_FIGURES, minutes=9),
+          LOOP_FILES + LOOP_FIGURES, minutes=5),
     Entry("close_loop_eiv", ("pyomo-heli close-loop studies/close_loop_eiv.toml --out {out}/close_loop_eiv "
                              "--restart",), LOOP_FILES + LOOP_FIGURES, minutes=9),
     Entry("close_loop_seeds", (f"python studies/close_loop_seeds.py --seeds {SEEDS} --existing {{out}}/close_loop "
                                f"--out {{out}}/close_loop_seeds",),
-          ("seeds.md", "seeds.csv"), needs=("close_loop",), minutes=45),
+          ("seeds.md", "seeds.csv"), needs=("close_loop",), minutes=25),
     Entry("close_loop_seeds_eiv", (f"python studies/close_loop_seeds.py --config studies/close_loop_eiv.toml "
                                    f"--seeds {SEEDS} --existing {{out}}/close_loop_eiv "
                                    f"--out {{out}}/close_loop_seeds_eiv",),
@@ -502,7 +502,8 @@ def compare(entries: list[Entry], out: str, reference: str) -> int:
     def root(p: str) -> Path:
         return Path(p) if Path(p).is_absolute() else ROOT / p
 
-    results = {e.folder: compare_folder(root(reference) / e.folder, root(out) / e.folder, e.keep, e.text)
+    roots = (reference.rstrip("/"), out.rstrip("/")) if reference.rstrip("/") != out.rstrip("/") else None
+    results = {e.folder: compare_folder(root(reference) / e.folder, root(out) / e.folder, e.keep, e.text, roots)
                for e in entries}
     print(table(results), flush=True)
     return 0 if all(c.ok for c in results.values()) else 1

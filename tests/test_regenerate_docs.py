@@ -228,3 +228,12 @@ def test_compare_reads_a_path_under_the_regenerated_root_as_under_the_committed_
     # only a path under the root is mapped: "/tmp/rx/loop" is another folder
     assert c.mismatches == ["seeds.csv row 2 realisation: 'docs/resultsx/loop' -> '/tmp/rx/loop'"]
     assert len(compare_folder(ref, new, ("seeds.csv",)).mismatches) == 2  # without roots both differ
+
+
+def test_printed_output_lands_in_the_entry_folder_under_the_checkout(tmp_path, monkeypatch):
+    """A relative --out is under the checkout for every file, also a command's printed output, wherever the
+    command is started from."""
+    monkeypatch.setattr(R, "ROOT", tmp_path / "checkout")
+    monkeypatch.chdir(tmp_path)
+    R.run([R.Entry("p", ('python -c "print(42)"',), ("p.txt",), stdout={0: "p.txt"})], "r")
+    assert (tmp_path / "checkout" / "r" / "p" / "p.txt").read_text() == "42\n" and not (tmp_path / "r").exists()

@@ -426,8 +426,8 @@ def run(entries: list[Entry], out: str, resume: bool = False) -> None:
         for i, command in enumerate(e.commands):
             print(f"[{e.folder}] {command.format(out=out)}", flush=True)
             if i in e.stdout:
-                (Path(out) / e.folder).mkdir(parents=True, exist_ok=True)
-                with open(Path(out) / e.folder / e.stdout[i], "w") as fh:
+                folder.mkdir(parents=True, exist_ok=True)  # under the checkout, as the commands' own --out
+                with open(folder / e.stdout[i], "w") as fh:
                     proc = subprocess.run(argv_of(command, out), cwd=ROOT, stdout=fh)
             else:
                 proc = subprocess.run(argv_of(command, out), cwd=ROOT)

@@ -172,7 +172,7 @@ ENTRIES: tuple[Entry, ...] = (
     # the input path's level as configured, with the inputs picked, and against the record-rate replay
     *(Entry(f"input_path_level{suffix}", (f"python studies/input_path_level.py --seeds 20261122-20261161{flag} "
                                           f"--out {{out}}/input_path_level{suffix}",),
-            ("summary.csv", "summary.md"), minutes=40)
+            ("summary.csv", "summary.md"), minutes=20)
       for suffix, flag in (("", ""), ("_sample", " --resample-inputs sample"), ("_record", " --replay record"),
                            ("_extended", " --input-path-family extended"),
                            ("_extended_record", " --input-path-family extended --replay record"))),

@@ -239,7 +239,7 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("held_out_small_blind4", (f"{HELD_OUT} --seeds 1 --effects {H17_H19} {SMALL} "
                                     "--out {out}/held_out_small_blind4",
                                     *reanalysed("held_out_small_blind4", SMALL)),
-          ("held_out.csv", "held_out.md"), minutes=8),
+          ("held_out.csv", "held_out.md"), minutes=3),
     # the small instance with the extended family, every held-out effect and M0 + noise
     Entry("held_out_small_extended", (f"{HELD_OUT} --seeds 1 --effects {H1_H13} {H14_H16} {H17_H19} none {SMALL} "
                                       "--generic-family extended --workers 2 --out {out}/held_out_small_extended",

@@ -235,7 +235,7 @@ ENTRIES: tuple[Entry, ...] = (
           ("multistart.json", "starts.csv"), minutes=20),
     Entry("held_out_small", (f"{HELD_OUT} --seeds 1 --effects {H1_H13} {H14_H16} none {SMALL} "
                              "--workers 2 --out {out}/held_out_small", *reanalysed("held_out_small", SMALL)),
-          ("held_out.csv", "held_out.md"), minutes=40),
+          ("held_out.csv", "held_out.md"), minutes=15),
     Entry("held_out_small_blind4", (f"{HELD_OUT} --seeds 1 --effects {H17_H19} {SMALL} "
                                     "--out {out}/held_out_small_blind4",
                                     *reanalysed("held_out_small_blind4", SMALL)),

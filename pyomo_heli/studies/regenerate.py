@@ -244,7 +244,7 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("held_out_small_extended", (f"{HELD_OUT} --seeds 1 --effects {H1_H13} {H14_H16} {H17_H19} none {SMALL} "
                                       "--generic-family extended --workers 2 --out {out}/held_out_small_extended",
                                       *reanalysed("held_out_small_extended", f"{SMALL} --generic-family extended")),
-          ("held_out.csv", "held_out.md"), minutes=50),
+          ("held_out.csv", "held_out.md"), minutes=20),
     Entry("noise_only", (f"{HELD_OUT} --effects none --seeds 5 {RECORD_P} --workers 2 --out {{out}}/noise_only",
                          *reanalysed("noise_only", RECORD_P)),
           ("held_out.csv", "held_out.md"), minutes=140),

@@ -237,3 +237,12 @@ def test_printed_output_lands_in_the_entry_folder_under_the_checkout(tmp_path, m
     monkeypatch.chdir(tmp_path)
     R.run([R.Entry("p", ('python -c "print(42)"',), ("p.txt",), stdout={0: "p.txt"})], "r")
     assert (tmp_path / "checkout" / "r" / "p" / "p.txt").read_text() == "42\n" and not (tmp_path / "r").exists()
+
+
+def test_a_root_with_digits_is_mapped_in_markdown_cells_too(tmp_path):
+    ref, new = tmp_path / "ref", tmp_path / "new"
+    for d, root in ((ref, "docs/results"), (new, "/tmp/r2")):
+        d.mkdir()
+        (d / "seeds.md").write_text(f"| realisation | err % |\n|---|---|\n| {root}/close_loop | 1.5 |\n")
+    c = compare_folder(ref, new, ("seeds.md",), roots=("docs/results", "/tmp/r2"))
+    assert c.ok and c.numbers == 1, c.mismatches

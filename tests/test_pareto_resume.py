@@ -204,6 +204,8 @@ def test_multistart_share_and_resume(reference, tmp_path):
     for f in cfg.free:
         assert res.best["parameters"][f.name] == pytest.approx(a[f.name], rel=1e-5, abs=1e-6)
     assert res.share >= 0.9 and res.n_reached == int(res.starts["reached_best"].sum())
+    # the best is the first start that reached it, not whichever is lowest by rounding
+    assert res.best["start"] == int(res.starts.loc[res.starts["reached_best"], "start"].min())
     assert len(pd.read_csv(tmp_path / "whole" / "starts.csv")) == 5
     # the same command in a real process, SIGKILLed once two starts are on disk, then run again
     out = tmp_path / "killed"

@@ -18,7 +18,9 @@ Each finished start is written at once to ``DIR/starts.csv`` and to
 again on the same folder loads finished starts and solves only the rest.
 
 A start *reaches the best optimum* when it converged and its objective is
-within ``rtol`` (relative) of the best converged objective.
+within ``rtol`` (relative) of the best converged objective; the reported best
+start is the first of those (the smallest objective among starts that agree to
+rounding would change with it).
 """
 from __future__ import annotations
 
@@ -260,9 +262,11 @@ def _run_multistart(cfg, run: RunFolder, starts, seed, problem, epsilon, rtol, p
     best = None
     table["reached_best"] = False
     if ok.any():
-        kb = int(table.loc[ok, "objective"].idxmin())
-        fb = float(table.loc[kb, "objective"])
+        fb = float(table.loc[ok, "objective"].min())
         table["reached_best"] = ok & (np.abs(table["objective"] - fb) <= rtol * max(abs(fb), 1.0))
+        # the first start that reached it: among starts equal to rounding, the smallest objective is noise
+        kb = int(table.index[table["reached_best"]][0])
+        fb = float(table.loc[kb, "objective"])
         best = {"start": int(table.loc[kb, "start"]), "objective": fb,
                 "parameters": {f.name: float(table.loc[kb, f.name]) for f in cfg.free},
                 "J_time": float(table.loc[kb, "J_time"]), "J_trim": float(table.loc[kb, "J_trim"])}

@@ -35,7 +35,7 @@ ATOL = 1e-9
 # timings, and facts of the machine, the checkout or the code version rather than results
 IGNORED = frozenset((
     "wall_time", "setup_time", "cold_wall_time", "build_time", "solver_setup_time", "total_time",
-    "uncertainty_time", "cpu_time", "time_s", "elapsed",  # timings [s]
+    "uncertainty_time", "cpu_time", "time_s", "wall_time_s", "elapsed",  # timings [s]
     # the benchmark's timings, their ratios and breakdowns, and the targets judged on them (its iterations and
     # estimates are compared)
     "clock_time", "solve_time", "a_solve_time", "a_solve_times", "a_time_per_iteration", "a_time_ratio",

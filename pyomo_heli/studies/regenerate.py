@@ -120,7 +120,7 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("close_loop", ("pyomo-heli close-loop studies/close_loop.toml --out {out}/close_loop --restart",),
           LOOP_FILES + LOOP_FIGURES, minutes=5),
     Entry("close_loop_eiv", ("pyomo-heli close-loop studies/close_loop_eiv.toml --out {out}/close_loop_eiv "
-                             "--restart",), LOOP_FILES + LOOP_FIGURES, minutes=9),
+                             "--restart",), LOOP_FILES + LOOP_FIGURES, minutes=6),
     Entry("close_loop_seeds", (f"python studies/close_loop_seeds.py --seeds {SEEDS} --existing {{out}}/close_loop "
                                f"--out {{out}}/close_loop_seeds",),
           ("seeds.md", "seeds.csv"), needs=("close_loop",), minutes=25),
@@ -144,7 +144,7 @@ ENTRIES: tuple[Entry, ...] = (
           f"--out {{out}}/innovation_check_seeds/data/{s} --force" for s in SEEDS.split()),
         "python studies/innovation_check.py --dataset data/bo105_synthetic "
         + " ".join(f"{{out}}/innovation_check_seeds/data/{s}" for s in SEEDS.split())
-        + " --out {out}/innovation_check_seeds"), ("summary.csv", "pooled.csv"), minutes=12),
+        + " --out {out}/innovation_check_seeds"), ("summary.csv", "pooled.csv"), minutes=4),
     Entry("score_test_level", (
         "python studies/score_test_level.py --seeds 101-200 --out {out}/score_test_level",
         "python studies/score_test_level.py --seeds 101-200 --identification oe --out {out}/score_test_level",
@@ -229,10 +229,10 @@ ENTRIES: tuple[Entry, ...] = (
           ("monte_carlo.json", "monte_carlo.png", "realizations.csv", "summary.csv", "summary.md"), minutes=45),
     Entry("multistart_case1", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "
                                "--out {out}/multistart_case1 --restart",), ("multistart.json", "starts.csv"),
-          minutes=15),
+          minutes=2),
     Entry("multistart_case1_eps", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "
                                    "--epsilon 0.2008495658274336 --out {out}/multistart_case1_eps --restart",),
-          ("multistart.json", "starts.csv"), minutes=20),
+          ("multistart.json", "starts.csv"), minutes=3),
     Entry("held_out_small", (f"{HELD_OUT} --seeds 1 --effects {H1_H13} {H14_H16} none {SMALL} "
                              "--workers 2 --out {out}/held_out_small", *reanalysed("held_out_small", SMALL)),
           ("held_out.csv", "held_out.md"), minutes=15),
@@ -300,7 +300,7 @@ ENTRIES: tuple[Entry, ...] = (
           ("summary.md",), needs=HELD_OUT_TABLES, minutes=0.1),
     Entry("bo105_flight_trims", ("pyomo-heli trim-loop studies/bo105_flight_trims.toml "
                                  "--out {out}/bo105_flight_trims",),
-          ("report.md", "trim_curves.png", "trim_loop.json", "trim_residuals.png"), minutes=2),
+          ("report.md", "trim_curves.png", "trim_loop.json", "trim_residuals.png"), minutes=0.2),
     # docs/performance.md, "Scaling": iterations unscaled against scaled (the IDAES Scaler), three instances and the
     # whole Case 1 front (its unscaled run is docs/results/case1/front.csv)
     Entry("scaling", (
@@ -312,7 +312,7 @@ ENTRIES: tuple[Entry, ...] = (
         "--no-report --uncertainty none"),
         ("scaling_case1.json", "scaling_case1.txt", "scaling_small_noisy.json", "scaling_small_noisy.txt",
          "scaling_quick.json", "scaling_quick.txt", "case1_scaled/front.csv", "case1_scaled/chosen.json"),
-        minutes=8, stdout={0: "scaling_case1.txt", 1: "scaling_small_noisy.txt", 2: "scaling_quick.txt"}),
+        minutes=6, stdout={0: "scaling_case1.txt", 1: "scaling_small_noisy.txt", 2: "scaling_quick.txt"}),
     Entry("benchmark", (
         f"{BENCH} --size 1,2,4,8 --repeat 3 --shooting rk4 --shooting-max-sims 0 --compare-nl-route "
         "--out {out}/benchmark/benchmark_case1_all.json",

@@ -127,13 +127,13 @@ ENTRIES: tuple[Entry, ...] = (
     Entry("close_loop_seeds_eiv", (f"python studies/close_loop_seeds.py --config studies/close_loop_eiv.toml "
                                    f"--seeds {SEEDS} --existing {{out}}/close_loop_eiv "
                                    f"--out {{out}}/close_loop_seeds_eiv",),
-          ("seeds.md", "seeds.csv"), needs=("close_loop_eiv",), minutes=50),
+          ("seeds.md", "seeds.csv"), needs=("close_loop_eiv",), minutes=30),
     Entry("envelope_validation", ("python studies/envelope_validation.py --loops {out}/close_loop_eiv "
                                   + " ".join(f"{{out}}/close_loop_seeds_eiv/loop_{s}" for s in SEEDS.split())
                                   + " {out}/close_loop "
                                   + " ".join(f"{{out}}/close_loop_seeds/loop_{s}" for s in SEEDS.split())
                                   + " --out {out}/envelope_validation",),
-          ("envelope_validation.md",), needs=("close_loop_seeds", "close_loop_seeds_eiv"), minutes=6),
+          ("envelope_validation.md",), needs=("close_loop_seeds", "close_loop_seeds_eiv"), minutes=2),
     Entry("innovation_check", ("python studies/innovation_check.py --loop {out}/close_loop_eiv "
                                "--out {out}/innovation_check",), ("summary.csv",), needs=("close_loop_eiv",),
           minutes=2),
@@ -224,7 +224,7 @@ ENTRIES: tuple[Entry, ...] = (
          "output_error_ar2/summary.md"), minutes=540),
     Entry("input_path", ("python studies/input_path_check.py --seeds 1 --out {out}/input_path",
                          "python studies/input_path_check.py --effects none --seeds 5 --out {out}/input_path"),
-          ("input_path.csv", "input_path.md"), minutes=20),
+          ("input_path.csv", "input_path.md"), minutes=13),
     Entry("monte_carlo", ("python studies/monte_carlo.py --realizations 20 --out {out}/monte_carlo",),
           ("monte_carlo.json", "monte_carlo.png", "realizations.csv", "summary.csv", "summary.md"), minutes=5),
     Entry("multistart_case1", ("pyomo-heli multistart studies/multistart_case1.toml --starts 20 --seed 1 "

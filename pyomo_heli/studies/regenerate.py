@@ -270,7 +270,7 @@ ENTRIES: tuple[Entry, ...] = (
         "--out {out}/held_out_control --workers 2",
         f"{HELD_OUT} --seeds 1 --effects none --generic-family control {RECORD_P} "
         "--out {out}/held_out_control", *reanalysed("held_out_control", f"--generic-family control {RECORD_P}")),
-        ("held_out.csv", "held_out.md"), minutes=60),
+        ("held_out.csv", "held_out.md"), minutes=50),
     # the blind sets (as held_out) are ranked by the deciding p and analysed against the record-rate replay (the
     # defaults), not as the held_out_discovery.toml pins have the others
     Entry("held_out_blind3", (f"{HELD_OUT} --seeds 3 --effects {H14_H16} {RECORD_P} --workers 2 "
@@ -286,7 +286,7 @@ ENTRIES: tuple[Entry, ...] = (
         f"{HELD_OUT} --seeds 1 --first-seed 1 --effects {SEED23_COL_SCALE} none --generic-family extended "
         f"{flags} --workers 2 --out {{out}}/record_inputs/{name}",
         *reanalysed(f"record_inputs/{name}", f"--generic-family extended {flags}")),
-        ("held_out.csv", "held_out.md"), minutes=40)
+        ("held_out.csv", "held_out.md"), minutes=45)
       for name, flags in (("projected", RECORD_P), ("record", f"{RECORD_P} {RECORD_INPUTS}"))),
     # the input path's extended dictionary on the kept models of the standard family's full-size rows, reanalysed
     Entry("input_path_extended", tuple(

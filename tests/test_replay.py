@@ -47,6 +47,23 @@ def test_checked_replay_in_pieces_is_the_one_piece_integration(maneuver):
         np.testing.assert_array_equal(whole[c].to_numpy(), direct[c].to_numpy(), err_msg=c)
 
 
+def test_maneuver_outputs_without_compilation_is_the_python_rk4(maneuver):
+    """``maneuver_outputs(compiled=False)`` (single shooting's ``"rk4"``, the benchmark's Python route) integrates by
+    the Python RK4, to the bit, not by the compiled one (equal only to rounding)."""
+    model = HelicopterModel()
+    tp = trim_float(model, maneuver.trim_speed)
+    t = maneuver.data["t"].to_numpy()
+    direct = simulate(model, tp, t, {k: sampled(t, v) for k, v in maneuver.increments().items()}, method="rk4",
+                      substeps=4)
+    outputs = ["q", "theta", "n_z"]
+    python = rp.maneuver_outputs(model, [maneuver], outputs, compiled=False)
+    fast = rp.maneuver_outputs(model, [maneuver], outputs)
+    for o in outputs:
+        np.testing.assert_array_equal(python[o], direct[o].to_numpy(), err_msg=o)
+        np.testing.assert_allclose(fast[o], direct[o].to_numpy(), rtol=1e-10, atol=1e-12, err_msg=o)
+    assert any(not np.array_equal(fast[o], python[o]) for o in outputs)  # the two routes really are two
+
+
 def test_a_diverging_replay_stops_at_the_same_sample_compiled_or_not(maneuver):
     """A pitch-unstable model (a generic pitch-damping term of the wrong sign, five times its NLP bound): both RK4s
     raise Diverged at the same first implausible sample and carry the same record up to it."""

@@ -215,7 +215,7 @@ def maneuver_outputs(model: HelicopterModel, maneuvers, outputs, substeps: int =
         if compiled and getattr(mv, "inputs_record", None) is None:
             y = simulate_outputs(model, tp, mv.data["t"].to_numpy(), maneuver_increments(mv), outputs, substeps)
         else:
-            df = replay(model, mv, tp, substeps=substeps, check=False)
+            df = replay(model, mv, tp, substeps=substeps, check=False, compiled=compiled)
             y = {o: df[o].to_numpy() for o in outputs}
         for o in outputs:
             out[o].append(y[o])

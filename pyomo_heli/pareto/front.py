@@ -337,7 +337,7 @@ class ParetoSolver(EpsilonConstraintSolver):
                 p = self._solve_warm("time", k, "eps", float(eps[k]), start,
                                      LEAVE_ANCHOR_OPTIONS if leaving else step, scale=scale)
                 if s.cold_check:
-                    self._cold_check(p, last_good, scale=scale)
+                    self._cold_check(p, scale=scale)
                 return p
 
             p = self.solve_point(f"eps{k:03d}", solve_k)
@@ -382,7 +382,7 @@ class ParetoSolver(EpsilonConstraintSolver):
         """Put the model's values back to the initial guess it had when this solver was made (cold starts)."""
         self._snap_initial.restore()
 
-    def _cold_check(self, p: FrontPoint, back, scale: float) -> None:
+    def _cold_check(self, p: FrontPoint, scale: float) -> None:
         """Solve the same epsilon point from the initial guess; keep the warm solution in the model."""
         warm = _Snapshot(self.m)
         self.restore_initial_guess()

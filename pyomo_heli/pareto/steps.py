@@ -33,7 +33,7 @@ LEAVE_ANCHOR_OPTIONS = {"warm_start_bound_push": 1e-3, "warm_start_mult_bound_pu
 #: Options of the later steps with ``"continuation"``: the start is (nearly) the solution, on the same
 #: active set, so it is left where it is: bound and slack pushes 1e-8 instead of 1e-6 (primal) and 1e-3
 #: (fractions and slacks). Case 1, full size, with the secant predictor: 29 -> 25 iterations over the
-#: 9 interior points, the same front (studies/warm_start_study.py, docs/performance.md).
+#: 9 interior points, the same front (docs/performance.md; the one-off study is in CHANGELOG.md).
 FRONT_STEP_OPTIONS = {"warm_start_bound_push": 1e-8, "warm_start_mult_bound_push": 1e-8,
                       "warm_start_slack_bound_push": 1e-8, "warm_start_bound_frac": 1e-8,
                       "warm_start_slack_bound_frac": 1e-8}

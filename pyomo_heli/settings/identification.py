@@ -165,7 +165,7 @@ class DiscretizationTable(Table):
 
 
 class ParetoTable(Table):
-    """``[pareto]``: the epsilon-constraint front (docs/identification.md)."""
+    """``[pareto]``: the epsilon-constraint front of paper Eq. 10 (docs/robustness.md, docs/performance.md)."""
 
     messages = {
         "points": (None, "field 'points': the epsilon grid needs 2 (the anchors) to 1000 points, got {v!r}"),

@@ -206,7 +206,7 @@ def maneuver_outputs(model: HelicopterModel, maneuvers, outputs, substeps: int =
 
     Each maneuver from the model's trim at its trim speed (:func:`~.trim.trim_float`). RK4 with
     ``substeps`` steps per sample interval, evaluated by casadi (:mod:`.compiled`, about 20x faster:
-    studies/simulation_speed.py) or, with ``compiled=False``, by the Python integrator of
+    ``python studies/benchmark.py --replay``) or, with ``compiled=False``, by the Python integrator of
     :mod:`.integrate`; the two agree to rounding. No divergence rule: a non-finite state raises.
     """
     out = {o: [] for o in outputs}

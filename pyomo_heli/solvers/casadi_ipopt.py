@@ -88,7 +88,7 @@ class CasadiSettings:
     #: named Pyomo Expressions (the collocation blocks' shared intermediates) go to the NL file
     #: as defined variables, written and differentiated once; False inlines them into every
     #: equation that uses them (the same functions, a graph about twice as large; kept for
-    #: comparison: studies/profile_setup.py --compare defined-variables)
+    #: comparison; the measurement is in CHANGELOG.md, its one-off study deleted)
     export_defined_variables: bool = True
     #: blocks that describe their rows point by point (``blk.point_rows``, the maneuver blocks) get
     #: those rows from one compiled function per point mapped over the points instead of from the

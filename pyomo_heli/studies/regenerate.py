@@ -286,8 +286,8 @@ ENTRIES: tuple[Entry, ...] = (
         f"{HELD_OUT} --seeds 1 --first-seed 1 --effects {SEED23_COL_SCALE} none --generic-family extended "
         f"{flags} --workers 2 --out {{out}}/record_inputs/{name}",
         *reanalysed(f"record_inputs/{name}", f"--generic-family extended {flags}")),
-        ("held_out.csv", "held_out.md"), minutes=45)
-      for name, flags in (("projected", RECORD_P), ("record", f"{RECORD_P} {RECORD_INPUTS}"))),
+        ("held_out.csv", "held_out.md"), minutes=minutes)
+      for name, flags, minutes in (("projected", RECORD_P, 45), ("record", f"{RECORD_P} {RECORD_INPUTS}", 120))),
     # the input path's extended dictionary on the kept models of the standard family's full-size rows, reanalysed
     Entry("input_path_extended", tuple(
         f"{HELD_OUT} --reanalyse {{out}}/input_path_extended/scratch --rows "

@@ -15,10 +15,11 @@ Example (studies/case1_tri.toml):
     omega_max_rad_s = 20.0
     points = 3                               # epsilon grid points on J_linear (the front is points x this)
     weighting = "bins"                       # or "tischler_remple": composite responses of the sweep records
-    # with "tischler_remple", the composite estimator (unset: SWEEP_SETTINGS, TR_POINTS), e.g. studies/case1_tri.toml:
-    sweep_windows_s = [5, 10, 20, 30, 45, 60]
-    sweep_min_periods = 4
-    sweep_points = 20                        # cost frequencies per response
+    # with "tischler_remple", the composite estimator's sweep_* keys (unset: SWEEP_SETTINGS, TR_POINTS) in place of
+    # the Welch keys above (a key the weighting does not read is an error), e.g. studies/case1_tri.toml:
+    #   sweep_windows_s = [5, 10, 20, 30, 45, 60]
+    #   sweep_min_periods = 4
+    #   sweep_points = 20                    # cost frequencies per response
 
 The table is declared (fields, defaults, domains) in :class:`pyomo_heli.settings.identification.LinearTable`.
 """

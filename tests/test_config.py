@@ -229,6 +229,12 @@ def test_model_mass_must_match_the_flight_tests(tmp_path):
      r"\[linear\]: field 'speeds_kt' must be a non-empty list of speeds"),
     (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\npoints = 100000'),
      r"\[linear\]: field 'points' must be an integer in 2..50"),
+    # a key the weighting does not read is refused, not ignored (the composite band came from the sweep_* keys)
+    (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\nweighting = "tischler_remple"\n'
+                'coherence_min = 0.99\nomega_min_rad_s = 5'),
+     r"\[linear\]: field\(s\) coherence_min, omega_min_rad_s are not used with weighting = 'tischler_remple'"),
+    (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\nsweep_points = 3'),
+     r"\[linear\]: field\(s\) sweep_points are not used with weighting = 'bins'"),
 ])
 def test_bad_config_second_audit(tmp_path, edit, message):
     with pytest.raises(ConfigError, match=message) as err:

@@ -534,7 +534,8 @@ def test_coherence_over_the_resolution_bandwidth_drops_the_bins_beside_an_input_
         CompositeSettings(coherence_span=-1.0)
     from pyomo_heli.linear_settings import LinearSettings  # the [linear] key that pins it in a study
 
-    assert LinearSettings.from_table({"sweep_coherence_span": 0}).composite.coherence_span == 0.0
+    assert LinearSettings.from_table({"weighting": "tischler_remple",
+                                      "sweep_coherence_span": 0}).composite.coherence_span == 0.0
     assert LinearSettings.from_table({}).composite.coherence_span == 2.0
 
 

@@ -161,6 +161,9 @@ def error_lines(cls: type[Table], errors: list[dict], raw) -> list[tuple[str | N
                 if sub is not None and rest and how == "":
                     table_cls, path = sub, path + [part]
                     continue
+                if sub is not None and how == "" and e["type"] == CUSTOM:  # the table's own check across its fields
+                    table_cls, path = sub, path + [part]
+                    break
                 if sub is not None and rest and how in ("dict", "list"):
                     key = rest.pop(0)
                     value = value[key] if isinstance(value, (dict, list)) else None

@@ -289,6 +289,20 @@ class LinearTable(Table):
             fail(info, f"field 'speeds_kt' names a speed more than once: {speeds}")
         return speeds
 
+    @model_validator(mode="after")
+    def _keys_of_the_weighting(self):
+        """A key the chosen weighting does not read is refused, not silently ignored: the Welch keys
+        (coherence_min, ..., omega_max_rad_s) set the bins of weighting = "bins", the sweep_* keys the
+        composite responses of weighting = "tischler_remple"."""
+        bins_keys = ("coherence_min", "input_power_min", "window_s", "overlap", "omega_min_rad_s", "omega_max_rad_s")
+        unused = (tuple(k for k in type(self).model_fields if k.startswith("sweep_")) if self.weighting == "bins"
+                  else bins_keys)
+        given = [k for k in unused if getattr(self, k) is not None]
+        if given:
+            fail(None, f"field(s) {', '.join(given)} are not used with weighting = '{self.weighting}' (the Welch "
+                       f"keys set weighting = 'bins', the sweep_* keys weighting = 'tischler_remple'); remove them")
+        return self
+
 
 class DiagnosisTable(Table):
     """``[diagnosis]``: the input-noise model of the residual analysis (docs/diagnosis.md)."""

@@ -359,6 +359,29 @@ def test_bi_objective_front_and_solve_at_on_the_closed_form():
                                                                                  nadir)[0], d.min())))
 
 
+def test_a_start_far_from_the_front_does_not_flatten_its_ranges():
+    """The same analytic front as above from a = b = 0.3 and from a = b = 3000, where J(theta_0) is 1.8e7, a
+    million times the front's values: the ranges are the front's (nadir (3, 2)), and Eq. 11 chooses the same
+    point and reaches its closed form a = b = 0.5. (Before, the initial guess's size was every range's floor:
+    both ranges counted as solver noise and Eq. 11 silently chose anchor A.)"""
+    from pyomo_heli.pareto.front import ParetoSolver
+
+    chosen = {}
+    for start in (0.3, 3000.0):
+        m = _model(lambda a, b: ((a - 1) ** 2 + b**2 + 1.0, a**2 + (b - 1) ** 2), names=("time", "trim"))
+        m.theta_s.set_values({"a": start, "b": start})
+        m.theta_s.setlb(-1e4)
+        m.theta_s.setub(1e4)
+        m.eps_trim = pyo.Param(initialize=1e20, mutable=True)
+        ps = ParetoSolver(m, ParetoSettings(points=6, spacing="linear", solver_options=SETTINGS.solver_options))
+        ps.front()
+        np.testing.assert_allclose(ps.utopia_nadir()[1], [3, 2], atol=5e-3)
+        chosen[start], _ = ps.choose()
+        direct = ps.direct_choice(chosen[start])
+        np.testing.assert_allclose([direct.parameters["a"], direct.parameters["b"]], [0.5, 0.5], atol=1e-3)
+    assert chosen[3000.0].kind == "eps" and chosen[3000.0].index == chosen[0.3].index
+
+
 def test_row_minima_settle_the_infeasible_grid_points_without_solving_them():
     """The discs f2 <= e2 around (0, 1) and f3 <= e3 around (-1, 0), centres sqrt(2) apart: under f2 <= e2
     the least f3 is (sqrt(2) - sqrt(e2))^2 (closed form). Each grid row solves that once; a point of the row

@@ -625,12 +625,19 @@ class EpsilonConstraintSolver:
 
         Such a range is solver noise (on noise-free data every front point is the truth: J_trim from 2e-10 to
         2e-9, J_time within 1.3e-3 of -36125, tests/test_identification.py); divided by it, Eq. 11 is a problem
-        of condition up to 1e18 that Ipopt fails on.
+        of condition up to 1e18 that Ipopt fails on. The scale (the objective's size at the initial guess) is the
+        floor only of a front whose primary objective has no range beyond RANGE_RTOL of its own size: where the
+        primary's range is real, the front is, and a start far from it (a scale many times the front's values)
+        must not flatten the other objectives' ranges (Eq. 11 would silently choose anchor A).
         """
+        names = tuple(names or self.names)
+        finite = [math.isfinite(u) and math.isfinite(n) for u, n in zip(utopia, nadir)]
+        primary_has_range = any(k == self.primary and ok and n - u > RANGE_RTOL * max(abs(u), abs(n))
+                                for k, u, n, ok in zip(names, utopia, nadir, finite))
         out = []
-        for k, u, n in zip(names or self.names, utopia, nadir):
-            floor = RANGE_RTOL * max(abs(u), abs(n), self.scale[k])
-            out.append(float(u) if math.isfinite(u) and math.isfinite(n) and n - u <= floor else n)
+        for k, u, n, ok in zip(names, utopia, nadir, finite):
+            floor = RANGE_RTOL * max(abs(u), abs(n), 0.0 if primary_has_range else self.scale[k])
+            out.append(float(u) if ok and n - u <= floor else n)
         return tuple(out)
 
     @property

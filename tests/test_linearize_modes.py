@@ -91,3 +91,15 @@ def test_bode_gain_units():
     assert gain_unit("q", "lon") == "(rad/s)/rad"
     assert gain_unit("theta", "lon") == "-"
     assert gain_unit("n_z", "col") == "g/rad"
+
+
+def test_a_trim_at_another_speed_is_refused_not_labelled_with_the_speed_asked():
+    """linearize_float(model, V, trim) with a trim of another speed would return that speed's model labelled V."""
+    from pyomo_heli.simulation.trim import trim_float
+
+    model = HelicopterModel()
+    at_80 = trim_float(model, 80 * KT)
+    with pytest.raises(ValueError, match=r"trim given is at V = 41\.1\d* m/s, not at V = 0 m/s"):
+        linearize_float(model, 0.0, at_80)
+    same = linearize_float(model, 80 * KT, at_80)  # the trim of that speed: the same model as trimming inside
+    np.testing.assert_array_equal(same.A, linearize_float(model, 80 * KT).A)

@@ -280,8 +280,9 @@ def model_curves(model, params: dict, responses, omega: np.ndarray) -> list[np.n
     return out
 
 
-def plot_bode(responses, curves: dict, omega: np.ndarray) -> Figure:
-    """Gain, phase and coherence per response: data (coherent band highlighted) and model curves."""
+def plot_bode(responses, curves: dict, omega: np.ndarray, coherence_min: float = 0.9) -> Figure:
+    """Gain, phase and coherence per response: data (coherent band highlighted) and model curves;
+    ``coherence_min``: the band's coherence threshold, drawn on the coherence panel."""
     n = len(responses)
     fig = Figure(figsize=(4.2 * n, 8.5))
     for j, r in enumerate(responses):
@@ -304,7 +305,7 @@ def plot_bode(responses, curves: dict, omega: np.ndarray) -> Figure:
                     ph = ph + 360 * np.round((r.phase_deg[k][0] - ref) / 360)
                 axp.semilogx(omega, ph, color=color, ls=ls)
         axc.semilogx(r.omega[sel], r.coherence[sel], "k.")
-        axc.axhline(0.9, color="grey", lw=0.8)
+        axc.axhline(coherence_min, color="grey", lw=0.8)
         axg.set_title(r.label)
         axg.set_ylabel(f"gain [dB re 1 {gain_unit(r.output, r.input)}]")
         axp.set_ylabel("phase [deg]")
@@ -358,7 +359,10 @@ def write_linear_report(out_dir, cfg, warn=None, figure_format: str = "png", sta
     curves = {label: model_curves(model, p, responses, omega) for label, (model, p) in sets.items()}
     fig = plot_front_projections(front, result)
     fig.savefig(out / f"front_projections.{figure_format}", dpi=110)
-    fig = plot_bode(responses, curves, omega)
+    lin = cfg.linear
+    fig = plot_bode(responses, curves, omega, coherence_min=(lin.composite.coherence_min
+                                                             if lin.weighting == "tischler_remple"
+                                                             else lin.spectral.coherence_min))
     fig.savefig(out / f"bode.{figure_format}", dpi=110)
     band_curves = {label: [model_curves(model, p, [r], r.band().omega)[0] for r in responses]
                    for label, (model, p) in sets.items()}

@@ -12,6 +12,7 @@ the two.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,7 +57,10 @@ class LinearModel:
 
 def linearize_float(model: HelicopterModel, V: float, trim: TrimPoint | None = None,
                     steps: dict | None = None) -> LinearModel:
-    """Central-difference linearisation of the float model at its own trim at airspeed V [m/s]."""
+    """Central-difference linearisation of the float model at its own trim at airspeed V [m/s] (``trim``: that
+    trim, already solved; a trim at another speed is refused, as it would label its model with V)."""
+    if trim is not None and not math.isclose(trim.V, V, rel_tol=1e-9, abs_tol=1e-9):
+        raise ValueError(f"linearize_float: the trim given is at V = {trim.V:g} m/s, not at V = {V:g} m/s")
     tp = trim if trim is not None else trim_float(model, V)
     h = dict(FD_STEPS, **(steps or {}))
     names = model.state_names

@@ -132,6 +132,46 @@ def test_sandwich_covariance_in_closed_form():
     np.testing.assert_allclose([r.se[n] for n in info.names], np.sqrt(np.diag(np.linalg.inv(Fr))), rtol=1e-10)
 
 
+def test_a_front_points_covariance_is_the_weights_held_estimators_not_the_epsilon_held_ones():
+    """Linear-Gaussian front with model error (the trims made by another parameter), b/a = 200: over 1000 seeded
+    noise draws the sandwich at the point's multiplier matches the spread of argmin J_time + (b/a) J_trim (the
+    weights held) within 10 %, while the point held at its own eps (argmin J_time s.t. J_trim <= eps) scatters
+    a third less in the direction the bound fixes (docs/uncertainty.md, "Which combination")."""
+    from scipy.optimize import brentq
+
+    rng = np.random.default_rng(0)
+    n_t, n_r = 400, 12
+    Xt, Xr = rng.normal(size=(n_t, 2)), rng.normal(size=(n_r, 2)) * DEG
+    st, sr = 1.0, 0.05 * DEG
+    yt0, yr0 = Xt @ np.array([1.0, 0.0]), Xr @ np.array([1.0, 1.0])
+    c = 2 / (n_r * DEG**2)  # J_trim = sum (r / DEG)^2 / M, J_time = sum e^2 / (2 st^2)
+
+    def weights_held(yt, yr, mu):
+        return np.linalg.solve(Xt.T @ Xt / st**2 + mu * c * Xr.T @ Xr, Xt.T @ yt / st**2 + mu * c * Xr.T @ yr)
+
+    def j_trim(th, yr):
+        return np.sum(((yr - Xr @ th) / DEG) ** 2) / n_r
+
+    def eps_held(yt, yr, eps):
+        lm = brentq(lambda lm: j_trim(weights_held(yt, yr, np.exp(lm)), yr) - eps, -30, 30, xtol=1e-13)
+        return weights_held(yt, yr, np.exp(lm))
+
+    mu = 200.0
+    th0 = weights_held(yt0, yr0, mu)
+    eps = j_trim(th0, yr0)
+    draws = [(yt0 + st * rng.normal(size=n_t), yr0 + sr * rng.normal(size=n_r)) for _ in range(1000)]
+    spread_w = np.std([weights_held(yt, yr, mu) for yt, yr in draws], axis=0, ddof=1)
+    spread_e = np.std([eps_held(yt, yr, eps) for yt, yr in draws], axis=0, ddof=1)
+    info = PointInformation(names=["p0", "p1"], values={"p0": th0[0], "p1": th0[1]}, scale=np.ones(2),
+                            S_time={"y": Xt}, e_time={"y": yt0 - Xt @ th0}, R_time={"y": st**2},
+                            S_trim={"c": Xr}, e_trim={"c": yr0 - Xr @ th0}, R_trim={"c": sr**2})
+    u = cramer_rao(info, [FreeParameter(f"p{i}", th0[i], -100, 100, 1.0) for i in range(2)], kind="eps",
+                   multiplier=mu)
+    se = np.array([u.se["p0"], u.se["p1"]])
+    np.testing.assert_allclose(se, spread_w, rtol=0.1)
+    assert spread_e[1] < 0.75 * se[1]
+
+
 def test_parameter_at_a_bound_is_projected_out():
     info = _linear_info(np.random.default_rng(4))
     info.values["p1"] = 10.0  # at the upper bound of _free

@@ -257,7 +257,8 @@ def score_column(A: np.ndarray, e: np.ndarray, b: np.ndarray, seg: np.ndarray, o
     F = b~.b~, kappa_hat = g / F, LM = g^2 / var(g) with the score's variance by ``variance``:
 
     - ``white``: F, LM referred to chi-square(1) (df infinite);
-    - ``batch``: batch means over the segments of u_i = b~_i (e_i - kappa_hat b~_i), referred to F(1, df),
+    - ``batch``: batch means over the segments of u_i = b~_i (e_i - kappa_hat b~_i), divided by 1 - sum_s F_s^2 / F^2
+      (taking kappa_hat out shrinks them by that factor under no effect), referred to F(1, df),
       df = F^2 / sum_s F_s^2 - 1 (Satterthwaite, F_s: segment s's share of F);
     - ``hc3``: as batch, each u_i divided by (1 - h_ii), h_ii the row's leverage in the least-squares fit of
       [A, b]; with one segment per row the HC3 sandwich, for few rows and a few fitted columns.
@@ -279,11 +280,17 @@ def score_column(A: np.ndarray, e: np.ndarray, b: np.ndarray, seg: np.ndarray, o
             X = np.column_stack([A, b])
             u = u / np.maximum(1.0 - np.einsum("ij,ji->i", X, np.linalg.pinv(X)), 1e-6)
         var = float(np.sum(np.bincount(seg, weights=u) ** 2))
-        lm = g * g / var if var > 0 else 0.0
         # the variance estimate is a weighted sum of one chi-square(1) per segment, weights = the segments'
         # shares of F: its effective degrees of freedom (Satterthwaite), less one for kappa_hat
         v = np.bincount(seg, weights=bt * bt)
-        df = max(F * F / float(np.sum(v * v)) - 1.0, 1.0)
+        share = float(np.sum(v * v)) / (F * F)  # 1 / Satterthwaite's df
+        df = max(1.0 / share - 1.0, 1.0)
+        if variance == "batch":
+            # taking kappa_hat out of the residual leaves E[var] = F (1 - share) under no effect, not F (with B
+            # equal segments LM would be B/(B-1) F(1, B-1)): scaled back, as the validation rule's batch means are
+            # (hc3's leverage does this row by row)
+            var /= max(1.0 - share, 1e-12)
+        lm = g * g / var if var > 0 else 0.0
     else:
         lm = g * g / F if F > 0 else 0.0
     ref = stats.f(1, df) if np.isfinite(df) else stats.chi2(1)

@@ -92,6 +92,20 @@ def test_coherence_flags_a_residual_driven_by_the_input_and_not_an_unrelated_one
     assert "lon:q" in curves["driven"]
 
 
+@pytest.mark.parametrize("n", [126, 250, 251, 256, 375])
+def test_coherence_counts_the_welch_segments_scipy_averages(n):
+    """The threshold's segment count is the number of segments scipy's Welch average uses (the time axis of
+    scipy.signal.spectrogram with the same segment and Welch's default overlap, nperseg // 2). An odd segment
+    (n = 126: nperseg 63, a record shorter than 128 samples) was counted one segment too many."""
+    fs = 25.0
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(n)
+    u = rng.normal(size=n)
+    tab, _ = coherence_table(pd.concat([_maneuver("m", rng.normal(size=n), u, t)]), ["q"], {"m": ["lon"]})
+    nps = min(2 ** int(round(np.log2(4 * fs))), n) // 2  # the coherence's segment: half the spectra's 4 s
+    assert tab["segments"].iloc[0] == len(signal.spectrogram(u, fs=fs, nperseg=nps, noverlap=nps // 2)[1])
+
+
 def test_nuisance_removal_recovers_a_constant_input_offset_and_whitens():
     fs = 25.0
     t = np.arange(0, 12, 1 / fs)

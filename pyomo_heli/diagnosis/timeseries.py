@@ -217,7 +217,7 @@ def coherence_table(time: pd.DataFrame, outputs, inputs_of: dict | None = None, 
         t = m["t"].to_numpy()
         fs = 1.0 / float(np.median(np.diff(t)))
         nps = _nperseg(len(t), fs) // 2
-        nseg = max(1, 1 + (len(t) - nps) // (nps // 2))
+        nseg = max(1, 1 + (len(t) - nps) // (nps - nps // 2))  # scipy's default overlap is nps // 2
         cur = {}
         for c in excited_inputs(m, (inputs_of or {}).get(name)):
             u = m[f"in_{c}"].to_numpy(dtype=float)

@@ -179,6 +179,8 @@ def test_close_loop_candidates_named_twice(tmp_path):
     ("validation_rule = false\nvalidation_joint = true", "field 'validation_joint' is not read here"),
     ('validation_rule = false\nafter_rejection = "stop"', "field 'after_rejection' is not read here"),
     ('score_inputs = "measured"', "field 'score_inputs' is not read here"),
+    ("discovery = true\nratio = 3.0", "field 'ratio' is not read here: the score test's ratio and confounding rules"),
+    ("discovery = true\nconfound_corr = 0.9", "field 'confound_corr' is not read here"),
 ])
 def test_a_loop_field_nothing_reads_is_refused(tmp_path, loop, message):
     """Found by a review: each was accepted and dropped (the base config has no [objectives] input_errors). The

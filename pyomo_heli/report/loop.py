@@ -357,10 +357,14 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
         sc = sc[[c for c in ("name", "strength", "LM", "df", "LM_needed", "p_value", "significant", "kappa_hat", "kept",
                              "like", "like_corr", "trim_share") if c in sc]]
         need = ("LM > LM_needed, its own F(1, df) quantile" if with_df else f"LM > {a['threshold']:.3g}")
-        L += [f"Score test (significant when p < {a['alpha']:g}/{len(sc)}, i.e. {need}; accepted "
-              f"when LM >= {a['ratio']:g} x runner-up's; confounded when projected |rho| >= "
-              f"{a['confound_corr']:g}):", "",
-              markdown_table(sc, digits=4), "", f"**Decision: {a['decision']}** - {a['message']}", ""]
+        if it.get("discovery"):  # the structure determination decides; the score test only scores
+            L += [f"Score test (significant when p < {a['alpha']:g}/{len(sc)}, i.e. {need}; its own ratio and "
+                  f"confounding rule is not used with discovery):", "", markdown_table(sc, digits=4), ""]
+        else:
+            L += [f"Score test (significant when p < {a['alpha']:g}/{len(sc)}, i.e. {need}; accepted "
+                  f"when LM >= {a['ratio']:g} x runner-up's; confounded when projected |rho| >= "
+                  f"{a['confound_corr']:g}):", "",
+                  markdown_table(sc, digits=4), "", f"**Decision: {a['decision']}** - {a['message']}", ""]
         if a.get("confounded_pairs"):
             L += ["Confounded pairs among the significant candidates (projected correlation): "
                   + "; ".join(f"{p[0]} / {p[1]} ({p[2]:+.2f})" for p in a["confounded_pairs"]), ""]
@@ -391,7 +395,7 @@ def iteration_checks(it: dict) -> list[str]:
     if it.get("validation_note"):  # records the test could not take (it passed on the others, or on none)
         L += [f"Validation rule: {it['validation_note']}", ""]
     if named:
-        G = named["best_generic_fit"]
+        G = named.get("most_significant_generic_fit") or named["best_generic_fit"]  # older loop.json: the best
         L += [f"Name check (a physical candidate the loop added must leave the generic family nothing significant "
               f"at the next step): **rejected: {it['rejected']}**; with it fitted the step found "
               f"{describe_fit(G)} (its decision: {named['decision']})", ""]

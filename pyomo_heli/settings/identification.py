@@ -337,15 +337,18 @@ DISCOVERY_ONLY_LOOP_FIELDS = ("generic", "generic_family", "generic_rank")
 
 def unread_discovery_fields(given, discovery: bool) -> list[tuple[str, str]]:
     """The discovery fields of a [loop] table that nothing reads, as (field, why): every one of
-    :data:`DISCOVERY_ONLY_LOOP_FIELDS` given without discovery, and ``generic_family`` given beside ``generic``.
+    :data:`DISCOVERY_ONLY_LOOP_FIELDS` given without discovery; with it ``ratio`` and ``confound_corr`` (the score
+    test's own decision, which discovery does not read) and ``generic_family`` given beside ``generic``.
     ``given``: the field names the file gives (not the defaults). One rule for every [loop] table (close-loop and
     trim-loop), so a field given that nothing reads is refused, not dropped."""
     given = set(given)
     if not discovery:
         return [(k, "it is read with discovery = true only") for k in DISCOVERY_ONLY_LOOP_FIELDS if k in given]
+    out = [(k, "the score test's ratio and confounding rules decide without discovery only (with it the screen and "
+               "encompassing decide)") for k in ("ratio", "confound_corr") if k in given]
     if {"generic", "generic_family"} <= given:
-        return [("generic_family", "'generic' names the terms (give one of the two)")]
-    return []
+        out.append(("generic_family", "'generic' names the terms (give one of the two)"))
+    return out
 
 
 class LoopTable(Table):

@@ -915,6 +915,8 @@ def test_generic_significant_looks_at_every_generic_fit_under_the_raw_lr_ranking
                         generic=("dM_one", "dM_mu2"), LM_white=[1.0, 30.0, 25.0], rank="likelihood_ratio")
     assert fits["dM_one"]["p"] > out["level"] > fits["dM_mu2"]["p"]
     assert out["best_generic_fit"]["name"] == "dM_one" and out["generic_significant"] is True
+    # the name check's reason names the significant term, not the raw-LR best (which read "p = 0.014 < 0.0033")
+    assert out["most_significant_generic_fit"]["name"] == "dM_mu2"
 
 
 def test_a_physical_candidate_significant_outside_the_screen_is_named(monkeypatch):

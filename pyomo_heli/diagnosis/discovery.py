@@ -460,7 +460,8 @@ def _step(cfg, model, start: dict, data, *, physical=None, generic=None, rejecte
     # (any generic fit significant, not only the best by the ranking: with generic_rank = "likelihood_ratio" the best
     # by raw LR can have a larger p than another term)
     out.update(generic_significant=any(f["generic"] and f["success"] and f.get("p", math.nan) < level
-                                       for f in fits.values()), best_generic_fit=G)
+                                       for f in fits.values()), best_generic_fit=G,
+               most_significant_generic_fit=best_fit(fits, True, "p"))  # what the name check names
     if rejected_generic:
         out["rejected_generic"] = list(rejected_generic)
     # a term the deciding test finds significant whose NLP fit failed (no estimate, no likelihood ratio): best_fit

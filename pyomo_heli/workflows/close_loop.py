@@ -508,7 +508,7 @@ def _close_loop(cfg, run: RunFolder, settings, progress, ft, id_data, val_mans) 
             if named and step.get("generic_significant"):
                 # a physical candidate must leave the generic family nothing significant; one that does not
                 # describes the missing effect only in part (docs/discovery.md): the step that added it is rejected
-                G = step["best_generic_fit"]
+                G = step.get("most_significant_generic_fit") or step["best_generic_fit"]
                 record["name_check"] = {k: v for k, v in step.items() if k != "attribution"}
                 rejected.append(named)
                 while named in [e.name for e in kept_models[-1][0].model.extensions]:  # back to before it came in

@@ -223,6 +223,9 @@ def load_identification_config(path: str | Path, overrides: dict | None = None,
             problems.add("objectives", f"field '{key}' {without_errors}: give input_errors too")
         elif getattr(obj, key) and not in_ref:
             problems.add("objectives", f"field '{key}': {without_lead_in}; give [data] input_reference_s > 0")
+    if obj.covariance == "full" and in_err:
+        problems.add("objectives", "field 'covariance' = \"full\" is not used with input_errors (their J_time has "
+                                   "the known noise sigmas, diagonal); give one of the two")
     use, linear = _objectives_use(s, raw, problems)
     diagnosis = None
     if s.diagnosis is not None:

@@ -223,6 +223,9 @@ def test_model_mass_must_match_the_flight_tests(tmp_path):
     (dict(extra='[objectives]\ninput_errors = ["col"]\nnoise_sigma = { q_deg_s = 0.2, theta_deg = 0.1, nx_g = 0.005, '
                 'nz_g = 0.01, tas_m_s = 0.5, col_deg = 1e300 }'), r"'col_deg' = 1e\+300 is not a sensor noise sigma"),
     (dict(extra='[objectives]\nuse = ["time", "trim", "linear", "linear"]'), r"field 'use' names \['linear'\]"),
+    (dict(extra='[objectives]\ninput_errors = ["col"]\ncovariance = "full"\nnoise_sigma = { q_deg_s = 0.2, '
+                'theta_deg = 0.1, nx_g = 0.005, nz_g = 0.01, tas_m_s = 0.5, col_deg = 0.05 }'),
+     r"\[objectives\]: field 'covariance' = \"full\" is not used with input_errors"),
     (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\nwindow_s = inf'),
      r"\[linear\]: field 'window_s' must be a finite number"),
     (dict(extra='[objectives]\nuse = ["time", "trim", "linear"]\n[linear]\npairs = [["q", "lon"], ["q", "lon"]]'),

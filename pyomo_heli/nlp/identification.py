@@ -92,6 +92,9 @@ class NLPOptions:
                 raise ValueError(f"{name} = {order!r}: an integer from 0 to {MAX_INPUT_ERROR_AR}")
         if self.output_error_ar and not self.input_errors:
             raise ValueError("output_error_ar weighs the known-noise J_time: give input_errors too")
+        if self.covariance == "full" and self.input_errors:
+            raise ValueError("covariance = 'full' is not used with input_errors (their J_time has the known noise "
+                             "sigmas, diagonal)")
         if self.noise_sigma is not None:
             bad = [k for k, v in self.noise_sigma.items() if not (isinstance(v, (int, float)) and v > 0)]
             if bad:

@@ -188,3 +188,18 @@ def test_replay_of_record_inputs_is_the_full_rate_replay_at_the_output_samples()
     proj = prepare_data(ft, ["lon3211_80kt_a"], 25, max_duration=4.0).maneuvers[0]
     c = replay(model, proj, tp, substeps=2)
     assert np.max(np.abs(c["q"] - b["q"].to_numpy()[::2])) > 1e-6
+
+
+def test_record_inputs_that_fall_between_collocation_points_are_refused():
+    """With 10 Hz outputs of the 50 Hz record and two Radau points per element, three of every five recorded input
+    samples have no collocation point beside them: the NLP would never read them (nor their input errors), while the
+    replay integrates every one. Refused, naming resample_hz and ncp; 25 Hz (two samples per element) is not."""
+    from pyomo_heli.nlp.identification import identification_data
+
+    over = {"data": {"resample_inputs": "record", "resample_hz": 10}}
+    cfg = load_identification_config(CONFIGS / "mc_time_small.toml", over)
+    with pytest.raises(ValueError, match=r"\[data\]: resample_inputs = 'record': \d+ of the \d+ recorded input samples "
+                                         r"of maneuver \w+ fall between collocation points.*'resample_hz'.*ncp"):
+        identification_data(cfg)
+    cfg = load_identification_config(CONFIGS / "mc_time_small.toml", {"data": {"resample_inputs": "record"}})
+    assert cfg.resample_hz == 25 and all(mv.inputs_record is not None for mv in identification_data(cfg).maneuvers)

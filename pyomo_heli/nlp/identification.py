@@ -467,6 +467,30 @@ def validation_maneuvers(cfg, ft) -> list:
     return list(prepare_data(ft, cfg.validation, input_reference_s=cfg.input_reference_s).maneuvers)
 
 
+def _record_samples_between_collocation_points(data: IdentificationData, ncp: int):
+    """(maneuver, how many, of how many) of the first maneuver whose recorded input samples
+    (``resample_inputs = "record"``) include some that no collocation point's interpolant reads (both neighbours of
+    the sample beyond every point: more record samples per element than Radau points); None if every one is read.
+    The NLP takes the record's interpolant at the collocation points only (``maneuver_block``)."""
+    from pyomo.dae.utilities import radau_tau_dict
+
+    tau = np.asarray(radau_tau_dict[ncp], dtype=float)
+    for mv in data.maneuvers:
+        if mv.inputs_record is None:
+            continue
+        t_r = mv.inputs_record["t"].to_numpy(dtype=float)
+        t_c = mv.data["t"].to_numpy(dtype=float)
+        points = (t_c[:-1, None] + np.diff(t_c)[:, None] * tau[None, :]).ravel()
+        k = np.clip(np.searchsorted(t_r, points, side="right") - 1, 0, len(t_r) - 1)
+        read = np.zeros(len(t_r), dtype=bool)
+        read[k] = True  # the sample at or before the point, and the one after unless the point is on a sample
+        on_sample = np.isclose(t_r[k], points, rtol=0.0, atol=1e-9)
+        read[np.minimum(k[~on_sample] + 1, len(t_r) - 1)] = True
+        if not read.all():
+            return mv.name, int((~read).sum()), len(t_r)
+    return None
+
+
 def identification_data(cfg, ft=None) -> IdentificationData:
     """The identification maneuvers of a config as the NLP fits them (its maneuvers, ``resample_hz``,
     ``resample_inputs``, ``max_duration_s``, ``input_reference_s``); ``ft`` a loaded FlightTest, else the
@@ -505,6 +529,13 @@ def identification_data(cfg, ft=None) -> IdentificationData:
             if climb:
                 raise ValueError(f"{cfg.dataset}/trims.csv: rows {[int(i) + 1 for i in climb][:5]} have a flight-path "
                                  f"angle gamma_fp != 0; the identification trims in level flight only")
+        unused = _record_samples_between_collocation_points(data, cfg.nlp.ncp)
+        if unused:
+            name, n, total = unused
+            raise ValueError(f"resample_inputs = 'record': {n} of the {total} recorded input samples of maneuver "
+                             f"{name} fall between collocation points and would not reach the model; give at most "
+                             f"{cfg.nlp.ncp} record samples per output sample (field 'resample_hz') or more "
+                             f"collocation points ([discretization] ncp)")
         # the validation maneuvers are replayed only after the solve: a wrong name must fail now
         if isinstance(cfg.validation, list):
             missing = [n for n in cfg.validation if n not in ft.maneuvers]

@@ -35,7 +35,7 @@ import numpy as np
 from ..log import info
 from ..config import load_identification_config
 from ..dataset import load_flight_test
-from ..nlp.identification import IdentificationData, build_identification_nlp, prepare_data
+from ..nlp.identification import IdentificationData, build_identification_nlp, identification_data
 from ..nlp.single_shooting import fit_single_shooting
 from ..pareto.front import ParetoSolver
 
@@ -306,7 +306,7 @@ def run_benchmark(settings: BenchmarkSettings, out: str | Path | None = None, pr
     """Run every measurement; write ``out`` (JSON) after each finished part; return the result dict."""
     cfg = load_identification_config(settings.config, settings.overrides)
     ft = load_flight_test(cfg.dataset)
-    base = prepare_data(ft, cfg.maneuvers, cfg.resample_hz, cfg.max_duration, resample_inputs=cfg.resample_inputs)
+    base = identification_data(cfg, ft)  # as identify selects them (its input_reference_s and checks too)
     result = {"command": settings.command, "config": str(settings.config), "overrides": settings.overrides,
               "machine": _machine(), "solver": cfg.pareto.solver, "free_parameters": [f.name for f in cfg.free],
               "front_points": cfg.pareto.points, "sizes": [], "single_shooting": None}

@@ -375,6 +375,34 @@ def test_a_numerically_zero_singular_value_is_reported_as_zero():
     assert identifiability(info).table.singular_value.iloc[2] == pytest.approx(1e-5, rel=1e-12)
 
 
+def test_realizations_carry_the_generators_low_speed_airspeed_noise():
+    """The bundled generator records TAS with 1.0 m/s noise below 30 kt and 0.5 m/s above (flighttest.sensors);
+    flight_test_noise returns both, and noisy_copy gives a maneuver trimmed below 30 kt the low-speed sigma and
+    every other output and maneuver the same draws as without it (before, the Monte Carlo study gave its hover
+    and 20 kt maneuvers half the airspeed noise the flight test has)."""
+    import dataclasses
+
+    from pyomo_heli.flighttest.config import flight_test_noise
+    from pyomo_heli.units import KT
+
+    sigma, _, (v_low, low) = flight_test_noise(HERE.parent / "data" / "bo105_synthetic.toml")
+    assert sigma["TAS"] == pytest.approx(0.5) and low == {"TAS": pytest.approx(1.0)}
+    assert v_low == pytest.approx(30 * KT)
+    data = identification_data(load_identification_config(CONFIGS / "mc_time_small.toml"))
+    mv = data.maneuvers[0]
+    slow = dataclasses.replace(mv, name="slow", trim_speed=10 * KT)
+    data = dataclasses.replace(data, maneuvers=[mv, slow] * 20)
+    plain = noisy_copy(data, SIGMA, {}, seed=4, k=0)
+    noisy = noisy_copy(data, SIGMA, {}, seed=4, k=0, low_speed=(v_low, low))
+    for i, m in enumerate(noisy.maneuvers):
+        for o in SIGMA:
+            d, d0 = m.data[o] - data.maneuvers[i].data[o], plain.maneuvers[i].data[o] - data.maneuvers[i].data[o]
+            scale = low["TAS"] / SIGMA["TAS"] if (o == "TAS" and m.name == "slow") else 1.0
+            np.testing.assert_allclose(d, scale * d0, rtol=1e-12, atol=1e-12)  # (x + n) - x: rounding of x
+    pooled = np.concatenate([(m.data["TAS"] - mv.data["TAS"]).to_numpy() for m in noisy.maneuvers if m.name == "slow"])
+    assert np.std(pooled) == pytest.approx(1.0, rel=0.05)
+
+
 def test_swapping_measured_data_equals_building_from_it():
     """An NLP with mutable data, re-pinned to a noise realization, has the objectives of an NLP
     built from that realization directly."""

@@ -220,14 +220,15 @@ def load_config(path: str | Path) -> GeneratorConfig:
                            trim_sigma=ts, trim_offset=to, maneuvers=plans, trim_stream=ds.trim_stream)
 
 
-def flight_test_noise(generator_config: str | Path) -> tuple[dict, dict]:
-    """(sigma, trim_sigma) in SI of a flight-test generator config (e.g. data/bo105_synthetic.toml).
+def flight_test_noise(generator_config: str | Path) -> tuple[dict, dict, tuple[float, dict]]:
+    """(sigma, trim_sigma, low_speed) in SI of a flight-test generator config (e.g. data/bo105_synthetic.toml).
 
     A trim point's noise is its averaging noise and its not-quite-steady offset
-    together: sqrt(sigma^2 + offset^2).
+    together: sqrt(sigma^2 + offset^2). ``low_speed``: (speed, {output: sigma}), the sigmas that replace
+    ``sigma``'s in maneuvers trimmed below that speed (the airspeed's, ``[sensors] tas_sigma_low_speed_m_s``).
     """
     cfg = load_config(generator_config)
     sigma = dict(cfg.sensors.sigma)
     trim = {k: math.hypot(cfg.trim_sigma.get(k, 0.0), cfg.trim_offset.get(k, 0.0))
             for k in set(cfg.trim_sigma) | set(cfg.trim_offset)}
-    return sigma, trim
+    return sigma, trim, (float(cfg.sensors.low_speed), {"TAS": float(cfg.sensors.tas_sigma_low_speed)})

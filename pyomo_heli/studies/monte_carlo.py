@@ -61,7 +61,7 @@ def main(argv=None) -> int:
         return 2
     try:
         cfg = load_identification_config(a.config)
-        sigma, trim_sigma = flight_test_noise(a.noise_from)
+        sigma, trim_sigma, low_speed = flight_test_noise(a.noise_from)
     except (ConfigError, FileNotFoundError, ValueError) as exc:
         print(f"monte_carlo: {exc}", file=sys.stderr)
         return 2
@@ -84,7 +84,8 @@ def main(argv=None) -> int:
     try:
         with dask_executor(max(workers, 1) if local else 0, None if local else a.scheduler) as executor:
             res = run_monte_carlo(ProblemSpec.make(a.config), a.realizations, a.seed, sigma, trim_sigma, truth,
-                                  out=a.out, multi_objective=not a.time_only, workers=workers, executor=executor)
+                                  out=a.out, multi_objective=not a.time_only, workers=workers, executor=executor,
+                                  low_speed=(low_speed[0], {o: s for o, s in low_speed[1].items() if o in sigma}))
     except ResultsMismatchError as exc:  # --out holds another run's realizations
         print(f"monte_carlo: {exc}", file=sys.stderr)
         return 2

@@ -66,6 +66,7 @@ class RealizationTask:
     trim_sigma: tuple
     multi_objective: bool = True
     crb: bool = True
+    low_speed: tuple | None = None  # (speed SI, ((output, sigma SI), ...)): the sigmas of maneuvers trimmed below it
 
 
 _CACHE: dict = {}
@@ -123,7 +124,8 @@ def _run_realization(task: RealizationTask) -> list[dict]:
     t0 = time.perf_counter()
     cfg, data, m, ps = _problem(task.problem)
     ps._snap_initial.restore()  # the same start for every realization, whatever ran before
-    noisy = noisy_copy(data, dict(task.sigma), dict(task.trim_sigma), task.seed, task.k)
+    low = None if task.low_speed is None else (task.low_speed[0], dict(task.low_speed[1]))
+    noisy = noisy_copy(data, dict(task.sigma), dict(task.trim_sigma), task.seed, task.k, low_speed=low)
     set_measurements(m, noisy)
     if task.multi_objective:
         points = ps.front()
@@ -222,14 +224,15 @@ def _config_and_dataset(arguments):
 @results_folder("out", _config_and_dataset)
 def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: dict, trim_sigma: dict,
                     truth: dict, out=None, multi_objective: bool = True, crb: bool = True, workers: int = 2,
-                    executor: cf.Executor | None = None, progress=info, scheduler: str | None = None
-                    ) -> MonteCarloResult:
+                    executor: cf.Executor | None = None, progress=info, scheduler: str | None = None,
+                    low_speed: tuple[float, dict] | None = None) -> MonteCarloResult:
     """Run (or finish) ``realizations`` noise realizations; write each one to ``out`` as it finishes.
 
     Where they run (:func:`pyomo_heli.parallel.dask_executor`): ``executor`` if given (any
     concurrent.futures Executor); else the Dask cluster of ``scheduler`` (an address); else a Dask
     LocalCluster of ``workers`` processes; ``workers == 0``: serially in this process. The estimates are
-    the same wherever they run.
+    the same wherever they run. ``low_speed``: (speed [m/s], {output: sigma}), the sigmas of the maneuvers trimmed
+    below that speed (:func:`~pyomo_heli.uncertainty.realizations.noisy_copy`).
     """
     cfg = load_identification_config(problem.config, json.loads(problem.overrides))
     params = [f.name for f in cfg.free]
@@ -238,6 +241,9 @@ def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: d
            "dataset_sha256": dataset_sha256(cfg.dataset),  # the noise-free records the realizations perturb
            "overrides": json.loads(problem.overrides), "seed": seed, "sigma": dict(sigma),
            "trim_sigma": dict(trim_sigma), "multi_objective": multi_objective, "crb": crb}
+    low = None if low_speed is None else (float(low_speed[0]), tuple(sorted(low_speed[1].items())))
+    if low is not None:
+        run["low_speed"] = [low[0], dict(low[1])]
     rows: list[dict] = []
     if csv is not None:
         csv.parent.mkdir(parents=True, exist_ok=True)
@@ -249,7 +255,7 @@ def run_monte_carlo(problem: ProblemSpec, realizations: int, seed: int, sigma: d
                                                                sort_keys=True) + "\n")
     done = {int(r["realization"]) for r in rows}
     tasks = [RealizationTask(problem, k, seed, tuple(sorted(sigma.items())), tuple(sorted(trim_sigma.items())),
-                             multi_objective, crb) for k in range(realizations) if k not in done]
+                             multi_objective, crb, low) for k in range(realizations) if k not in done]
     if done:
         progress(f"{len(done)} realizations already in {csv}; running {len(tasks)}")
     t0 = time.perf_counter()

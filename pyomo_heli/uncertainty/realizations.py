@@ -16,15 +16,20 @@ import numpy as np
 from ..nlp.identification import IdentificationData
 
 
-def noisy_copy(data: IdentificationData, sigma: dict, trim_sigma: dict, seed: int, k: int) -> IdentificationData:
-    """Realization ``k`` of ``data`` plus white noise (SI units; outputs not named get none)."""
+def noisy_copy(data: IdentificationData, sigma: dict, trim_sigma: dict, seed: int, k: int,
+               low_speed: tuple[float, dict] | None = None) -> IdentificationData:
+    """Realization ``k`` of ``data`` plus white noise (SI units; outputs not named get none). ``low_speed``:
+    (speed [m/s], {output: sigma}), the sigmas of maneuvers trimmed below that speed (a generated flight test's
+    airspeed noise at low speed, :func:`~pyomo_heli.flighttest.config.flight_test_noise`)."""
     rng = np.random.default_rng([int(seed), int(k)])
     maneuvers = []
     for mv in data.maneuvers:
         df = mv.data.copy()
+        slow = low_speed is not None and mv.trim_speed < low_speed[0]
         for o in sorted(sigma):
             if o in df:
-                df[o] = df[o].to_numpy() + rng.standard_normal(len(df)) * float(sigma[o])
+                s = low_speed[1].get(o, sigma[o]) if slow else sigma[o]
+                df[o] = df[o].to_numpy() + rng.standard_normal(len(df)) * float(s)
         maneuvers.append(dataclasses.replace(mv, data=df))
     trims = data.trims.copy()
     for o in sorted(trim_sigma):

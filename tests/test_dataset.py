@@ -165,6 +165,23 @@ def test_rewrite_is_byte_identical(ds, tmp_path):
     pd.testing.assert_frame_equal(back.trims, ft.trims, rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.parametrize("as_type", [float, np.float32, np.int64])
+def test_a_trim_speed_held_as_a_numpy_scalar_is_written_in_knots(ds, tmp_path, as_type):
+    """Maneuver.trim_speed [m/s] as numpy float32 or int64 (not Python float subclasses) was written to the
+    manifest's trim_speed_kt unconverted, 1.94 times too low (below 15 kt no check caught it)."""
+    from pyomo_heli.units import KT
+
+    ft = load_flight_test(ds)
+    mv = ft.maneuvers[next(iter(ft.maneuvers))]
+    v = round(mv.trim_speed)  # 41 m/s = 79.7 kt, the record's 80 kt within the check's 5 kt
+    mv.trim_speed = as_type(v)
+    write_flight_test(tmp_path / "w", ft)  # before: 41 "kt" in the manifest, refused by the speed check
+    entry = next(e for e in json.loads((tmp_path / "w" / "manifest.json").read_text())["maneuvers"]
+                 if e["name"] == mv.name)
+    assert entry["trim_speed_kt"] == pytest.approx(v / KT, rel=1e-9)
+    assert load_flight_test(tmp_path / "w").maneuvers[mv.name].trim_speed == pytest.approx(v, rel=1e-9)
+
+
 def test_write_from_manifest_dict_and_si_frames(ds, tmp_path):
     ft = load_flight_test(ds)
     manifest = {"aircraft": "Bo-105 (synthetic)", "atmosphere": {"rho_kg_m3": 1.225, "g_m_s2": 9.80665},

@@ -170,7 +170,8 @@ def write_flight_test(path, flight_test_or_manifest, maneuvers=None, trims=None,
             files[rel] = text
         v = m.trim_speed
         entry = {"name": m.name, "file": rel, "role": m.role,
-                 "trim_speed_kt": _num(v / KT if isinstance(v, (int, float)) and not isinstance(v, bool) else v),
+                 "trim_speed_kt": _num(float(v) / KT if isinstance(v, (int, float, np.number))
+                                       and not isinstance(v, (bool, np.bool_)) else v),  # numpy scalars too
                  "inputs": list(m.inputs)}
         if m.description:
             entry["description"] = m.description

@@ -156,7 +156,7 @@ ENTRIES: tuple[Entry, ...] = (
         "python studies/score_test_level.py --seeds 101-200 --variance white_offsets --out {out}/score_test_level",
         "python studies/score_test_level.py --seeds 101-140 --truth wake --variance white_offsets "
         "--out {out}/score_test_level"),
-        ("*/summary*.csv",), minutes=50),
+        ("*/summary*.csv",), minutes=60),
     Entry("validation_test_level", ("python studies/validation_test_level.py --seeds 20261122-20261147 "
                                     "--out {out}/validation_test_level",),
           ("summary.csv", "summary.md"), minutes=30),

@@ -357,14 +357,14 @@ def write_loop_report(out, cfg, figure_format: str = "png") -> Path:
         sc = sc[[c for c in ("name", "strength", "LM", "df", "LM_needed", "p_value", "significant", "kappa_hat", "kept",
                              "like", "like_corr", "trim_share") if c in sc]]
         need = ("LM > LM_needed, its own F(1, df) quantile" if with_df else f"LM > {a['threshold']:.3g}")
-        if it.get("discovery"):  # the structure determination decides; the score test only scores
-            L += [f"Score test (significant when p < {a['alpha']:g}/{len(sc)}, i.e. {need}; its own ratio and "
-                  f"confounding rule is not used with discovery):", "", markdown_table(sc, digits=4), ""]
-        else:
-            L += [f"Score test (significant when p < {a['alpha']:g}/{len(sc)}, i.e. {need}; accepted "
-                  f"when LM >= {a['ratio']:g} x runner-up's; confounded when projected |rho| >= "
-                  f"{a['confound_corr']:g}):", "",
-                  markdown_table(sc, digits=4), "", f"**Decision: {a['decision']}** - {a['message']}", ""]
+        # with discovery the structure determination decides; the score test only scores
+        rule = ("its own ratio and confounding rule is not used with discovery" if it.get("discovery") else
+                f"accepted when LM >= {a['ratio']:g} x runner-up's; confounded when projected |rho| >= "
+                f"{a['confound_corr']:g}")
+        L += [f"Score test (significant when p < {a['alpha']:g}/{len(sc)}, i.e. {need}; {rule}):", "",
+              markdown_table(sc, digits=4), ""]
+        if not it.get("discovery"):
+            L += [f"**Decision: {a['decision']}** - {a['message']}", ""]
         if a.get("confounded_pairs"):
             L += ["Confounded pairs among the significant candidates (projected correlation): "
                   + "; ".join(f"{p[0]} / {p[1]} ({p[2]:+.2f})" for p in a["confounded_pairs"]), ""]
